@@ -1,0 +1,33 @@
+# Both targets create (or reuse) the virtual environment in .venv.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup test demo bench schema clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+# pytest exits 5 when it collected no tests: that is a failure here.
+test: setup
+	$(PY) -m pytest -q; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
+	exit $$rc
+
+demo: setup
+	$(PY) -m examples.demo
+
+bench: setup
+	$(PY) -m benchmarks.run
+
+schema: setup
+	$(VENV)/bin/fcso schema --out schemas/
+
+clean:
+	rm -rf $(VENV) *.egg-info demo-out
