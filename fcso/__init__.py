@@ -1,0 +1,32 @@
+"""FCSO: Fingerpad Customization with Set Operators (Lim & Pham).
+
+Custom gripper fingerpads for 3D-printed parts, carved with Boolean set
+operations so one pair of rigid fingers cages several parts in several
+resting poses, ranked by contact area over the radius of the largest empty
+sphere of contact normals.
+"""
+
+__version__ = "0.1.0"
+
+from .config import DesignConfig, load_config  # noqa: E402
+from .design import DesignResult, design  # noqa: E402
+from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError  # noqa: E402
+from .parts import Part, load_part  # noqa: E402
+from .poses import stable_poses  # noqa: E402
+from .rles import rles  # noqa: E402
+
+__all__ = [
+    "ConfigError",
+    "DesignConfig",
+    "DesignResult",
+    "FcsoError",
+    "GeometryError",
+    "MeshError",
+    "NoGraspError",
+    "Part",
+    "design",
+    "load_config",
+    "load_part",
+    "rles",
+    "stable_poses",
+]

@@ -1,0 +1,169 @@
+"""Command line: ``fcso design``, ``fcso poses``, ``fcso schema``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from .config import DesignConfig, format_validation_error, load_config
+from .design import DesignResult, design
+from .errors import FcsoError, GeometryError
+from .parts import load_part
+from .poses import stable_poses
+from .schema import write_schemas
+from .table import quality_table
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+
+
+class ProgressLine:
+    """A one-line progress bar on a terminal; silent elsewhere or when quiet."""
+
+    def __init__(self, stream, enabled: bool):
+        self.stream = stream
+        self.enabled = enabled
+        self.stage = None
+        self.started = time.perf_counter()
+        self.last_draw = 0.0
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if stage == self.stage and done < total and now - self.last_draw < 0.1:
+            return
+        if stage != self.stage and self.stage is not None:
+            self.stream.write("\n")
+        self.stage, self.last_draw = stage, now
+        fraction = done / total if total else 1.0
+        bar = "#" * int(fraction * 30)
+        self.stream.write(f"\r{stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.stage is not None:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="fcso", description="Custom gripper fingerpads for 3D-printed parts (FCSO).")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    run = commands.add_parser("design", help="design a fingerpad and finger for one or more parts")
+    run.add_argument("parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY)")
+    run.add_argument("--out", required=True, type=Path, help="output folder")
+    run.add_argument("--config", type=Path, help="settings (TOML)")
+    run.add_argument("--units", default="mm", help="unit of the part files: mm, inch or a factor to mm")
+    run.add_argument("--scale-to", type=float, metavar="MM", help="scale each part so its longest side is MM")
+    run.add_argument("--poses", type=int, metavar="N", help="stable poses per part (poses.count)")
+    run.add_argument("--seed", type=int, help="seed of the random pose choice (poses.seed)")
+    run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
+    run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
+    run.add_argument("--quiet", action="store_true", help="no progress and no table")
+
+    poses = commands.add_parser("poses", help="list a part's stable poses with probabilities")
+    poses.add_argument("part", type=Path, metavar="PART")
+    poses.add_argument("--units", default="mm")
+    poses.add_argument("--scale-to", type=float, metavar="MM")
+    poses.add_argument("--repair", action="store_true")
+
+    schema = commands.add_parser("schema", help="write the JSON Schemas of config and report")
+    schema.add_argument("--out", required=True, type=Path)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code (2 for bad input, 1 for a failed design)."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "design":
+            return _design(args)
+        if args.command == "poses":
+            return _poses(args)
+        for path in write_schemas(args.out):
+            print(path)
+        return 0
+    except GeometryError as exc:
+        print(f"fcso: design failed: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except FcsoError as exc:
+        print(f"fcso: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+def _config(args) -> DesignConfig:
+    config = load_config(args.config) if args.config else DesignConfig()
+    overrides: dict = {}
+    if args.poses is not None:
+        overrides.setdefault("poses", {})["count"] = args.poses
+    if args.seed is not None:
+        overrides.setdefault("poses", {})["seed"] = args.seed
+    if args.finger is not None:
+        overrides.setdefault("finger", {})["mesh"] = args.finger
+    if not overrides:
+        return config
+    from pydantic import ValidationError
+
+    from .errors import ConfigError
+
+    try:
+        return config.updated(overrides)
+    except ValidationError as exc:
+        raise ConfigError(args.config or "command line", format_validation_error(exc)) from None
+
+
+def _design(args) -> int:
+    config = _config(args)
+    parts = [load_part(p, units=args.units, scale_to_mm=args.scale_to, repair=args.repair) for p in args.parts]
+    progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
+    try:
+        result = design(parts, config, progress=progress, repair=args.repair)
+    finally:
+        progress.close()
+    write_outputs(result, args.out)
+    if not args.quiet:
+        print(quality_table(result.report))
+        for warning in result.report.warnings:
+            print(f"warning: {warning}")
+        print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json")
+    return 0
+
+
+def write_outputs(result: DesignResult, out_dir: Path) -> None:
+    """Write ``finger.stl``, ``fingerpad.stl`` (binary STL) and ``report.json`` into ``out_dir``.
+
+    Each file is written under a temporary name and renamed into place.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {
+        "finger.stl": result.finger.export(file_type="stl"),
+        "fingerpad.stl": result.fingerpad.export(file_type="stl"),
+        "report.json": (result.report.model_dump_json(indent=2) + "\n").encode("utf-8"),
+    }
+    for name, data in files.items():
+        temporary = out_dir / f".{name}.tmp"
+        temporary.write_bytes(data)
+        os.replace(temporary, out_dir / name)
+
+
+def _poses(args) -> int:
+    part = load_part(args.part, units=args.units, scale_to_mm=args.scale_to, repair=args.repair)
+    transforms, probabilities = stable_poses(part.mesh)
+    print(f"{part.name}: {len(probabilities)} stable poses (extents in the resting frame, mm)")
+    print(f"{'index':>5} {'probability':>12} {'extents x y z':>28}")
+    for index, (transform, probability) in enumerate(zip(transforms, probabilities)):
+        rested = part.mesh.copy()
+        rested.apply_transform(transform)
+        extents = " ".join(f"{x:8.2f}" for x in rested.extents)
+        print(f"{index:>5} {probability:>12.4f} {extents:>28}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

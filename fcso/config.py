@@ -1,0 +1,218 @@
+"""Configuration of the method as pydantic models, loadable from TOML.
+
+Every length is in millimetres (suffix ``_mm``), every area in mm² (``_mm2``),
+every angle in degrees (``_deg``). Defaults follow METHOD.md and the paper's
+reference experiment (Robotiq Hand-E, L = W = 20, T = 5, D = 4).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .errors import ConfigError
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SamplerConfig(_Section):
+    """Pad box size and the sliding-window grasp sampler (METHOD §3)."""
+
+    length_mm: float = Field(20.0, gt=0, description="Pad length L along the sliding axis b, mm")
+    width_mm: float = Field(20.0, gt=0, description="Pad width W along the vertical axis, mm")
+    thickness_mm: float = Field(5.0, gt=0, description="Pad thickness T along the closing axis, mm")
+    penetration_mm: float = Field(4.0, gt=0, description="Penetration D of the pad into the part, 0 < D < T, mm")
+    stride_mm: float | None = Field(None, gt=0, description="Sampling step along b and z, mm; default L/5")
+    yaw_deg: list[float] = Field(
+        default_factory=lambda: [0.0, 90.0],
+        min_length=1,
+        description="Yaw angles of the closing axis about the table normal, degrees, in the rested part's bounding-box frame",
+    )
+    table_clearance_mm: float = Field(
+        1.0, ge=0, description="Lowest pad height above the table and the clearance the part needs between the open pads, mm"
+    )
+    min_contact_area_mm2: float | None = Field(
+        None, ge=0, description="Least part surface inside each pad box, mm²; default 10 % of L x W"
+    )
+
+    @model_validator(mode="after")
+    def _penetration_inside_pad(self) -> "SamplerConfig":
+        if not self.penetration_mm < self.thickness_mm:
+            raise ValueError(
+                f"penetration_mm ({self.penetration_mm}) must be smaller than thickness_mm ({self.thickness_mm})"
+            )
+        return self
+
+    @property
+    def stride(self) -> float:
+        """Sampling step in mm (``stride_mm`` or L/5)."""
+        return self.stride_mm if self.stride_mm is not None else self.length_mm / 5.0
+
+    @property
+    def min_contact_area(self) -> float:
+        """Least contact area per side in mm² (``min_contact_area_mm2`` or 0.1 L W)."""
+        if self.min_contact_area_mm2 is not None:
+            return self.min_contact_area_mm2
+        return 0.1 * self.length_mm * self.width_mm
+
+
+class GripperConfig(_Section):
+    """Parallel-jaw gripper with linear closing (default: Robotiq Hand-E)."""
+
+    max_opening_mm: float = Field(50.0, gt=0, description="Distance between the finger mounting faces fully open, mm")
+    min_opening_mm: float = Field(0.0, ge=0, description="Distance between the finger mounting faces fully closed, mm")
+    finger_height_mm: float = Field(
+        25.0, ge=0, description="Height of the finger body above the pad, checked for collisions, mm"
+    )
+
+    @model_validator(mode="after")
+    def _opening_order(self) -> "GripperConfig":
+        if self.min_opening_mm >= self.max_opening_mm:
+            raise ValueError("min_opening_mm must be smaller than max_opening_mm")
+        return self
+
+
+class FilterConfig(_Section):
+    """Good/bad geometry filter (METHOD §5)."""
+
+    volume_ratio_threshold: float = Field(0.1, ge=0, le=1, description="Threshold th on R = (V_B - V_I)/V_B")
+    block_factor: float = Field(1.5, gt=0, description="K: block depth d_B = K x min(d_n of good geometries)")
+    cluster_angle_deg: float = Field(15.0, gt=0, lt=90, description="Angle for normal clustering and the flatness test, degrees")
+    full_cover_fraction: float = Field(
+        0.99, gt=0, le=1, description="Fraction of the pad face a cross-section must cover to count as full"
+    )
+
+
+class PosesConfig(_Section):
+    """Which stable poses of each part to plan for (METHOD §2)."""
+
+    count: int = Field(2, ge=1, description="Number of stable poses per part, N_p")
+    select: Literal["random", "most_probable"] | list[int] = Field(
+        "random", description="'random' (seeded), 'most_probable', or explicit pose indices (0 = most probable)"
+    )
+    seed: int = Field(0, description="Seed of the random pose selection")
+
+
+class ContactConfig(_Section):
+    """Contact evaluation by seating (METHOD §6)."""
+
+    eps_mm: float = Field(0.05, gt=0, description="Contact tolerance: part points within eps of the pad are in contact, mm")
+    sample_density_per_mm2: float = Field(4.0, gt=0, description="Surface samples per mm² of part surface inside a pad box")
+    seed: int = Field(0, description="Seed of the surface sampling")
+
+
+class SearchConfig(_Section):
+    """Candidate enumeration (METHOD §8)."""
+
+    max_exhaustive: int = Field(4096, ge=1, description="Evaluate every candidate when there are at most this many")
+    max_evaluations: int = Field(
+        4096, ge=1, description="Budget of the branch-and-bound search beyond max_exhaustive, candidates"
+    )
+
+
+class FingerConfig(_Section):
+    """The flat finger the pad is fused onto (METHOD §9).
+
+    Without ``mesh`` the built-in parametric Hand-E-sized finger is used and
+    the frame fields are ignored. With ``mesh``, ``contact_origin_mm`` is the
+    centre of the pad's back face on the finger's contact face,
+    ``contact_normal`` the face's inward normal (towards the gripped part) and
+    ``up`` the finger's up direction (away from the fingertip), all in the
+    mesh's own coordinates after unit scaling.
+    """
+
+    mesh: Path | None = Field(None, description="Flat finger mesh file; none: built-in parametric finger")
+    units: Literal["mm", "inch", "m"] | float = Field("mm", description="Unit of the finger mesh: mm, inch, m or a factor to mm")
+    contact_origin_mm: tuple[float, float, float] | None = Field(
+        None, description="Centre of the contact face where the pad's back face goes, mm (finger mesh coordinates)"
+    )
+    contact_normal: tuple[float, float, float] | None = Field(
+        None, description="Inward unit normal of the contact face (towards the part), finger mesh coordinates"
+    )
+    up: tuple[float, float, float] | None = Field(None, description="Up direction of the finger (away from the tip)")
+    overlap_mm: float = Field(0.2, gt=0, description="Overlap of pad and finger so the union is one solid, mm")
+
+    @model_validator(mode="after")
+    def _frame_with_mesh(self) -> "FingerConfig":
+        if self.mesh is not None:
+            missing = [k for k in ("contact_origin_mm", "contact_normal", "up") if getattr(self, k) is None]
+            if missing:
+                raise ValueError(f"a finger mesh needs its contact-face frame: set {', '.join(missing)}")
+        return self
+
+
+class DesignConfig(_Section):
+    """Every setting of ``fcso design``."""
+
+    sampler: SamplerConfig = Field(default_factory=SamplerConfig)
+    gripper: GripperConfig = Field(default_factory=GripperConfig)
+    filter: FilterConfig = Field(default_factory=FilterConfig)
+    poses: PosesConfig = Field(default_factory=PosesConfig)
+    contact: ContactConfig = Field(default_factory=ContactConfig)
+    search: SearchConfig = Field(default_factory=SearchConfig)
+    finger: FingerConfig = Field(default_factory=FingerConfig)
+
+    def updated(self, overrides: dict) -> "DesignConfig":
+        """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""
+        merged = self.model_dump()
+        for section, values in overrides.items():
+            if isinstance(values, dict) and isinstance(merged.get(section), dict):
+                merged[section].update(values)
+            else:
+                merged[section] = values
+        return DesignConfig.model_validate(merged)
+
+
+def format_validation_error(error: ValidationError) -> str:
+    """One line per defect, each naming the dotted key, e.g. ``sampler.length_mm: ...``."""
+    parts = []
+    for item in error.errors():
+        key = ".".join(str(p) for p in item["loc"]) or "(top level)"
+        message = item["msg"]
+        if item["type"] == "extra_forbidden":
+            message = "unknown key"
+        parts.append(f"{key}: {message}")
+    return "; ".join(parts)
+
+
+def load_config(path: str | Path) -> DesignConfig:
+    """Load a :class:`DesignConfig` from a TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        TOML file with sections ``[sampler] [gripper] [filter] [poses]
+        [contact] [search] [finger]``.
+
+    Returns
+    -------
+    DesignConfig
+
+    Raises
+    ------
+    ConfigError
+        Unreadable file, TOML syntax error, unknown key or bad value; the
+        message names the file and the key.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(path, "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, f"cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    finger = data.get("finger")
+    if isinstance(finger, dict) and isinstance(finger.get("mesh"), str):
+        # a relative finger mesh is relative to the config file, not the cwd
+        finger["mesh"] = str((path.parent / finger["mesh"]).resolve()) if not Path(finger["mesh"]).is_absolute() else finger["mesh"]
+    try:
+        return DesignConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(path, format_validation_error(exc)) from None

@@ -1,0 +1,407 @@
+"""The FCSO pipeline: parts in, fingerpad, finger and quality table out."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import manifold3d
+import numpy as np
+import trimesh
+
+from . import __version__
+from .config import DesignConfig
+from .contact import PadContact, SurfaceSamples, sample_surface, seat
+from .errors import NoGraspError
+from .finger import FlatFinger, fuse, load_finger, pad_to_finger, parametric_finger
+from .geometry import to_manifold, to_trimesh
+from .grasps import tcp_pose
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
+from .parts import Part, load_part
+from .poses import select_poses, stable_poses
+from .report import (
+    CandidateReport,
+    DesignReport,
+    FingerReport,
+    GraspReport,
+    PartReport,
+    SampleReport,
+    ScenarioQuality,
+    ScenarioReport,
+    SearchReport,
+)
+from .rles import rles
+from .sampler import GraspSample, SamplerResult, sample_grasps
+from .search import candidate_index, search
+
+#: ``progress(stage, done, total)``: called as long work advances.
+Progress = Callable[[str, int, int], None]
+
+#: Sides of a grasp: the "+" pad and the "-" pad.
+SIDES = (1, -1)
+
+
+@dataclass
+class SampleGeometry:
+    """A valid sample with everything candidate evaluation needs from it."""
+
+    sample: GraspSample
+    frames: tuple[np.ndarray, np.ndarray]
+    geometries: tuple[PadGeometry, PadGeometry]
+    surfaces: tuple[SurfaceSamples, SurfaceSamples]
+    effective_area_bound: float
+
+
+@dataclass
+class Scenario:
+    """A part in one chosen stable pose, with its valid samples."""
+
+    part_index: int
+    part: Part
+    pose_index: int
+    probability: float
+    rest_transform: np.ndarray
+    mesh: trimesh.Trimesh
+    sampler_result: SamplerResult
+    samples: list[SampleGeometry] = field(default_factory=list)
+
+
+@dataclass
+class ScenarioEvaluation:
+    """One candidate in one scenario: seating of both pads and the quality."""
+
+    contacts: tuple[PadContact, PadContact]
+    contact_normals: np.ndarray
+    rles: float
+    contact_area_mm2: float
+    effective_area: float
+
+
+@dataclass
+class CandidateEvaluation:
+    choice: tuple[int, ...]
+    fingerpad: Fingerpad
+    scenarios: list[ScenarioEvaluation]
+    quality: float
+    mean_effective_area: float
+
+
+@dataclass
+class DesignResult:
+    """What :func:`design` returns.
+
+    Attributes
+    ----------
+    report : DesignReport
+        The content of ``report.json``.
+    finger : trimesh.Trimesh
+        Print-ready finger (both fingers are this part), mm.
+    fingerpad : trimesh.Trimesh
+        The chosen pad alone, in its pad frame, mm.
+    scenarios : list of Scenario
+        Parts in their poses with their samples (for pictures and audits).
+    best : CandidateEvaluation
+        The chosen candidate with its contacts.
+    flat_finger : FlatFinger
+        The finger the pad was fused onto.
+    pad_to_finger : (4, 4) float
+        Pad frame to finger frame.
+    """
+
+    report: DesignReport
+    finger: trimesh.Trimesh
+    fingerpad: trimesh.Trimesh
+    scenarios: list[Scenario]
+    best: CandidateEvaluation
+    flat_finger: FlatFinger
+    pad_to_finger: np.ndarray
+
+
+def design(
+    parts: Sequence[Part | str | Path],
+    config: DesignConfig | None = None,
+    progress: Progress | None = None,
+    repair: bool = False,
+) -> DesignResult:
+    """Design one fingerpad and finger for a batch of parts (METHOD §1-9).
+
+    Parameters
+    ----------
+    parts : sequence of Part or path
+        The parts; paths are loaded in mm (use :func:`fcso.load_part` for
+        other units or scaling).
+    config : DesignConfig, optional
+        Settings; defaults reproduce the paper's set-up.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+    repair : bool
+        Repair part and finger meshes that are not closed volumes.
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    MeshError, ConfigError
+        Bad input, naming the file and the defect.
+    NoGraspError
+        A scenario has no valid sample.
+    """
+    config = config or DesignConfig()
+    report_progress = progress or (lambda stage, done, total: None)
+    timings: dict[str, float] = {}
+    warnings: list[str] = []
+    clock = time.perf_counter()
+    loaded = [p if isinstance(p, Part) else load_part(p, repair=repair) for p in parts]
+    finger = load_finger(config.finger, repair=repair) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    timings["load"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    scenarios = _choose_scenarios(loaded, config, warnings)
+    timings["poses"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    for done, scenario in enumerate(scenarios):
+        report_progress("sampling", done, len(scenarios))
+        scenario.sampler_result = sample_grasps(scenario.mesh, config.sampler, config.gripper)
+    report_progress("sampling", len(scenarios), len(scenarios))
+    timings["sampling"] = time.perf_counter() - clock
+    empty = [s for s in scenarios if not s.sampler_result.samples]
+    if empty:
+        raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
+
+    clock = time.perf_counter()
+    total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
+    done = 0
+    for number, scenario in enumerate(scenarios):
+        part_manifold = to_manifold(scenario.mesh)
+        for index, sample in enumerate(scenario.sampler_result.samples):
+            report_progress("pad geometries", done, total_samples)
+            scenario.samples.append(_sample_geometry(part_manifold, scenario.mesh, sample, config, seed=(number, index)))
+            done += 1
+    report_progress("pad geometries", total_samples, total_samples)
+    timings["pad_geometries"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    counts = [len(s.samples) for s in scenarios]
+    evaluations: dict[tuple[int, ...], CandidateEvaluation] = {}
+    total = int(np.prod(counts, dtype=object))
+    expected = min(total, config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations)
+
+    def evaluate(choice: tuple[int, ...]) -> tuple[float, float]:
+        evaluation = _evaluate(scenarios, choice, config, keep_pad=False)
+        evaluations[choice] = evaluation
+        report_progress("candidates", len(evaluations), expected)
+        return evaluation.quality, evaluation.mean_effective_area
+
+    bounds = [np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]
+    outcome = search(counts, bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
+    if not outcome.proven_optimal:
+        warnings.append(
+            f"search stopped after {len(outcome.evaluated)} of {outcome.total} candidates (search.max_evaluations) "
+            "without proving the best is optimal"
+        )
+    indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
+    best_choice = max(outcome.evaluated, key=lambda c: (evaluations[c].quality, evaluations[c].mean_effective_area, -indices[c]))
+    timings["search"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    best = _evaluate(scenarios, best_choice, config, keep_pad=True)
+    transform = pad_to_finger(finger, config.sampler)
+    fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
+    floor = config.sampler.thickness_mm - config.sampler.penetration_mm
+    if fused.min_pad_thickness_mm < floor - 1e-3:
+        warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D = {floor:.3f} mm")
+    timings["finger"] = time.perf_counter() - clock
+
+    report = DesignReport(
+        fcso_version=__version__,
+        parts=[_part_report(p) for p in loaded],
+        scenarios=[_scenario_report(s) for s in scenarios],
+        candidates=[
+            _candidate_report(evaluations[c], indices[c]) for c in sorted(outcome.evaluated, key=lambda c: indices[c])
+        ],
+        best=indices[best_choice],
+        search=SearchReport(
+            kind=outcome.kind, evaluated=len(outcome.evaluated), candidates_total=outcome.total, proven_optimal=outcome.proven_optimal
+        ),
+        grasps=[_grasp_report(s, k, e, config) for s, k, e in zip(scenarios, best_choice, best.scenarios)],
+        finger=FingerReport(
+            source=finger.source,
+            repairs=finger.repairs,
+            volume_mm3=_round(fused.volume_mm3),
+            bodies=fused.bodies,
+            watertight=bool(fused.mesh.is_watertight),
+            min_pad_thickness_mm=_round(fused.min_pad_thickness_mm),
+        ),
+        timings_s={k: round(v, 3) for k, v in timings.items()},
+        warnings=warnings,
+        settings=config,
+    )
+    return DesignResult(
+        report=report,
+        finger=fused.mesh,
+        fingerpad=to_trimesh(best.fingerpad.pad),
+        scenarios=scenarios,
+        best=best,
+        flat_finger=finger,
+        pad_to_finger=transform,
+    )
+
+
+def _choose_scenarios(parts: list[Part], config: DesignConfig, warnings: list[str]) -> list[Scenario]:
+    scenarios = []
+    for part_index, part in enumerate(parts):
+        transforms, probabilities = stable_poses(part.mesh)
+        chosen, notes = select_poses(probabilities, config.poses, part_index, part.name)
+        warnings.extend(notes)
+        for pose in chosen:
+            mesh = part.mesh.copy()
+            mesh.apply_transform(transforms[pose])
+            scenarios.append(
+                Scenario(
+                    part_index=part_index,
+                    part=part,
+                    pose_index=pose,
+                    probability=float(probabilities[pose]),
+                    rest_transform=transforms[pose],
+                    mesh=mesh,
+                    sampler_result=SamplerResult([], {}, 0),
+                )
+            )
+    return scenarios
+
+
+def _no_grasp_message(scenario: Scenario, config: DesignConfig) -> str:
+    rejected = ", ".join(f"{k} {v}" for k, v in scenario.sampler_result.rejected.items() if v) or "no footprint met the part"
+    return (
+        f"{scenario.part.path}: no valid grasp in stable pose {scenario.pose_index} "
+        f"(rejected: {rejected}; gripper opening {config.gripper.max_opening_mm:g} mm)"
+    )
+
+
+def _sample_geometry(part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, sample: GraspSample, config: DesignConfig, seed) -> SampleGeometry:
+    frames = tuple(sample.pad_frame(side, config.sampler) for side in SIDES)
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
+    surfaces = tuple(
+        sample_surface(g.surface_vertices, g.surface_faces, config.contact.sample_density_per_mm2, [config.contact.seed, *seed, side_number])
+        for side_number, g in enumerate(geometries)
+    )
+    # contact points and normals are subsets of these samples, so A <= the sampled
+    # area and RLES >= the RLES of all sampled normals: E can never exceed this
+    area = sum(len(s.points) * s.area_per_point_mm2 for s in surfaces)
+    normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, frames)])
+    bound = area / rles(normals) if len(normals) else 0.0
+    return SampleGeometry(sample=sample, frames=frames, geometries=geometries, surfaces=surfaces, effective_area_bound=float(bound))
+
+
+def _evaluate(scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool) -> CandidateEvaluation:
+    chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
+    geometries = [g for sample in chosen for g in sample.geometries]
+    fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
+    pad_mesh = fingerpad.pad.to_mesh()
+    vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
+    faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
+    results = []
+    for sample in chosen:
+        contacts = tuple(seat(surface, vertices, faces, config.contact.eps_mm) for surface in sample.surfaces)
+        normals = np.vstack(
+            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
+        )
+        area = float(sum(c.contact_area_mm2 for c in contacts))
+        radius = rles(normals) if len(normals) else 2.0
+        effective = area / radius if area > 0 else 0.0
+        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective))
+    effective_areas = [r.effective_area for r in results]
+    return CandidateEvaluation(
+        choice=choice,
+        fingerpad=fingerpad if keep_pad else Fingerpad(manifold3d.Manifold(), fingerpad.case, fingerpad.block_depth_mm),
+        scenarios=results,
+        quality=float(min(effective_areas)),
+        mean_effective_area=float(np.mean(effective_areas)),
+    )
+
+
+def _round(value: float) -> float:
+    return round(float(value), 6)
+
+
+def _part_report(part: Part) -> PartReport:
+    return PartReport(
+        name=part.name,
+        file=part.path,
+        scale_to_mm=_round(part.scale),
+        extents_mm=[_round(x) for x in part.mesh.extents],
+        volume_mm3=_round(part.mesh.volume),
+        faces=len(part.mesh.faces),
+        repairs=part.repairs,
+    )
+
+
+def _scenario_report(scenario: Scenario) -> ScenarioReport:
+    result = scenario.sampler_result
+    return ScenarioReport(
+        part=scenario.part.name,
+        pose_index=scenario.pose_index,
+        pose_probability=_round(scenario.probability),
+        rest_transform=[[_round(x) for x in row] for row in scenario.rest_transform],
+        tried_samples=result.tried,
+        valid_samples=len(result.samples),
+        rejected=dict(result.rejected),
+        samples=[
+            SampleReport(
+                yaw_deg=g.sample.yaw_deg,
+                s_mm=_round(g.sample.s_mm),
+                h_mm=_round(g.sample.h_mm),
+                span_mm=_round(g.sample.a_max_mm - g.sample.a_min_mm),
+                surface_area_mm2=[_round(g.sample.area_plus_mm2), _round(g.sample.area_minus_mm2)],
+                labels=["good" if p.good else "bad" for p in g.geometries],
+                ratio=[_round(p.ratio) for p in g.geometries],
+                depth_mm=[_round(p.depth_mm) for p in g.geometries],
+                effective_area_bound=_round(g.effective_area_bound),
+            )
+            for g in scenario.samples
+        ],
+    )
+
+
+def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateReport:
+    return CandidateReport(
+        index=index,
+        samples=list(evaluation.choice),
+        per_scenario=[
+            ScenarioQuality(
+                rles=_round(e.rles),
+                contact_area_mm2=_round(e.contact_area_mm2),
+                effective_area=_round(e.effective_area),
+                seat_offsets_mm=[_round(c.offset_mm) for c in e.contacts],
+            )
+            for e in evaluation.scenarios
+        ],
+        quality=_round(evaluation.quality),
+        mean_effective_area=_round(evaluation.mean_effective_area),
+        pad_case=evaluation.fingerpad.case,
+        block_depth_mm=None if evaluation.fingerpad.block_depth_mm is None else _round(evaluation.fingerpad.block_depth_mm),
+    )
+
+
+def _grasp_report(scenario: Scenario, sample_index: int, evaluation: ScenarioEvaluation, config: DesignConfig) -> GraspReport:
+    pose = tcp_pose(
+        scenario.samples[sample_index].sample, evaluation.contacts[0].offset_mm, evaluation.contacts[1].offset_mm, config.sampler
+    )
+    return GraspReport(
+        part=scenario.part.name,
+        pose_index=scenario.pose_index,
+        sample=sample_index,
+        rest_transform=[[_round(x) for x in row] for row in scenario.rest_transform],
+        position_mm=[_round(x) for x in pose["position_mm"]],
+        quaternion_wxyz=[_round(x) for x in pose["quaternion_wxyz"]],
+        approach_direction=pose["approach_direction"],
+        closing_axis=[_round(x) for x in pose["closing_axis"]],
+        pad_gap_mm=_round(pose["pad_gap_mm"]),
+        closing_width_mm=_round(pose["closing_width_mm"]),
+    )

@@ -1,0 +1,202 @@
+"""Flat fingers and fusing the fingerpad onto one (METHOD §9)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import manifold3d
+import numpy as np
+import trimesh
+
+from .config import FingerConfig, GripperConfig, SamplerConfig
+from .errors import ConfigError, GeometryError
+from .geometry import affine_3x4, box, to_manifold, to_trimesh
+from .parts import read_mesh, unit_factor, validate_mesh
+
+#: Built-in finger: plate thickness and mounting flange, mm (Robotiq Hand-E sized).
+PLATE_THICKNESS_MM = 8.0
+FLANGE_THICKNESS_MM = 18.0
+FLANGE_HEIGHT_MM = 12.0
+MOUNT_HOLE_DIAMETER_MM = 4.5
+MOUNT_HOLE_PITCH_MM = 12.0
+MIN_PLATE_WIDTH_MM = 20.0
+
+
+@dataclass
+class FlatFinger:
+    """A flat finger and the frame of its contact face.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Watertight finger in mm.
+    contact_origin : (3,) float
+        Where the centre of the pad's back face goes, mm.
+    contact_normal : (3,) float
+        Inward unit normal of the contact face (towards the gripped part).
+    up : (3,) float
+        Unit direction from the fingertip towards the gripper.
+    source : str
+        ``"built-in"`` or the mesh file.
+    repairs : list of str
+        What repair changed on a finger mesh.
+    """
+
+    mesh: trimesh.Trimesh
+    contact_origin: np.ndarray
+    contact_normal: np.ndarray
+    up: np.ndarray
+    source: str
+    repairs: list[str]
+
+
+def parametric_finger(sampler: SamplerConfig, gripper: GripperConfig) -> FlatFinger:
+    """The built-in flat finger, sized like a Robotiq Hand-E finger.
+
+    A plate whose lower end carries the pad (its tip flush with the pad's
+    bottom edge), ``finger_height_mm`` of plate above the pad, and a mounting
+    flange with two through holes at the top.
+
+    Returns
+    -------
+    FlatFinger
+        Frame: x across the plate (contact face at x = 0, inward normal -x),
+        y along the pad length, z up from the fingertip.
+    """
+    width = max(sampler.length_mm + 4.0, MIN_PLATE_WIDTH_MM)
+    plate_height = sampler.width_mm + gripper.finger_height_mm
+    plate = box((0.0, -width / 2.0, 0.0), (PLATE_THICKNESS_MM, width / 2.0, plate_height))
+    flange = box(
+        (0.0, -width / 2.0, plate_height),
+        (FLANGE_THICKNESS_MM, width / 2.0, plate_height + FLANGE_HEIGHT_MM),
+    )
+    body = plate + flange
+    for offset in (-MOUNT_HOLE_PITCH_MM / 2.0, MOUNT_HOLE_PITCH_MM / 2.0):
+        hole = (
+            manifold3d.Manifold.cylinder(FLANGE_THICKNESS_MM + 2.0, MOUNT_HOLE_DIAMETER_MM / 2.0, circular_segments=32)
+            .rotate([0.0, 90.0, 0.0])
+            .translate([-1.0, offset, plate_height + FLANGE_HEIGHT_MM / 2.0])
+        )
+        body = body - hole
+    return FlatFinger(
+        mesh=to_trimesh(body),
+        contact_origin=np.array([0.0, 0.0, sampler.width_mm / 2.0]),
+        contact_normal=np.array([-1.0, 0.0, 0.0]),
+        up=np.array([0.0, 0.0, 1.0]),
+        source="built-in",
+        repairs=[],
+    )
+
+
+def load_finger(config: FingerConfig, repair: bool = False) -> FlatFinger:
+    """Load a user's flat finger mesh with its contact-face frame.
+
+    Raises
+    ------
+    MeshError
+        The finger mesh is unreadable or not a closed volume.
+    ConfigError
+        The frame is not usable (zero or non-perpendicular vectors).
+    """
+    path = config.mesh
+    mesh = read_mesh(path)
+    mesh, changes = validate_mesh(mesh, path, repair=repair)
+    factor = unit_factor(config.units, path)
+    mesh.apply_scale(factor)
+    normal = _unit(config.contact_normal, "finger.contact_normal")
+    up = _unit(config.up, "finger.up")
+    if abs(float(normal @ up)) > 1e-3:
+        raise ConfigError("finger.up", "must be perpendicular to finger.contact_normal")
+    return FlatFinger(
+        mesh=mesh,
+        contact_origin=np.asarray(config.contact_origin_mm, dtype=float),
+        contact_normal=normal,
+        up=up,
+        source=str(path),
+        repairs=changes,
+    )
+
+
+def _unit(vector, key: str) -> np.ndarray:
+    vector = np.asarray(vector, dtype=float)
+    norm = float(np.linalg.norm(vector))
+    if not np.isfinite(norm) or norm < 1e-9:
+        raise ConfigError(key, "must be a non-zero direction")
+    return vector / norm
+
+
+def pad_to_finger(finger: FlatFinger, sampler: SamplerConfig) -> np.ndarray:
+    """4x4 transform from the pad frame to the finger's frame.
+
+    The pad's back face (u = T) lands on the contact face, centred on the
+    contact origin; u (outward) goes to ``-contact_normal``, w to ``up`` and
+    v to ``up x u`` so the map is a rotation, never a mirror.
+    """
+    outward = -finger.contact_normal
+    up = finger.up
+    along = np.cross(up, outward)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2] = outward, along, up
+    matrix[:3, 3] = finger.contact_origin - (
+        sampler.thickness_mm * outward + sampler.length_mm / 2.0 * along + sampler.width_mm / 2.0 * up
+    )
+    return matrix
+
+
+@dataclass
+class FusedFinger:
+    """The print-ready finger: the flat finger with the fingerpad fused on."""
+
+    mesh: trimesh.Trimesh
+    bodies: int
+    volume_mm3: float
+    min_pad_thickness_mm: float
+
+
+def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, overlap_mm: float) -> FusedFinger:
+    """Fuse a fingerpad onto a flat finger with manifold3d.
+
+    The pad is extended ``overlap_mm`` behind its back face into the finger so
+    that the union is one solid while the pad keeps its full thickness T in
+    front of the contact face.
+
+    Raises
+    ------
+    GeometryError
+        When the result is not one watertight body of positive volume.
+    """
+    thickness, length, width = sampler.thickness_mm, sampler.length_mm, sampler.width_mm
+    backing = box((thickness - 0.5 * overlap_mm, 0.0, 0.0), (thickness + overlap_mm, length, width))
+    pad_in_finger = (pad + backing).transform(affine_3x4(pad_to_finger(finger, sampler)))
+    fused = to_manifold(finger.mesh) + pad_in_finger
+    if fused.status() != manifold3d.Error.NoError:
+        raise GeometryError(f"finger union failed: {fused.status()}")
+    mesh = to_trimesh(fused)
+    bodies = len(fused.decompose())
+    if not mesh.is_watertight or bodies != 1 or not fused.volume() > 0:
+        raise GeometryError(
+            f"fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
+            "check the finger's contact_origin_mm and contact_normal"
+        )
+    return FusedFinger(mesh=mesh, bodies=bodies, volume_mm3=float(fused.volume()), min_pad_thickness_mm=pad_thickness(pad, sampler))
+
+
+def pad_thickness(pad: manifold3d.Manifold, sampler: SamplerConfig, samples_per_side: int = 40) -> float:
+    """Thinnest section of the pad along u (mm), from rays across its face.
+
+    Each ray enters the pad at its carved surface; the section there runs to
+    the back face u = T.
+    """
+    mesh = to_trimesh(pad)
+    v = (np.arange(samples_per_side) + 0.5) / samples_per_side * sampler.length_mm
+    w = (np.arange(samples_per_side) + 0.5) / samples_per_side * sampler.width_mm
+    grid_v, grid_w = np.meshgrid(v, w)
+    origins = np.column_stack([np.full(grid_v.size, -1.0), grid_v.ravel(), grid_w.ravel()])
+    directions = np.tile([1.0, 0.0, 0.0], (len(origins), 1))
+    locations, rays, _ = mesh.ray.intersects_location(origins, directions, multiple_hits=True)
+    if len(rays) == 0:
+        return 0.0
+    first_hit = np.full(len(origins), np.inf)
+    np.minimum.at(first_hit, rays, locations[:, 0])
+    hit = np.isfinite(first_hit)
+    return float(sampler.thickness_mm - first_hit[hit].max())

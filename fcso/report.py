@@ -1,0 +1,118 @@
+"""The design report: pydantic models of ``report.json``."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .config import DesignConfig
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class PartReport(_Model):
+    """A part as it was used."""
+
+    name: str
+    file: str
+    scale_to_mm: float = Field(description="Factor applied to the file's coordinates to get mm")
+    extents_mm: list[float] = Field(description="Bounding-box size in the file frame after scaling, mm")
+    volume_mm3: float
+    faces: int
+    repairs: list[str] = Field(description="What --repair changed; empty when nothing was repaired")
+
+
+class SampleReport(_Model):
+    """One valid sample pair of a scenario and the filter labels of its two pads."""
+
+    yaw_deg: float
+    s_mm: float = Field(description="Footprint centre along the sliding axis, mm")
+    h_mm: float = Field(description="Footprint bottom above the table, mm")
+    span_mm: float = Field(description="a_max - a_min inside the footprint, mm")
+    surface_area_mm2: list[float] = Field(description="Part surface inside the + and - pad boxes, mm²")
+    labels: list[str] = Field(description="Filter label of the + and - geometries: good or bad")
+    ratio: list[float] = Field(description="R = (V_B - V_I) / V_B of the + and - geometries")
+    depth_mm: list[float] = Field(description="d_n of the + and - geometries, mm")
+    effective_area_bound: float = Field(description="Upper bound of E for any candidate using this sample, mm²")
+
+
+class ScenarioReport(_Model):
+    """One grasp scenario: a part in one stable pose."""
+
+    part: str
+    pose_index: int = Field(description="Index among the part's stable poses, 0 = most probable")
+    pose_probability: float
+    rest_transform: list[list[float]] = Field(description="4x4, part file frame (mm) to resting frame (mm)")
+    tried_samples: int = Field(description="Sample pairs whose footprint met the part")
+    valid_samples: int
+    rejected: dict[str, int] = Field(description="Rejection reason -> count")
+    samples: list[SampleReport]
+
+
+class ScenarioQuality(_Model):
+    """Quality of one candidate in one scenario."""
+
+    rles: float = Field(description="Radius of the largest empty sphere of contact normals (chord, 0..2)")
+    contact_area_mm2: float = Field(description="A: contact area of both pads, mm²")
+    effective_area: float = Field(description="E = A / RLES, mm²")
+    seat_offsets_mm: list[float] = Field(description="Seating offset t of the + and - pads, mm")
+
+
+class CandidateReport(_Model):
+    """One evaluated candidate fingerpad."""
+
+    index: int = Field(description="Position in the lexicographic enumeration of sample choices")
+    samples: list[int] = Field(description="Chosen sample per scenario (same order as scenarios)")
+    per_scenario: list[ScenarioQuality]
+    quality: float = Field(description="Q = min over scenarios of E, mm²")
+    mean_effective_area: float = Field(description="Mean E over scenarios (first tie-break), mm²")
+    pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
+    block_depth_mm: float | None = Field(None, description="d_B in the mixed case, mm")
+
+
+class SearchReport(_Model):
+    kind: str = Field(description="exhaustive or branch_and_bound")
+    evaluated: int
+    candidates_total: int = Field(description="C = product of valid samples per scenario")
+    proven_optimal: bool
+
+
+class GraspReport(_Model):
+    """What the robot runs for one part in one pose."""
+
+    part: str
+    pose_index: int
+    sample: int
+    rest_transform: list[list[float]] = Field(description="4x4, part file frame to resting frame (mm)")
+    position_mm: list[float] = Field(description="TCP position in the resting frame, mm")
+    quaternion_wxyz: list[float] = Field(description="TCP orientation in the resting frame (z: approach, y: closing axis)")
+    approach_direction: list[float]
+    closing_axis: list[float]
+    pad_gap_mm: float = Field(description="Distance between the two pad faces at contact, mm")
+    closing_width_mm: float = Field(description="Distance between the flat fingers' contact faces at contact, mm")
+
+
+class FingerReport(_Model):
+    source: str = Field(description="built-in or the finger mesh file")
+    repairs: list[str]
+    volume_mm3: float
+    bodies: int
+    watertight: bool
+    min_pad_thickness_mm: float
+
+
+class DesignReport(_Model):
+    """Everything ``fcso design`` decided and why (``report.json``)."""
+
+    fcso_version: str
+    parts: list[PartReport]
+    scenarios: list[ScenarioReport]
+    candidates: list[CandidateReport]
+    best: int = Field(description="Index of the chosen candidate (argmax Q, ties: larger mean E, then smaller index)")
+    search: SearchReport
+    grasps: list[GraspReport]
+    finger: FingerReport
+    timings_s: dict[str, float] = Field(description="Wall time per stage, s (the only field that varies between identical runs)")
+    warnings: list[str]
+    settings: DesignConfig
