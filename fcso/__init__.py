@@ -11,6 +11,7 @@ __version__ = "0.1.0"
 from .config import DesignConfig, load_config  # noqa: E402
 from .design import DesignResult, design  # noqa: E402
 from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError  # noqa: E402
+from .output import output_files, write_outputs  # noqa: E402
 from .parts import Part, load_part  # noqa: E402
 from .poses import stable_poses  # noqa: E402
 from .rles import rles  # noqa: E402
@@ -27,6 +28,8 @@ __all__ = [
     "design",
     "load_config",
     "load_part",
+    "output_files",
+    "write_outputs",
     "rles",
     "stable_poses",
 ]

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
-from .design import DesignResult, design
+from .design import design
 from .errors import FcsoError, GeometryError
+from .output import write_outputs
 from .parts import load_part
 from .poses import stable_poses
 from .schema import write_schemas
@@ -132,24 +132,6 @@ def _design(args) -> int:
             print(f"warning: {warning}")
         print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json")
     return 0
-
-
-def write_outputs(result: DesignResult, out_dir: Path) -> None:
-    """Write ``finger.stl``, ``fingerpad.stl`` (binary STL) and ``report.json`` into ``out_dir``.
-
-    Each file is written under a temporary name and renamed into place.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = {
-        "finger.stl": result.finger.export(file_type="stl"),
-        "fingerpad.stl": result.fingerpad.export(file_type="stl"),
-        "report.json": (result.report.model_dump_json(indent=2) + "\n").encode("utf-8"),
-    }
-    for name, data in files.items():
-        temporary = out_dir / f".{name}.tmp"
-        temporary.write_bytes(data)
-        os.replace(temporary, out_dir / name)
 
 
 def _poses(args) -> int:

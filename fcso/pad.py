@@ -204,6 +204,20 @@ class Fingerpad:
     block_depth_mm: float | None
 
 
+def _attached(pad: manifold3d.Manifold, thickness: float) -> manifold3d.Manifold:
+    """Keep the pad material connected to the back face.
+
+    Pad material enclosed by a part (inside a hole running along the pad
+    face) is cut off from the back slab: it could neither be printed on the
+    finger nor reach the part, so it is dropped.
+    """
+    pieces = pad.decompose()
+    if len(pieces) <= 1:
+        return pad
+    attached = [p for p in pieces if p.bounding_box()[3] >= thickness - 1e-4]
+    return manifold3d.Manifold.batch_boolean(attached, manifold3d.OpType.Add) if attached else pad
+
+
 def build_fingerpad(geometries: list[PadGeometry], sampler: SamplerConfig, filter_config: FilterConfig) -> Fingerpad:
     """Carve the fingerpad from the labelled geometries of one candidate (METHOD §4-5).
 
@@ -234,7 +248,7 @@ def build_fingerpad(geometries: list[PadGeometry], sampler: SamplerConfig, filte
             block_depth = min(g.depth_mm for g in good) * filter_config.block_factor
             if block_depth < depth:
                 removed = removed + box((-1.0, -1.0, -1.0), (depth - block_depth, length + 1.0, width + 1.0))
-        pad = pad_box(sampler) - removed
+        pad = _attached(pad_box(sampler) - removed, thickness)
         result = Fingerpad(pad=pad, case=case, block_depth_mm=block_depth)
     if result.pad.status() != manifold3d.Error.NoError or result.pad.is_empty():
         raise GeometryError(f"fingerpad Boolean failed: {result.pad.status()}")

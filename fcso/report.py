@@ -29,7 +29,8 @@ class SampleReport(_Model):
     yaw_deg: float
     s_mm: float = Field(description="Footprint centre along the sliding axis, mm")
     h_mm: float = Field(description="Footprint bottom above the table, mm")
-    span_mm: float = Field(description="a_max - a_min inside the footprint, mm")
+    a_max_mm: float = Field(description="Part's largest coordinate along the closing axis inside the footprint, mm")
+    a_min_mm: float = Field(description="Part's smallest coordinate along the closing axis inside the footprint, mm")
     surface_area_mm2: list[float] = Field(description="Part surface inside the + and - pad boxes, mm²")
     labels: list[str] = Field(description="Filter label of the + and - geometries: good or bad")
     ratio: list[float] = Field(description="R = (V_B - V_I) / V_B of the + and - geometries")

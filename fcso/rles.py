@@ -1,20 +1,10 @@
-"""RLES grasp-quality primitive: the largest empty spherical cap among contact normals.
+"""RLES grasp quality: the exact largest empty spherical cap among contact normals.
 
-The contact normals are points on the unit sphere. RLES (radius of the largest
-empty sphere) is ``max_c min_i |c - n_i|`` over unit vectors ``c``: the chord
-radius of the largest cap that contains no normal, in [0, 2]. It is computed
-exactly by evaluating ``f(c) = min_i |c - n_i|`` (with a KD-tree) at a finite
-candidate set that provably contains the maximiser:
-
-* points equidistant from three or more nearest normals: the vertices of the
-  spherical Voronoi diagram, i.e. the outward unit normals of the facets of
-  the convex hull of the normals (what `scipy.spatial.SphericalVoronoi`
-  computes); for normals on one circle these are the two poles of its plane;
-* points inside a Voronoi edge between neighbours ``i, j`` where ``f`` is
-  locally maximal along the edge: ``-(n_i + n_j) / |n_i + n_j|``;
-* ``-n`` when there is a single distinct normal.
-
-Evaluating ``f`` exactly at a superset of these points is still exact.
+``max_c min_i |c - n_i|`` over unit ``c`` is evaluated with a KD-tree at a
+finite candidate set that contains the maximiser: the spherical Voronoi
+vertices (convex-hull facet normals, or the poles of the plane of cocircular
+normals), the edge points ``-(n_i + n_j)/|n_i + n_j|`` of Voronoi neighbours,
+and ``-n`` for a single normal.
 """
 
 from __future__ import annotations
@@ -49,8 +39,8 @@ def fibonacci_sphere(count: int) -> np.ndarray:
     points : (count, 3) float ndarray
         Unit vectors; point ``k`` has height ``z = 1 - (2k + 1) / count`` and
         azimuth ``k`` times the golden angle. The largest distance from any
-        point of the sphere to its nearest lattice point is about
-        ``1.1 * sqrt(4 pi / count)`` or less.
+        point of the sphere to its nearest lattice point is
+        about ``0.75 * sqrt(4 pi / count)`` (measured).
     """
     count = int(count)
     if count < 0:

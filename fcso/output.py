@@ -1,0 +1,36 @@
+"""Writing a design's files into an output folder."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .design import DesignResult
+
+
+def output_files(result: DesignResult) -> dict[str, bytes]:
+    """The files of a design: ``finger.stl``, ``fingerpad.stl`` (binary STL) and ``report.json``."""
+    return {
+        "finger.stl": result.finger.export(file_type="stl"),
+        "fingerpad.stl": result.fingerpad.export(file_type="stl"),
+        "report.json": (result.report.model_dump_json(indent=2) + "\n").encode("utf-8"),
+    }
+
+
+def write_outputs(result: DesignResult, out_dir: str | Path) -> list[Path]:
+    """Write :func:`output_files` into ``out_dir``, each under a temporary name renamed into place.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, data in output_files(result).items():
+        temporary = out_dir / f".{name}.tmp"
+        temporary.write_bytes(data)
+        os.replace(temporary, out_dir / name)
+        written.append(out_dir / name)
+    return written
