@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 
 import numpy as np
 import pytest
@@ -308,14 +307,3 @@ def test_spherical_voronoi_vertices():
         upper[:, 2] = np.abs(upper[:, 2]) + 0.05
         upper = unit(upper)
         assert nearest(SphericalVoronoi(upper).vertices, upper).max() <= rles(upper) + 1e-12
-
-
-def test_speed():
-    # the inner-loop case: ~2000 contact normals, many duplicates
-    rng = np.random.default_rng(18)
-    base = random_unit(rng, 300)
-    rows = base[rng.integers(0, 300, size=2000)] * rng.uniform(0.5, 2.0, size=(2000, 1))
-    start = time.perf_counter()
-    for _ in range(20):
-        rles(rows)
-    assert (time.perf_counter() - start) / 20 < 0.05
