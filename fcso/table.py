@@ -1,8 +1,68 @@
-"""Plain-text quality tables (the paper's Table I layout)."""
+"""Quality tables (the paper's Table I layout): shared columns, and the plain-text table."""
 
 from __future__ import annotations
 
-from .report import DesignReport
+from dataclasses import dataclass
+from typing import Callable
+
+from .report import CandidateReport, DesignReport
+
+#: Column groups of the quality table: title, ScenarioQuality field, decimals.
+SCENARIO_GROUPS = (("RLES", "rles", 4), ("A mm2", "contact_area_mm2", 1), ("E", "effective_area", 1))
+
+
+@dataclass(frozen=True)
+class QualityColumn:
+    """One numeric column of the quality table.
+
+    Attributes
+    ----------
+    group : str
+        ``"RLES"``, ``"A mm2"``, ``"E"`` or ``"Q"``.
+    scenario : str or None
+        Label of the grasp scenario (part/pose); None for Q.
+    decimals : int
+        Digits after the decimal point.
+    value : callable
+        ``value(candidate) -> float``.
+    """
+
+    group: str
+    scenario: str | None
+    decimals: int
+    value: Callable[[CandidateReport], float]
+
+    @property
+    def title(self) -> str:
+        return self.group if self.scenario is None else f"{self.group} {self.scenario}"
+
+
+def scenario_labels(report: DesignReport) -> list[str]:
+    """Short ``part/p<pose>`` label of each grasp scenario."""
+    return [f"{s.part[:10]}/p{s.pose_index}" for s in report.scenarios]
+
+
+def quality_columns(report: DesignReport) -> list[QualityColumn]:
+    """RLES, A and E per scenario (grouped by quantity), then Q."""
+    labels = scenario_labels(report)
+    columns = [
+        QualityColumn(group, label, decimals, lambda c, m=m, name=name: getattr(c.per_scenario[m], name))
+        for group, name, decimals in SCENARIO_GROUPS
+        for m, label in enumerate(labels)
+    ]
+    columns.append(QualityColumn("Q", None, 1, lambda c: c.quality))
+    return columns
+
+
+def ranked_candidates(report: DesignReport, limit: int | None = None) -> list[CandidateReport]:
+    """Candidates best first (larger Q, then larger mean E, then smaller index), at most ``limit``."""
+    rows = sorted(report.candidates, key=lambda c: (-c.quality, -c.mean_effective_area, c.index))
+    return rows if limit is None else rows[:limit]
+
+
+def chosen_candidate(report: DesignReport) -> CandidateReport:
+    """The candidate the design chose."""
+    return next(c for c in report.candidates if c.index == report.best)
 
 
 def quality_table(report: DesignReport, limit: int | None = 20) -> str:
@@ -20,28 +80,19 @@ def quality_table(report: DesignReport, limit: int | None = 20) -> str:
     str
         A fixed-width table; the chosen candidate is marked with ``*``.
     """
-    labels = [f"{s.part[:10]}/p{s.pose_index}" for s in report.scenarios]
-    rows = report.candidates
-    if limit is not None:
-        rows = sorted(rows, key=lambda c: (-c.quality, -c.mean_effective_area, c.index))[:limit]
-    width = max(12, *(len(label) + 1 for label in labels))
-    header = ["    i"]
-    for name in ("RLES", "A mm2", "E"):
-        header += [f"{name + ' ' + label:>{width + 6}}" for label in labels]
-    header.append(f"{'Q':>10}")
+    columns = quality_columns(report)
+    rows = report.candidates if limit is None else ranked_candidates(report, limit)
+    width = max(12, *(len(label) + 1 for label in scenario_labels(report)))
+    widths = [10 if column.scenario is None else width + 6 for column in columns]
+    header = ["    i"] + [f"{column.title:>{w}}" for column, w in zip(columns, widths)]
     lines = [" ".join(header)]
     for row in rows:
         mark = "*" if row.index == report.best else " "
         cells = [f"{mark}{row.index:>4}"]
-        cells += [f"{q.rles:>{width + 6}.4f}" for q in row.per_scenario]
-        cells += [f"{q.contact_area_mm2:>{width + 6}.1f}" for q in row.per_scenario]
-        cells += [f"{q.effective_area:>{width + 6}.1f}" for q in row.per_scenario]
-        cells.append(f"{row.quality:>10.1f}")
+        cells += [f"{column.value(row):>{w}.{column.decimals}f}" for column, w in zip(columns, widths)]
         lines.append(" ".join(cells))
-    shown = len(rows)
-    total = len(report.candidates)
     lines.append(
-        f"{shown} of {total} evaluated candidates shown ({report.search.kind}, C = {report.search.candidates_total}); "
-        f"* = chosen, Q = {next(c.quality for c in report.candidates if c.index == report.best):.1f}"
+        f"{len(rows)} of {len(report.candidates)} evaluated candidates shown ({report.search.kind}, "
+        f"C = {report.search.candidates_total}); * = chosen, Q = {chosen_candidate(report).quality:.1f}"
     )
     return "\n".join(lines)

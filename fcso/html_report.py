@@ -1,0 +1,426 @@
+"""``report.html``: one self-contained page of pictures and tables per design.
+
+The page is built from :class:`ReportInputs`, which come either from a
+fresh :class:`~fcso.design.DesignResult` (:func:`report_inputs`) or from an
+output folder (:func:`load_report_inputs`: ``report.json``, the part files it
+names, ``finger.stl`` and ``fingerpad.stl``), so ``fcso report DIR`` redraws
+the same page without designing again.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import trimesh
+
+from .contact import sample_surface, seat
+from .design import SIDES, DesignResult
+from .errors import MeshError
+from .finger import load_finger, pad_to_finger, parametric_finger
+from .geometry import clip_to_box, transform_points
+from .parts import load_part
+from .render import PadPlacement, finger_picture, fingerpad_picture, grasp_picture, normals_picture, pose_picture
+from .report import DesignReport
+from .rles import largest_empty_cap
+from .sampler import REJECTION_REASONS, GraspSample
+from .table import SCENARIO_GROUPS, chosen_candidate, quality_columns, ranked_candidates, scenario_labels
+
+#: ``progress(stage, done, total)``, as for :func:`fcso.design.design`.
+Progress = Callable[[str, int, int], None]
+
+#: Index-ordered tables longer than this start folded.
+FOLDED_ROWS = 40
+
+
+@dataclass
+class GraspScene:
+    """What the page shows of one grasp scenario of the chosen candidate.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        The part in its resting frame (mm).
+    sample : GraspSample
+        The chosen sample.
+    placements : list of PadPlacement
+        The seated "+" and "-" pads with their contact masks.
+    normals : (n, 3) float
+        Contact normals, resting frame.
+    rles : float
+        Chord radius of the largest empty cap of ``normals``.
+    cap_centre : (3,) float
+        Its centre.
+    """
+
+    mesh: trimesh.Trimesh
+    sample: GraspSample
+    placements: list[PadPlacement]
+    normals: np.ndarray
+    rles: float
+    cap_centre: np.ndarray
+
+
+@dataclass
+class ReportInputs:
+    """Everything ``report.html`` is drawn from.
+
+    Attributes
+    ----------
+    report : DesignReport
+    finger : trimesh.Trimesh
+        The fused finger, finger frame (mm).
+    fingerpad : trimesh.Trimesh
+        The chosen pad, pad frame (mm).
+    pad_to_finger : (4, 4) float
+        Pad frame to finger frame.
+    grasps : list of GraspScene
+        One per scenario, in the report's scenario order.
+    """
+
+    report: DesignReport
+    finger: trimesh.Trimesh
+    fingerpad: trimesh.Trimesh
+    pad_to_finger: np.ndarray
+    grasps: list[GraspScene]
+
+
+def report_inputs(result: DesignResult) -> ReportInputs:
+    """The page's inputs from a design that was just run."""
+    grasps = []
+    for scenario, index, evaluation in zip(result.scenarios, result.best.choice, result.best.scenarios):
+        chosen = scenario.samples[index]
+        placements = [
+            PadPlacement(frame, contact.offset_mm, surface, contact.contact)
+            for frame, contact, surface in zip(chosen.frames, evaluation.contacts, chosen.surfaces)
+        ]
+        radius, centre = largest_empty_cap(evaluation.contact_normals)
+        grasps.append(GraspScene(scenario.mesh, chosen.sample, placements, evaluation.contact_normals, radius, centre))
+    return ReportInputs(result.report, result.finger, result.fingerpad, result.pad_to_finger, grasps)
+
+
+def load_report_inputs(directory: str | Path) -> ReportInputs:
+    """The page's inputs from an output folder, re-seating the chosen grasps.
+
+    The parts are reloaded with the recorded scale and moved into their
+    recorded resting poses; each chosen sample's pad frames are rebuilt, the
+    part surface inside each pad box is sampled with the design's seeds and
+    seated against ``fingerpad.stl`` (METHOD §6).
+
+    Parameters
+    ----------
+    directory : str or Path
+        Holds ``report.json``, ``finger.stl`` and ``fingerpad.stl``.
+
+    Returns
+    -------
+    ReportInputs
+
+    Raises
+    ------
+    MeshError
+        A file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    report_path = directory / "report.json"
+    if not report_path.is_file():
+        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
+    report = DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
+    config = report.settings
+    finger = _read_stl(directory / "finger.stl")
+    fingerpad = _read_stl(directory / "fingerpad.stl")
+    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    pad_size = (config.sampler.thickness_mm, config.sampler.length_mm, config.sampler.width_mm)
+    pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
+    parts = [
+        load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name) for p in report.parts
+    ]
+    part_number = 0
+    grasps = []
+    for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
+        # scenarios come part by part, in the order of the parts
+        while parts[part_number].name != scenario.part:
+            part_number += 1
+        mesh = parts[part_number].mesh.copy()
+        mesh.apply_transform(np.asarray(scenario.rest_transform, dtype=float))
+        reported = scenario.samples[index]
+        sample = GraspSample(
+            yaw_deg=reported.yaw_deg,
+            s_mm=reported.s_mm,
+            h_mm=reported.h_mm,
+            a_max_mm=reported.a_max_mm,
+            a_min_mm=reported.a_min_mm,
+            area_plus_mm2=reported.surface_area_mm2[0],
+            area_minus_mm2=reported.surface_area_mm2[1],
+        )
+        placements, normals = [], []
+        for side_number, side in enumerate(SIDES):
+            frame = sample.pad_frame(side, config.sampler)
+            inside = clip_to_box(transform_points(frame, np.asarray(mesh.vertices)), np.asarray(mesh.faces), (0.0, 0.0, 0.0), pad_size)
+            # the design's seed for this scenario, sample and side
+            surface = sample_surface(*inside, config.contact.sample_density_per_mm2, [config.contact.seed, number, index, side_number])
+            contact = seat(surface, pad_vertices, pad_faces, config.contact.eps_mm)
+            placements.append(PadPlacement(frame, contact.offset_mm, surface, contact.contact))
+            normals.append(surface.normals[contact.contact] @ frame[:3, :3])
+        normals = np.vstack(normals)
+        radius, centre = largest_empty_cap(normals)
+        grasps.append(GraspScene(mesh, sample, placements, normals, radius, centre))
+    return ReportInputs(report, finger, fingerpad, pad_to_finger(flat, config.sampler), grasps)
+
+
+def _read_stl(path: Path) -> trimesh.Trimesh:
+    if not path.is_file():
+        raise MeshError(path, "file not found")
+    # merged vertices: the signed distance used for seating needs a closed mesh
+    return trimesh.load(str(path), force="mesh", process=True)
+
+
+def _part_path(file: str, directory: Path) -> Path:
+    """A part file as recorded, or relative to the output folder when the recorded path is gone."""
+    recorded = Path(file)
+    if recorded.is_file() or recorded.is_absolute():
+        return recorded
+    beside = directory / recorded
+    return beside if beside.is_file() else recorded
+
+
+def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str, bytes]:
+    """Render every picture of the page.
+
+    Returns
+    -------
+    dict
+        ``"finger"``, ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``,
+        ``"pose <m>"`` for each scenario ``m``: PNG bytes.
+    """
+    report = inputs.report
+    settings = report.settings.sampler
+    pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
+    labels = _scenario_titles(report)
+    jobs: list[tuple[str, Callable[[], bytes]]] = [
+        ("finger", lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)")),
+        ("fingerpad", lambda: fingerpad_picture(inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)")),
+    ]
+    for m, grasp in enumerate(inputs.grasps):
+        jobs += [
+            (f"grasp {m}", lambda g=grasp, t=labels[m]: grasp_picture(g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t)),
+            (f"normals {m}", lambda g=grasp, t=labels[m]: normals_picture(g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}")),
+            (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
+        ]
+    report_progress = progress or (lambda stage, done, total: None)
+    rendered = {}
+    for done, (name, draw) in enumerate(jobs):
+        report_progress("pictures", done, len(jobs))
+        rendered[name] = draw()
+    report_progress("pictures", len(jobs), len(jobs))
+    return rendered
+
+
+def _scenario_titles(report: DesignReport) -> list[str]:
+    return [f"{s.part} / pose {s.pose_index} (p = {s.pose_probability:.3f})" for s in report.scenarios]
+
+
+def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
+    """The whole page, images embedded as base64 PNG."""
+    report = inputs.report
+    images = pictures(inputs, progress)
+    chosen = chosen_candidate(report)
+    titles = _scenario_titles(report)
+    body = [
+        "<h1>FCSO design report</h1>",
+        _summary(report, chosen),
+        "<h2>Finger and fingerpad</h2>",
+        _image(images["finger"], "finger", "the finger with its fingerpad"),
+        _image(images["fingerpad"], "fingerpad", "the fingerpad coloured by depth"),
+        "<h2>Grasps of the chosen candidate</h2>",
+        "<p>Each part in its resting pose with the two seated pads (translucent orange); "
+        "the part surface touching a pad is red. Below, the contact normals on the unit sphere "
+        "and the largest empty cap (orange), whose chord radius is the RLES.</p>",
+    ]
+    for m, (scenario, grasp) in enumerate(zip(report.scenarios, inputs.grasps)):
+        body += [
+            f"<h3>{_text(titles[m])}</h3>",
+            _grasp_table(report, m, grasp),
+            _image(images[f"grasp {m}"], "grasp", f"grasp of {titles[m]}"),
+            _image(images[f"normals {m}"], "normals", f"contact normals of {titles[m]}"),
+        ]
+    body += [
+        "<h2>Stable poses used</h2>",
+        _poses_table(report),
+        '<div class="poses">' + "".join(_image(images[f"pose {m}"], "pose", titles[m]) for m in range(len(inputs.grasps))) + "</div>",
+        "<h2>Quality of all evaluated candidates</h2>",
+        "<p>Best first (Q, then mean E, then index); the chosen candidate is marked &#9733;. "
+        "RLES: radius of the largest empty sphere of contact normals (smaller is better); "
+        "A: contact area of both pads (mm&sup2;); E = A / RLES (mm&sup2;); Q = min E over scenarios.</p>",
+        quality_table_html(report, ranked_candidates(report), "sorted"),
+    ]
+    if len(report.scenarios) == 2:
+        table = quality_table_html(report, report.candidates, "table-i")
+        body += [
+            "<h3>The paper's Table I layout (index order)</h3>",
+            f"<details><summary>{len(report.candidates)} candidates</summary>{table}</details>"
+            if len(report.candidates) > FOLDED_ROWS
+            else table,
+        ]
+    body += [
+        "<h2>Grasp sampler</h2>",
+        _sampler_table(report),
+        "<h2>Warnings</h2>",
+        "<ul>" + "".join(f"<li>{_text(w)}</li>" for w in report.warnings) + "</ul>" if report.warnings else "<p>None.</p>",
+        "<h2>Settings and timings</h2>",
+        f"<details><summary>settings</summary><pre>{_text(report.settings.model_dump_json(indent=2))}</pre></details>",
+        f"<pre>{_text(json.dumps(report.timings_s, indent=2))}</pre>",
+    ]
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<title>FCSO report: {_text(', '.join(p.name for p in report.parts))}</title>\n<style>{_STYLE}</style>\n</head>\n"
+        "<body>\n" + "\n".join(body) + "\n</body>\n</html>\n"
+    )
+
+
+_STYLE = """
+body { font-family: sans-serif; max-width: 1240px; margin: 1em auto; color: #222; }
+img { display: block; max-width: 100%; margin: 0.5em 0; }
+.poses { display: flex; flex-wrap: wrap; gap: 0.5em; }
+table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.85em; }
+th, td { border: 1px solid #bbb; padding: 2px 6px; text-align: right; }
+th { background: #eef; }
+td.text, th.text { text-align: left; }
+tr.chosen td { background: #ffe4a8; font-weight: bold; }
+pre { background: #f6f6f6; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
+"""
+
+
+def _text(value) -> str:
+    return html.escape(str(value))
+
+
+def _image(png: bytes, kind: str, alt: str) -> str:
+    data = base64.b64encode(png).decode("ascii")
+    return f'<img data-kind="{kind}" alt="{_text(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _summary(report: DesignReport, chosen) -> str:
+    rows = [
+        ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
+        ("scenarios", len(report.scenarios)),
+        ("search", f"{report.search.kind}: {report.search.evaluated} of C = {report.search.candidates_total} candidates evaluated"
+         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}"),
+        ("chosen candidate", f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad"),
+        ("finger", f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
+         f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}"),
+        ("fcso", report.fcso_version),
+    ]
+    return "<table>" + "".join(f'<tr><th class="text">{_text(k)}</th><td class="text">{_text(v)}</td></tr>' for k, v in rows) + "</table>"
+
+
+def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
+    chosen = chosen_candidate(report)
+    quality = chosen.per_scenario[m]
+    sample = report.scenarios[m].samples[chosen.samples[m]]
+    robot = report.grasps[m]
+    rows = [
+        ("sample", f"{chosen.samples[m]}: yaw {sample.yaw_deg:g}°, s = {sample.s_mm:.2f} mm, h = {sample.h_mm:.2f} mm"),
+        ("filter labels (+, -)", ", ".join(f"{label} (R = {r:.3f}, d = {d:.2f} mm)" for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm))),
+        ("seat offsets t (+, -)", ", ".join(f"{t:.3f} mm" for t in quality.seat_offsets_mm)),
+        ("contact area A", f"{quality.contact_area_mm2:.1f} mm²"),
+        ("RLES", f"{quality.rles:.4f} (drawn: {grasp.rles:.4f}, {len(grasp.normals)} contact normals)"),
+        ("effective area E", f"{quality.effective_area:.1f} mm²"),
+        ("TCP (resting frame)", f"position {robot.position_mm} mm, quaternion wxyz {robot.quaternion_wxyz}, "
+         f"closing width {robot.closing_width_mm:.2f} mm"),
+    ]
+    return "<table>" + "".join(f'<tr><th class="text">{_text(k)}</th><td class="text">{_text(v)}</td></tr>' for k, v in rows) + "</table>"
+
+
+def _poses_table(report: DesignReport) -> str:
+    header = '<tr><th class="text">part</th><th>pose index</th><th>probability</th><th>valid samples</th></tr>'
+    rows = "".join(
+        f'<tr><td class="text">{_text(s.part)}</td><td>{s.pose_index}</td><td>{s.pose_probability:.4f}</td><td>{s.valid_samples}</td></tr>'
+        for s in report.scenarios
+    )
+    return f"<table>{header}{rows}</table>"
+
+
+def _sampler_table(report: DesignReport) -> str:
+    reasons = list(REJECTION_REASONS) + sorted({r for s in report.scenarios for r in s.rejected} - set(REJECTION_REASONS))
+    header = "<tr><th class=\"text\">scenario</th><th>tried</th><th>valid</th>" + "".join(
+        f"<th>rejected: {_text(r)}</th>" for r in reasons
+    ) + "</tr>"
+    rows = "".join(
+        f'<tr><td class="text">{_text(label)}</td><td>{s.tried_samples}</td><td>{s.valid_samples}</td>'
+        + "".join(f"<td>{s.rejected.get(r, 0)}</td>" for r in reasons)
+        + "</tr>"
+        for label, s in zip(_scenario_titles(report), report.scenarios)
+    )
+    return f"<table>{header}{rows}</table>"
+
+
+def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
+    """The quality table as HTML, headers grouped as in the paper's Table I.
+
+    Parameters
+    ----------
+    report : DesignReport
+    rows : list of CandidateReport
+        In the order to show.
+    table_id : str
+        ``id`` of the table element.
+
+    Returns
+    -------
+    str
+        A ``<table>``; the chosen candidate's row has class ``chosen`` and a star.
+    """
+    columns = quality_columns(report)
+    group_titles = {group: title for group, title in zip((g for g, _, _ in SCENARIO_GROUPS), ("RLES", "contact area A (mm²)", "effective area E (mm²)"))}
+    count = len(scenario_labels(report))
+    top = '<tr><th rowspan="2">i</th>' + "".join(
+        f'<th colspan="{count}">{_text(group_titles[g])}</th>' for g, _, _ in SCENARIO_GROUPS
+    ) + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
+    second = "<tr>" + "".join(f"<th>{_text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
+    lines = [f'<table id="{table_id}" class="quality">', top, second]
+    for row in rows:
+        chosen = row.index == report.best
+        cells = [f"{'&#9733; ' if chosen else ''}{row.index}"] + [f"{c.value(row):.{c.decimals}f}" for c in columns]
+        attributes = ' class="chosen"' if chosen else ""
+        lines.append(
+            f"<tr{attributes}>" + "".join(f"<td>{cell}</td>" for cell in cells) + f'<td class="text">{_text(row.pad_case)}</td></tr>'
+        )
+    lines.append("</table>")
+    return "\n".join(lines)
+
+
+def report_html(result: DesignResult, progress: Progress | None = None) -> bytes:
+    """``report.html`` of a design that was just run, UTF-8."""
+    return render_html(report_inputs(result), progress).encode("utf-8")
+
+
+def rebuild_report(directory: str | Path, progress: Progress | None = None) -> Path:
+    """Rebuild ``report.html`` in an output folder from its other files.
+
+    Parameters
+    ----------
+    directory : str or Path
+        Output folder of ``fcso design`` (``report.json``, ``finger.stl``,
+        ``fingerpad.stl``); the part files named in the report must exist.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    Path
+        The written ``report.html``.
+    """
+    directory = Path(directory)
+    page = render_html(load_report_inputs(directory), progress).encode("utf-8")
+    target = directory / "report.html"
+    temporary = directory / ".report.html.tmp"
+    temporary.write_bytes(page)
+    os.replace(temporary, target)
+    return target

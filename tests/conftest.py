@@ -1,0 +1,38 @@
+"""Shared helpers: the fixture meshes copied into tests/data and small, fast settings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fcso.config import DesignConfig
+
+DATA = Path(__file__).parent / "data"
+REPO = Path(__file__).parent.parent
+
+
+def data_path(name: str) -> Path:
+    """Path of a fixture mesh in tests/data (see tests/data/README.md for origins)."""
+    path = DATA / name
+    assert path.is_file(), path
+    return path
+
+
+def small_config(**sections) -> DesignConfig:
+    """A 10 x 10 mm pad (T = 4, D = 3) with a coarse stride, so designs take seconds.
+
+    ``sections`` are merged over it, e.g. ``small_config(poses={"select": [0, 1]})``.
+    """
+    base = {
+        "sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 5.0},
+        "poses": {"count": 1, "select": "most_probable"},
+    }
+    for section, values in sections.items():
+        base.setdefault(section, {}).update(values)
+    return DesignConfig().updated(base)
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    return DATA
