@@ -35,6 +35,8 @@ from .table import SCENARIO_GROUPS, chosen_candidate, quality_columns, ranked_ca
 #: ``progress(stage, done, total)``, as for :func:`fcso.design.design`.
 Progress = Callable[[str, int, int], None]
 
+#: Headers of the quality table's column groups (keys: :data:`fcso.table.SCENARIO_GROUPS`).
+GROUP_TITLES = {"RLES": "RLES", "A mm2": "contact area A (mm²)", "E": "effective area E (mm²)"}
 #: Index-ordered tables longer than this start folded.
 FOLDED_ROWS = 40
 
@@ -378,10 +380,9 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
         A ``<table>``; the chosen candidate's row has class ``chosen`` and a star.
     """
     columns = quality_columns(report)
-    group_titles = {group: title for group, title in zip((g for g, _, _ in SCENARIO_GROUPS), ("RLES", "contact area A (mm²)", "effective area E (mm²)"))}
     count = len(scenario_labels(report))
     top = '<tr><th rowspan="2">i</th>' + "".join(
-        f'<th colspan="{count}">{_text(group_titles[g])}</th>' for g, _, _ in SCENARIO_GROUPS
+        f'<th colspan="{count}">{_text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS
     ) + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
     second = "<tr>" + "".join(f"<th>{_text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
     lines = [f'<table id="{table_id}" class="quality">', top, second]

@@ -31,7 +31,7 @@ DPI = 100
 PICTURE_SIZES = {
     "finger": (1200, 420),
     "fingerpad": (900, 420),
-    "grasp": (1000, 460),
+    "grasp": (1350, 460),
     "normals": (900, 460),
     "pose": (420, 340),
 }
@@ -163,7 +163,9 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int = MAX_DRAWN
         cell *= 1.25
 
 
-def draw_layers(axes, layers: list[Layer], view: View, background: list[Layer] | None = None) -> None:
+def draw_layers(
+    axes, layers: list[Layer], view: View, background: list[Layer] | None = None, focus: np.ndarray | None = None
+) -> None:
     """Paint triangle layers into 2D axes, far to near, flat-shaded.
 
     Parameters
@@ -175,6 +177,8 @@ def draw_layers(axes, layers: list[Layer], view: View, background: list[Layer] |
     view : View
     background : list of Layer, optional
         Drawn first and never over ``layers`` (e.g. the table under a part).
+    focus : (n, 3) float, optional
+        Fit the limits to these points instead of to everything drawn.
     """
     basis = view.basis()
     light = basis[2] + 0.45 * basis[1] - 0.25 * basis[0]
@@ -202,11 +206,17 @@ def draw_layers(axes, layers: list[Layer], view: View, background: list[Layer] |
             continue
         polygons, colours = np.concatenate(polygons), np.concatenate(colours)
         order = np.argsort(np.concatenate(depths), kind="stable")
-        # edges in the face colour close the hairline seams antialiasing leaves
+        # opaque faces get edges in their own colour to close the seams
+        # antialiasing leaves; on translucent ones edges would show as lines
+        edges = colours.copy()
+        edges[edges[:, 3] < 1.0, 3] = 0.0
         axes.add_collection(
-            PolyCollection(polygons[order], facecolors=colours[order], edgecolors=colours[order], linewidths=0.3, zorder=zorder)
+            PolyCollection(polygons[order], facecolors=colours[order], edgecolors=edges[order], linewidths=0.8, zorder=zorder),
+            autolim=False,
         )
         corners.append(polygons.reshape(-1, 2))
+    if focus is not None:
+        corners = [(np.asarray(focus, dtype=float) @ basis.T)[:, :2]]
     _fit(axes, np.concatenate(corners) if corners else np.zeros((1, 2)))
 
 
@@ -234,6 +244,12 @@ def _panels(figure: Figure, count: int, right_margin: float = 0.0) -> list:
     """``count`` side-by-side axes with room for a title above each."""
     width = (1.0 - right_margin) / count
     return [figure.add_axes((k * width + 0.01, 0.02, width - 0.02, 0.86)) for k in range(count)]
+
+
+def _caption(axes, text: str) -> None:
+    """Text centred above a panel (a figure text: axes titles cost a tick layout)."""
+    box = axes.get_position()
+    axes.figure.text((box.x0 + box.x1) / 2.0, box.y1 + 0.02, text, ha="center", va="bottom", fontsize=9)
 
 
 def _png(figure: Figure) -> bytes:
@@ -288,7 +304,7 @@ def finger_picture(finger: trimesh.Trimesh, pad_to_finger: np.ndarray, pad_size:
         figure.suptitle(title, fontsize=11)
     for axes, view in zip(_panels(figure, 3), views):
         draw_layers(axes, [Layer(vertices, faces, colours)], view)
-        axes.set_title(view.title, fontsize=9)
+        _caption(axes, view.title)
     return _png(figure)
 
 
@@ -321,7 +337,7 @@ def fingerpad_picture(pad: trimesh.Trimesh, pad_size: tuple[float, float, float]
         figure.suptitle(title, fontsize=11)
     for axes, view in zip(_panels(figure, 2, right_margin=0.1), views):
         draw_layers(axes, [Layer(vertices, faces, colours)], view)
-        axes.set_title(view.title, fontsize=9)
+        _caption(axes, view.title)
     bar_axes = figure.add_axes((0.91, 0.12, 0.02, 0.7))
     figure.colorbar(ScalarMappable(scale, colourmap), cax=bar_axes, label="u (mm): 0 = pad face, T = back")
     return _png(figure)
@@ -395,8 +411,8 @@ def grasp_picture(
     Returns
     -------
     bytes
-        PNG of ``PICTURE_SIZES["grasp"]``: the part seen from each pad's side,
-        pads translucent, the touching surface red.
+        PNG of ``PICTURE_SIZES["grasp"]``: the part seen from each pad's side
+        and a close-up of the pads, pads translucent, the touching surface red.
     """
     full_vertices, full_faces = _mesh_arrays(part)
     vertices, faces = decimate(full_vertices, full_faces)
@@ -410,21 +426,25 @@ def grasp_picture(
         layers.append(Layer(patch_vertices, patch_faces, np.where(touching[:, None], CONTACT_COLOUR, PART_COLOUR)))
     layers.insert(0, Layer(vertices, faces[keep], PART_COLOUR))
     pad_vertices, pad_faces = decimate(*_mesh_arrays(pad))
+    seated_pads = []
     for placement in placements:
-        seated = pad_vertices + [placement.offset_mm, 0.0, 0.0]
-        layers.append(Layer(transform_points(np.linalg.inv(placement.frame), seated), pad_faces, PAD_COLOUR, alpha=0.35))
+        seated = transform_points(np.linalg.inv(placement.frame), pad_vertices + [placement.offset_mm, 0.0, 0.0])
+        layers.append(Layer(seated, pad_faces, PAD_COLOUR, alpha=0.35))
+        seated_pads.append(seated)
     closing = np.asarray(closing_axis, dtype=float)
     sliding = np.cross([0.0, 0.0, 1.0], closing)
     views = [
         View(tuple(side * closing + 0.7 * sliding + (0.0, 0.0, 0.8)), (0.0, 0.0, 1.0), f"from the {name} pad")
         for side, name in ((1.0, "+"), (-1.0, "-"))
     ]
+    views.append(View(tuple(0.35 * closing + sliding + (0.0, 0.0, 0.5)), (0.0, 0.0, 1.0), "close-up, along the pads"))
+    focuses = [None, None, np.vstack(seated_pads)]
     figure = _figure("grasp")
     if title:
         figure.suptitle(title, fontsize=11)
-    for axes, view in zip(_panels(figure, 2), views):
-        draw_layers(axes, layers, view, background=[_table(full_vertices)])
-        axes.set_title(view.title, fontsize=9)
+    for axes, view, focus in zip(_panels(figure, 3), views, focuses):
+        draw_layers(axes, layers, view, background=[_table(full_vertices)], focus=focus)
+        _caption(axes, view.title)
     return _png(figure)
 
 
@@ -446,7 +466,7 @@ def pose_picture(part: trimesh.Trimesh, title: str = "") -> bytes:
     figure = _figure("pose")
     axes = figure.add_axes((0.02, 0.02, 0.96, 0.84))
     draw_layers(axes, [Layer(vertices, faces, PART_COLOUR)], View((1.0, -1.2, 0.9), (0.0, 0.0, 1.0)), background=[_table(vertices)])
-    axes.set_title(title, fontsize=9)
+    _caption(axes, title)
     return _png(figure)
 
 
@@ -527,5 +547,5 @@ def normals_picture(normals: np.ndarray, radius: float, centre: np.ndarray, titl
             if tip[2] >= 0.0:
                 axes.annotate(name, (1.08 * tip[0], 1.08 * tip[1]), fontsize=8, color="0.3", ha="center", va="center")
         _fit(axes, np.array([[-1.12, -1.12], [1.12, 1.12]]), margin=0.0)
-        axes.set_title(view.title, fontsize=9)
+        _caption(axes, view.title)
     return _png(figure)
