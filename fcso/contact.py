@@ -82,21 +82,23 @@ class PadContact:
     contact: np.ndarray
 
 
-def seat(samples: SurfaceSamples, pad_vertices: np.ndarray, pad_faces: np.ndarray, eps_mm: float, max_iterations: int = 400) -> PadContact:
-    """Seat the part against the pad and find the contact (METHOD §6).
+def seat(
+    samples: list[SurfaceSamples], pad_vertices: np.ndarray, pad_faces: np.ndarray, eps_mm: float, max_iterations: int = 400
+) -> list[PadContact]:
+    """Seat parts against one pad and find their contact (METHOD §6).
 
-    The part moves along ``-u`` (away from the pad) by the smallest
-    ``t >= 0`` at which no sample lies deeper than ``eps`` inside the pad.
-    Depth is Euclidean (signed distance to the pad mesh). A sample at depth
-    ``δ`` needs at least ``δ - eps`` of travel before it can be shallow
-    enough, so stepping ``t`` by the largest such amount never passes the
-    smallest feasible ``t``; a floor of ``eps / 8`` per step bounds the
+    Each part moves along ``-u`` (away from the pad) by the smallest
+    ``t >= 0`` at which none of its samples lies deeper than ``eps`` inside
+    the pad. Depth is Euclidean (signed distance to the pad mesh). A sample
+    at depth ``δ`` needs at least ``δ - eps`` of travel before it can be
+    shallow enough, so stepping ``t`` by the largest such amount never passes
+    the smallest feasible ``t``; a floor of ``eps / 8`` per step bounds the
     iterations and the overshoot.
 
     Parameters
     ----------
-    samples : SurfaceSamples
-        Part surface inside the pad box, pad frame.
+    samples : list of SurfaceSamples
+        Part surfaces inside the pad box, one per pad geometry, pad frame.
     pad_vertices, pad_faces : ndarray
         The fingerpad ``P`` (pad frame, closed mesh).
     eps_mm : float
@@ -104,13 +106,21 @@ def seat(samples: SurfaceSamples, pad_vertices: np.ndarray, pad_faces: np.ndarra
 
     Returns
     -------
-    PadContact
+    list of PadContact
+        One per entry of ``samples``.
     """
+    counts = [len(s.points) for s in samples]
+    everything = np.vstack([s.points for s in samples]) if sum(counts) else np.zeros((0, 3))
+    # one distance query for all geometries at t = 0: most never move
+    initial = np.split(_signed_distance(everything, pad_vertices, pad_faces), np.cumsum(counts)[:-1])
+    return [_seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations) for s, d in zip(samples, initial)]
+
+
+def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations) -> PadContact:
     if len(samples.points) == 0:
         return PadContact(0.0, 0.0, np.zeros(0, dtype=bool))
     offset = 0.0
     step_floor = eps_mm / 8.0
-    distances = _signed_distance(samples.points, pad_vertices, pad_faces)
     for _ in range(max_iterations):
         deepest = float(-distances.min())
         if deepest <= eps_mm:
@@ -122,10 +132,13 @@ def seat(samples: SurfaceSamples, pad_vertices: np.ndarray, pad_faces: np.ndarra
 
 
 def _signed_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Signed distance of points to a closed mesh, negative inside (libigl AABB tree)."""
+    """Signed distance of points to a closed mesh, negative inside (libigl AABB tree, pseudonormal sign)."""
+    if len(points) == 0:
+        return np.zeros(0)
     distances = igl.signed_distance(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(vertices, dtype=np.float64),
         np.ascontiguousarray(faces, dtype=np.int64),
+        igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
     )[0]
     return np.asarray(distances)

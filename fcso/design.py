@@ -306,9 +306,10 @@ def _evaluate(scenarios: list[Scenario], choice: tuple[int, ...], config: Design
     pad_mesh = fingerpad.pad.to_mesh()
     vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
     faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
+    seated = iter(seat([surface for sample in chosen for surface in sample.surfaces], vertices, faces, config.contact.eps_mm))
     results = []
     for sample in chosen:
-        contacts = tuple(seat(surface, vertices, faces, config.contact.eps_mm) for surface in sample.surfaces)
+        contacts = (next(seated), next(seated))
         normals = np.vstack(
             [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
         )

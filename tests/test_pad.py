@@ -125,7 +125,7 @@ def _seat(part, sample, side, pad, sampler=SAMPLER):
     g = geometry(part, sample, side, sampler)
     surface = sample_surface(g.surface_vertices, g.surface_faces, 4.0, seed=[0, 1 + side])
     mesh = to_trimesh(pad.pad)
-    return seat(surface, mesh.vertices, mesh.faces, 0.05)
+    return seat([surface], mesh.vertices, mesh.faces, 0.05)[0]
 
 
 def test_mixed_pad_and_seating_offsets():
