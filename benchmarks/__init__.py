@@ -1,0 +1,1 @@
+"""Benchmarks of fcso (run with ``python -m benchmarks.<name>``)."""
