@@ -1,4 +1,4 @@
-"""Command line: ``fcso design``, ``fcso poses``, ``fcso schema``."""
+"""Command line: ``fcso design``, ``fcso report``, ``fcso poses``, ``fcso schema``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 from .config import DesignConfig, format_validation_error, load_config
 from .design import design
 from .errors import FcsoError, GeometryError
+from .html_report import rebuild_report
 from .output import write_outputs
 from .parts import load_part
 from .poses import stable_poses
@@ -21,33 +22,55 @@ EXIT_FAILED = 1
 
 
 class ProgressLine:
-    """A one-line progress bar on a terminal; silent elsewhere or when quiet."""
+    """A one-line progress bar per stage on a terminal; silent elsewhere or when quiet.
+
+    Parameters
+    ----------
+    stream : file
+        Where to draw (standard error).
+    enabled : bool
+        Draw at all (a terminal, and not ``--quiet``).
+    """
 
     def __init__(self, stream, enabled: bool):
         self.stream = stream
         self.enabled = enabled
         self.stage = None
+        self.last = (0, 0)
         self.started = time.perf_counter()
         self.last_draw = 0.0
 
     def __call__(self, stage: str, done: int, total: int) -> None:
+        """``progress(stage, done, total)`` as :func:`fcso.design.design` calls it."""
         if not self.enabled:
             return
         now = time.perf_counter()
-        if stage == self.stage and done < total and now - self.last_draw < 0.1:
+        if stage != self.stage:
+            if self.stage is not None:
+                # the last count of a stage may have been throttled: show it before moving on
+                self._draw(now)
+                self.stream.write("\n")
+            self.stage = stage
+        elif done < total and now - self.last_draw < 0.1:
+            self.last = (done, total)
             return
-        if stage != self.stage and self.stage is not None:
-            self.stream.write("\n")
-        self.stage, self.last_draw = stage, now
-        fraction = done / total if total else 1.0
+        self.last = (done, total)
+        self._draw(now)
+
+    def _draw(self, now: float) -> None:
+        done, total = self.last
+        fraction = min(done / total, 1.0) if total else 1.0
         bar = "#" * int(fraction * 30)
-        self.stream.write(f"\r{stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s")
+        self.stream.write(f"\r{self.stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s")
         self.stream.flush()
+        self.last_draw = now
 
     def close(self) -> None:
         if self.enabled and self.stage is not None:
+            self._draw(time.perf_counter())
             self.stream.write("\n")
             self.stream.flush()
+            self.stage = None
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -65,6 +88,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
+
+    report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
+    report.add_argument(
+        "directory", type=Path, metavar="DIR", help="output folder of fcso design (report.json, finger.stl, fingerpad.stl)"
+    )
+    report.add_argument("--quiet", action="store_true", help="no progress")
 
     poses = commands.add_parser("poses", help="list a part's stable poses with probabilities")
     poses.add_argument("part", type=Path, metavar="PART")
@@ -85,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             return _design(args)
         if args.command == "poses":
             return _poses(args)
+        if args.command == "report":
+            return _report(args)
         for path in write_schemas(args.out):
             print(path)
         return 0
@@ -123,14 +154,25 @@ def _design(args) -> int:
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
         result = design(parts, config, progress=progress, repair=args.repair)
+        write_outputs(result, args.out, progress=progress)
     finally:
         progress.close()
-    write_outputs(result, args.out)
     if not args.quiet:
         print(quality_table(result.report))
         for warning in result.report.warnings:
             print(f"warning: {warning}")
-        print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json")
+        print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
+    return 0
+
+
+def _report(args) -> int:
+    progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
+    try:
+        path = rebuild_report(args.directory, progress=progress)
+    finally:
+        progress.close()
+    if not args.quiet:
+        print(f"wrote {path}")
     return 0
 
 

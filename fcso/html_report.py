@@ -26,7 +26,15 @@ from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .geometry import clip_to_box, transform_points
 from .parts import load_part
-from .render import PadPlacement, finger_picture, fingerpad_picture, grasp_picture, normals_picture, pose_picture
+from .render import (
+    PadPlacement,
+    finger_picture,
+    fingerpad_picture,
+    grasp_picture,
+    gripper_picture,
+    normals_picture,
+    pose_picture,
+)
 from .report import DesignReport
 from .rles import largest_empty_cap
 from .sampler import REJECTION_REASONS, GraspSample
@@ -198,21 +206,35 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
     Returns
     -------
     dict
-        ``"finger"``, ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``,
-        ``"pose <m>"`` for each scenario ``m``: PNG bytes.
+        ``"gripper"`` (both fingers on the first scenario's part), ``"finger"``,
+        ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``, ``"pose <m>"``
+        for each scenario ``m``: PNG bytes.
     """
     report = inputs.report
     settings = report.settings.sampler
     pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
     labels = _scenario_titles(report)
+    first = inputs.grasps[0]
+
+    def gripper() -> bytes:
+        closing = first.sample.closing_axis
+        return gripper_picture(first.mesh, inputs.finger, inputs.pad_to_finger, first.placements, pad_size, closing, labels[0])
+
     jobs: list[tuple[str, Callable[[], bytes]]] = [
+        ("gripper", gripper),
         ("finger", lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)")),
         ("fingerpad", lambda: fingerpad_picture(inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)")),
     ]
     for m, grasp in enumerate(inputs.grasps):
         jobs += [
-            (f"grasp {m}", lambda g=grasp, t=labels[m]: grasp_picture(g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t)),
-            (f"normals {m}", lambda g=grasp, t=labels[m]: normals_picture(g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}")),
+            (
+                f"grasp {m}",
+                lambda g=grasp, t=labels[m]: grasp_picture(g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t),
+            ),
+            (
+                f"normals {m}",
+                lambda g=grasp, t=labels[m]: normals_picture(g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}"),
+            ),
             (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
         ]
     report_progress = progress or (lambda stage, done, total: None)
@@ -237,6 +259,7 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
     body = [
         "<h1>FCSO design report</h1>",
         _summary(report, chosen),
+        _image(images["gripper"], "gripper", "both fingers closed on the first part"),
         "<h2>Finger and fingerpad</h2>",
         _image(images["finger"], "finger", "the finger with its fingerpad"),
         _image(images["fingerpad"], "fingerpad", "the fingerpad coloured by depth"),
@@ -245,7 +268,7 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
         "the part surface touching a pad is red. Below, the contact normals on the unit sphere "
         "and the largest empty cap (orange), whose chord radius is the RLES.</p>",
     ]
-    for m, (scenario, grasp) in enumerate(zip(report.scenarios, inputs.grasps)):
+    for m, grasp in enumerate(inputs.grasps):
         body += [
             f"<h3>{_text(titles[m])}</h3>",
             _grasp_table(report, m, grasp),
@@ -308,6 +331,11 @@ def _image(png: bytes, kind: str, alt: str) -> str:
     return f'<img data-kind="{kind}" alt="{_text(alt)}" src="data:image/png;base64,{data}">'
 
 
+def _key_value_table(rows) -> str:
+    cells = (f'<tr><th class="text">{_text(key)}</th><td class="text">{_text(value)}</td></tr>' for key, value in rows)
+    return "<table>" + "".join(cells) + "</table>"
+
+
 def _summary(report: DesignReport, chosen) -> str:
     rows = [
         ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
@@ -319,7 +347,7 @@ def _summary(report: DesignReport, chosen) -> str:
          f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}"),
         ("fcso", report.fcso_version),
     ]
-    return "<table>" + "".join(f'<tr><th class="text">{_text(k)}</th><td class="text">{_text(v)}</td></tr>' for k, v in rows) + "</table>"
+    return _key_value_table(rows)
 
 
 def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
@@ -329,7 +357,10 @@ def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
     robot = report.grasps[m]
     rows = [
         ("sample", f"{chosen.samples[m]}: yaw {sample.yaw_deg:g}°, s = {sample.s_mm:.2f} mm, h = {sample.h_mm:.2f} mm"),
-        ("filter labels (+, -)", ", ".join(f"{label} (R = {r:.3f}, d = {d:.2f} mm)" for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm))),
+        (
+            "filter labels (+, -)",
+            ", ".join(f"{label} (R = {r:.3f}, d = {d:.2f} mm)" for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm)),
+        ),
         ("seat offsets t (+, -)", ", ".join(f"{t:.3f} mm" for t in quality.seat_offsets_mm)),
         ("contact area A", f"{quality.contact_area_mm2:.1f} mm²"),
         ("RLES", f"{quality.rles:.4f} (drawn: {grasp.rles:.4f}, {len(grasp.normals)} contact normals)"),
@@ -337,13 +368,14 @@ def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
         ("TCP (resting frame)", f"position {robot.position_mm} mm, quaternion wxyz {robot.quaternion_wxyz}, "
          f"closing width {robot.closing_width_mm:.2f} mm"),
     ]
-    return "<table>" + "".join(f'<tr><th class="text">{_text(k)}</th><td class="text">{_text(v)}</td></tr>' for k, v in rows) + "</table>"
+    return _key_value_table(rows)
 
 
 def _poses_table(report: DesignReport) -> str:
     header = '<tr><th class="text">part</th><th>pose index</th><th>probability</th><th>valid samples</th></tr>'
     rows = "".join(
-        f'<tr><td class="text">{_text(s.part)}</td><td>{s.pose_index}</td><td>{s.pose_probability:.4f}</td><td>{s.valid_samples}</td></tr>'
+        f'<tr><td class="text">{_text(s.part)}</td><td>{s.pose_index}</td>'
+        f"<td>{s.pose_probability:.4f}</td><td>{s.valid_samples}</td></tr>"
         for s in report.scenarios
     )
     return f"<table>{header}{rows}</table>"

@@ -34,6 +34,7 @@ PICTURE_SIZES = {
     "grasp": (1350, 460),
     "normals": (900, 460),
     "pose": (420, 340),
+    "gripper": (900, 560),
 }
 #: Most triangles drawn per mesh; more are decimated for drawing.
 MAX_DRAWN_FACES = 6000
@@ -283,16 +284,7 @@ def finger_picture(finger: trimesh.Trimesh, pad_to_finger: np.ndarray, pad_size:
         PNG of ``PICTURE_SIZES["finger"]``.
     """
     vertices, faces = decimate(*_mesh_arrays(finger))
-    thickness, length, width = pad_size
-    # faces of the pad: centroids inside the pad box, short of the finger's contact face
-    centroids = transform_points(np.linalg.inv(pad_to_finger), vertices[faces].mean(axis=1))
-    tolerance = 1e-3
-    on_pad = (
-        (centroids[:, 0] < thickness - tolerance)
-        & (centroids[:, 1] > -tolerance) & (centroids[:, 1] < length + tolerance)
-        & (centroids[:, 2] > -tolerance) & (centroids[:, 2] < width + tolerance)
-    )
-    colours = np.where(on_pad[:, None], PAD_COLOUR, FINGER_COLOUR)
+    colours = _finger_colours(transform_points(np.linalg.inv(pad_to_finger), vertices), faces, pad_size)
     outward, along, up = (pad_to_finger[:3, k] for k in range(3))
     views = [
         View(tuple(-outward - 0.9 * along + 0.6 * up), tuple(up), "finger"),
@@ -306,6 +298,23 @@ def finger_picture(finger: trimesh.Trimesh, pad_to_finger: np.ndarray, pad_size:
         draw_layers(axes, [Layer(vertices, faces, colours)], view)
         _caption(axes, view.title)
     return _png(figure)
+
+
+def _finger_colours(pad_frame_vertices: np.ndarray, faces: np.ndarray, pad_size) -> np.ndarray:
+    """Pad faces orange, the rest of the finger grey-blue.
+
+    A face belongs to the pad when its centroid (pad frame) is inside the
+    pad box and short of the finger's contact face ``u = T``.
+    """
+    thickness, length, width = pad_size
+    centroids = pad_frame_vertices[faces].mean(axis=1)
+    tolerance = 1e-3
+    on_pad = (
+        (centroids[:, 0] < thickness - tolerance)
+        & (centroids[:, 1] > -tolerance) & (centroids[:, 1] < length + tolerance)
+        & (centroids[:, 2] > -tolerance) & (centroids[:, 2] < width + tolerance)
+    )
+    return np.where(on_pad[:, None], PAD_COLOUR, FINGER_COLOUR)
 
 
 def fingerpad_picture(pad: trimesh.Trimesh, pad_size: tuple[float, float, float], title: str = "") -> bytes:
@@ -343,7 +352,9 @@ def fingerpad_picture(pad: trimesh.Trimesh, pad_size: tuple[float, float, float]
     return _png(figure)
 
 
-def contact_patch(mesh_vertices: np.ndarray, mesh_faces: np.ndarray, placement: PadPlacement, pad_size, max_edge_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def contact_patch(
+    mesh_vertices: np.ndarray, mesh_faces: np.ndarray, placement: PadPlacement, pad_size, max_edge_mm: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The part's surface inside one pad box, split into touching and free triangles.
 
     Parameters
@@ -437,14 +448,68 @@ def grasp_picture(
         View(tuple(side * closing + 0.7 * sliding + (0.0, 0.0, 0.8)), (0.0, 0.0, 1.0), f"from the {name} pad")
         for side, name in ((1.0, "+"), (-1.0, "-"))
     ]
-    views.append(View(tuple(0.35 * closing + sliding + (0.0, 0.0, 0.5)), (0.0, 0.0, 1.0), "close-up, along the pads"))
-    focuses = [None, None, np.vstack(seated_pads)]
+    views.append(View(tuple(0.35 * closing + sliding + (0.0, 0.0, 0.5)), (0.0, 0.0, 1.0), "close-up, part cut around the pads"))
+    # the close-up leaves out the part away from the pads, which would hide them
+    pads = np.vstack(seated_pads)
+    margin = 0.5 * max(pad_size)
+    near = np.all((vertices >= pads.min(axis=0) - margin) & (vertices <= pads.max(axis=0) + margin), axis=1)[faces].all(axis=1)
+    close_layers = [Layer(vertices, faces[keep & near], PART_COLOUR)] + layers[1:]
     figure = _figure("grasp")
     if title:
         figure.suptitle(title, fontsize=11)
-    for axes, view, focus in zip(_panels(figure, 3), views, focuses):
-        draw_layers(axes, layers, view, background=[_table(full_vertices)], focus=focus)
+    for axes, view, drawn, focus in zip(_panels(figure, 3), views, (layers, layers, close_layers), (None, None, pads)):
+        draw_layers(axes, drawn, view, background=[_table(full_vertices)], focus=focus)
         _caption(axes, view.title)
+    return _png(figure)
+
+
+def gripper_picture(
+    part: trimesh.Trimesh,
+    finger: trimesh.Trimesh,
+    pad_to_finger: np.ndarray,
+    placements: list[PadPlacement],
+    pad_size: tuple[float, float, float],
+    closing_axis: np.ndarray,
+    title: str = "",
+) -> bytes:
+    """Both fingers closed on a part resting on the table.
+
+    Parameters
+    ----------
+    part : trimesh.Trimesh
+        The part in its resting frame (mm).
+    finger : trimesh.Trimesh
+        The fused finger, finger frame (mm).
+    pad_to_finger : (4, 4) float
+        Pad frame to finger frame.
+    placements : list of PadPlacement
+        The seated "+" and "-" pads; each finger follows its pad.
+    pad_size : (T, L, W)
+    closing_axis : (3,) float
+    title : str
+
+    Returns
+    -------
+    bytes
+        PNG of ``PICTURE_SIZES["gripper"]``, seen along the pads' length.
+    """
+    vertices, faces = decimate(*_mesh_arrays(part))
+    # long plate triangles sort badly against the part: split them for drawing
+    finger_vertices, finger_faces = trimesh.remesh.subdivide_to_size(
+        *decimate(*_mesh_arrays(finger)), float(finger.extents.max()) / 12.0
+    )
+    in_pad_frame = transform_points(np.linalg.inv(pad_to_finger), finger_vertices)
+    colours = _finger_colours(in_pad_frame, finger_faces, pad_size)
+    layers = [Layer(vertices, faces, PART_COLOUR)]
+    for placement in placements:
+        seated = transform_points(np.linalg.inv(placement.frame), in_pad_frame + [placement.offset_mm, 0.0, 0.0])
+        layers.append(Layer(seated, finger_faces, colours))
+    closing = np.asarray(closing_axis, dtype=float)
+    view = View(tuple(0.45 * closing + np.cross([0.0, 0.0, 1.0], closing) + (0.0, 0.0, 0.55)), (0.0, 0.0, 1.0))
+    figure = _figure("gripper")
+    axes = figure.add_axes((0.02, 0.02, 0.96, 0.88))
+    draw_layers(axes, layers, view, background=[_table(vertices)])
+    _caption(axes, title)
     return _png(figure)
 
 
