@@ -23,8 +23,10 @@ test: setup
 demo: setup
 	$(PY) -m examples.demo
 
+# every benchmarks/bench_*.py, one after the other, printing its figures
 bench: setup
-	$(PY) -m benchmarks.run
+	@for module in $(basename $(notdir $(wildcard benchmarks/bench_*.py))); do \
+		echo "== benchmarks.$$module"; $(PY) -m benchmarks.$$module || exit 1; done
 
 schema: setup
 	$(VENV)/bin/fcso schema --out schemas/

@@ -16,7 +16,8 @@ class SearchOutcome:
     Attributes
     ----------
     kind : str
-        ``"exhaustive"`` or ``"branch_and_bound"``.
+        ``"exhaustive"``, ``"branch_and_bound"`` or, when the budget ran out
+        before a proof, ``"branch_and_bound+coordinate_ascent"``.
     evaluated : list of tuple of int
         The sample choices evaluated, in evaluation order.
     total : int
@@ -61,7 +62,8 @@ def search(
     max_exhaustive : int
         Evaluate all candidates when there are at most this many.
     max_evaluations : int
-        Budget of the branch and bound.
+        Budget beyond ``max_exhaustive``: branch and bound may use half, a
+        coordinate ascent from its best candidate the rest.
 
     Returns
     -------
@@ -84,22 +86,57 @@ def search(
         for choice in evaluated:
             evaluate(choice)
         return SearchOutcome("exhaustive", evaluated, total, True)
+    results: dict[tuple[int, ...], tuple[float, float]] = {}
+
+    def scored(choice: tuple[int, ...]) -> tuple[float, float, int]:
+        if choice not in results:
+            results[choice] = evaluate(choice)
+        quality, mean = results[choice]
+        return quality, mean, -candidate_index(choice, counts)
+
+    proven = _branch_and_bound(counts, upper_bounds, scored, results, max(1, max_evaluations // 2))
+    if proven:
+        return SearchOutcome("branch_and_bound", list(results), total, True)
+    _coordinate_ascent(counts, scored, results, max_evaluations)
+    return SearchOutcome("branch_and_bound+coordinate_ascent", list(results), total, False)
+
+
+def _branch_and_bound(counts, upper_bounds, scored, results, budget: int) -> bool:
+    """Best-first branch and bound; True when it proved its best optimal within ``budget``."""
     order = sorted(
         ((float(bound), scenario, sample) for scenario, bounds in enumerate(upper_bounds) for sample, bound in enumerate(bounds)),
         key=lambda item: (-item[0], item[1], item[2]),
     )
     admitted: list[list[int]] = [[] for _ in counts]
-    evaluated: list[tuple[int, ...]] = []
     best_quality = -np.inf
     for bound, scenario, sample in order:
         if bound < best_quality:
-            return SearchOutcome("branch_and_bound", evaluated, total, True)
+            return True
         admitted[scenario].append(sample)
         pools = [pool if m != scenario else [sample] for m, pool in enumerate(admitted)]
         for choice in itertools.product(*pools):
-            if len(evaluated) >= max_evaluations:
-                return SearchOutcome("branch_and_bound", evaluated, total, False)
-            quality, _ = evaluate(tuple(choice))
-            evaluated.append(tuple(choice))
-            best_quality = max(best_quality, quality)
-    return SearchOutcome("branch_and_bound", evaluated, total, True)
+            if len(results) >= budget:
+                return False
+            best_quality = max(best_quality, scored(tuple(choice))[0])
+    return True
+
+
+def _coordinate_ascent(counts, scored, results, budget: int) -> None:
+    """Improve the best candidate one scenario at a time until no change helps or the budget is spent.
+
+    Used when branch and bound cannot prove optimality within half the budget:
+    large batches have far more candidates than can be evaluated, and a grasp
+    that suits the other scenarios' carving is found by changing one choice
+    at a time.
+    """
+    current = max(results, key=scored)
+    improved = True
+    while improved:
+        improved = False
+        for scenario, count in enumerate(counts):
+            for sample in range(count):
+                choice = current[:scenario] + (sample,) + current[scenario + 1 :]
+                if choice not in results and len(results) >= budget:
+                    return
+                if scored(choice) > scored(current):
+                    current, improved = choice, True

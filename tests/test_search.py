@@ -60,6 +60,22 @@ def test_exhaustive_below_the_limit_and_budget_above_it():
     assert [candidate_index(c, counts) for c in full.evaluated] == list(range(total))
     capped = search([5, 5, 5], [np.full(5, 100.0)] * 3, lambda c: (1.0, 1.0), max_exhaustive=1, max_evaluations=10)
     assert len(capped.evaluated) == 10 and not capped.proven_optimal
+    assert capped.kind == "branch_and_bound+coordinate_ascent"
+
+
+def test_coordinate_ascent_climbs_when_bounds_cannot_prune():
+    # bounds that say nothing (all equal) and one good region away from the
+    # first candidates: branch and bound alone spends its half on the corner
+    counts = [6, 6, 6]
+    peak = (5, 4, 5)
+
+    def evaluate(choice):
+        quality = 100.0 - sum(abs(a - b) for a, b in zip(choice, peak))
+        return quality, quality
+
+    outcome = search(counts, [np.full(6, 1000.0)] * 3, evaluate, max_exhaustive=1, max_evaluations=60)
+    assert outcome.kind == "branch_and_bound+coordinate_ascent"
+    assert peak in outcome.evaluated and len(outcome.evaluated) <= 60
 
 
 def test_search_finds_the_exhaustive_optimum_on_a_real_design():
