@@ -288,8 +288,7 @@ def _sample_geometry(part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, 
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
     surfaces = tuple(
-        sample_surface(g.surface_vertices, g.surface_faces, config.contact.sample_density_per_mm2, [config.contact.seed, *seed, side_number])
-        for side_number, g in enumerate(geometries)
+        contact_samples(g.surface_vertices, g.surface_faces, config, *seed, side_number) for side_number, g in enumerate(geometries)
     )
     # contact points and normals are subsets of these samples, so A <= the sampled
     # area and RLES >= the RLES of all sampled normals: E can never exceed this
@@ -297,6 +296,27 @@ def _sample_geometry(part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, 
     normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, frames)])
     bound = area / rles(normals) if len(normals) else 0.0
     return SampleGeometry(sample=sample, frames=frames, geometries=geometries, surfaces=surfaces, effective_area_bound=float(bound))
+
+
+def contact_samples(
+    vertices: np.ndarray, faces: np.ndarray, config: DesignConfig, scenario_number: int, sample_index: int, side_number: int
+) -> SurfaceSamples:
+    """The design's surface samples of one pad geometry.
+
+    The seed is ``[contact.seed, scenario, sample, side]`` so a report can be
+    rebuilt with exactly the samples the design used.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
+    config : DesignConfig
+    scenario_number, sample_index, side_number : int
+        Position of the scenario in the design, of the sample in the scenario,
+        and the side (0: "+", 1: "-").
+    """
+    seed = [config.contact.seed, scenario_number, sample_index, side_number]
+    return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
 
 
 def _evaluate(scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool) -> CandidateEvaluation:

@@ -20,11 +20,11 @@ from typing import Callable
 import numpy as np
 import trimesh
 
-from .contact import sample_surface, seat
-from .design import SIDES, DesignResult
+from .contact import seat
+from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
-from .geometry import clip_to_box, transform_points
+from .pad import surface_in_pad
 from .parts import load_part
 from .render import (
     PadPlacement,
@@ -146,7 +146,6 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
     finger = _read_stl(directory / "finger.stl")
     fingerpad = _read_stl(directory / "fingerpad.stl")
     flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
-    pad_size = (config.sampler.thickness_mm, config.sampler.length_mm, config.sampler.width_mm)
     pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
     parts = [
         load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name) for p in report.parts
@@ -169,16 +168,14 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
             area_plus_mm2=reported.surface_area_mm2[0],
             area_minus_mm2=reported.surface_area_mm2[1],
         )
-        placements, normals = [], []
-        for side_number, side in enumerate(SIDES):
-            frame = sample.pad_frame(side, config.sampler)
-            inside = clip_to_box(transform_points(frame, np.asarray(mesh.vertices)), np.asarray(mesh.faces), (0.0, 0.0, 0.0), pad_size)
-            # the design's seed for this scenario, sample and side
-            surface = sample_surface(*inside, config.contact.sample_density_per_mm2, [config.contact.seed, number, index, side_number])
-            contact = seat(surface, pad_vertices, pad_faces, config.contact.eps_mm)
-            placements.append(PadPlacement(frame, contact.offset_mm, surface, contact.contact))
-            normals.append(surface.normals[contact.contact] @ frame[:3, :3])
-        normals = np.vstack(normals)
+        frames = [sample.pad_frame(side, config.sampler) for side in SIDES]
+        surfaces = [
+            contact_samples(*surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number)
+            for side_number, frame in enumerate(frames)
+        ]
+        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm)
+        placements = [PadPlacement(f, c.offset_mm, s, c.contact) for f, c, s in zip(frames, contacts, surfaces)]
+        normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for f, c, s in zip(frames, contacts, surfaces)])
         radius, centre = largest_empty_cap(normals)
         grasps.append(GraspScene(mesh, sample, placements, normals, radius, centre))
     return ReportInputs(report, finger, fingerpad, pad_to_finger(flat, config.sampler), grasps)

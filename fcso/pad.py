@@ -84,8 +84,7 @@ def pad_geometry(
     intersection = part.transform(affine_3x4(frame)) ^ pad_box(sampler)
     if intersection.status() != manifold3d.Error.NoError:
         raise GeometryError(f"pad intersection is not manifold: {intersection.status()}")
-    local_vertices = part_vertices @ frame[:3, :3].T + frame[:3, 3]
-    surface_vertices, surface_faces = clip_to_box(local_vertices, part_faces, (0.0, 0.0, 0.0), (thickness, length, width))
+    surface_vertices, surface_faces = surface_in_pad(part_vertices, part_faces, frame, sampler)
     volume = float(intersection.volume())
     lower_upper = np.asarray(intersection.bounding_box(), dtype=float)
     extent = np.clip(lower_upper[3:] - lower_upper[:3], 0.0, None) if volume > 0 else np.zeros(3)
@@ -111,6 +110,26 @@ def pad_geometry(
         basis=basis,
         dominant_normal=dominant,
     )
+
+
+def surface_in_pad(vertices: np.ndarray, faces: np.ndarray, frame: np.ndarray, sampler: SamplerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The part surface inside the pad box, in the pad frame.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The part in its resting frame (mm).
+    frame : (4, 4) float
+        Resting frame to pad frame.
+    sampler : SamplerConfig
+        Pad size.
+
+    Returns
+    -------
+    vertices, faces : ndarray
+    """
+    local = vertices @ frame[:3, :3].T + frame[:3, 3]
+    return clip_to_box(local, faces, (0.0, 0.0, 0.0), (sampler.thickness_mm, sampler.length_mm, sampler.width_mm))
 
 
 def interest_depth(intersection: manifold3d.Manifold, depth: float, full_area: float, steps: int = 64) -> float:
