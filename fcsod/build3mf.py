@@ -1,0 +1,360 @@
+"""A job's build: its items (parts and fingers) with their placements, read from
+a 3MF or from loose meshes, and written back as ``build.3mf``.
+
+Lengths are millimetres. A transform is a 4x4 homogeneous matrix taking an
+item's mesh frame to the build-volume frame; ``None`` means not placed yet.
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import trimesh
+from lxml import etree
+
+from fcso.errors import MeshError
+from fcso.parts import read_mesh, unit_factor
+
+#: Refuse a 3MF whose entries would inflate beyond this many bytes in memory.
+MAX_3MF_UNCOMPRESSED_BYTES = 1 << 30
+#: Refuse a 3MF entry that inflates more than this many times (zip bomb).
+MAX_3MF_COMPRESSION_RATIO = 1000.0
+#: Refuse a 3MF archive with more entries than this.
+MAX_3MF_ENTRIES = 10_000
+
+_CORE_NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+_CONTENT_TYPES = (
+    b'<?xml version="1.0" encoding="UTF-8"?>\n'
+    b'<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
+    b'<Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
+    b'<Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
+    b"</Types>"
+)
+_RELS = (
+    b'<?xml version="1.0" encoding="UTF-8"?>\n'
+    b'<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+    b'<Relationship Target="/3D/3dmodel.model" Id="rel0" '
+    b'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>'
+    b"</Relationships>"
+)
+# 3MF's unit names and their length in millimetres
+_3MF_UNIT_MM = {
+    "micron": 1e-3,
+    "millimeter": 1.0,
+    "centimeter": 10.0,
+    "inch": 25.4,
+    "foot": 304.8,
+    "meter": 1000.0,
+}
+
+
+@dataclass
+class BuildItem:
+    """One object of a build.
+
+    Attributes
+    ----------
+    name : str
+        Unique within the build; the item's name in ``build.3mf``.
+    mesh : trimesh.Trimesh
+        Geometry in its own frame, mm.
+    transform : (4, 4) float or None
+        Mesh frame to build-volume frame; ``None`` when not placed.
+    kind : {'part', 'finger'}
+        A job part or a finger copy.
+    """
+
+    name: str
+    mesh: trimesh.Trimesh
+    transform: np.ndarray | None = None
+    kind: Literal["part", "finger"] = "part"
+
+    def placed_mesh(self) -> trimesh.Trimesh:
+        """The mesh moved by its transform (a copy); the item must be placed."""
+        if self.transform is None:
+            raise ValueError(f"build item {self.name!r} has no transform")
+        return self.mesh.copy().apply_transform(self.transform)
+
+
+@dataclass
+class Build:
+    """The items of one print job.
+
+    Attributes
+    ----------
+    items : list of BuildItem
+        Parts (and, after placement, fingers).
+    source : str
+        Where the build was read from, for messages.
+    """
+
+    items: list[BuildItem] = field(default_factory=list)
+    source: str = ""
+
+    @property
+    def placed(self) -> bool:
+        """True when every item has a transform (a placed build)."""
+        return bool(self.items) and all(item.transform is not None for item in self.items)
+
+
+def parse_transform(value, source: str = "transform") -> np.ndarray:
+    """A 4x4 transform from a manifest value.
+
+    Parameters
+    ----------
+    value : sequence
+        Row-major list of 16 numbers, or 4 rows of 4 numbers, mm.
+    source : str
+        Names the setting in error messages.
+
+    Returns
+    -------
+    (4, 4) float
+        The transform; its last row is ``0 0 0 1``.
+
+    Raises
+    ------
+    MeshError
+        Wrong shape, non-finite numbers, a last row other than ``0 0 0 1`` or a
+        singular (flattening) 3x3 part.
+    """
+    try:
+        matrix = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise MeshError(source, "transform must be 16 numbers or 4 rows of 4 numbers") from None
+    if matrix.size != 16 or matrix.ndim not in (1, 2) or (matrix.ndim == 2 and matrix.shape != (4, 4)):
+        raise MeshError(source, f"transform must be 16 numbers or 4 rows of 4 numbers, got shape {matrix.shape}")
+    matrix = matrix.reshape(4, 4)
+    if not np.all(np.isfinite(matrix)):
+        raise MeshError(source, "transform holds a non-finite number")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise MeshError(source, f"transform's last row must be 0 0 0 1, got {matrix[3].tolist()}")
+    if abs(np.linalg.det(matrix[:3, :3])) < 1e-9:
+        raise MeshError(source, "transform is singular (it flattens the part)")
+    return matrix
+
+
+def check_zip_archive(
+    path: str | Path,
+    max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
+    max_ratio: float = MAX_3MF_COMPRESSION_RATIO,
+) -> None:
+    """Refuse a zip (3MF) archive that would inflate too much before reading it.
+
+    Python's zipfile stops each entry at its declared size, so checking the
+    declared sizes bounds the memory a reader can take.
+
+    Raises
+    ------
+    MeshError
+        Not a zip archive, too many entries, total inflated size above
+        ``max_uncompressed_bytes`` or an entry inflating more than ``max_ratio``
+        times.
+    """
+    try:
+        with zipfile.ZipFile(path) as archive:
+            entries = archive.infolist()
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise MeshError(path, f"not a readable 3MF (zip) archive: {exc}") from None
+    if len(entries) > MAX_3MF_ENTRIES:
+        raise MeshError(path, f"3MF archive holds {len(entries)} entries (limit {MAX_3MF_ENTRIES})")
+    total = sum(entry.file_size for entry in entries)
+    if total > max_uncompressed_bytes:
+        raise MeshError(path, f"3MF inflates to {total} bytes (limit {max_uncompressed_bytes}): refused as a zip bomb")
+    for entry in entries:
+        ratio = entry.file_size / max(entry.compress_size, 1)
+        if ratio > max_ratio:
+            raise MeshError(
+                path, f"3MF entry {entry.filename!r} inflates {ratio:.0f} times (limit {max_ratio:.0f}): refused as a zip bomb"
+            )
+
+
+def read_build_3mf(path: str | Path, max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES) -> list[BuildItem]:
+    """The build items of a 3MF file, placed, in millimetres.
+
+    Every mesh instance of the build (trimesh flattens components, so a build
+    item made of several bodies gives one item per body) becomes a part with
+    its transform.
+
+    Raises
+    ------
+    MeshError
+        A zip bomb, an unreadable file or a build without items.
+    """
+    path = Path(path)
+    check_zip_archive(path, max_uncompressed_bytes)
+    try:
+        scene = trimesh.load(str(path), file_type="3mf", force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        raise MeshError(path, f"cannot be read as 3MF: {exc}") from None
+    # trimesh keeps 3MF coordinates in the file's unit (it reports the unit name)
+    unit = str(scene.units or "millimeter").lower().rstrip("s")
+    if unit not in _3MF_UNIT_MM:
+        raise MeshError(path, f"unknown 3MF unit {scene.units!r}")
+    to_mm = _3MF_UNIT_MM[unit]
+    items = []
+    for node in sorted(scene.graph.nodes_geometry):
+        matrix, geometry_name = scene.graph[node]
+        mesh = scene.geometry[geometry_name]
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            continue
+        mesh = mesh.copy()
+        mesh.apply_scale(to_mm)
+        transform = np.array(matrix, dtype=float)
+        transform[:3, 3] *= to_mm
+        items.append(BuildItem(name=str(node), mesh=mesh, transform=transform))
+    if not items:
+        raise MeshError(path, "3MF build holds no mesh items")
+    return items
+
+
+def read_build(
+    paths: Sequence[str | Path],
+    transforms: Mapping[str, object] | None = None,
+    units: Mapping[str, str | float] | None = None,
+    max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
+) -> Build:
+    """Read a job's build from its mesh files.
+
+    Parameters
+    ----------
+    paths : sequence of path
+        The job's part files. A ``.3mf`` gives its build items, placed; any
+        other mesh file gives one part.
+    transforms : mapping, optional
+        File name (or stem) to the manifest's 4x4 transform of that loose
+        part (16 numbers row-major, or 4 rows), mm, applied after unit
+        scaling. Loose parts without one are unplaced.
+    units : mapping, optional
+        File name (or stem) to ``'mm'``, ``'inch'``, ``'m'`` or a factor for
+        loose parts; default mm.
+    max_uncompressed_bytes : int
+        Zip-bomb limit of each 3MF.
+
+    Returns
+    -------
+    Build
+        Items named after their files (3MF items after their build items),
+        made unique.
+
+    Raises
+    ------
+    MeshError
+        An unreadable file or transform.
+    """
+    transforms = transforms or {}
+    units = units or {}
+    items: list[BuildItem] = []
+    for path in map(Path, paths):
+        if path.suffix.lower() == ".3mf":
+            for item in read_build_3mf(path, max_uncompressed_bytes):
+                item.name = f"{path.stem}/{item.name}"
+                items.append(item)
+            continue
+        mesh = read_mesh(path)
+        mesh.apply_scale(unit_factor(_by_file(units, path, "mm"), path))
+        value = _by_file(transforms, path, None)
+        transform = None if value is None else parse_transform(value, f"{path.name}: transform")
+        items.append(BuildItem(name=path.stem, mesh=mesh, transform=transform))
+    _make_names_unique(items)
+    return Build(items=items, source=", ".join(str(p) for p in paths))
+
+
+def _by_file(mapping: Mapping[str, object], path: Path, default):
+    """A manifest value keyed by file name or by stem."""
+    return mapping.get(path.name, mapping.get(path.stem, default))
+
+
+def _make_names_unique(items: Sequence[BuildItem]) -> None:
+    """Suffix repeated item names with ``_2``, ``_3``... (in place)."""
+    seen: dict[str, int] = {}
+    for item in items:
+        count = seen.get(item.name, 0) + 1
+        seen[item.name] = count
+        if count > 1:
+            item.name = f"{item.name}_{count}"
+
+
+def export_build_3mf(items: Sequence[BuildItem]) -> bytes:
+    """``build.3mf`` bytes: one object per distinct mesh, one build item per item.
+
+    Items sharing one mesh object (the finger copies) share one 3MF object.
+    The output is deterministic: the same items give the same bytes.
+
+    Parameters
+    ----------
+    items : sequence of BuildItem
+        Placed items (every transform set), mm.
+
+    Returns
+    -------
+    bytes
+        A 3MF (core specification, unit millimeter) that trimesh and slicers
+        load; each build item carries its name as ``partnumber``.
+    """
+    object_ids: dict[int, int] = {}
+    model = etree.Element(f"{{{_CORE_NS}}}model", nsmap={None: _CORE_NS}, unit="millimeter")
+    model.set("{http://www.w3.org/XML/1998/namespace}lang", "en-US")
+    resources = etree.SubElement(model, f"{{{_CORE_NS}}}resources")
+    build = etree.SubElement(model, f"{{{_CORE_NS}}}build")
+    for item in items:
+        if item.transform is None:
+            raise ValueError(f"build item {item.name!r} has no transform")
+        key = id(item.mesh)
+        if key not in object_ids:
+            object_ids[key] = len(object_ids) + 1
+            _add_mesh_object(resources, object_ids[key], item.name, item.mesh)
+        etree.SubElement(
+            build,
+            f"{{{_CORE_NS}}}item",
+            objectid=str(object_ids[key]),
+            transform=_transform_attribute(item.transform),
+            partnumber=item.name,
+        )
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, data in (
+            ("[Content_Types].xml", _CONTENT_TYPES),
+            ("_rels/.rels", _RELS),
+            ("3D/3dmodel.model", etree.tostring(model, xml_declaration=True, encoding="UTF-8")),
+        ):
+            # a fixed timestamp keeps the archive bytes reproducible
+            archive.writestr(zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0)), data, zipfile.ZIP_DEFLATED)
+    return buffer.getvalue()
+
+
+def write_build_3mf(items: Sequence[BuildItem], path: str | Path) -> Path:
+    """Write :func:`export_build_3mf` to ``path`` (the caller renames it into place)."""
+    path = Path(path)
+    path.write_bytes(export_build_3mf(items))
+    return path
+
+
+def _add_mesh_object(resources, object_id: int, name: str, mesh: trimesh.Trimesh) -> None:
+    """Append a 3MF ``object`` holding ``mesh`` to ``resources``."""
+    obj = etree.SubElement(resources, f"{{{_CORE_NS}}}object", id=str(object_id), type="model", name=name)
+    mesh_element = etree.SubElement(obj, f"{{{_CORE_NS}}}mesh")
+    vertices = etree.SubElement(mesh_element, f"{{{_CORE_NS}}}vertices")
+    for x, y, z in np.asarray(mesh.vertices, dtype=float).tolist():
+        etree.SubElement(vertices, f"{{{_CORE_NS}}}vertex", x=repr(x), y=repr(y), z=repr(z))
+    triangles = etree.SubElement(mesh_element, f"{{{_CORE_NS}}}triangles")
+    for v1, v2, v3 in np.asarray(mesh.faces, dtype=np.int64).tolist():
+        etree.SubElement(triangles, f"{{{_CORE_NS}}}triangle", v1=str(v1), v2=str(v2), v3=str(v3))
+
+
+def _transform_attribute(transform: np.ndarray) -> str:
+    """The 3MF ``transform`` attribute of a 4x4 transform.
+
+    3MF multiplies row vectors, so it stores the transposed 3x3 block row by
+    row (m00 m01 m02 m10 ... m22) and then the translation; ``repr`` keeps
+    every float exact through a reload.
+    """
+    matrix = np.asarray(transform, dtype=float)
+    values = matrix[:3, :3].T.reshape(-1).tolist() + matrix[:3, 3].tolist()
+    return " ".join(repr(value) for value in values)
