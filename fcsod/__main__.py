@@ -1,0 +1,8 @@
+"""``python -m fcsod``: the same as the ``fcsod`` command."""
+
+import sys
+
+from .cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,229 @@
+"""Command line: ``fcsod run | audit | replay | subscribe | schema``.
+
+Exit codes: 0 success, 1 a check failed (audit) or nothing arrived in time
+(subscribe), 2 bad input (config file, arguments, unreadable record).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import logging
+import re
+import sys
+import threading
+import time
+from pathlib import Path
+
+from fcso.errors import ConfigError
+
+from .config import DaemonConfig, load_daemon_config
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="fcsod", description="Print-server daemon: fcso on every complete print-job folder.")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    run = commands.add_parser("run", help="run the daemon")
+    run.add_argument("--config", required=True, type=Path, help="daemon settings (fcsod.toml)")
+    run.add_argument("--log-level", default="info", choices=["debug", "info", "warning", "error"])
+
+    audit = commands.add_parser("audit", help="print a job's story from its job.mcap and check its hashes")
+    audit.add_argument("record", type=Path, metavar="FILE.mcap")
+    audit.add_argument("--verify", type=Path, metavar="DIR", help="the job's output folder: check every output file's sha256")
+    audit.add_argument("--inputs", type=Path, metavar="DIR", help="the job folder: check every input file's sha256")
+
+    replay = commands.add_parser("replay", help="publish the zenoh messages recorded in a job.mcap again")
+    replay.add_argument("record", type=Path, metavar="FILE.mcap")
+    replay.add_argument("--config", required=True, type=Path, help="daemon settings (zenoh session)")
+    replay.add_argument("--listen", action="append", metavar="ENDPOINT", help="listen here instead of the config's endpoints")
+    replay.add_argument("--connect", action="append", metavar="ENDPOINT", help="connect here instead of the config's endpoints")
+    replay.add_argument("--wait", type=float, default=10.0, metavar="S", help="wait up to S seconds for a subscriber before publishing")
+
+    subscribe = commands.add_parser("subscribe", help="print what the daemon publishes (a small cell-controller client)")
+    subscribe.add_argument("--config", required=True, type=Path, help="daemon settings (prefix, cell, zenoh)")
+    subscribe.add_argument("--connect", action="append", metavar="ENDPOINT", help="daemon endpoint (default: the config's connect, else its listen endpoints)")
+    subscribe.add_argument("--save", type=Path, metavar="DIR", help="save each received design as DIR/<job_id>.stl")
+    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results published before this start")
+    subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
+    subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
+
+    schema = commands.add_parser("schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels")
+    schema.add_argument("--out", required=True, type=Path)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            return _run(args)
+        if args.command == "audit":
+            return _audit(args)
+        if args.command == "replay":
+            return _replay(args)
+        if args.command == "subscribe":
+            return _subscribe(args)
+        return _schema(args)
+    except ConfigError as exc:
+        print(f"fcsod: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+def _run(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from .logs import setup_logging
+    from .service import Daemon, StateDirBusy
+
+    config = load_daemon_config(args.config)
+    setup_logging(logging.getLevelName(args.log_level.upper()))
+    try:
+        return Daemon(config).run()
+    except StateDirBusy as exc:
+        print(f"fcsod: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except zenoh.ZError as exc:
+        # e.g. a listen endpoint already in use or a bad zenoh config file
+        print(f"fcsod: {args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+def _audit(args: argparse.Namespace) -> int:
+    from .audit import audit
+
+    if not args.record.is_file():
+        print(f"fcsod: {args.record}: file not found", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    result = audit(args.record, args.verify, args.inputs)
+    for line in result.lines:
+        print(line)
+    for problem in result.problems:
+        print(f"PROBLEM: {problem}")
+    if args.verify is not None or args.inputs is not None:
+        print("verification " + ("FAILED" if result.problems else "passed"))
+    return EXIT_FAILED if result.problems else EXIT_OK
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .bus import open_session, put
+    from .messages import BusMessage, BusRecord, jobs_key
+    from .recorder import TOPIC_BUS, read_record
+
+    config = load_daemon_config(args.config)
+    if not args.record.is_file():
+        print(f"fcsod: {args.record}: file not found", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    content = read_record(args.record)
+    messages = [BusMessage.from_record(BusRecord.model_validate(b)) for b in content.of(TOPIC_BUS)]
+    if content.truncated:
+        print(f"record is truncated ({content.problem}): replaying the {len(messages)} messages before the cut")
+    session = open_session(config.zenoh, listen=args.listen, connect=args.connect)
+    try:
+        # samples put before a subscriber has been discovered are lost: wait for one
+        probe = session.declare_publisher(jobs_key(config.bus.prefix, config.bus.cell))
+        deadline = time.monotonic() + args.wait
+        while not probe.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(0.05)
+        matched = probe.matching_status.matching
+        probe.undeclare()
+        for message in messages:
+            put(session, message)
+            print(f"replayed {message.key_expr} ({message.encoding}, {len(message.payload)} bytes)")
+        # let the reliable link deliver before the session closes
+        time.sleep(0.5)
+    finally:
+        session.close()
+    if not matched:
+        print("no subscriber was connected: the messages went nowhere")
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def _subscriber_endpoints(config: DaemonConfig, override: list[str] | None) -> list[str]:
+    """Where the subscriber connects: the override, the config's connect endpoints, or its listen endpoints on this host."""
+    if override:
+        return override
+    if config.zenoh.connect:
+        return config.zenoh.connect
+    return [re.sub(r"/(0\.0\.0\.0|\[::\]):", "/127.0.0.1:", e) for e in config.zenoh.listen or []]
+
+
+def _subscribe(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from .bus import open_session
+    from .messages import ENCODING_JSON, daemon_key, jobs_key
+
+    config = load_daemon_config(args.config)
+    prefix, cell = config.bus.prefix, config.bus.cell
+    # the subscriber must not bind the daemon's listen endpoints
+    session = open_session(config.zenoh, listen=[], connect=_subscriber_endpoints(config, args.connect))
+    finished: set[str] = set()
+    lock = threading.Lock()
+    all_done = threading.Event()
+
+    def show(sample, source: str) -> None:
+        key = str(sample.key_expr)
+        payload = sample.payload.to_bytes()
+        line: dict = {"source": source, "key": key, "topic": key.rsplit("/", 1)[-1], "encoding": str(sample.encoding), "bytes": len(payload)}
+        parts = key.split("/")
+        line["job_id"] = parts[-2] if len(parts) >= 2 else None
+        if str(sample.encoding).startswith(ENCODING_JSON):
+            line["body"] = json.loads(payload)
+        else:
+            line["sha256"] = hashlib.sha256(payload).hexdigest()
+        if sample.attachment is not None:
+            attachment = json.loads(sample.attachment.to_bytes())
+            line["attachment"] = attachment
+            if "sha256" in attachment:
+                line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
+        if args.save is not None and line["topic"] == "design":
+            args.save.mkdir(parents=True, exist_ok=True)
+            target = args.save / f"{line['job_id']}.stl"
+            target.write_bytes(payload)
+            line["saved"] = str(target)
+        with lock:
+            print(json.dumps(line), flush=True)
+            body = line.get("body") or {}
+            if line["topic"] == "status" and body.get("state") in ("done", "failed"):
+                finished.add(line["job_id"])
+                if args.exit_after is not None and len(finished) >= args.exit_after:
+                    all_done.set()
+
+    def liveliness(sample) -> None:
+        state = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+        with lock:
+            print(json.dumps({"source": "liveliness", "key": str(sample.key_expr), "daemon": state}), flush=True)
+
+    try:
+        subscriber = session.declare_subscriber(jobs_key(prefix, cell), lambda s: show(s, "live"))
+        watcher = session.liveliness().declare_subscriber(daemon_key(prefix, cell), liveliness, history=True)
+        if not args.no_query:
+            for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
+                if reply.ok is not None:
+                    show(reply.ok, "query")
+        all_done.wait(timeout=args.timeout)
+        subscriber.undeclare()
+        watcher.undeclare()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+    if args.exit_after is not None and not all_done.is_set():
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def _schema(args: argparse.Namespace) -> int:
+    from .schema import write_fcsod_schemas
+
+    for path in write_fcsod_schemas(args.out):
+        print(path)
+    return EXIT_OK

@@ -1,0 +1,290 @@
+"""The daemon's configuration (``fcsod.toml``) and the job manifest (``job.toml``), as pydantic models.
+
+Lengths are in millimetres (``_mm``), sizes in bytes (``_bytes``), times in
+seconds (``_seconds``). Both models forbid unknown keys so a typo is an error
+that names the key, never a silently ignored setting.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from fcso.config import (
+    ContactConfig,
+    DesignConfig,
+    FilterConfig,
+    GripperConfig,
+    PosesConfig,
+    SamplerConfig,
+    SearchConfig,
+    format_validation_error,
+)
+from fcso.errors import ConfigError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+
+#: Name of the optional manifest in a job folder.
+MANIFEST_NAME = "job.toml"
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class WatchConfig(_Section):
+    """Which folders are watched and when a job folder counts as complete."""
+
+    roots: list[Path] = Field(min_length=1, description="Watched roots; each holds one folder per print job")
+    settle_seconds: float = Field(
+        5.0, ge=0, description="How long the job's files must stay unchanged (size and mtime) before the job starts, s"
+    )
+    polling: bool = Field(
+        False, description="Poll the roots instead of using inotify (needed on network shares written by other machines)"
+    )
+    poll_interval_seconds: float = Field(1.0, gt=0, description="Interval of the polling observer, s")
+    rescan_seconds: float = Field(
+        60.0, gt=0, description="Full rescan of every root at this interval, s (catches events lost by the observer)"
+    )
+
+
+class OutputConfig(_Section):
+    """Where results go (never inside a watched root)."""
+
+    root: Path = Field(description="Results are written to <root>/<job_id>/")
+
+
+class StateConfig(_Section):
+    """Where the daemon keeps its job journal."""
+
+    dir: Path = Field(description="Folder of the SQLite journal (journal.sqlite3) and the daemon's lock file")
+
+
+class JobsConfig(_Section):
+    """How many jobs run at once and for how long."""
+
+    concurrency: int = Field(1, ge=1, description="Jobs running at the same time, each in its own worker process")
+    time_limit_seconds: float = Field(1800.0, gt=0, description="A job still running after this long fails, s")
+    stop_grace_seconds: float = Field(
+        5.0, gt=0, description="Time a worker gets to record its failure after the time limit before it is killed, s"
+    )
+
+
+class LimitsConfig(_Section):
+    """Size limits that refuse a job before any mesh is parsed."""
+
+    max_file_bytes: int = Field(200_000_000, gt=0, description="Largest part or manifest file, bytes")
+    max_job_bytes: int = Field(1_000_000_000, gt=0, description="Largest total size of a job's input files, bytes")
+    max_parts: int = Field(50, ge=1, description="Most distinct part files in one job")
+    max_faces: int = Field(2_000_000, gt=0, description="Most triangles in one part mesh")
+    max_3mf_uncompressed_bytes: int = Field(
+        500_000_000, gt=0, description="Largest total uncompressed size of the entries of a 3MF (zip) file, bytes"
+    )
+    max_3mf_ratio: float = Field(200.0, gt=1, description="Largest uncompressed/compressed size ratio of a 3MF entry")
+
+
+class BusConfig(_Section):
+    """Zenoh key expressions: ``<prefix>/<cell>/jobs/<job_id>/...``."""
+
+    prefix: str = Field("fcso", pattern=r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$", description="Key prefix")
+    cell: str = Field("cell1", pattern=r"^[A-Za-z0-9_\-]+$", description="Cell id, one key chunk")
+
+
+class ZenohConfig(_Section):
+    """Zenoh session settings: a zenoh config file (JSON5) and/or inline endpoints (inline wins)."""
+
+    config_file: Path | None = Field(None, description="Zenoh configuration file (JSON5): mode, endpoints, TLS, access control")
+    mode: Literal["peer", "client", "router"] | None = Field(None, description="Session mode; default: the config file's or peer")
+    listen: list[str] | None = Field(None, description="Listen endpoints, e.g. tcp/127.0.0.1:7447")
+    connect: list[str] | None = Field(None, description="Endpoints to connect to, e.g. tcp/192.168.1.10:7447")
+    multicast_scouting: bool | None = Field(None, description="UDP multicast scouting; default: the config file's or zenoh's")
+
+
+class McapConfig(_Section):
+    """How ``job.mcap`` is written."""
+
+    compression: Literal["zstd", "lz4", "none"] = Field("zstd", description="Chunk compression")
+    chunk_size_bytes: int = Field(
+        65536, ge=1024, description="Chunk size, bytes: small chunks keep a crashed job's record readable up to the crash"
+    )
+
+
+class DaemonConfig(_Section):
+    """Every setting of ``fcsod run`` (``fcsod.toml``)."""
+
+    watch: WatchConfig
+    output: OutputConfig
+    state: StateConfig
+    jobs: JobsConfig = Field(default_factory=JobsConfig)
+    limits: LimitsConfig = Field(default_factory=LimitsConfig)
+    bus: BusConfig = Field(default_factory=BusConfig)
+    zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
+    mcap: McapConfig = Field(default_factory=McapConfig)
+    design: DesignConfig = Field(default_factory=DesignConfig, description="Default fcso settings for every job")
+
+    @model_validator(mode="after")
+    def _output_outside_watch_roots(self) -> "DaemonConfig":
+        output = self.output.root.resolve()
+        for root in self.watch.roots:
+            resolved = root.resolve()
+            if output == resolved or resolved in output.parents or output in resolved.parents:
+                raise ValueError(f"output.root {self.output.root} overlaps watch root {root}: results never go into watched folders")
+        return self
+
+
+def _resolve_paths(data: dict, base: Path) -> None:
+    """Make the config's relative paths relative to the config file's folder (not the cwd), in place."""
+    def fix(section: str, key: str) -> None:
+        values = data.get(section)
+        if isinstance(values, dict) and isinstance(values.get(key), str) and not Path(values[key]).is_absolute():
+            values[key] = str(base / values[key])
+
+    watch = data.get("watch")
+    if isinstance(watch, dict) and isinstance(watch.get("roots"), list):
+        watch["roots"] = [str(base / r) if isinstance(r, str) and not Path(r).is_absolute() else r for r in watch["roots"]]
+    fix("output", "root")
+    fix("state", "dir")
+    fix("zenoh", "config_file")
+    design = data.get("design")
+    if isinstance(design, dict):
+        fix_finger = design.get("finger")
+        if isinstance(fix_finger, dict) and isinstance(fix_finger.get("mesh"), str) and not Path(fix_finger["mesh"]).is_absolute():
+            fix_finger["mesh"] = str(base / fix_finger["mesh"])
+
+
+def load_daemon_config(path: str | Path) -> DaemonConfig:
+    """Load and validate ``fcsod.toml``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file; relative paths in it are relative to its folder.
+
+    Returns
+    -------
+    DaemonConfig
+
+    Raises
+    ------
+    ConfigError
+        Unreadable file, TOML syntax error, unknown key or bad value; the
+        message names the file and the dotted key.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(path, "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, f"cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    _resolve_paths(data, path.resolve().parent)
+    try:
+        config = DaemonConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(path, format_validation_error(exc)) from None
+    for number, root in enumerate(config.watch.roots):
+        if not root.is_dir():
+            raise ConfigError(path, f"watch.roots.{number}: folder {root} does not exist")
+    if config.zenoh.config_file is not None and not config.zenoh.config_file.is_file():
+        raise ConfigError(path, f"zenoh.config_file: file {config.zenoh.config_file} does not exist")
+    return config
+
+
+# ---------------------------------------------------------------- job manifest
+
+
+class PartEntry(_Section):
+    """One part of the batch."""
+
+    file: str = Field(min_length=1, description="Mesh file, relative to the job folder (STL, 3MF, OBJ, PLY)")
+    units: Literal["mm", "inch", "m"] | float = Field("mm", description="Unit of the file's coordinates, or a factor to mm")
+    quantity: int = Field(1, ge=1, description="Copies of this part in the print job")
+    scale_to_mm: float | None = Field(None, gt=0, description="Scale so the longest bounding-box side is this long, mm")
+
+    @field_validator("units")
+    @classmethod
+    def _positive_factor(cls, value: str | float) -> str | float:
+        if isinstance(value, float) and not value > 0:
+            raise ValueError("a unit factor must be a positive number of mm per file unit")
+        return value
+
+
+#: Manifest sections that override the daemon's fcso settings, with fcso's models.
+OVERRIDE_SECTIONS: dict[str, type[BaseModel]] = {
+    "sampler": SamplerConfig,
+    "gripper": GripperConfig,
+    "filter": FilterConfig,
+    "poses": PosesConfig,
+    "contact": ContactConfig,
+    "search": SearchConfig,
+}
+
+
+class JobManifest(_Section):
+    """``job.toml``: the parts of a batch and per-job overrides of fcso's settings.
+
+    Override sections take fcso's keys (``schemas/design-config.json``); keys
+    not given keep the daemon's defaults. Validate with
+    ``context={"defaults": DesignConfig}`` so cross-key checks (such as
+    penetration below thickness) see the daemon's defaults.
+    """
+
+    parts: list[PartEntry] = Field(
+        default_factory=list, description="The parts; empty: every mesh file in the folder, in mm, quantity 1"
+    )
+    repair: bool = Field(False, description="Repair part meshes that are not closed volumes")
+    sampler: SamplerConfig | None = None
+    gripper: GripperConfig | None = None
+    filter: FilterConfig | None = None
+    poses: PosesConfig | None = None
+    contact: ContactConfig | None = None
+    search: SearchConfig | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_from_defaults(cls, data: Any, info: ValidationInfo) -> Any:
+        defaults = (info.context or {}).get("defaults")
+        if not isinstance(data, dict) or not isinstance(defaults, DesignConfig):
+            return data
+        filled = dict(data)
+        for section in OVERRIDE_SECTIONS:
+            given = data.get(section)
+            if isinstance(given, dict):
+                filled[section] = {**getattr(defaults, section).model_dump(), **given}
+        return filled
+
+    def design_config(self, defaults: DesignConfig) -> DesignConfig:
+        """The job's fcso settings: ``defaults`` with this manifest's sections applied."""
+        overrides = {s: getattr(self, s).model_dump() for s in OVERRIDE_SECTIONS if getattr(self, s) is not None}
+        return defaults.updated(overrides)
+
+
+def parse_manifest(text: str, source: str | Path, defaults: DesignConfig) -> JobManifest:
+    """Parse and validate a manifest's text.
+
+    Parameters
+    ----------
+    text : str
+        Content of ``job.toml``.
+    source : str or Path
+        Name used in error messages.
+    defaults : DesignConfig
+        The daemon's fcso settings the overrides apply to.
+
+    Raises
+    ------
+    ConfigError
+        TOML syntax, unknown key or bad value, naming ``source`` and the key.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, f"not valid TOML: {exc}") from None
+    try:
+        manifest = JobManifest.model_validate(data, context={"defaults": defaults})
+        manifest.design_config(defaults)
+    except ValidationError as exc:
+        raise ConfigError(source, format_validation_error(exc)) from None
+    return manifest

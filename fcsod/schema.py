@@ -1,0 +1,33 @@
+"""JSON Schemas of fcsod's documents: config, job manifest, zenoh messages and MCAP channels (``schemas/``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fcso.schema import write_schemas
+from pydantic import BaseModel
+
+from .config import DaemonConfig, JobManifest
+from .messages import DesignAttachment, GraspsMessage, QualityMessage, StatusMessage
+from .recorder import CHANNELS
+
+
+def _channel_file(topic: str) -> str:
+    return "mcap" + topic.replace("/", "-") + ".json"
+
+
+#: fcsod's documents: file name -> model.
+FCSOD_SCHEMAS: dict[str, type[BaseModel]] = {
+    "fcsod-config.json": DaemonConfig,
+    "job-manifest.json": JobManifest,
+    "zenoh-status.json": StatusMessage,
+    "zenoh-quality.json": QualityMessage,
+    "zenoh-grasps.json": GraspsMessage,
+    "zenoh-design-attachment.json": DesignAttachment,
+    **{_channel_file(topic): model for topic, model in CHANNELS.items()},
+}
+
+
+def write_fcsod_schemas(out_dir: str | Path) -> list[Path]:
+    """Write every fcsod schema into ``out_dir``; returns the paths."""
+    return write_schemas(out_dir, FCSOD_SCHEMAS)

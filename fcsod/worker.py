@@ -1,0 +1,466 @@
+"""One job, run in a worker process started with the spawn method.
+
+The worker checks the job's inputs, runs :func:`fcso.design`, writes the
+results into ``<output_root>/.tmp-<job_id>/`` and records ``job.mcap`` as it
+goes (flushed after every stage), then renames the folder to
+``<output_root>/<job_id>/``. A failed job's folder holds ``job.mcap`` only.
+The worker never touches zenoh: the messages to publish go back to the
+daemon over a pipe, after they are in the record.
+
+The job runs as a list of steps (:data:`STEPS`); each takes the
+:class:`JobRun` and records what it made, so a later step (such as build
+placement) is one more function in the list.
+"""
+
+from __future__ import annotations
+
+import base64
+import ctypes
+import hashlib
+import os
+import shutil
+import signal
+import time
+import traceback
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Callable
+
+import fcso
+import numpy as np
+import trimesh
+from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_part
+from fcso.output import output_files
+
+from . import __version__
+from .config import DaemonConfig, JobManifest
+from .jobs import PartInput, check_parts, hash_inputs, job_inputs, read_manifest
+from .messages import (
+    BusMessage,
+    CandidateRecord,
+    DesignAttachment,
+    DesignRecord,
+    ENCODING_STL,
+    FoxgloveTime,
+    GraspsMessage,
+    InputFile,
+    InputHashesRecord,
+    JobSpecRecord,
+    LogRecord,
+    OutputFilesRecord,
+    PoseRecord,
+    QualityMessage,
+    SamplesRecord,
+    ScenarioSummary,
+    SceneEntity,
+    SceneUpdate,
+    StateChangeRecord,
+    StatusMessage,
+    TriangleListPrimitive,
+    job_key,
+    utc_now,
+)
+from .recorder import (
+    TOPIC_BUS,
+    TOPIC_CANDIDATES,
+    TOPIC_DESIGN,
+    TOPIC_GRASPS,
+    TOPIC_INPUTS,
+    TOPIC_LOG,
+    TOPIC_OUTPUTS,
+    TOPIC_POSES,
+    TOPIC_SAMPLES,
+    TOPIC_SCENE,
+    TOPIC_SPEC,
+    TOPIC_STATE,
+    Recorder,
+)
+
+#: Name of the record in every job's output folder.
+RECORD_NAME = "job.mcap"
+
+#: Shortest interval between two progress lines of the same stage, s.
+PROGRESS_INTERVAL_S = 1.0
+
+
+class TimeLimitExceeded(BaseException):
+    """Raised in the worker when the daemon signals that the job ran out of time.
+
+    A BaseException so that libraries catching ``Exception`` cannot swallow it.
+    """
+
+
+@dataclass
+class JobTask:
+    """What the daemon hands a worker.
+
+    Attributes
+    ----------
+    job_id, folder : str
+        The job and its watched folder.
+    attempt : int
+        Run number (more than 1 after a restart re-queued the job).
+    queued_at, started_at : str
+        UTC ISO 8601 times from the journal.
+    config : DaemonConfig
+        The daemon's settings.
+    """
+
+    job_id: str
+    folder: str
+    attempt: int
+    queued_at: str
+    started_at: str
+    config: DaemonConfig
+
+
+@dataclass
+class JobRun:
+    """The state of a running job that steps read and extend."""
+
+    task: JobTask
+    folder: Path
+    work_dir: Path
+    recorder: Recorder
+    emit: Callable[[tuple], None]
+    manifest: JobManifest | None = None
+    manifest_text: str | None = None
+    inputs: list[InputFile] = field(default_factory=list)
+    parts: list[PartInput] = field(default_factory=list)
+    settings: DesignConfig | None = None
+    loaded: list[fcso.Part] = field(default_factory=list)
+    result: DesignResult | None = None
+    files: dict[str, bytes] = field(default_factory=dict)
+    outgoing: list[BusMessage] = field(default_factory=list)
+
+    def log(self, level: str, message: str, **fields) -> None:
+        """Record a log line and send it to the daemon's log."""
+        self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
+        self.emit(("log", level, message, fields))
+
+    def status(self, state: str, finished_at: str | None = None, error: str | None = None, outputs: list[str] | None = None) -> BusMessage:
+        """The job's status message, recorded on the bus channel."""
+        body = StatusMessage(
+            job_id=self.task.job_id,
+            state=state,
+            folder=self.task.folder,
+            attempt=self.task.attempt,
+            queued_at=self.task.queued_at,
+            started_at=self.task.started_at,
+            finished_at=finished_at,
+            error=error,
+            outputs=outputs or [],
+        )
+        bus = self.task.config.bus
+        message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
+        self.recorder.write(TOPIC_BUS, message.record())
+        self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
+        return message
+
+
+# ------------------------------------------------------------------------ steps
+
+
+def step_inputs(run: JobRun) -> None:
+    """Hash the inputs, read and validate the manifest, check the part files against the limits."""
+    config = run.task.config
+    run.inputs = hash_inputs(run.folder, job_inputs(run.folder), config.limits.max_file_bytes)
+    run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
+    try:
+        run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits)
+        run.settings = run.manifest.design_config(config.design)
+        run.parts = check_parts(run.folder, run.manifest, config.limits)
+    finally:
+        run.recorder.write(
+            TOPIC_SPEC,
+            JobSpecRecord(
+                job_id=run.task.job_id,
+                folder=run.task.folder,
+                manifest=run.manifest_text,
+                parts=[{**p.entry.model_dump(), "file": p.entry.file} for p in run.parts],
+                settings=(run.settings or config.design).model_dump(mode="json"),
+                fcsod_version=__version__,
+                fcso_version=fcso.__version__,
+            ),
+        )
+
+
+def step_load(run: JobRun) -> None:
+    """Load and validate every part mesh (closed volume, units, face limit)."""
+    max_faces = run.task.config.limits.max_faces
+    for part in run.parts:
+        loaded = load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)
+        if len(loaded.mesh.faces) > max_faces:
+            raise MeshError(part.path, f"{len(loaded.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+        run.loaded.append(loaded)
+        run.log("info", f"loaded {part.entry.file}: {len(loaded.mesh.faces)} triangles, extents {np.round(loaded.mesh.extents, 2).tolist()} mm")
+
+
+def step_design(run: JobRun) -> None:
+    """Run fcso's design, logging progress per stage."""
+    last: dict[str, float] = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        now = time.monotonic()
+        if stage in last and done < total and now - last[stage] < PROGRESS_INTERVAL_S:
+            return
+        last[stage] = now
+        run.log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
+
+    run.result = design(run.loaded, run.settings, progress=progress)
+
+
+def step_record_design(run: JobRun) -> None:
+    """Record poses, samples with rejections, every candidate row, the design, the grasps and the 3D scene."""
+    result, recorder = run.result, run.recorder
+    report = result.report
+    for scenario in report.scenarios:
+        recorder.write(
+            TOPIC_POSES,
+            PoseRecord(part=scenario.part, pose_index=scenario.pose_index, probability=scenario.pose_probability, rest_transform=scenario.rest_transform),
+        )
+        recorder.write(
+            TOPIC_SAMPLES,
+            SamplesRecord(
+                part=scenario.part,
+                pose_index=scenario.pose_index,
+                tried_samples=scenario.tried_samples,
+                valid_samples=scenario.valid_samples,
+                rejected=scenario.rejected,
+                samples=[s.model_dump() for s in scenario.samples],
+            ),
+        )
+    for candidate in report.candidates:
+        recorder.write(TOPIC_CANDIDATES, CandidateRecord(candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario))
+    run.files = output_files(result)
+    finger = run.files["finger.stl"]
+    recorder.write(
+        TOPIC_DESIGN,
+        DesignRecord(
+            finger_stl_base64=_base64(finger),
+            finger_sha256=hashlib.sha256(finger).hexdigest(),
+            fingerpad_sha256=hashlib.sha256(run.files["fingerpad.stl"]).hexdigest(),
+            finger_volume_mm3=report.finger.volume_mm3,
+            finger_watertight=report.finger.watertight,
+        ),
+    )
+    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=report.grasps))
+    recorder.write(TOPIC_SCENE, scene_update(result))
+
+
+def step_outputs(run: JobRun) -> None:
+    """Write every output file into the work folder and record their hashes; prepare the bus messages."""
+    for name, data in run.files.items():
+        (run.work_dir / name).write_bytes(data)
+    run.recorder.write(
+        TOPIC_OUTPUTS,
+        OutputFilesRecord(
+            job_id=run.task.job_id,
+            files=[InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in run.files.items()],
+        ),
+    )
+    bus, report = run.task.config.bus, run.result.report
+    best = next(c for c in report.candidates if c.index == report.best)
+    quality = QualityMessage(
+        job_id=run.task.job_id,
+        quality_mm2=best.quality,
+        mean_effective_area_mm2=best.mean_effective_area,
+        pad_case=best.pad_case,
+        candidates_evaluated=report.search.evaluated,
+        candidates_total=report.search.candidates_total,
+        proven_optimal=report.search.proven_optimal,
+        scenarios=[
+            ScenarioSummary(part=s.part, pose_index=s.pose_index, rles=q.rles, contact_area_mm2=q.contact_area_mm2, effective_area_mm2=q.effective_area)
+            for s, q in zip(report.scenarios, best.per_scenario)
+        ],
+        finger_volume_mm3=report.finger.volume_mm3,
+        finger_watertight=report.finger.watertight,
+        min_pad_thickness_mm=report.finger.min_pad_thickness_mm,
+        warnings=report.warnings,
+        timings_s=report.timings_s,
+    )
+    finger = run.files["finger.stl"]
+    attachment = DesignAttachment(job_id=run.task.job_id, sha256=hashlib.sha256(finger).hexdigest(), size_bytes=len(finger))
+    run.outgoing = [
+        BusMessage.json_body(bus.prefix, bus.cell, "quality", quality),
+        BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=report.grasps)),
+        BusMessage(
+            run.task.job_id,
+            "design",
+            job_key(bus.prefix, bus.cell, run.task.job_id, "design"),
+            ENCODING_STL,
+            finger,
+            attachment.model_dump_json().encode(),
+        ),
+    ]
+    for message in run.outgoing:
+        run.recorder.write(TOPIC_BUS, message.record())
+
+
+#: The job's steps in order; each is logged and flushed to the record when it ends.
+STEPS: list[Callable[[JobRun], None]] = [step_inputs, step_load, step_design, step_record_design, step_outputs]
+
+
+# ------------------------------------------------------------------------ scene
+
+
+def _base64(data: bytes) -> str:
+    return base64.b64encode(data).decode()
+
+
+def _triangles(mesh: trimesh.Trimesh, transform: np.ndarray, color: tuple[float, float, float, float]) -> TriangleListPrimitive:
+    vertices = trimesh.transformations.transform_points(np.asarray(mesh.vertices), transform)
+    return TriangleListPrimitive.model_validate(
+        {
+            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+            "points": [{"x": x, "y": y, "z": z} for x, y, z in (vertices / 1000.0).tolist()],
+            "color": dict(zip("rgba", color)),
+            "indices": np.asarray(mesh.faces).reshape(-1).tolist(),
+        }
+    )
+
+
+def scene_update(result: DesignResult) -> SceneUpdate:
+    """Foxglove SceneUpdate: per scenario the rested part, both seated pads and both fingers, in metres.
+
+    Scenarios are laid side by side along x so they do not overlap.
+    """
+    now = time.time_ns()
+    stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
+    to_pad = np.linalg.inv(result.pad_to_finger)
+    entities, offset_x = [], 0.0
+    for number, (scenario, sample_index, evaluation) in enumerate(zip(result.scenarios, result.best.choice, result.best.scenarios)):
+        sample = scenario.samples[sample_index]
+        bounds = scenario.mesh.bounds
+        gap = 0.5 * float(np.ptp(bounds[:, 0])) + 60.0
+        shift = np.eye(4)
+        shift[0, 3] = offset_x - bounds[0, 0]
+        triangles = [_triangles(scenario.mesh, shift, (0.6, 0.6, 0.65, 1.0))]
+        for frame, contact in zip(sample.frames, evaluation.contacts):
+            seated = np.eye(4)
+            seated[0, 3] = contact.offset_mm
+            pad_to_rest = shift @ np.linalg.inv(frame) @ seated
+            triangles.append(_triangles(result.fingerpad, pad_to_rest, (0.9, 0.45, 0.1, 1.0)))
+            triangles.append(_triangles(result.finger, pad_to_rest @ to_pad, (0.2, 0.4, 0.8, 0.35)))
+        entities.append(
+            SceneEntity(
+                timestamp=stamp,
+                frame_id="fcso_rest",
+                id=f"scenario-{number}",
+                lifetime=FoxgloveTime(sec=0, nsec=0),
+                frame_locked=False,
+                metadata=[
+                    {"key": "part", "value": scenario.part.name},
+                    {"key": "pose_index", "value": str(scenario.pose_index)},
+                ],
+                triangles=triangles,
+            )
+        )
+        offset_x += float(np.ptp(bounds[:, 0])) + gap
+    return SceneUpdate(entities=entities)
+
+
+# ------------------------------------------------------------------------ running
+
+
+def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
+    """Run one job start to end; always leaves a finished ``job.mcap`` in the job's output folder.
+
+    Parameters
+    ----------
+    task : JobTask
+    emit : callable
+        Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``
+        and finally ``("finished", state, error, [BusMessage, ...])``.
+    """
+    config = task.config
+    output_root = config.output.root
+    work_dir = output_root / f".tmp-{task.job_id}"
+    final_dir = output_root / task.job_id
+    shutil.rmtree(work_dir, ignore_errors=True)
+    work_dir.mkdir(parents=True)
+    recorder = Recorder(work_dir / RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
+    recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
+    emit(("publish", run.status("running")))
+    recorder.flush()
+    error = None
+    try:
+        for step in STEPS:
+            started = time.perf_counter()
+            step(run)
+            run.log("info", f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s", stage=step.__name__.removeprefix("step_"))
+            recorder.flush()
+    except FcsoError as exc:
+        error = str(exc)
+    except TimeLimitExceeded:
+        error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({config.jobs.time_limit_seconds:g} s)"
+    except Exception as exc:  # a bug or an unexpected library error: the job fails, the daemon goes on
+        error = f"internal error: {type(exc).__name__}: {exc}"
+        run.log("error", traceback.format_exc())
+    if error is None:
+        outputs = sorted([*run.files, RECORD_NAME])
+        final = run.status("done", finished_at=utc_now(), outputs=outputs)
+        publish = [*run.outgoing, final]
+    else:
+        run.log("error", error)
+        final = run.status("failed", finished_at=utc_now(), error=error)
+        publish = [final]
+        # a failed job leaves its record and nothing else
+        for path in work_dir.iterdir():
+            if path.name != RECORD_NAME:
+                path.unlink()
+    recorder.finish()
+    for path in work_dir.iterdir():
+        with open(path, "rb") as stream:
+            os.fsync(stream.fileno())
+    os.replace(work_dir, final_dir)
+    _fsync_dir(output_root)
+    emit(("finished", "done" if error is None else "failed", error, publish))
+
+
+def _fsync_dir(path: Path) -> None:
+    """Make a rename in ``path`` durable."""
+    descriptor = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Ask Linux to SIGKILL this process when the daemon dies, so no orphan finishes a job the restarted daemon re-runs."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    pr_set_pdeathsig = 1
+    libc.prctl(pr_set_pdeathsig, signal.SIGKILL)
+    # the daemon may have died before prctl took effect
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def _time_limit(signum, frame) -> None:
+    raise TimeLimitExceeded()
+
+
+def worker_main(connection: Connection, parent_pid: int) -> None:
+    """Entry point of a worker process: announce readiness, take one job, run it, report, exit.
+
+    Parameters
+    ----------
+    connection : Connection
+        Duplex pipe to the daemon.
+    parent_pid : int
+        The daemon's pid.
+    """
+    _die_with_parent(parent_pid)
+    # Ctrl-C in a terminal reaches the whole process group: the daemon decides what happens to jobs
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGUSR1, _time_limit)
+    connection.send(("ready", os.getpid()))
+    task = connection.recv()
+    if task is None:
+        return
+    run_job(task, connection.send)
+    connection.close()

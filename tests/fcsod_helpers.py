@@ -1,0 +1,201 @@
+"""Helpers of the fcsod tests: free ports, configs, daemon and subscriber subprocesses, slow job drops."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO / "tests" / "data"
+
+#: The tiny fcso settings that design the test cube in well under a second.
+FAST_DESIGN = """
+[design.sampler]
+length_mm = 10
+width_mm = 10
+thickness_mm = 4
+penetration_mm = 3
+stride_mm = 5
+
+[design.poses]
+count = 1
+select = "most_probable"
+"""
+
+
+def free_port() -> int:
+    """A TCP port on loopback that nothing listens on now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def write_config(base: Path, port: int, settle_seconds: float = 0.7, extra: str = "") -> Path:
+    """Write an fcsod.toml for a daemon listening on ``tcp/127.0.0.1:<port>`` with folders below ``base``.
+
+    Returns
+    -------
+    Path
+        The config file; watch root ``base/watch``, outputs ``base/out``, state ``base/state``.
+    """
+    (base / "watch").mkdir(parents=True, exist_ok=True)
+    path = base / "fcsod.toml"
+    path.write_text(
+        f"""
+[watch]
+roots = ["watch"]
+settle_seconds = {settle_seconds}
+rescan_seconds = 5
+
+[output]
+root = "out"
+
+[state]
+dir = "state"
+
+[bus]
+prefix = "fcso"
+cell = "test"
+
+[zenoh]
+listen = ["tcp/127.0.0.1:{port}"]
+multicast_scouting = false
+
+[mcap]
+chunk_size_bytes = 4096
+{extra}
+{FAST_DESIGN}
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+class Process:
+    """A subprocess whose stdout lines are collected by a thread.
+
+    Parameters
+    ----------
+    args : list of str
+        Arguments after ``python -m fcsod``.
+    env : dict, optional
+        Extra environment variables.
+    """
+
+    def __init__(self, args: list[str], env: dict | None = None):
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str] = queue.Queue()
+        self.popen = subprocess.Popen(
+            [sys.executable, "-m", "fcsod", *args],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, **(env or {})},
+        )
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.popen.stdout:
+            self.lines.append(line.rstrip("\n"))
+            self._queue.put(line)
+
+    def wait_for(self, predicate, timeout: float) -> dict | str:
+        """The first line (parsed JSON if it is) for which ``predicate`` is true; AssertionError after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        seen = 0
+        while time.monotonic() < deadline:
+            while seen < len(self.lines):
+                line = self.lines[seen]
+                seen += 1
+                value = _parse(line)
+                if predicate(value):
+                    return value
+            if self.popen.poll() is not None and seen >= len(self.lines):
+                time.sleep(0.2)
+                if seen >= len(self.lines):
+                    break
+            time.sleep(0.05)
+        raise AssertionError(f"no matching line within {timeout} s; output:\n" + "\n".join(self.lines[-60:]))
+
+    def json_lines(self) -> list[dict]:
+        return [v for v in map(_parse, self.lines) if isinstance(v, dict)]
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 20.0) -> int:
+        """Send ``sig``, wait, kill if needed; returns the exit code."""
+        if self.popen.poll() is None:
+            self.popen.send_signal(sig)
+            try:
+                self.popen.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(timeout=10)
+        self._reader.join(timeout=5)
+        return self.popen.returncode
+
+
+def _parse(line: str):
+    try:
+        return json.loads(line)
+    except ValueError:
+        return line
+
+
+def start_daemon(config: Path, env: dict | None = None) -> Process:
+    """Start ``fcsod run`` and wait until it logged its start."""
+    daemon = Process(["run", "--config", str(config)], env=env)
+    daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "fcsod started", timeout=60)
+    return daemon
+
+
+def start_subscriber(config: Path, save: Path | None = None, extra: list[str] | None = None) -> Process:
+    """Start ``fcsod subscribe`` and wait until it sees the daemon's liveliness token."""
+    args = ["subscribe", "--config", str(config), *(["--save", str(save)] if save else []), *(extra or [])]
+    subscriber = Process(args)
+    subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("daemon") == "alive", timeout=60)
+    return subscriber
+
+
+def drop_job(folder: Path, files: dict[str, Path | str | bytes], pause_s: float = 0.0, hidden_first: bool = False) -> None:
+    """Create a job folder file by file.
+
+    Parameters
+    ----------
+    folder : Path
+        The job folder to create.
+    files : dict
+        Relative name -> source file, text or bytes.
+    pause_s : float
+        Pause between files and between the halves of each file, s, so the
+        daemon sees a folder still being written.
+    hidden_first : bool
+        Build the folder under a hidden name and rename it into place.
+    """
+    target = folder.parent / f".{folder.name}.partial" if hidden_first else folder
+    target.mkdir(parents=True)
+    for name, source in files.items():
+        data = source.read_bytes() if isinstance(source, Path) else source.encode() if isinstance(source, str) else source
+        path = target / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as stream:
+            stream.write(data[: len(data) // 2])
+            stream.flush()
+            time.sleep(pause_s)
+            stream.write(data[len(data) // 2 :])
+        time.sleep(pause_s)
+    if hidden_first:
+        target.rename(folder)
+
+
+def copy_tree(source: Path, target: Path) -> None:
+    shutil.copytree(source, target)
