@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test demo bench schema clean
+.PHONY: setup test demo paper bench schema clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -20,8 +20,14 @@ test: setup
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc
 
+# the daemon on a temporary watch folder with the bundled batch; outputs in demo-out/daemon/out
 demo: setup
-	$(PY) -m examples.demo
+	$(PY) -m examples.demo_daemon
+
+# the paper's experiment (METHOD §10) on the bundled bunny; outputs in demo-out/paper
+paper: setup
+	$(VENV)/bin/fcso design examples/parts/stanford_bunny_closed.ply --scale-to 65 \
+		--config examples/paper.toml --out demo-out/paper
 
 # every benchmarks/bench_*.py, one after the other, printing its figures
 bench: setup
@@ -30,6 +36,7 @@ bench: setup
 
 schema: setup
 	$(VENV)/bin/fcso schema --out schemas/
+	$(VENV)/bin/fcsod schema --out schemas/
 
 clean:
 	rm -rf $(VENV) *.egg-info demo-out

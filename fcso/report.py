@@ -117,3 +117,6 @@ class DesignReport(_Model):
     timings_s: dict[str, float] = Field(description="Wall time per stage, s (the only field that varies between identical runs)")
     warnings: list[str]
     settings: DesignConfig
+    placement: dict | None = Field(
+        None, description="Where the finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
+    )
