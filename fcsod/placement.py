@@ -6,15 +6,18 @@ orientation of an item one FFT correlation of its voxel kernel with that grid
 counts the collisions at every translation at once. The item goes where the
 build height grows least, then (for fingers) where its pad faces up best,
 then lowest top, then lowest z, y, x. Every chosen position is then checked on
-the meshes themselves.
+the meshes themselves (manifold3d's exact ``min_gap``).
 
-Why the voxel test is conservative: a voxel is forbidden when its centre lies
-within ``spacing + h`` of a placed solid (``h`` = half the voxel diagonal), and
-an item's kernel holds every voxel its solid touches. Any point of the item
-lies in a kernel voxel, within ``h`` of a free centre, so it lies more than
-``spacing`` from every placed solid. Distances are exact signed distances
-(libigl), so the grid needs no extra margin; the price is up to ``2 h`` of
-extra gap (3.5 mm at 2 mm voxels).
+Why the voxel test is conservative: an item's kernel holds every voxel (closed
+cube) its solid may touch, found by cutting its triangles into pieces no
+longer than a voxel and filling what their voxels enclose. A voxel is
+forbidden when its cube comes closer than ``spacing`` to a cube of a placed
+solid: the solid's voxels grown by a Euclidean distance transform and one
+3 x 3 x 3 dilation (cube-to-cube distance of voxels ``d`` apart is
+``|max(|d| - 1, 0)|``). Any point of a placed item lies in a kernel voxel on a
+free voxel, so it lies at least ``spacing`` from every placed solid. Each
+mesh is voxelised once in its own frame; its axis-aligned rotations are
+transposes and flips of those voxels.
 
 Lengths are millimetres; the build volume spans ``origin_mm`` to
 ``origin_mm + volume_mm`` with z up.
@@ -28,16 +31,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-import igl
+import manifold3d
 import numpy as np
 import scipy.fft
 import trimesh
+from scipy import ndimage
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .build3mf import Build, BuildItem
 
-#: Edge sampling step of the exact gap check; gaps are exact to half of it.
-GAP_SAMPLE_STEP_MM = 0.2
+#: Exact gaps are taken this much smaller when checked against the spacing:
+#: the rounding of the meshes' vertices in manifold3d.
+GAP_TOLERANCE_MM = 1e-3
 
 
 class BuildConfig(BaseModel):
@@ -149,7 +154,9 @@ class _Pose:
     offset: np.ndarray  # (3,) mm
     lower: np.ndarray  # (3,) mm
     upper: np.ndarray  # (3,) mm
-    kernel: np.ndarray  # bool, voxels the rotated solid touches
+    kernel: np.ndarray  # bool, voxels the rotated solid may touch
+    mark: np.ndarray  # bool, voxels it forbids once placed, from kernel index -mark_pad
+    mark_pad: int
     pad_penalty: float  # 1 - cos(angle of the pad normal to +z); 0 for parts
 
 
@@ -207,97 +214,126 @@ def finger_rotations(pad_normal: np.ndarray, mode: str) -> tuple[np.ndarray, np.
     return rotations[order], penalties[order]
 
 
-def solid_voxels(vertices: np.ndarray, faces: np.ndarray, grid: _Grid, clearance_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """Voxels whose centre lies within ``clearance_mm + h`` of a closed mesh's solid.
+def _split_triangles(triangles: np.ndarray, cuts: int) -> np.ndarray:
+    """Cut each triangle into ``cuts**2`` pieces similar to it.
 
-    ``h`` is half the voxel diagonal, so the result holds every voxel that
-    the solid grown by ``clearance_mm`` touches.
+    Parameters
+    ----------
+    triangles : (t, 3, 3) float
+    cuts : int
+        Pieces along each edge; a piece's edges are the triangle's over ``cuts``.
+
+    Returns
+    -------
+    (t * cuts**2, 3, 3) float
+    """
+    i, j = np.meshgrid(np.arange(cuts), np.arange(cuts), indexing="ij")
+    up = np.stack([np.stack([i, j], -1), np.stack([i + 1, j], -1), np.stack([i, j + 1], -1)], -2)[i + j <= cuts - 1]
+    down = np.stack([np.stack([i + 1, j], -1), np.stack([i, j + 1], -1), np.stack([i + 1, j + 1], -1)], -2)[i + j <= cuts - 2]
+    lattice = np.concatenate([up, down]) / cuts  # (pieces, corner, (a, b))
+    weights = np.concatenate([1.0 - lattice.sum(axis=-1, keepdims=True), lattice], axis=-1)
+    return np.einsum("pcw,twd->tpcd", weights, triangles).reshape(-1, 3, 3)
+
+
+def surface_voxels(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, voxel: float, shape) -> np.ndarray:
+    """Voxels a mesh's surface may touch (a superset of those it touches).
+
+    Triangles are cut into pieces no longer than a voxel; every voxel a
+    piece's bounding box overlaps (at most two per axis) is marked.
 
     Parameters
     ----------
     vertices : (n, 3) float
-        Mesh vertices in the grid's frame, mm.
+        Mesh vertices, mm.
     faces : (m, 3) int
-    grid : _Grid
-    clearance_mm : float
+    origin : (3,) float
+        Lower corner of voxel 0, mm.
+    voxel : float
+        Voxel edge, mm.
+    shape : (3,) int
+        Grid shape; the surface must lie inside the grid.
 
     Returns
     -------
-    start : (3,) int
-        Grid index of the block's first voxel.
-    block : bool array
-        The voxels, from ``start``; empty when the solid misses the grid.
+    bool array of ``shape``
     """
-    reach = clearance_mm + grid.voxel * np.sqrt(3.0) / 2.0
-    shape = np.array(grid.shape)
-    start = np.clip(np.floor((vertices.min(axis=0) - reach - grid.origin) / grid.voxel).astype(int), 0, shape)
-    stop = np.clip(np.ceil((vertices.max(axis=0) + reach - grid.origin) / grid.voxel).astype(int), 0, shape)
-    size = np.maximum(stop - start, 0)
-    if np.any(size == 0):
-        return start, np.zeros(size, dtype=bool)
-    axes = [grid.origin[k] + (np.arange(start[k], stop[k]) + 0.5) * grid.voxel for k in range(3)]
-    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    distances = igl.signed_distance(
-        centres,
-        np.ascontiguousarray(vertices, dtype=np.float64),
-        np.ascontiguousarray(faces, dtype=np.int64),
-        sign_type=igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
-        upper_bound=reach + grid.voxel,
-    )[0]
-    return start, (distances <= reach).reshape(size)
+    triangles = (np.asarray(vertices, dtype=np.float64)[faces] - origin) / voxel
+    longest = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
+    cuts = np.maximum(np.ceil(longest).astype(int), 1)
+    pieces = [triangles[cuts == 1]] + [_split_triangles(triangles[cuts == n], int(n)) for n in np.unique(cuts[cuts > 1])]
+    pieces = np.concatenate(pieces)
+    # the closed voxels covering each piece's box [a, b]: floor(a) to ceil(b) - 1
+    low = np.floor(pieces.min(axis=1)).astype(int)
+    high = np.maximum(np.ceil(pieces.max(axis=1)).astype(int) - 1, low)
+    limit = np.array(shape) - 1
+    low, high = np.clip(low, 0, limit), np.clip(high, 0, limit)
+    grid = np.zeros(tuple(int(n) for n in shape), dtype=bool)
+    for choice in itertools.product((False, True), repeat=3):
+        grid[tuple(np.where(choice, high, low).T)] = True
+    return grid
 
 
-def mesh_gap(a: trimesh.Trimesh, b: trimesh.Trimesh, limit_mm: float = np.inf) -> float:
-    """Gap between two closed meshes, 0 when they touch, overlap or nest.
+def solid_voxels(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, voxel: float, shape) -> np.ndarray:
+    """Voxels a closed mesh's solid may touch.
 
-    Signed distances (libigl) from the vertices and edge samples of each mesh
-    to the other: a minimum-distance pair always has one point on an edge, so
-    the result exceeds the true gap by at most ``GAP_SAMPLE_STEP_MM / 2``.
-    The vertices go first; their gap bounds the search, so only samples that
-    close to the other mesh's bounding box are queried.
+    The surface voxels plus every voxel they enclose (6-connected fill of the
+    outside); enclosed voids count as solid.
 
     Parameters
     ----------
-    a, b : trimesh.Trimesh
-        Placed, closed meshes, mm.
-    limit_mm : float
-        Gaps beyond this are reported as ``limit_mm`` (faster).
+    vertices : (n, 3) float
+        Mesh vertices, mm.
+    faces : (m, 3) int
+    origin : (3,) float
+        Lower corner of voxel 0, mm.
+    voxel : float
+        Voxel edge, mm.
+    shape : (3,) int
+        Grid shape, with at least one empty voxel around the mesh.
 
     Returns
     -------
-    float
-        The gap, mm.
+    bool array of ``shape``
     """
-    gap = float(limit_mm)
-    for sampler in (lambda mesh: mesh.vertices, _edge_samples):
-        for source, target in ((a, b), (b, a)):
-            points = np.asarray(sampler(source), dtype=np.float64)
-            outside = np.maximum(0.0, np.maximum(target.bounds[0] - points, points - target.bounds[1]))
-            points = points[np.linalg.norm(outside, axis=1) <= gap]
-            if not len(points):
-                continue
-            distances = igl.signed_distance(
-                points,
-                np.ascontiguousarray(target.vertices, dtype=np.float64),
-                np.ascontiguousarray(target.faces, dtype=np.int64),
-                sign_type=igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
-                upper_bound=min(gap, 1e9) + 1.0,
-            )[0]
-            gap = min(gap, max(float(distances.min()), 0.0))
-    return gap
+    return ndimage.binary_fill_holes(surface_voxels(vertices, faces, origin, voxel, shape))
 
 
-def _edge_samples(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Vertices plus points along every edge at most ``GAP_SAMPLE_STEP_MM`` apart."""
-    edges = mesh.vertices[mesh.edges_unique]
-    lengths = np.linalg.norm(edges[:, 1] - edges[:, 0], axis=1)
-    counts = np.ceil(lengths / GAP_SAMPLE_STEP_MM).astype(int)
-    counts = np.maximum(counts, 1)
-    edge_index = np.repeat(np.arange(len(edges)), counts)
-    step = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    fraction = (step / counts[edge_index])[:, None]
-    points = edges[edge_index, 0] * (1.0 - fraction) + edges[edge_index, 1] * fraction
-    return np.vstack([mesh.vertices, points])
+def grow(solid: np.ndarray, voxel: float, clearance_mm: float) -> np.ndarray:
+    """Voxels whose cube comes closer than ``clearance_mm`` to a cube of ``solid``.
+
+    Cubes ``d`` voxels apart are ``voxel * |max(|d| - 1, 0)|`` apart: a
+    Euclidean distance transform below the clearance, then a 3 x 3 x 3
+    dilation. ``solid`` needs ``ceil(clearance_mm / voxel) + 1`` empty voxels
+    around its content.
+
+    Returns
+    -------
+    bool array like ``solid``; ``solid`` itself when the clearance is 0.
+    """
+    if clearance_mm <= 0 or not solid.any():
+        return solid.copy()
+    near = ndimage.distance_transform_edt(~solid) * voxel < clearance_mm
+    return ndimage.binary_dilation(near, structure=np.ones((3, 3, 3), dtype=bool))
+
+
+def mark_pad(voxel: float, clearance_mm: float) -> int:
+    """Voxels around a solid's voxels that :func:`grow` needs (plus one for the fill)."""
+    return int(np.ceil(clearance_mm / voxel)) + 2
+
+
+def solid_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
+    """The mesh as a manifold3d solid, for exact gaps; the mesh must be closed."""
+    return manifold3d.Manifold(
+        manifold3d.Mesh64(
+            vert_properties=np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+            tri_verts=np.ascontiguousarray(mesh.faces, dtype=np.uint64),
+        )
+    )
+
+
+def mesh_gap(a: manifold3d.Manifold, b: manifold3d.Manifold, limit_mm: float) -> float:
+    """Exact gap between two solids, 0 when they touch, overlap or nest; at most ``limit_mm``."""
+    return float(a.min_gap(b, float(limit_mm)))
 
 
 def _bounds_gap(a: np.ndarray, b: np.ndarray) -> float:
@@ -306,18 +342,26 @@ def _bounds_gap(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(separation))
 
 
-def _poses(mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, voxel: float) -> list[_Pose]:
-    """Voxelise ``mesh`` once and turn its kernel into each rotation.
+def _bounds_span(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest distance between a point of box ``a`` and one of box ``b``."""
+    return float(np.linalg.norm(np.maximum(a[1], b[1]) - np.minimum(a[0], b[0])))
+
+
+def _poses(mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, voxel: float, spacing: float) -> list[_Pose]:
+    """Voxelise ``mesh`` once and turn its kernel and mark into each rotation.
 
     The voxel box starts at the mesh's bounding-box corner; an axis-aligned
     rotation maps that box's voxels onto voxels, so each rotated kernel is a
-    transpose and flip of the first. Rotations giving the same kernel and
-    penalty are dropped.
+    transpose and flip of the first, and so is the mark (the voxels the
+    placed item forbids to others, which :func:`grow` keeps symmetric).
+    Rotations giving the same kernel and penalty are dropped.
     """
     counts = np.maximum(np.ceil(mesh.extents / voxel - 1e-9).astype(int), 1)
     corner = mesh.bounds[0]
-    grid = _Grid(origin=corner, voxel=voxel, shape=tuple(counts))
-    _, base = solid_voxels(mesh.vertices, mesh.faces, grid, 0.0)
+    pad = mark_pad(voxel, spacing)
+    solid = solid_voxels(mesh.vertices, mesh.faces, corner - pad * voxel, voxel, counts + 2 * pad)
+    base_mark = grow(solid, voxel, spacing)
+    base = solid[pad:-pad, pad:-pad, pad:-pad]
     box = np.array([corner, corner + counts * voxel])
     poses: list[_Pose] = []
     seen: set[tuple] = set()
@@ -325,8 +369,8 @@ def _poses(mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, 
         # (R c)_a = sign_a * c_source_a for a signed permutation matrix R
         source = np.argmax(np.abs(rotation), axis=1)
         signs = rotation[np.arange(3), source]
-        kernel = np.transpose(base, source)
-        kernel = np.flip(kernel, axis=tuple(int(a) for a in np.flatnonzero(signs < 0)))
+        flips = tuple(int(a) for a in np.flatnonzero(signs < 0))
+        kernel = np.flip(np.transpose(base, source), axis=flips)
         key = (round(float(penalty), 9), kernel.shape, kernel.tobytes())
         if key in seen:
             continue
@@ -340,6 +384,8 @@ def _poses(mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, 
                 lower=rotated_bounds.min(axis=0),
                 upper=rotated_bounds.max(axis=0),
                 kernel=np.ascontiguousarray(kernel),
+                mark=np.flip(np.transpose(base_mark, source), axis=flips),
+                mark_pad=pad,
                 pad_penalty=float(penalty),
             )
         )
@@ -376,12 +422,17 @@ def _lowest_position(
     ranges = [_allowed_range(grid, pose, volume, config.wall_margin_mm) for pose in poses]
     occupied_layers = np.flatnonzero(forbidden.any(axis=(0, 1)))
     top_layer = int(occupied_layers[-1]) if len(occupied_layers) else -1
-    # above the highest forbidden voxel every position is free, so the FFT
-    # only needs the occupied layers (at least up to the floor margin) plus
-    # one kernel height
+    # kernels only ever cover the region inside the wall margins, and above
+    # the highest forbidden voxel every position is free, so the FFT only
+    # needs that region up to the occupied layers (at least up to the floor
+    # margin) plus one kernel height
     lowest_start = max(int(low[2]) for low, _ in ranges)
     crop = min(grid.shape[2], max(top_layer + 1, lowest_start) + max(pose.kernel.shape[2] for pose in poses))
-    fft_shape = [scipy.fft.next_fast_len(n, real=True) for n in (grid.shape[0], grid.shape[1], crop)]
+    region_low = np.min([low for low, _ in ranges], axis=0)
+    region_high = np.max([high + pose.kernel.shape for pose, (_, high) in zip(poses, ranges)], axis=0)
+    region_high = np.minimum(region_high, (grid.shape[0], grid.shape[1], crop))
+    region = tuple(slice(int(a), int(b)) for a, b in zip(region_low, region_high))
+    fft_shape = [scipy.fft.next_fast_len(int(n), real=True) for n in region_high - region_low]
     forbidden_spectrum = None
 
     def best_possible(index: int) -> tuple:
@@ -394,17 +445,17 @@ def _lowest_position(
         pose, (low, high) = poses[index], ranges[index]
         if best_key is not None and best_possible(index) > best_key[:3]:
             break
-        high = high.copy()
-        high[2] = min(high[2], crop - pose.kernel.shape[2])
-        if np.any(high < low):
+        high = np.minimum(high, region_high - pose.kernel.shape)
+        if np.any(high < low) or np.any(region_high <= region_low):
             continue
         if forbidden_spectrum is None:
-            forbidden_spectrum = scipy.fft.rfftn(forbidden[:, :, :crop].astype(np.float32), s=fft_shape, workers=-1)
+            forbidden_spectrum = scipy.fft.rfftn(forbidden[region].astype(np.float32), s=fft_shape, workers=-1)
         kernel_spectrum = scipy.fft.rfftn(pose.kernel.astype(np.float32), s=fft_shape, workers=-1)
         # circular correlation: no wrap-around because every translation kept
-        # keeps the kernel inside the unpadded grid
+        # keeps the kernel inside the unpadded region
         counts = scipy.fft.irfftn(forbidden_spectrum * np.conj(kernel_spectrum), s=fft_shape, workers=-1)
-        free = counts[low[0] : high[0] + 1, low[1] : high[1] + 1, low[2] : high[2] + 1] < 0.5
+        local_low, local_high = low - region_low, high - region_low
+        free = counts[tuple(slice(int(a), int(b) + 1) for a, b in zip(local_low, local_high))] < 0.5
         for pose_index, position in rejected:
             local = np.array(position) - low
             if pose_index == index and np.all(local >= 0) and np.all(local < free.shape):
@@ -433,10 +484,22 @@ def _place_movables(
     fixed: Sequence[BuildItem],
     movables: Sequence[BuildItem],
     pose_sets: dict[int, list[_Pose]],
+    solids: dict[int, manifold3d.Manifold],
     config: BuildConfig,
     volume_z_mm: float,
 ) -> tuple[list[BuildItem], list[str]]:
     """Place ``movables`` one by one among ``fixed`` in a volume ``volume_z_mm`` high.
+
+    Parameters
+    ----------
+    fixed, movables : sequence of BuildItem
+    pose_sets : dict
+        Poses of each movable mesh, by ``id(mesh)``.
+    solids : dict
+        manifold3d solid of every mesh in its own frame, by ``id(mesh)``.
+    config : BuildConfig
+    volume_z_mm : float
+        Height of the volume searched, mm.
 
     Returns
     -------
@@ -451,13 +514,17 @@ def _place_movables(
     shape = tuple(int(np.ceil(size / voxel - 1e-9)) for size in search_config.volume_mm)
     grid = _Grid(origin=origin, voxel=voxel, shape=shape)
     forbidden = np.zeros(shape, dtype=bool)
-    neighbours: list[tuple[BuildItem, trimesh.Trimesh]] = []
+    neighbours: list[tuple[np.ndarray, manifold3d.Manifold]] = []
     build_height = 0.0
     for item in fixed:
-        placed_mesh = item.placed_mesh()
-        neighbours.append((item, placed_mesh))
-        _mark(forbidden, placed_mesh.vertices, placed_mesh.faces, grid, config.spacing_mm)
-        build_height = max(build_height, float(placed_mesh.bounds[1, 2] - origin[2]))
+        vertices = _placed_vertices(item)
+        neighbours.append((_vertex_bounds(vertices), _placed_solid(solids[id(item.mesh)], item.transform)))
+        pad = mark_pad(voxel, config.spacing_mm)
+        start = np.floor((vertices.min(axis=0) - origin) / voxel).astype(int) - pad
+        stop = np.ceil((vertices.max(axis=0) - origin) / voxel).astype(int) + pad
+        solid = solid_voxels(vertices, item.mesh.faces, origin + start * voxel, voxel, stop - start)
+        _mark(forbidden, start, grow(solid, voxel, config.spacing_mm))
+        build_height = max(build_height, float(vertices[:, 2].max() - origin[2]))
     placed, unplaced = [], []
     for item in movables:
         poses = pose_sets[id(item.mesh)]
@@ -472,51 +539,87 @@ def _place_movables(
             transform[:3, :3] = pose.rotation
             transform[:3, 3] = origin + np.array(choice[1]) * voxel + pose.offset
             candidate = BuildItem(item.name, item.mesh, transform, item.kind)
-            placed_mesh = candidate.placed_mesh()
-            if not _clear_of(placed_mesh, [mesh for _, mesh in neighbours], config.spacing_mm):
+            bounds = _vertex_bounds(_placed_vertices(candidate))
+            solid = _placed_solid(solids[id(item.mesh)], transform)
+            if not _clear_of(bounds, solid, neighbours, config.spacing_mm):
                 rejected.add(choice)
                 continue
             placed.append(candidate)
-            neighbours.append((candidate, placed_mesh))
-            _mark(forbidden, placed_mesh.vertices, placed_mesh.faces, grid, config.spacing_mm)
-            build_height = max(build_height, float(placed_mesh.bounds[1, 2] - origin[2]))
+            neighbours.append((bounds, solid))
+            _mark(forbidden, np.array(choice[1]) - pose.mark_pad, pose.mark)
+            build_height = max(build_height, float(bounds[1, 2] - origin[2]))
             break
     return placed, unplaced
 
 
-def _mark(forbidden: np.ndarray, vertices: np.ndarray, faces: np.ndarray, grid: _Grid, spacing: float) -> None:
-    """Forbid (in place) the voxels within ``spacing`` of a placed solid."""
-    start, block = solid_voxels(vertices, faces, grid, spacing)
-    window = tuple(slice(s, s + n) for s, n in zip(start, block.shape))
-    forbidden[window] |= block
+def _placed_vertices(item: BuildItem) -> np.ndarray:
+    """An item's vertices moved by its transform, (n, 3) mm."""
+    return item.mesh.vertices @ item.transform[:3, :3].T + item.transform[:3, 3]
 
 
-def _clear_of(mesh: trimesh.Trimesh, others: Sequence[trimesh.Trimesh], spacing: float) -> bool:
-    """True when ``mesh`` is at least ``spacing`` from every mesh of ``others`` (exact check)."""
-    for other in others:
-        if _bounds_gap(mesh.bounds, other.bounds) >= spacing:
+def _vertex_bounds(vertices: np.ndarray) -> np.ndarray:
+    """[[xmin, ymin, zmin], [xmax, ymax, zmax]] of points (n, 3)."""
+    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
+
+
+def _placed_solid(solid: manifold3d.Manifold, transform: np.ndarray) -> manifold3d.Manifold:
+    """A manifold3d solid moved by a 4x4 transform."""
+    return solid.transform(np.ascontiguousarray(transform[:3, :4], dtype=np.float64))
+
+
+def _mark(forbidden: np.ndarray, start: np.ndarray, block: np.ndarray) -> None:
+    """Forbid (in place) the voxels of ``block`` placed at grid index ``start``; what lies outside the grid is dropped."""
+    low = np.maximum(start, 0)
+    high = np.minimum(start + np.array(block.shape), forbidden.shape)
+    if np.any(high <= low):
+        return
+    forbidden[tuple(slice(a, b) for a, b in zip(low, high))] |= block[tuple(slice(a, b) for a, b in zip(low - start, high - start))]
+
+
+def _clear_of(
+    bounds: np.ndarray, solid: manifold3d.Manifold, others: Sequence[tuple[np.ndarray, manifold3d.Manifold]], spacing: float
+) -> bool:
+    """True when ``solid`` is at least ``spacing`` from every solid of ``others`` (exact check; boxes skip the far ones)."""
+    for other_bounds, other in others:
+        if _bounds_gap(bounds, other_bounds) >= spacing:
             continue
-        if mesh_gap(mesh, other, spacing + 1.0) < spacing + GAP_SAMPLE_STEP_MM / 2.0:
+        if mesh_gap(solid, other, spacing + 1.0) < spacing + GAP_TOLERANCE_MM:
             return False
     return True
 
 
-def _nearest_neighbours(meshes: Sequence[trimesh.Trimesh]) -> list[tuple[float | None, int | None]]:
-    """Each mesh's gap to its nearest other mesh and that mesh's index."""
-    bounds = [mesh.bounds for mesh in meshes]
+def _nearest_neighbours(bounds: Sequence[np.ndarray], solids: Sequence[manifold3d.Manifold]) -> list[tuple[float | None, int | None]]:
+    """Each solid's gap to its nearest other solid and that solid's index.
+
+    Candidates go by bounding-box gap; each exact gap is searched no further
+    than the nearest gap found so far, and the search stops at the first box
+    farther than that.
+    """
     gaps: dict[tuple[int, int], float] = {}
     nearest = []
-    for i in range(len(meshes)):
-        order = sorted((_bounds_gap(bounds[i], bounds[j]), j) for j in range(len(meshes)) if j != i)
+    for i in range(len(solids)):
+        order = sorted((_bounds_gap(bounds[i], bounds[j]), j) for j in range(len(solids)) if j != i)
         best, best_index = np.inf, None
         for box_gap, j in order:
             if box_gap >= best:
                 break
             pair = (min(i, j), max(i, j))
-            if pair not in gaps:
-                gaps[pair] = mesh_gap(meshes[i], meshes[j])
-            if gaps[pair] < best:
-                best, best_index = gaps[pair], j
+            if pair in gaps:
+                gap = gaps[pair]
+            else:
+                # min_gap slows down with its search length: search just past
+                # the boxes' gap first, widening until found or beyond best
+                limit = min(best, _bounds_span(bounds[i], bounds[j]) + 1.0)
+                search = min(box_gap + 1.0, limit)
+                gap = mesh_gap(solids[i], solids[j], search)
+                while gap >= search and search < limit:
+                    search = min(2.0 * search, limit)
+                    gap = mesh_gap(solids[i], solids[j], search)
+                # a gap at the limit is only a lower bound, not worth keeping
+                if gap < limit:
+                    gaps[pair] = gap
+            if gap < best:
+                best, best_index = gap, j
         nearest.append((None, None) if best_index is None else (float(best), best_index))
     return nearest
 
@@ -569,37 +672,38 @@ def place_fingers(
     part_rots = {"as_given": np.eye(3)[None], "z_rotations": z_rotations(), "axis_aligned": axis_aligned_rotations()}[
         config.part_orientations
     ]
-    pose_sets = {id(finger): _poses(finger, finger_rots, finger_penalties, config.voxel_mm)}
+    pose_sets = {id(finger): _poses(finger, finger_rots, finger_penalties, config.voxel_mm, config.spacing_mm)}
     for item in unplaced_parts:
-        pose_sets[id(item.mesh)] = _poses(item.mesh, part_rots, np.zeros(len(part_rots)), config.voxel_mm)
+        pose_sets[id(item.mesh)] = _poses(item.mesh, part_rots, np.zeros(len(part_rots)), config.voxel_mm, config.spacing_mm)
+    solids = {id(item.mesh): solid_manifold(item.mesh) for item in build.items}
+    solids[id(finger)] = solid_manifold(finger)
     # largest first packs tighter; the spares come last so they never take a
     # required item's room
     movables = sorted(unplaced_parts + required, key=lambda item: (-float(np.prod(item.mesh.extents)), item.name))
     movables += spares
 
-    placed, missing = _place_movables(fixed, movables, pose_sets, config, config_volume[2])
+    placed, missing = _place_movables(fixed, movables, pose_sets, solids, config, config_volume[2])
     warnings = []
     extra_height = None
     if missing:
         # the same placement in a volume tall enough for everything gives the
         # build height that was missing
         tall = config_volume[2] + sum(float(item.mesh.extents.max()) + config.spacing_mm for item in movables)
-        tall_placed, tall_missing = _place_movables(fixed, movables, pose_sets, config, tall)
+        tall_placed, tall_missing = _place_movables(fixed, movables, pose_sets, solids, config, tall)
         if not tall_missing:
-            needed = max(float(item.placed_mesh().bounds[1, 2] - config.origin_mm[2]) for item in tall_placed)
+            needed = max(float(_placed_vertices(item)[:, 2].max() - config.origin_mm[2]) for item in tall_placed)
             extra_height = round(needed + config.wall_margin_mm - config_volume[2], 3)
 
     items = fixed + [item for item in placed if item.kind == "part"] + [item for item in placed if item.kind == "finger"]
-    meshes = [item.placed_mesh() for item in items]
+    bounds_list = [_vertex_bounds(_placed_vertices(item)) for item in items]
     fixed_ids = {id(item) for item in fixed}
-    nearest = _nearest_neighbours(meshes)
+    nearest = _nearest_neighbours(bounds_list, [_placed_solid(solids[id(item.mesh)], item.transform) for item in items])
     lower, upper = np.array(config.origin_mm), np.array(config.origin_mm) + config_volume
     item_reports = []
-    for item, mesh, (distance, neighbour) in zip(items, meshes, nearest):
-        bounds = mesh.bounds
+    for item, bounds, (distance, neighbour) in zip(items, bounds_list, nearest):
         if np.any(bounds[0] < lower + config.wall_margin_mm - 1e-6) or np.any(bounds[1] > upper - config.wall_margin_mm + 1e-6):
             warnings.append(f"{item.name} lies outside the build volume minus the wall margin")
-        if distance is not None and distance < config.spacing_mm - GAP_SAMPLE_STEP_MM / 2.0 and id(item) in fixed_ids:
+        if distance is not None and distance < config.spacing_mm - GAP_TOLERANCE_MM and id(item) in fixed_ids:
             warnings.append(f"{item.name} is {distance:.2f} mm from {items[neighbour].name}, closer than spacing_mm in the job's build")
         item_reports.append(
             PlacedItemReport(
@@ -612,8 +716,8 @@ def place_fingers(
                 nearest_item=None if neighbour is None else items[neighbour].name,
             )
         )
-    build_height = max((float(mesh.bounds[1, 2] - lower[2]) for mesh in meshes), default=0.0)
-    solid_volume = sum(abs(float(mesh.volume)) for mesh in meshes)
+    build_height = max((float(bounds[1, 2] - lower[2]) for bounds in bounds_list), default=0.0)
+    solid_volume = sum(abs(float(item.mesh.volume) * np.linalg.det(item.transform[:3, :3])) for item in items)
     density = solid_volume / (config_volume[0] * config_volume[1] * build_height) if build_height > 0 else 0.0
     fingers_placed = sum(1 for item in placed if item.kind == "finger")
     fingers_fit = all(item.name not in missing for item in required)
