@@ -180,6 +180,25 @@ def format_validation_error(error: ValidationError) -> str:
     return "; ".join(parts)
 
 
+def read_toml(path: str | Path) -> dict:
+    """Read a TOML file into a dict.
+
+    Raises
+    ------
+    ConfigError
+        Missing or unreadable file, or a TOML syntax error, naming the file.
+    """
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(path, "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, f"cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(path, f"not valid TOML: {exc}") from None
+
+
 def load_config(path: str | Path) -> DesignConfig:
     """Load a :class:`DesignConfig` from a TOML file.
 
@@ -200,14 +219,7 @@ def load_config(path: str | Path) -> DesignConfig:
         message names the file and the key.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(path, "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(path, f"cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    data = read_toml(path)
     finger = data.get("finger")
     if isinstance(finger, dict) and isinstance(finger.get("mesh"), str):
         # a relative finger mesh is relative to the config file, not the cwd
