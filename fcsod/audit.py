@@ -16,6 +16,7 @@ from .recorder import (
     TOPIC_INPUTS,
     TOPIC_LOG,
     TOPIC_OUTPUTS,
+    TOPIC_PLACEMENT,
     TOPIC_POSES,
     TOPIC_SAMPLES,
     TOPIC_SPEC,
@@ -95,11 +96,23 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
         say(f"design: finger {len(data)} bytes sha256 {design['finger_sha256']}, volume {design['finger_volume_mm3']:.1f} mm³")
         if actual != design["finger_sha256"]:
             result.problems.append(f"{TOPIC_DESIGN}: recorded finger bytes hash to {actual}, record says {design['finger_sha256']}")
+    for placement in content.of(TOPIC_PLACEMENT):
+        volume = " x ".join(f"{size:g}" for size in placement["volume_mm"])
+        say(
+            f"placement ({placement['mode']}, volume {volume} mm): "
+            + ("fingers fit" if placement["fingers_fit"] else "FINGERS DO NOT FIT")
+            + f", {placement['finger_copies_placed']} of {placement['finger_copies_requested']} finger copies placed, "
+            f"{len(placement['items'])} items, build height {placement['build_height_mm']:.1f} mm, "
+            f"packing density {placement['packing_density']:.4f}: {placement['message']}"
+        )
+        for warning in placement["warnings"]:
+            say(f"  placement warning: {warning}")
     for body in content.of(TOPIC_BUS):
         size = len(body["payload_text"] or "") if body["payload_base64"] is None else len(base64.b64decode(body["payload_base64"]))
         line = f"published {body['key_expr']} ({body['encoding']}, {size} bytes)"
         if body["payload_text"] is not None and body["key_expr"].endswith("/status"):
-            line += f": {json.loads(body['payload_text'])['state']}"
+            status = json.loads(body["payload_text"])
+            line += f": {status['state']}" + "".join(f" (warning: {w})" for w in status.get("warnings", []))
         say(line)
         if body["attachment"] and body["payload_base64"] is not None:
             announced = json.loads(body["attachment"]).get("sha256")

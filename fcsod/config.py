@@ -21,8 +21,11 @@ from fcso.config import (
     SearchConfig,
     format_validation_error,
 )
-from fcso.errors import ConfigError
+from fcso.errors import ConfigError, MeshError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+
+from .build3mf import parse_transform
+from .placement import BuildConfig
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"
@@ -121,6 +124,9 @@ class DaemonConfig(_Section):
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     mcap: McapConfig = Field(default_factory=McapConfig)
     design: DesignConfig = Field(default_factory=DesignConfig, description="Default fcso settings for every job")
+    build: BuildConfig = Field(
+        default_factory=BuildConfig, description="Default build volume, spacing and finger copies of every job's build.3mf"
+    )
 
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> "DaemonConfig":
@@ -202,6 +208,13 @@ class PartEntry(_Section):
     units: Literal["mm", "inch", "m"] | float = Field("mm", description="Unit of the file's coordinates, or a factor to mm")
     quantity: int = Field(1, ge=1, description="Copies of this part in the print job")
     scale_to_mm: float | None = Field(None, gt=0, description="Scale so the longest bounding-box side is this long, mm")
+    transform: list[float] | list[list[float]] | None = Field(
+        None,
+        description=(
+            "Where the part sits in the build volume: 4x4 from the part's frame (after units and scaling) to the build's, "
+            "16 numbers row-major or 4 rows of 4, mm; without it the part is packed with the fingers"
+        ),
+    )
 
     @field_validator("units")
     @classmethod
@@ -209,6 +222,28 @@ class PartEntry(_Section):
         if isinstance(value, float) and not value > 0:
             raise ValueError("a unit factor must be a positive number of mm per file unit")
         return value
+
+    @field_validator("transform")
+    @classmethod
+    def _proper_transform(cls, value: list | None) -> list[list[float]] | None:
+        if value is None:
+            return None
+        try:
+            return parse_transform(value).tolist()
+        except MeshError as exc:
+            raise ValueError(exc.defect) from None
+
+    @model_validator(mode="after")
+    def _one_placement_per_entry(self) -> "PartEntry":
+        if self.file.lower().endswith(".3mf"):
+            # a 3MF is a placed build: its items are the copies, in the file's own unit, where the file puts them
+            given = [key for key in ("units", "scale_to_mm", "transform") if key in self.model_fields_set]
+            given += ["quantity"] if self.quantity != 1 else []
+            if given:
+                raise ValueError(f"a 3MF build carries its own items, unit and transforms: remove {', '.join(given)}")
+        elif self.transform is not None and self.quantity > 1:
+            raise ValueError("a transform places one copy: give each placed copy its own [[parts]] entry with quantity 1")
+        return self
 
 
 #: Manifest sections that override the daemon's fcso settings, with fcso's models.
@@ -227,8 +262,9 @@ class JobManifest(_Section):
 
     Override sections take fcso's keys (``schemas/design-config.json``); keys
     not given keep the daemon's defaults. Validate with
-    ``context={"defaults": DesignConfig}`` so cross-key checks (such as
-    penetration below thickness) see the daemon's defaults.
+    ``context={"defaults": DesignConfig, "build_defaults": BuildConfig}`` so
+    cross-key checks (such as penetration below thickness, or the wall margin
+    inside the volume) see the daemon's defaults.
     """
 
     parts: list[PartEntry] = Field(
@@ -241,18 +277,23 @@ class JobManifest(_Section):
     poses: PosesConfig | None = None
     contact: ContactConfig | None = None
     search: SearchConfig | None = None
+    build: BuildConfig | None = Field(None, description="Overrides of the daemon's [build] settings, key by key")
 
     @model_validator(mode="before")
     @classmethod
     def _fill_from_defaults(cls, data: Any, info: ValidationInfo) -> Any:
-        defaults = (info.context or {}).get("defaults")
-        if not isinstance(data, dict) or not isinstance(defaults, DesignConfig):
+        if not isinstance(data, dict):
             return data
+        context = info.context or {}
+        defaults, build_defaults = context.get("defaults"), context.get("build_defaults")
         filled = dict(data)
-        for section in OVERRIDE_SECTIONS:
-            given = data.get(section)
-            if isinstance(given, dict):
-                filled[section] = {**getattr(defaults, section).model_dump(), **given}
+        if isinstance(defaults, DesignConfig):
+            for section in OVERRIDE_SECTIONS:
+                given = data.get(section)
+                if isinstance(given, dict):
+                    filled[section] = {**getattr(defaults, section).model_dump(), **given}
+        if isinstance(build_defaults, BuildConfig) and isinstance(data.get("build"), dict):
+            filled["build"] = {**build_defaults.model_dump(), **data["build"]}
         return filled
 
     def design_config(self, defaults: DesignConfig) -> DesignConfig:
@@ -260,8 +301,14 @@ class JobManifest(_Section):
         overrides = {s: getattr(self, s).model_dump() for s in OVERRIDE_SECTIONS if getattr(self, s) is not None}
         return defaults.updated(overrides)
 
+    def build_config(self, defaults: BuildConfig) -> BuildConfig:
+        """The job's build settings: this manifest's ``[build]`` (already filled from the daemon's) or ``defaults``."""
+        return self.build if self.build is not None else defaults
 
-def parse_manifest(text: str, source: str | Path, defaults: DesignConfig) -> JobManifest:
+
+def parse_manifest(
+    text: str, source: str | Path, defaults: DesignConfig, build_defaults: BuildConfig | None = None
+) -> JobManifest:
     """Parse and validate a manifest's text.
 
     Parameters
@@ -272,6 +319,9 @@ def parse_manifest(text: str, source: str | Path, defaults: DesignConfig) -> Job
         Name used in error messages.
     defaults : DesignConfig
         The daemon's fcso settings the overrides apply to.
+    build_defaults : BuildConfig, optional
+        The daemon's ``[build]`` settings a manifest's ``[build]`` overrides
+        key by key; default :class:`BuildConfig`'s.
 
     Raises
     ------
@@ -283,7 +333,8 @@ def parse_manifest(text: str, source: str | Path, defaults: DesignConfig) -> Job
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(source, f"not valid TOML: {exc}") from None
     try:
-        manifest = JobManifest.model_validate(data, context={"defaults": defaults})
+        context = {"defaults": defaults, "build_defaults": build_defaults or BuildConfig()}
+        manifest = JobManifest.model_validate(data, context=context)
         manifest.design_config(defaults)
     except ValidationError as exc:
         raise ConfigError(source, format_validation_error(exc)) from None

@@ -20,6 +20,7 @@ from fcso.parts import MESH_SUFFIXES
 
 from .config import MANIFEST_NAME, JobManifest, LimitsConfig, PartEntry, parse_manifest
 from .messages import InputFile
+from .placement import BuildConfig
 
 #: (relative path, size in bytes, mtime in ns); size -1 for a missing file.
 FileStat = tuple[str, int, int]
@@ -167,8 +168,13 @@ class PartInput:
     path: Path
 
 
-def read_manifest(folder: Path, defaults: DesignConfig, limits: LimitsConfig) -> tuple[JobManifest, str | None]:
+def read_manifest(
+    folder: Path, defaults: DesignConfig, limits: LimitsConfig, build_defaults: BuildConfig | None = None
+) -> tuple[JobManifest, str | None]:
     """The job's manifest and its text; an empty manifest (every mesh, mm) without ``job.toml``.
+
+    ``defaults`` and ``build_defaults`` are the daemon's fcso and ``[build]``
+    settings the manifest's sections override key by key.
 
     Raises
     ------
@@ -186,7 +192,7 @@ def read_manifest(folder: Path, defaults: DesignConfig, limits: LimitsConfig) ->
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(path, f"cannot read: {exc}") from None
-    return parse_manifest(text, path, defaults), text
+    return parse_manifest(text, path, defaults, build_defaults), text
 
 
 def check_parts(folder: Path, manifest: JobManifest, limits: LimitsConfig) -> list[PartInput]:

@@ -43,6 +43,9 @@ class StatusMessage(_Message):
     finished_at: str | None = None
     error: str | None = Field(None, description="Why the job failed, naming the file and the defect")
     outputs: list[str] = Field(default_factory=list, description="Files in <output_root>/<job_id>/ when done")
+    warnings: list[str] = Field(
+        default_factory=list, description="What a done job could not deliver, such as fingers that did not fit into the build volume"
+    )
 
 
 class ScenarioSummary(_Message):
@@ -89,6 +92,26 @@ class DesignAttachment(_Message):
     size_bytes: int
 
 
+class PlacementMessage(_Message):
+    """``<prefix>/<cell>/jobs/<job_id>/placement``: the finger copies in the job's build volume (``build.3mf``)."""
+
+    job_id: str
+    mode: Literal["add_fingers", "pack"] = Field(
+        description="add_fingers: the job's build was placed, fingers added; pack: unplaced parts and fingers packed"
+    )
+    fingers_fit: bool = Field(description="All required finger copies are in the build")
+    finger_copies_requested: int = Field(description="finger_copies + spare_fingers")
+    finger_copies_placed: int
+    build_height_mm: float = Field(description="Top of the highest item above the volume floor, mm")
+    packing_density: float = Field(description="Volume of the items / (volume x * y * build height)")
+    extra_height_needed_mm: float | None = Field(
+        description="When items did not fit: the build height missing to fit them, mm; None when everything fits or nothing would"
+    )
+    unplaced_items: list[str] = Field(description="Items left out of build.3mf")
+    message: str
+    file: str = Field("build.3mf", description="Name of the placed build in the job's output folder")
+
+
 # ------------------------------------------------------------------ MCAP channels
 
 
@@ -106,6 +129,7 @@ class JobSpecRecord(_Message):
     manifest: str | None = Field(description="Text of job.toml, none without a manifest")
     parts: list[dict] = Field(description="Parts as used: file, units, quantity, scale_to_mm")
     settings: dict = Field(description="The fcso settings of the job (design-config.json)")
+    build: dict | None = Field(None, description="The job's build placement settings (the [build] section of job-manifest.json)")
     fcsod_version: str
     fcso_version: str
 
@@ -265,7 +289,7 @@ class SceneEntityDeletion(_Message):
 
 
 class SceneUpdate(_Message):
-    """``/scene``: the part in its pose, the pads and the fingers, for a 3D viewer."""
+    """``/scene``: the part in its pose, the pads and the fingers; then the placed build; for a 3D viewer."""
 
     deletions: list[SceneEntityDeletion] = Field(default_factory=list)
     entities: list[SceneEntity]
@@ -274,7 +298,7 @@ class SceneUpdate(_Message):
 # ------------------------------------------------------------ keys and outgoing messages
 
 #: Topics published per job.
-JOB_TOPICS = ("status", "quality", "grasps", "design")
+JOB_TOPICS = ("status", "quality", "grasps", "design", "placement")
 
 ENCODING_JSON = "application/json"
 ENCODING_STL = "model/stl"

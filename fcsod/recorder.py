@@ -37,6 +37,7 @@ from .messages import (
     SceneUpdate,
     StateChangeRecord,
 )
+from .placement import PlacementReport
 
 TOPIC_SPEC = "/job/spec"
 TOPIC_INPUTS = "/job/inputs"
@@ -50,7 +51,6 @@ TOPIC_DESIGN = "/design/finger"
 TOPIC_GRASPS = "/design/grasps"
 TOPIC_BUS = "/zenoh/published"
 TOPIC_SCENE = "/scene"
-#: Written by the build-placement step when it runs (its model comes with the message).
 TOPIC_PLACEMENT = "/build/placement"
 
 #: Channel -> model of its messages.
@@ -67,13 +67,14 @@ CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_GRASPS: GraspsMessage,
     TOPIC_BUS: BusRecord,
     TOPIC_SCENE: SceneUpdate,
+    TOPIC_PLACEMENT: PlacementReport,
 }
 
 #: Channels every job has, done or failed.
 ALWAYS_RECORDED = (TOPIC_SPEC, TOPIC_INPUTS, TOPIC_STATE, TOPIC_LOG, TOPIC_BUS)
 
 #: Channels a finished design adds.
-DESIGN_RECORDED = (TOPIC_POSES, TOPIC_SAMPLES, TOPIC_CANDIDATES, TOPIC_DESIGN, TOPIC_GRASPS, TOPIC_OUTPUTS, TOPIC_SCENE)
+DESIGN_RECORDED = (TOPIC_POSES, TOPIC_SAMPLES, TOPIC_CANDIDATES, TOPIC_DESIGN, TOPIC_GRASPS, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_PLACEMENT)
 
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 

@@ -8,8 +8,9 @@ The worker never touches zenoh: the messages to publish go back to the
 daemon over a pipe, after they are in the record.
 
 The job runs as a list of steps (:data:`STEPS`); each takes the
-:class:`JobRun` and records what it made, so a later step (such as build
-placement) is one more function in the list.
+:class:`JobRun` and records what it made: inputs, loading (the parts to
+design and the job's build), design, its record, build placement
+(``build.3mf``, the placement section of ``report.json``), output files.
 """
 
 from __future__ import annotations
@@ -32,8 +33,10 @@ import numpy as np
 import trimesh
 from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_part
 from fcso.output import output_files
+from fcso.parts import Part, validate_mesh
 
 from . import __version__
+from .build3mf import Build, BuildItem, export_build_3mf, read_build
 from .config import DaemonConfig, JobManifest
 from .jobs import PartInput, check_parts, hash_inputs, job_inputs, read_manifest
 from .messages import (
@@ -49,6 +52,7 @@ from .messages import (
     JobSpecRecord,
     LogRecord,
     OutputFilesRecord,
+    PlacementMessage,
     PoseRecord,
     QualityMessage,
     SamplesRecord,
@@ -69,6 +73,7 @@ from .recorder import (
     TOPIC_INPUTS,
     TOPIC_LOG,
     TOPIC_OUTPUTS,
+    TOPIC_PLACEMENT,
     TOPIC_POSES,
     TOPIC_SAMPLES,
     TOPIC_SCENE,
@@ -76,12 +81,16 @@ from .recorder import (
     TOPIC_STATE,
     Recorder,
 )
+from .placement import BuildConfig, PlacementReport, place_fingers
 
 #: Name of the record in every job's output folder.
 RECORD_NAME = "job.mcap"
 
 #: Shortest interval between two progress lines of the same stage, s.
 PROGRESS_INTERVAL_S = 1.0
+
+#: The placed build in every done job's output folder.
+BUILD_NAME = "build.3mf"
 
 
 class TimeLimitExceeded(BaseException):
@@ -129,17 +138,27 @@ class JobRun:
     inputs: list[InputFile] = field(default_factory=list)
     parts: list[PartInput] = field(default_factory=list)
     settings: DesignConfig | None = None
+    build_settings: BuildConfig | None = None
     loaded: list[fcso.Part] = field(default_factory=list)
+    build: Build = field(default_factory=Build)
     result: DesignResult | None = None
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
     def log(self, level: str, message: str, **fields) -> None:
         """Record a log line and send it to the daemon's log."""
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(("log", level, message, fields))
 
-    def status(self, state: str, finished_at: str | None = None, error: str | None = None, outputs: list[str] | None = None) -> BusMessage:
+    def status(
+        self,
+        state: str,
+        finished_at: str | None = None,
+        error: str | None = None,
+        outputs: list[str] | None = None,
+        warnings: list[str] | None = None,
+    ) -> BusMessage:
         """The job's status message, recorded on the bus channel."""
         body = StatusMessage(
             job_id=self.task.job_id,
@@ -151,6 +170,7 @@ class JobRun:
             finished_at=finished_at,
             error=error,
             outputs=outputs or [],
+            warnings=warnings or [],
         )
         bus = self.task.config.bus
         message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
@@ -168,8 +188,9 @@ def step_inputs(run: JobRun) -> None:
     run.inputs = hash_inputs(run.folder, job_inputs(run.folder), config.limits.max_file_bytes)
     run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
     try:
-        run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits)
+        run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
         run.settings = run.manifest.design_config(config.design)
+        run.build_settings = run.manifest.build_config(config.build)
         run.parts = check_parts(run.folder, run.manifest, config.limits)
     finally:
         run.recorder.write(
@@ -180,6 +201,7 @@ def step_inputs(run: JobRun) -> None:
                 manifest=run.manifest_text,
                 parts=[{**p.entry.model_dump(), "file": p.entry.file} for p in run.parts],
                 settings=(run.settings or config.design).model_dump(mode="json"),
+                build=(run.build_settings or config.build).model_dump(mode="json"),
                 fcsod_version=__version__,
                 fcso_version=fcso.__version__,
             ),
@@ -187,14 +209,79 @@ def step_inputs(run: JobRun) -> None:
 
 
 def step_load(run: JobRun) -> None:
-    """Load and validate every part mesh (closed volume, units, face limit)."""
+    """Load and validate every part mesh (closed volume, units, face limit) and assemble the job's build.
+
+    A loose part is designed once and is ``quantity`` build items, placed
+    when its manifest entry has a transform. A 3MF is a placed build: each
+    distinct item mesh is designed once and every item keeps its transform.
+    """
     max_faces = run.task.config.limits.max_faces
+    items: list[BuildItem] = []
     for part in run.parts:
-        loaded = load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)
-        if len(loaded.mesh.faces) > max_faces:
-            raise MeshError(part.path, f"{len(loaded.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
-        run.loaded.append(loaded)
-        run.log("info", f"loaded {part.entry.file}: {len(loaded.mesh.faces)} triangles, extents {np.round(loaded.mesh.extents, 2).tolist()} mm")
+        if part.path.suffix.lower() == ".3mf":
+            loaded, placed = _load_build_3mf(part.path, run.manifest.repair, run.task.config.limits.max_3mf_uncompressed_bytes)
+            items.extend(placed)
+            labels = [f"{part.entry.file} item {one.name}" for one in loaded]
+        else:
+            loaded = [load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)]
+            transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
+            items.extend(BuildItem(loaded[0].name, loaded[0].mesh, transform, "part") for _ in range(part.entry.quantity))
+            labels = [part.entry.file]
+        for one, label in zip(loaded, labels):
+            if len(one.mesh.faces) > max_faces:
+                raise MeshError(part.path, f"{label}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+            run.loaded.append(one)
+            run.log("info", f"loaded {label}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm")
+    if len(run.loaded) > run.task.config.limits.max_parts:
+        raise MeshError(run.folder, f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})")
+    _make_names_unique(items)
+    run.build = Build(items=items, source=str(run.folder))
+    placed = sum(1 for item in items if item.transform is not None)
+    run.log("info", f"build: {len(items)} part items, {placed} placed by the job, {len(items) - placed} to pack")
+
+
+def _load_build_3mf(path: Path, repair: bool, max_uncompressed_bytes: int) -> tuple[list[Part], list[BuildItem]]:
+    """The distinct part meshes of a 3MF build and its items, each keeping its transform.
+
+    Items with equal geometry (one 3MF object placed several times) share
+    one validated mesh and are one part to design.
+
+    Parameters
+    ----------
+    path : Path
+        The 3MF file.
+    repair : bool
+        Repair item meshes that are not closed volumes.
+    max_uncompressed_bytes : int
+        Zip-bomb limit of the archive, bytes.
+
+    Returns
+    -------
+    parts : list of Part
+        One per distinct geometry, named after its first item, mm.
+    items : list of BuildItem
+        Every build item with its transform, mm.
+    """
+    parts: dict[str, Part] = {}
+    items = []
+    for item in read_build([path], max_uncompressed_bytes=max_uncompressed_bytes).items:
+        geometry = hashlib.sha256(
+            np.ascontiguousarray(item.mesh.vertices, dtype=np.float64).tobytes() + np.ascontiguousarray(item.mesh.faces, dtype=np.int64).tobytes()
+        ).hexdigest()
+        if geometry not in parts:
+            mesh, repairs = validate_mesh(item.mesh, f"{path} (build item {item.name})", repair=repair)
+            parts[geometry] = Part(name=item.name, path=str(path), mesh=mesh, repairs=repairs)
+        items.append(BuildItem(item.name, parts[geometry].mesh, item.transform, "part"))
+    return list(parts.values()), items
+
+
+def _make_names_unique(items: list[BuildItem]) -> None:
+    """Number the repeated names of build items (copies of a part): ``cube``, ``cube_2``... (in place)."""
+    seen: dict[str, int] = {}
+    for item in items:
+        seen[item.name] = seen.get(item.name, 0) + 1
+        if seen[item.name] > 1:
+            item.name = f"{item.name}_{seen[item.name]}"
 
 
 def step_design(run: JobRun) -> None:
@@ -233,7 +320,8 @@ def step_record_design(run: JobRun) -> None:
         )
     for candidate in report.candidates:
         recorder.write(TOPIC_CANDIDATES, CandidateRecord(candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario))
-    run.files = output_files(result)
+    # report.json and report.html wait for the placement section (step_outputs)
+    run.files = {"finger.stl": result.finger.export(file_type="stl"), "fingerpad.stl": result.fingerpad.export(file_type="stl")}
     finger = run.files["finger.stl"]
     recorder.write(
         TOPIC_DESIGN,
@@ -249,8 +337,40 @@ def step_record_design(run: JobRun) -> None:
     recorder.write(TOPIC_SCENE, scene_update(result))
 
 
+def step_placement(run: JobRun) -> None:
+    """Place the finger copies into the job's build volume: ``build.3mf``, the report's placement section, record, scene, bus message.
+
+    Fingers that do not fit leave the job done with its design, a warning
+    and the free build height that was missing.
+    """
+    result = run.result
+    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name="finger")
+    report = placed.report
+    run.recorder.write(TOPIC_PLACEMENT, report)
+    run.files[BUILD_NAME] = export_build_3mf(placed.items)
+    update: dict = {"placement": report.model_dump(mode="json")}
+    if not report.fingers_fit:
+        run.warnings.append(report.message)
+        update["warnings"] = [*result.report.warnings, report.message]
+    result.report = result.report.model_copy(update=update)
+    run.log("info" if report.fingers_fit else "warning", f"placement: {report.message}")
+    for warning in report.warnings:
+        run.log("warning", f"placement: {warning}")
+    run.recorder.write(TOPIC_SCENE, build_scene_update(placed.items, report, run.build_settings))
+    bus = run.task.config.bus
+    summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
+    body = PlacementMessage(job_id=run.task.job_id, file=BUILD_NAME, **summary)
+    # published after the design's messages (step_outputs puts them first)
+    run.outgoing.append(BusMessage.json_body(bus.prefix, bus.cell, "placement", body))
+
+
 def step_outputs(run: JobRun) -> None:
-    """Write every output file into the work folder and record their hashes; prepare the bus messages."""
+    """Write every output file into the work folder and record their hashes; record the bus messages.
+
+    ``report.json`` and ``report.html`` are made here, after every step that
+    adds to the report; the meshes are those the design record holds.
+    """
+    run.files = {**output_files(run.result), **run.files}
     for name, data in run.files.items():
         (run.work_dir / name).write_bytes(data)
     run.recorder.write(
@@ -293,13 +413,14 @@ def step_outputs(run: JobRun) -> None:
             finger,
             attachment.model_dump_json().encode(),
         ),
+        *run.outgoing,
     ]
     for message in run.outgoing:
         run.recorder.write(TOPIC_BUS, message.record())
 
 
 #: The job's steps in order; each is logged and flushed to the record when it ends.
-STEPS: list[Callable[[JobRun], None]] = [step_inputs, step_load, step_design, step_record_design, step_outputs]
+STEPS: list[Callable[[JobRun], None]] = [step_inputs, step_load, step_design, step_record_design, step_placement, step_outputs]
 
 
 # ------------------------------------------------------------------------ scene
@@ -361,6 +482,55 @@ def scene_update(result: DesignResult) -> SceneUpdate:
     return SceneUpdate(entities=entities)
 
 
+def build_scene_update(items: list[BuildItem], report: PlacementReport, config: BuildConfig) -> SceneUpdate:
+    """Foxglove SceneUpdate of the placed build in metres: the build volume, each part's bounding box and the finger copies.
+
+    Parts are drawn as their boxes (a build may hold many large meshes); the
+    fingers, small and the job's design, as triangles.
+
+    Parameters
+    ----------
+    items : list of BuildItem
+        The placed items (``PlacementResult.items``).
+    report : PlacementReport
+        Their bounding boxes and the placement's outcome.
+    config : BuildConfig
+        The build volume.
+    """
+    now = time.time_ns()
+    stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
+    identity = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
+
+    def box(lower, upper, color: tuple[float, float, float, float]) -> dict:
+        lower, upper = np.asarray(lower, dtype=float) / 1000.0, np.asarray(upper, dtype=float) / 1000.0
+        centre = (lower + upper) / 2.0
+        return {
+            "pose": {**identity, "position": dict(zip("xyz", centre.tolist()))},
+            "size": dict(zip("xyz", (upper - lower).tolist())),
+            "color": dict(zip("rgba", color)),
+        }
+
+    origin = np.asarray(config.origin_mm, dtype=float)
+    cubes = [box(origin, origin + np.asarray(config.volume_mm), (0.5, 0.5, 0.5, 0.08))]
+    cubes += [box(*placed.bounds_mm, (0.6, 0.6, 0.65, 0.8)) for placed in report.items if placed.kind == "part"]
+    triangles = [_triangles(item.mesh, item.transform, (0.2, 0.4, 0.8, 1.0)) for item in items if item.kind == "finger"]
+    entity = SceneEntity(
+        timestamp=stamp,
+        frame_id="fcso_build",
+        id="build",
+        lifetime=FoxgloveTime(sec=0, nsec=0),
+        frame_locked=False,
+        metadata=[
+            {"key": "fingers_fit", "value": str(report.fingers_fit).lower()},
+            {"key": "build_height_mm", "value": f"{report.build_height_mm:g}"},
+            {"key": "message", "value": report.message},
+        ],
+        cubes=cubes,
+        triangles=triangles,
+    )
+    return SceneUpdate(entities=[entity])
+
+
 # ------------------------------------------------------------------------ running
 
 
@@ -401,7 +571,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         run.log("error", traceback.format_exc())
     if error is None:
         outputs = sorted([*run.files, RECORD_NAME])
-        final = run.status("done", finished_at=utc_now(), outputs=outputs)
+        final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
         publish = [*run.outgoing, final]
     else:
         run.log("error", error)

@@ -75,7 +75,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     states = [v["body"]["state"] for v in lines if v["topic"] == "status"]
     assert states == ["queued", "running", "done"]
     topics = {v["topic"] for v in lines}
-    assert {"status", "quality", "grasps", "design"} <= topics
+    assert {"status", "quality", "grasps", "design", "placement"} <= topics
 
     # readiness: the job did not start while the part was still being written
     daemon_lines = cell["daemon"].json_lines()
@@ -97,7 +97,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert mesh.is_watertight and mesh.volume > 0
 
     out = base / "out" / job_id
-    for name in ("finger.stl", "fingerpad.stl", "report.json", "job.mcap"):
+    for name in ("finger.stl", "fingerpad.stl", "build.3mf", "report.json", "job.mcap"):
         assert (out / name).is_file(), name
     assert (out / "finger.stl").read_bytes() == received
     assert json.loads((out / "report.json").read_text())["settings"]["gripper"]["max_opening_mm"] == 45
@@ -122,7 +122,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert not record.truncated
     assert [s["state"] for s in record.of(TOPIC_STATE)] == ["queued", "running", "done"]
     published = [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)]
-    assert published == ["status", "quality", "grasps", "design", "status"]
+    assert published == ["status", "quality", "grasps", "design", "placement", "status"]
     assert any(b.get("stage") == "candidates" for b in record.of(TOPIC_LOG))
     scene = record.of("/scene")[0]
     assert len(scene["entities"][0]["triangles"]) == 5
@@ -188,7 +188,7 @@ def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):
         replies = late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("job_id") == job_id and v["topic"] == "design", 30)
         assert replies["sha256_ok"] is True
         got = {v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id}
-        assert set(got) == {"status", "quality", "grasps", "design"}
+        assert set(got) == {"status", "quality", "grasps", "design", "placement"}
         assert got["status"]["body"]["state"] == "done"
         assert Path(replies["saved"]).read_bytes() == (base / "out" / job_id / "finger.stl").read_bytes()
     finally:
@@ -206,7 +206,7 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
         assert done["job_id"] == job_id
         assert replay.popen.wait(timeout=30) == 0
         topics = [v["topic"] for v in listener.json_lines() if v.get("job_id") == job_id]
-        assert topics == ["status", "quality", "grasps", "design", "status"]
+        assert topics == ["status", "quality", "grasps", "design", "placement", "status"]
     finally:
         listener.stop()
         replay.stop()
