@@ -20,6 +20,7 @@ from fcso.config import (
     SamplerConfig,
     SearchConfig,
     format_validation_error,
+    read_toml,
 )
 from fcso.errors import ConfigError, MeshError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
@@ -177,14 +178,7 @@ def load_daemon_config(path: str | Path) -> DaemonConfig:
         message names the file and the dotted key.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(path, "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(path, f"cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    data = read_toml(path)
     _resolve_paths(data, path.resolve().parent)
     try:
         config = DaemonConfig.model_validate(data)
