@@ -290,6 +290,8 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
             if len(report.candidates) > FOLDED_ROWS
             else table,
         ]
+    if report.placement is not None:
+        body += _placement_section(report.placement)
     body += [
         "<h2>Grasp sampler</h2>",
         _sampler_table(report),
@@ -326,6 +328,24 @@ def _text(value) -> str:
 def _image(png: bytes, kind: str, alt: str) -> str:
     data = base64.b64encode(png).decode("ascii")
     return f'<img data-kind="{kind}" alt="{_text(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _placement_section(placement: dict) -> list[str]:
+    """Where the finger copies go in the job's build (set by fcsod): a summary and one row per item."""
+    summary = [(key, value) for key, value in placement.items() if not isinstance(value, (list, dict))]
+    header = "".join(f"<th>{name}</th>" for name in ("item", "kind", "placed by", "bounds (mm)", "nearest gap (mm)", "nearest item"))
+    rows = []
+    for item in placement.get("items", []):
+        bounds = item.get("bounds_mm")
+        bounds_text = " – ".join("(" + ", ".join(f"{x:.1f}" for x in corner) + ")" for corner in bounds) if bounds else ""
+        gap = item.get("nearest_distance_mm")
+        cells = (item.get("name"), item.get("kind"), item.get("placed_by"), bounds_text, "" if gap is None else f"{gap:.2f}", item.get("nearest_item") or "")
+        rows.append("<tr>" + "".join(f'<td class="text">{_text(c)}</td>' for c in cells) + "</tr>")
+    return [
+        "<h2>Build placement</h2>",
+        _key_value_table(summary),
+        f"<table><tr>{header}</tr>{''.join(rows)}</table>",
+    ]
 
 
 def _key_value_table(rows) -> str:

@@ -107,6 +107,8 @@ def test_loose_parts_are_packed_with_the_fingers(cell, capsys):
     assert placement["build_height_mm"] > 0 and 0 < placement["packing_density"] < 1
     _check_build_file(out, placement)
     assert _record_placement(out) == placement
+    page = (out / "report.html").read_text()
+    assert "<h2>Build placement</h2>" in page and str(placement["build_height_mm"]) in page
 
     message = _live(subscriber, job_id, "placement")["body"]
     assert message["fingers_fit"] is True and message["file"] == "build.3mf"
