@@ -60,6 +60,10 @@ def _show(line: str) -> None:
         for grasp in body["grasps"]:
             position = ", ".join(f"{x:.1f}" for x in grasp["position_mm"])
             print(f"  {message['key']}: {grasp['part']} pose {grasp['pose_index']}: TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
+    elif topic == "placement":
+        fit = "fingers placed" if body["fingers_fit"] else "FINGERS DO NOT FIT"
+        print(f"  {message['key']}: {fit} ({body['finger_copies_placed']}/{body['finger_copies_requested']}), "
+              f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}")
     elif topic == "design":
         print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
 
