@@ -9,8 +9,8 @@ then lowest top, then lowest z, y, x. Every chosen position is then checked on
 the meshes themselves (manifold3d's exact ``min_gap``).
 
 Why the voxel test is conservative: an item's kernel holds every voxel (closed
-cube) its solid may touch, found by cutting its triangles into pieces no
-longer than a voxel and filling what their voxels enclose. A voxel is
+cube) its solid may touch, found by covering its triangles with cells whose
+boxes span at most one voxel per axis and filling what their voxels enclose. A voxel is
 forbidden when its cube comes closer than ``spacing`` to a cube of a placed
 solid: the solid's voxels grown by a Euclidean distance transform and one
 3 x 3 x 3 dilation (cube-to-cube distance of voxels ``d`` apart is
@@ -214,32 +214,73 @@ def finger_rotations(pad_normal: np.ndarray, mode: str) -> tuple[np.ndarray, np.
     return rotations[order], penalties[order]
 
 
-def _split_triangles(triangles: np.ndarray, cuts: int) -> np.ndarray:
-    """Cut each triangle into ``cuts**2`` pieces similar to it.
+def _right_triangles(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split each triangle into two right triangles along the altitude onto its longest edge.
 
     Parameters
     ----------
     triangles : (t, 3, 3) float
-    cuts : int
-        Pieces along each edge; a piece's edges are the triangle's over ``cuts``.
 
     Returns
     -------
-    (t * cuts**2, 3, 3) float
+    corner : (2t, 3) float
+        The right-angle vertex (the altitude's foot).
+    legs : (2t, 2, 3) float
+        The two legs from ``corner``, perpendicular (either may be zero).
+    bounds : (2t, 2, 3) float
+        Each right triangle's bounding box.
     """
-    i, j = np.meshgrid(np.arange(cuts), np.arange(cuts), indexing="ij")
-    up = np.stack([np.stack([i, j], -1), np.stack([i + 1, j], -1), np.stack([i, j + 1], -1)], -2)[i + j <= cuts - 1]
-    down = np.stack([np.stack([i + 1, j], -1), np.stack([i, j + 1], -1), np.stack([i + 1, j + 1], -1)], -2)[i + j <= cuts - 2]
-    lattice = np.concatenate([up, down]) / cuts  # (pieces, corner, (a, b))
-    weights = np.concatenate([1.0 - lattice.sum(axis=-1, keepdims=True), lattice], axis=-1)
-    return np.einsum("pcw,twd->tpcd", weights, triangles).reshape(-1, 3, 3)
+    edges = np.roll(triangles, -1, axis=1) - triangles  # edge k runs from vertex k to k + 1
+    longest = np.argmax(np.einsum("tkd,tkd->tk", edges, edges), axis=1)
+    rows = np.arange(len(triangles))
+    b = triangles[rows, longest]
+    c = triangles[rows, (longest + 1) % 3]
+    a = triangles[rows, (longest + 2) % 3]
+    base = c - b
+    # the angles at b and c are not obtuse, so the foot lies on the longest edge
+    t = np.einsum("td,td->t", a - b, base) / np.maximum(np.einsum("td,td->t", base, base), 1e-300)
+    foot = b + np.clip(t, 0.0, 1.0)[:, None] * base
+    corner = np.concatenate([foot, foot])
+    legs = np.stack([np.concatenate([b - foot, c - foot]), np.concatenate([a - foot, a - foot])], axis=1)
+    tips = np.stack([corner, corner + legs[:, 0], corner + legs[:, 1]], axis=1)
+    return corner, legs, np.stack([tips.min(axis=1), tips.max(axis=1)], axis=1)
+
+
+def _cell_counts(legs: np.ndarray) -> np.ndarray:
+    """Cells along each leg so that a cell's box spans at most one voxel per axis.
+
+    A cell is the parallelogram ``legs[0] / n0`` by ``legs[1] / n1``; its box
+    spans ``|legs[0]| / n0 + |legs[1]| / n1`` per axis (in voxels). Of a few
+    splits of that one voxel between the legs, the one with fewest cells wins.
+
+    Returns
+    -------
+    (t, 2) int
+    """
+    # a hair larger, so that rounding cannot stretch a box past one voxel
+    size = np.abs(legs) * (1.0 + 1e-9)  # (t, 2, 3)
+    best = None
+    for share in (0.25, 0.5, 0.75):
+        first = np.maximum(np.ceil(size[:, 0].max(axis=1) / share), 1.0)
+        room = 1.0 - size[:, 0] / first[:, None]  # at least 1 - share > 0
+        second = np.maximum(np.ceil((size[:, 1] / room).max(axis=1)), 1.0)
+        counts = np.stack([first, second], axis=1)
+        if best is None:
+            best = counts
+        else:
+            fewer = counts.prod(axis=1) < best.prod(axis=1)
+            best[fewer] = counts[fewer]
+    return best.astype(np.int64)
 
 
 def surface_voxels(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, voxel: float, shape) -> np.ndarray:
     """Voxels a mesh's surface may touch (a superset of those it touches).
 
-    Triangles are cut into pieces no longer than a voxel; every voxel a
-    piece's bounding box overlaps (at most two per axis) is marked.
+    Each triangle is split into two right triangles, each covered by a
+    lattice of parallelogram cells along its legs whose boxes span at most
+    one voxel per axis (cell count about four times the area in voxels, so
+    thin triangles stay cheap); every voxel a cell's box, clipped to its
+    triangle's box, overlaps (at most two per axis) is marked.
 
     Parameters
     ----------
@@ -258,18 +299,30 @@ def surface_voxels(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, 
     bool array of ``shape``
     """
     triangles = (np.asarray(vertices, dtype=np.float64)[faces] - origin) / voxel
-    longest = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
-    cuts = np.maximum(np.ceil(longest).astype(int), 1)
-    pieces = [triangles[cuts == 1]] + [_split_triangles(triangles[cuts == n], int(n)) for n in np.unique(cuts[cuts > 1])]
-    pieces = np.concatenate(pieces)
-    # the closed voxels covering each piece's box [a, b]: floor(a) to ceil(b) - 1
-    low = np.floor(pieces.min(axis=1)).astype(int)
-    high = np.maximum(np.ceil(pieces.max(axis=1)).astype(int) - 1, low)
+    corner, legs, bounds = _right_triangles(triangles)
+    counts = _cell_counts(legs)
+    # cells (i, j) whose lower corner i / n0 + j / n1 <= 1 lies in the
+    # triangle: every point of it lies in one of them
+    rows_of = np.repeat(np.arange(len(corner)), counts[:, 0])
+    i = np.arange(len(rows_of)) - np.repeat(np.cumsum(counts[:, 0]) - counts[:, 0], counts[:, 0])
+    n0, n1 = counts[rows_of, 0], counts[rows_of, 1]
+    per_row = np.minimum(n1, (n0 - i) * n1 // n0 + 1)
+    cell_of = np.repeat(rows_of, per_row)
+    j = np.arange(len(cell_of)) - np.repeat(np.cumsum(per_row) - per_row, per_row)
+    step = legs[cell_of] / counts[cell_of][:, :, None]  # (c, 2, 3)
+    start = corner[cell_of] + np.repeat(i, per_row)[:, None] * step[:, 0] + j[:, None] * step[:, 1]
+    low = np.maximum(start + np.minimum(step[:, 0], 0.0) + np.minimum(step[:, 1], 0.0), bounds[cell_of, 0])
+    high = np.minimum(start + np.maximum(step[:, 0], 0.0) + np.maximum(step[:, 1], 0.0), bounds[cell_of, 1])
+    # the closed voxels covering each cell's box [a, b]: floor(a) to ceil(b) - 1
+    low_index = np.floor(low).astype(np.int64)
+    high_index = np.maximum(np.ceil(high).astype(np.int64) - 1, low_index)
     limit = np.array(shape) - 1
-    low, high = np.clip(low, 0, limit), np.clip(high, 0, limit)
+    low_index, high_index = np.clip(low_index, 0, limit), np.clip(high_index, 0, limit)
     grid = np.zeros(tuple(int(n) for n in shape), dtype=bool)
+    flat = grid.reshape(-1)
+    strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
     for choice in itertools.product((False, True), repeat=3):
-        grid[tuple(np.where(choice, high, low).T)] = True
+        flat[np.where(choice, high_index, low_index) @ strides] = True
     return grid
 
 
@@ -401,6 +454,41 @@ def _allowed_range(grid: _Grid, pose: _Pose, volume: np.ndarray, margin: float) 
     return low, high
 
 
+def _spectrum(block: np.ndarray, fft_shape: Sequence[int]) -> np.ndarray:
+    """DFT of a bool block zero-padded to ``fft_shape``, halved along x.
+
+    The axes go one at a time, each over the rows the padding leaves
+    non-zero, so a small block (a kernel) costs little more than the last
+    axis' transform.
+
+    Returns
+    -------
+    (fft_shape[0] // 2 + 1, fft_shape[1], fft_shape[2]) complex64
+    """
+    spectrum = scipy.fft.rfft(block.astype(np.float32), n=fft_shape[0], axis=0, workers=-1)
+    spectrum = scipy.fft.fft(spectrum, n=fft_shape[1], axis=1, workers=-1)
+    return scipy.fft.fft(spectrum, n=fft_shape[2], axis=2, workers=-1)
+
+
+def _correlation(
+    forbidden_spectrum: np.ndarray, kernel_spectrum: np.ndarray, fft_shape: Sequence[int], low: np.ndarray, stop: np.ndarray
+) -> np.ndarray:
+    """Circular correlation of two blocks from their :func:`_spectrum`, at indices ``low`` to ``stop`` (exclusive).
+
+    The inverse goes z, y, then x, cropping each axis as soon as it is
+    done, so a narrow z-range costs little more than the first stage.
+
+    Returns
+    -------
+    float array of shape ``stop - low``: at index i, the overlap count of the
+    kernel placed at ``low + i``.
+    """
+    product = forbidden_spectrum * np.conj(kernel_spectrum)
+    counts = scipy.fft.ifft(product, axis=2, workers=-1)[:, :, low[2] : stop[2]]
+    counts = scipy.fft.ifft(counts, axis=1, workers=-1)[:, low[1] : stop[1]]
+    return scipy.fft.irfft(counts, n=fft_shape[0], axis=0, workers=-1)[low[0] : stop[0]]
+
+
 def _lowest_position(
     forbidden: np.ndarray,
     poses: Sequence[_Pose],
@@ -432,7 +520,9 @@ def _lowest_position(
     region_high = np.max([high + pose.kernel.shape for pose, (_, high) in zip(poses, ranges)], axis=0)
     region_high = np.minimum(region_high, (grid.shape[0], grid.shape[1], crop))
     region = tuple(slice(int(a), int(b)) for a, b in zip(region_low, region_high))
-    fft_shape = [scipy.fft.next_fast_len(int(n), real=True) for n in region_high - region_low]
+    # x is the halved (real) axis, so that y and z stay complex and the
+    # inverse can drop unneeded z and y before its costlier stages
+    fft_shape = [scipy.fft.next_fast_len(int(n), real=axis == 0) for axis, n in enumerate(region_high - region_low)]
     forbidden_spectrum = None
 
     def best_possible(index: int) -> tuple:
@@ -446,16 +536,18 @@ def _lowest_position(
         if best_key is not None and best_possible(index) > best_key[:3]:
             break
         high = np.minimum(high, region_high - pose.kernel.shape)
+        if best_key is not None:
+            # a position can only win with its top at most the best's top
+            # (lower pad penalty: at most the best's build height)
+            limit_top = best_key[2] if pose.pad_penalty >= best_key[1] else best_key[0]
+            high[2] = min(high[2], int(np.floor((limit_top - pose.upper[2]) / grid.voxel + 1e-6)))
         if np.any(high < low) or np.any(region_high <= region_low):
             continue
         if forbidden_spectrum is None:
-            forbidden_spectrum = scipy.fft.rfftn(forbidden[region].astype(np.float32), s=fft_shape, workers=-1)
-        kernel_spectrum = scipy.fft.rfftn(pose.kernel.astype(np.float32), s=fft_shape, workers=-1)
-        # circular correlation: no wrap-around because every translation kept
-        # keeps the kernel inside the unpadded region
-        counts = scipy.fft.irfftn(forbidden_spectrum * np.conj(kernel_spectrum), s=fft_shape, workers=-1)
+            forbidden_spectrum = _spectrum(forbidden[region], fft_shape)
         local_low, local_high = low - region_low, high - region_low
-        free = counts[tuple(slice(int(a), int(b) + 1) for a, b in zip(local_low, local_high))] < 0.5
+        counts = _correlation(forbidden_spectrum, _spectrum(pose.kernel, fft_shape), fft_shape, local_low, local_high + 1)
+        free = counts < 0.5
         for pose_index, position in rejected:
             local = np.array(position) - low
             if pose_index == index and np.all(local >= 0) and np.all(local < free.shape):

@@ -315,3 +315,25 @@ def test_spare_fingers_are_placed_when_there_is_room(finger):
         np.testing.assert_allclose(item.transform[:3, :3] @ [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], atol=1e-9)
     assert io.BytesIO(export_build_3mf(result.items)).getbuffer().nbytes > 0
     assert len(meshes) == 4
+
+
+def test_surface_voxels_hold_every_surface_point():
+    """The voxeliser is a superset of the voxels the surface touches, thin and slanted triangles included."""
+    from fcsod.placement import surface_voxels
+
+    sliver = trimesh.Trimesh(
+        vertices=[[0.3, 0.2, 0.1], [97.1, 40.3, 13.7], [97.4, 40.9, 13.2], [50.0, 20.0, 60.0]],
+        faces=[[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]],
+    )
+    slanted = trimesh.creation.box(extents=(40.0, 25.0, 10.0))
+    slanted.apply_transform(trimesh.transformations.rotation_matrix(0.7, [1.0, 2.0, 3.0]))
+    for mesh in (sliver, slanted, load("stanford_bunny_closed.ply")):
+        voxel = 2.0
+        origin = mesh.bounds[0] - 2.0 * voxel
+        shape = np.ceil(mesh.extents / voxel).astype(int) + 4
+        grid = surface_voxels(mesh.vertices, mesh.faces, origin, voxel, shape)
+        points, _ = trimesh.sample.sample_surface(mesh, 50000, seed=0)
+        points = np.concatenate([points, mesh.vertices])
+        assert grid[tuple(np.floor((points - origin) / voxel).astype(int).T)].all()
+        # cells span at most a voxel per axis: the surface layer stays thin
+        assert grid.sum() < 3.0 * mesh.area / voxel**2 + 200
