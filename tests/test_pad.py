@@ -156,8 +156,10 @@ def test_flat_pad_seats_at_zero_with_the_face_in_contact():
     # expected: the +x face triangles at x = 10 inside the footprint (engraving excluded)
     local = cube.copy()
     local.apply_transform(sample.pad_frame(1, SAMPLER))
+    vertices, faces = local.vertices, local.faces
     for normal, origin in (((0, 1, 0), (0, 0, 0)), ((0, -1, 0), (0, 10, 0)), ((0, 0, 1), (0, 0, 0)), ((0, 0, -1), (0, 0, 10))):
-        local = trimesh.intersections.slice_mesh_plane(local, normal, origin)
+        vertices, faces = trimesh.intersections.slice_faces_plane(vertices, faces, np.array(normal, float), np.array(origin, float))[:2]
+    local = trimesh.Trimesh(vertices, faces, process=False)
     on_face = np.abs(local.triangles_center[:, 0] - SAMPLER.penetration_mm) < 1e-6
     expected = float(local.area_faces[on_face].sum())
     assert 50.0 < expected < 100.0
