@@ -199,3 +199,14 @@ def drop_job(folder: Path, files: dict[str, Path | str | bytes], pause_s: float 
 
 def copy_tree(source: Path, target: Path) -> None:
     shutil.copytree(source, target)
+
+
+def finished(subscriber, folder_name: str, timeout: float = 90) -> dict:
+    """The done/failed status line the subscriber printed for the job of ``folder_name``."""
+    return subscriber.wait_for(
+        lambda v: isinstance(v, dict)
+        and v.get("topic") == "status"
+        and v["body"]["folder"].endswith("/" + folder_name)
+        and v["body"]["state"] in ("done", "failed"),
+        timeout,
+    )

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from fcsod.cli import main
 from fcsod.recorder import ALWAYS_RECORDED, DESIGN_RECORDED, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record
 
-from tests.fcsod_helpers import DATA, Process, drop_job, free_port, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import DATA, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
 
@@ -38,20 +38,10 @@ def cell(tmp_path_factory):
 def cube_job(cell) -> str:
     """The id of a plain cube job (no manifest) the daemon has done."""
     drop_job(cell["base"] / "watch" / "cube", {"cube.stl": CUBE})
-    done = _finished(cell["subscriber"], "cube")
+    done = finished(cell["subscriber"], "cube")
     assert done["body"]["state"] == "done", done
     return done["job_id"]
 
-
-def _finished(process, folder_name: str, timeout: float = 90) -> dict:
-    """The done/failed status line the subscriber printed for the job of ``folder_name``."""
-    return process.wait_for(
-        lambda v: isinstance(v, dict)
-        and v.get("topic") == "status"
-        and v["body"]["folder"].endswith("/" + folder_name)
-        and v["body"]["state"] in ("done", "failed"),
-        timeout,
-    )
 
 
 def _audit(capsys, *args: str) -> tuple[int, str]:
@@ -68,7 +58,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     # manifest first, then the part in two halves with pauses longer than settle_seconds' half
     drop_job(folder, {"job.toml": manifest, "parts/cube.stl": CUBE}, pause_s=0.5)
     dropped = time.monotonic()
-    done = _finished(subscriber, "batch-slow")
+    done = finished(subscriber, "batch-slow")
     assert done["body"]["state"] == "done", done
     job_id = done["job_id"]
     lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
@@ -160,15 +150,15 @@ def test_bad_jobs_fail_clearly_and_the_next_good_job_runs(cell):
     drop_job(base / "watch" / "escape", {"job.toml": '[[parts]]\nfile = "../cube/cube.stl"\n', "cube.stl": CUBE})
     drop_job(base / "watch" / "good-after-bad", {"cube.stl": CUBE})
 
-    open_mesh = _finished(subscriber, "open-mesh")["body"]
+    open_mesh = finished(subscriber, "open-mesh")["body"]
     assert open_mesh["state"] == "failed"
     assert "encoder.stl" in open_mesh["error"] and "open mesh" in open_mesh["error"]
-    unknown = _finished(subscriber, "unknown-key")["body"]
+    unknown = finished(subscriber, "unknown-key")["body"]
     assert unknown["state"] == "failed"
     assert "job.toml" in unknown["error"] and "sampler.lenght_mm: unknown key" in unknown["error"]
-    escape = _finished(subscriber, "escape")["body"]
+    escape = finished(subscriber, "escape")["body"]
     assert escape["state"] == "failed" and "leaves the job folder" in escape["error"]
-    assert _finished(subscriber, "good-after-bad")["body"]["state"] == "done"
+    assert finished(subscriber, "good-after-bad")["body"]["state"] == "done"
 
     for body in (open_mesh, unknown, escape):
         out = base / "out" / body["job_id"]

@@ -21,7 +21,7 @@ from fcsod.cli import main
 from fcsod.config import load_daemon_config, parse_manifest
 from fcsod.recorder import TOPIC_PLACEMENT, TOPIC_SCENE, read_record
 
-from tests.fcsod_helpers import DATA, drop_job, free_port, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import DATA, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
 #: 1.34 x 1 x 1.35 inches: 34 x 25.4 x 34.3 mm
@@ -39,16 +39,6 @@ def cell(tmp_path_factory):
     subscriber.stop()
     assert daemon.stop() == 0, "daemon did not stop cleanly on SIGTERM"
 
-
-def _finished(subscriber, folder_name: str, timeout: float = 60) -> dict:
-    """The done/failed status line the subscriber printed for the job of ``folder_name``."""
-    return subscriber.wait_for(
-        lambda v: isinstance(v, dict)
-        and v.get("topic") == "status"
-        and v["body"]["folder"].endswith("/" + folder_name)
-        and v["body"]["state"] in ("done", "failed"),
-        timeout,
-    )
 
 
 def _live(subscriber, job_id: str, topic: str) -> dict:
@@ -91,7 +81,7 @@ def test_loose_parts_are_packed_with_the_fingers(cell, capsys):
     base, subscriber = cell["base"], cell["subscriber"]
     manifest = '[[parts]]\nfile = "cube.stl"\nquantity = 2\n\n[[parts]]\nfile = "angle_block.STL"\nunits = "inch"\n'
     drop_job(base / "watch" / "loose", {"job.toml": manifest, "cube.stl": CUBE, "angle_block.STL": ANGLE_BLOCK})
-    done = _finished(subscriber, "loose")
+    done = finished(subscriber, "loose")
     assert done["body"]["state"] == "done" and done["body"]["warnings"] == [], done
     job_id = done["job_id"]
     out = base / "out" / job_id
@@ -132,7 +122,7 @@ def test_3mf_build_keeps_its_parts_and_gets_the_fingers(cell, tmp_path):
     ]
     plate = write_build_3mf(given, tmp_path / "plate.3mf")
     drop_job(base / "watch" / "placed-build", {"plate.3mf": plate})
-    done = _finished(subscriber, "placed-build")
+    done = finished(subscriber, "placed-build")
     assert done["body"]["state"] == "done" and done["body"]["warnings"] == [], done
     out = base / "out" / done["job_id"]
 
@@ -156,7 +146,7 @@ def test_fingers_that_do_not_fit_leave_the_design_delivered(cell):
     # room for the cube (20 mm + 10 mm wall margins) but not for a 19 x 20 x 47 mm finger beside or on it
     manifest = '[[parts]]\nfile = "cube.stl"\n\n[build]\nvolume_mm = [60, 60, 41]\n'
     drop_job(base / "watch" / "small-volume", {"job.toml": manifest, "cube.stl": CUBE})
-    done = _finished(subscriber, "small-volume")
+    done = finished(subscriber, "small-volume")
     body = done["body"]
     assert body["state"] == "done", done
     out = base / "out" / done["job_id"]
