@@ -15,7 +15,7 @@ from . import __version__
 from .config import DesignConfig
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .errors import NoGraspError
-from .finger import FlatFinger, fuse, load_finger, pad_to_finger, parametric_finger
+from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger
 from .geometry import to_manifold, to_trimesh
 from .grasps import tcp_pose
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
@@ -33,14 +33,11 @@ from .report import (
     SearchReport,
 )
 from .rles import rles
-from .sampler import GraspSample, SamplerResult, sample_grasps
+from .sampler import SIDES, GraspSample, SamplerResult, sample_grasps
 from .search import candidate_index, search
 
 #: ``progress(stage, done, total)``: called as long work advances.
 Progress = Callable[[str, int, int], None]
-
-#: Sides of a grasp: the "+" pad and the "-" pad.
-SIDES = (1, -1)
 
 
 @dataclass
@@ -164,9 +161,10 @@ def design(
     timings["poses"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
+    plate = finger_plate(finger, config.sampler, config.gripper)
     for done, scenario in enumerate(scenarios):
         report_progress("sampling", done, len(scenarios))
-        scenario.sampler_result = sample_grasps(scenario.mesh, config.sampler, config.gripper)
+        scenario.sampler_result = sample_grasps(scenario.mesh, config.sampler, config.gripper, plate)
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
     empty = [s for s in scenarios if not s.sampler_result.samples]

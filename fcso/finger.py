@@ -10,8 +10,9 @@ import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
 from .errors import ConfigError, GeometryError
-from .geometry import affine_3x4, box, to_manifold, to_trimesh
+from .geometry import affine_3x4, box, clip_to_box, to_manifold, to_trimesh, transform_points
 from .parts import read_mesh, unit_factor, validate_mesh
+from .sampler import FingerPlate
 
 #: Built-in finger: plate thickness and mounting flange, mm (Robotiq Hand-E sized).
 PLATE_THICKNESS_MM = 8.0
@@ -141,6 +142,34 @@ def pad_to_finger(finger: FlatFinger, sampler: SamplerConfig) -> np.ndarray:
         sampler.thickness_mm * outward + sampler.length_mm / 2.0 * along + sampler.width_mm / 2.0 * up
     )
     return matrix
+
+
+def finger_plate(finger: FlatFinger, sampler: SamplerConfig, gripper: GripperConfig) -> FingerPlate:
+    """The finger's body behind its pad, as the sampler's collision checks need it.
+
+    Measured on the finger mesh itself (the built-in plate or a user's
+    finger): the part of the finger behind the contact face (``u >= T`` in
+    the pad frame) between the pad's bottom edge and ``W + finger_height_mm``.
+
+    Returns
+    -------
+    FingerPlate
+        Thickness behind the pad's back face and extent along the pad
+        length, mm; thickness 0 when the finger has nothing there.
+    """
+    to_pad = np.linalg.inv(pad_to_finger(finger, sampler))
+    vertices = transform_points(to_pad, np.asarray(finger.mesh.vertices, dtype=np.float64))
+    # just below the top so a flange starting at that height is not counted
+    top = sampler.width_mm + gripper.finger_height_mm - 1e-6
+    inside_v, inside_f = clip_to_box(vertices, finger.mesh.faces, (sampler.thickness_mm, -np.inf, 0.0), (np.inf, np.inf, top))
+    if len(inside_f) == 0:
+        return FingerPlate(thickness_mm=0.0, v_min_mm=0.0, v_max_mm=sampler.length_mm)
+    used = inside_v[inside_f].reshape(-1, 3)
+    return FingerPlate(
+        thickness_mm=float(used[:, 0].max() - sampler.thickness_mm),
+        v_min_mm=float(min(used[:, 1].min(), 0.0)),
+        v_max_mm=float(max(used[:, 1].max(), sampler.length_mm)),
+    )
 
 
 @dataclass
