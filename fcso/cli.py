@@ -12,7 +12,7 @@ from .design import design
 from .errors import FcsoError, GeometryError
 from .html_report import rebuild_report
 from .output import write_outputs
-from .parts import load_part
+from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
 from .table import quality_table
@@ -78,7 +78,9 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("design", help="design a fingerpad and finger for one or more parts")
-    run.add_argument("parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY)")
+    run.add_argument(
+        "parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object"
+    )
     run.add_argument("--out", required=True, type=Path, help="output folder")
     run.add_argument("--config", type=Path, help="settings (TOML)")
     run.add_argument("--units", default="mm", help="unit of the part files: mm, inch or a factor to mm")
@@ -150,7 +152,11 @@ def _config(args) -> DesignConfig:
 
 def _design(args) -> int:
     config = _config(args)
-    parts = [load_part(p, units=args.units, scale_to_mm=args.scale_to, repair=args.repair) for p in args.parts]
+    parts = [
+        part
+        for path in args.parts
+        for part in load_parts(path, units=args.units, scale_to_mm=args.scale_to, repair=args.repair, split_bodies=config.parts.split_bodies)
+    ]
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
         result = design(parts, config, progress=progress, repair=args.repair)
@@ -158,6 +164,11 @@ def _design(args) -> int:
     finally:
         progress.close()
     if not args.quiet:
+        for entry in result.report.parts:
+            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
+            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
+        for entry in result.report.ungraspable:
+            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
         print(quality_table(result.report))
         for warning in result.report.warnings:
             print(f"warning: {warning}")

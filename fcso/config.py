@@ -115,6 +115,14 @@ class SearchConfig(_Section):
     )
 
 
+class PartsConfig(_Section):
+    """How part files become parts (overlapping shells are always united)."""
+
+    split_bodies: bool = Field(
+        True, description="Separate solids in one file become separate parts <file>#<k>; false refuses such a file"
+    )
+
+
 class FingerConfig(_Section):
     """The flat finger the pad is fused onto (METHOD §9).
 
@@ -142,13 +150,14 @@ class FingerConfig(_Section):
         if self.mesh is not None:
             missing = [k for k in ("contact_origin_mm", "contact_normal", "up") if getattr(self, k) is None]
             if missing:
-                raise ValueError(f"a finger mesh needs its contact-face frame: set {', '.join(missing)}")
+                raise ValueError(f"finger mesh {self.mesh} needs its contact-face frame: set {', '.join(missing)} in [finger]")
         return self
 
 
 class DesignConfig(_Section):
     """Every setting of ``fcso design``."""
 
+    parts: PartsConfig = Field(default_factory=PartsConfig)
     sampler: SamplerConfig = Field(default_factory=SamplerConfig)
     gripper: GripperConfig = Field(default_factory=GripperConfig)
     filter: FilterConfig = Field(default_factory=FilterConfig)
@@ -205,7 +214,7 @@ def load_config(path: str | Path) -> DesignConfig:
     Parameters
     ----------
     path : str or Path
-        TOML file with sections ``[sampler] [gripper] [filter] [poses]
+        TOML file with sections ``[parts] [sampler] [gripper] [filter] [poses]
         [contact] [search] [finger]``.
 
     Returns

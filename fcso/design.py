@@ -19,7 +19,7 @@ from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, 
 from .geometry import to_manifold, to_trimesh
 from .grasps import tcp_pose
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
-from .parts import Part, load_part
+from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
 from .report import (
     CandidateReport,
@@ -31,6 +31,7 @@ from .report import (
     ScenarioQuality,
     ScenarioReport,
     SearchReport,
+    UngraspableReport,
 )
 from .rles import rles
 from .sampler import SIDES, GraspSample, SamplerResult, sample_grasps
@@ -127,8 +128,9 @@ def design(
     Parameters
     ----------
     parts : sequence of Part or path
-        The parts; paths are loaded in mm (use :func:`fcso.load_part` for
-        other units or scaling).
+        The parts; paths are loaded in mm with :func:`fcso.load_parts` (a
+        file may give several parts; load them yourself for other units or
+        scaling).
     config : DesignConfig, optional
         Settings; defaults reproduce the paper's set-up.
     progress : callable, optional
@@ -145,14 +147,19 @@ def design(
     MeshError, ConfigError
         Bad input, naming the file and the defect.
     NoGraspError
-        A scenario has no valid sample.
+        No scenario has a valid sample. Scenarios without one are left out
+        and listed in the report's ``ungraspable`` when others can be served.
     """
     config = config or DesignConfig()
     report_progress = progress or (lambda stage, done, total: None)
     timings: dict[str, float] = {}
-    warnings: list[str] = []
     clock = time.perf_counter()
-    loaded = [p if isinstance(p, Part) else load_part(p, repair=repair) for p in parts]
+    loaded = [
+        one
+        for p in parts
+        for one in ([p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies))
+    ]
+    warnings = list(dict.fromkeys(w for p in loaded for w in p.warnings))
     finger = load_finger(config.finger, repair=repair) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
     timings["load"] = time.perf_counter() - clock
 
@@ -168,8 +175,12 @@ def design(
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
     empty = [s for s in scenarios if not s.sampler_result.samples]
-    if empty:
+    if len(empty) == len(scenarios):
         raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
+    ungraspable = [_ungraspable_report(s, config) for s in empty]
+    for entry in ungraspable:
+        warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
+    scenarios = [s for s in scenarios if s.sampler_result.samples]
 
     clock = time.perf_counter()
     total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
@@ -227,6 +238,7 @@ def design(
             kind=outcome.kind, evaluated=len(outcome.evaluated), candidates_total=outcome.total, proven_optimal=outcome.proven_optimal
         ),
         grasps=[_grasp_report(s, k, e, config) for s, k, e in zip(scenarios, best_choice, best.scenarios)],
+        ungraspable=ungraspable,
         finger=FingerReport(
             source=finger.source,
             repairs=finger.repairs,
@@ -278,6 +290,32 @@ def _no_grasp_message(scenario: Scenario, config: DesignConfig) -> str:
     return (
         f"{scenario.part.path}: no valid grasp in stable pose {scenario.pose_index} "
         f"(rejected: {rejected}; gripper opening {config.gripper.max_opening_mm:g} mm)"
+    )
+
+
+#: One sentence per rejection reason, for a scenario that reason emptied.
+_REJECTION_SENTENCES = {
+    "contact": "no pad box holds the least contact area ({area:g} mm² per side) on both sides",
+    "fit": "wherever the pads meet it, the part is too wide for the open gripper ({opening:g} mm) or too narrow to close on",
+    "collision_finger": "the finger plate behind every pad would hit the part",
+    "collision_descent": "the open fingers would hit the part on their way down",
+}
+
+
+def _ungraspable_report(scenario: Scenario, config: DesignConfig) -> UngraspableReport:
+    result = scenario.sampler_result
+    if result.tried == 0:
+        reason = "no pad footprint meets the part above the table clearance"
+    else:
+        worst = max(result.rejected, key=lambda k: result.rejected[k])
+        reason = _REJECTION_SENTENCES[worst].format(area=config.sampler.min_contact_area, opening=config.gripper.max_opening_mm)
+        reason = f"{reason} ({result.rejected[worst]} of {result.tried} samples)"
+    return UngraspableReport(
+        part=scenario.part.name,
+        pose_index=scenario.pose_index,
+        tried_samples=result.tried,
+        rejected=dict(result.rejected),
+        reason=reason,
     )
 
 
@@ -358,6 +396,9 @@ def _part_report(part: Part) -> PartReport:
         volume_mm3=_round(part.mesh.volume),
         faces=len(part.mesh.faces),
         repairs=part.repairs,
+        shells=part.shells,
+        solid_index=part.solid_index,
+        shell_handling=part.shell_note,
     )
 
 

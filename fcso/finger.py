@@ -104,10 +104,10 @@ def load_finger(config: FingerConfig, repair: bool = False) -> FlatFinger:
     mesh, changes = validate_mesh(mesh, path, repair=repair)
     factor = unit_factor(config.units, path)
     mesh.apply_scale(factor)
-    normal = _unit(config.contact_normal, "finger.contact_normal")
-    up = _unit(config.up, "finger.up")
+    normal = _unit(config.contact_normal, path, "finger.contact_normal")
+    up = _unit(config.up, path, "finger.up")
     if abs(float(normal @ up)) > 1e-3:
-        raise ConfigError("finger.up", "must be perpendicular to finger.contact_normal")
+        raise ConfigError(path, "finger.up must be perpendicular to finger.contact_normal")
     return FlatFinger(
         mesh=mesh,
         contact_origin=np.asarray(config.contact_origin_mm, dtype=float),
@@ -118,11 +118,11 @@ def load_finger(config: FingerConfig, repair: bool = False) -> FlatFinger:
     )
 
 
-def _unit(vector, key: str) -> np.ndarray:
+def _unit(vector, path, key: str) -> np.ndarray:
     vector = np.asarray(vector, dtype=float)
     norm = float(np.linalg.norm(vector))
     if not np.isfinite(norm) or norm < 1e-9:
-        raise ConfigError(key, "must be a non-zero direction")
+        raise ConfigError(path, f"{key} must be a non-zero direction")
     return vector / norm
 
 
@@ -199,12 +199,12 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
     pad_in_finger = (pad + backing).transform(affine_3x4(pad_to_finger(finger, sampler)))
     fused = to_manifold(finger.mesh) + pad_in_finger
     if fused.status() != manifold3d.Error.NoError:
-        raise GeometryError(f"finger union failed: {fused.status()}")
+        raise GeometryError(f"{finger.source}: finger union failed: {fused.status()}")
     mesh = to_trimesh(fused)
     bodies = len(fused.decompose())
     if not mesh.is_watertight or bodies != 1 or not fused.volume() > 0:
         raise GeometryError(
-            f"fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
+            f"{finger.source}: fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
             "check the finger's contact_origin_mm and contact_normal"
         )
     return FusedFinger(mesh=mesh, bodies=bodies, volume_mm3=float(fused.volume()), min_pad_thickness_mm=pad_thickness(pad, sampler))

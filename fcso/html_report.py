@@ -25,7 +25,7 @@ from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .pad import surface_in_pad
-from .parts import load_part
+from .parts import Part, load_parts
 from .render import (
     PadPlacement,
     finger_picture,
@@ -147,9 +147,7 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
     fingerpad = _read_stl(directory / "fingerpad.stl")
     flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
     pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
-    parts = [
-        load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name) for p in report.parts
-    ]
+    parts = _reload_parts(report, directory)
     part_number = 0
     grasps = []
     for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
@@ -186,6 +184,36 @@ def _read_stl(path: Path) -> trimesh.Trimesh:
         raise MeshError(path, "file not found")
     # merged vertices: the signed distance used for seating needs a closed mesh
     return trimesh.load(str(path), force="mesh", process=True)
+
+
+def _reload_parts(report: DesignReport, directory: Path) -> list[Part]:
+    """The report's parts read again from their files, in the report's order, mm.
+
+    A file is read once with the scale recorded for it (a 3MF in its own unit,
+    then scaled), and its parts are matched by name (a one-part file whatever
+    its name in the report).
+    """
+    by_file: dict[tuple[str, float, bool], dict[str, Part]] = {}
+    parts = []
+    for entry in report.parts:
+        path = _part_path(entry.file, directory)
+        key = (str(path), entry.scale_to_mm, bool(entry.repairs))
+        if key not in by_file:
+            is_3mf = path.suffix.lower() == ".3mf"
+            loaded = load_parts(path, units=1.0 if is_3mf else entry.scale_to_mm, repair=bool(entry.repairs))
+            for part in loaded:
+                if is_3mf and entry.scale_to_mm != 1.0:
+                    part.mesh.apply_scale(entry.scale_to_mm)
+            by_file[key] = {part.name: part for part in loaded}
+        found = by_file[key]
+        if entry.name in found:
+            parts.append(found[entry.name])
+        elif len(found) == 1:
+            # a one-part file designed under another name
+            parts.append(next(iter(found.values())))
+        else:
+            raise MeshError(path, f"holds no part named {entry.name!r} any more (the file changed since the design)")
+    return parts
 
 
 def _part_path(file: str, directory: Path) -> Path:

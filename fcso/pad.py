@@ -79,7 +79,7 @@ def pad_geometry(
     -------
     PadGeometry
     """
-    thickness, length, width = sampler.thickness_mm, sampler.length_mm, sampler.width_mm
+    length, width = sampler.length_mm, sampler.width_mm
     depth = sampler.penetration_mm
     intersection = part.transform(affine_3x4(frame)) ^ pad_box(sampler)
     if intersection.status() != manifold3d.Error.NoError:

@@ -21,6 +21,21 @@ class PartReport(_Model):
     volume_mm3: float
     faces: int
     repairs: list[str] = Field(description="What --repair changed; empty when nothing was repaired")
+    shells: int = Field(1, description="Closed shells of the file that make up this part")
+    solid_index: int | None = Field(
+        None, description="k of the name <file>#<k> when the file held several separate solids (1 = largest), else null"
+    )
+    shell_handling: str | None = Field(None, description="How the file's shells were made one solid; null for a single shell")
+
+
+class UngraspableReport(_Model):
+    """A part in a stable pose that no sample can grasp, left out of the design."""
+
+    part: str
+    pose_index: int
+    tried_samples: int
+    rejected: dict[str, int] = Field(description="Rejected samples per reason (METHOD §3)")
+    reason: str = Field(description="Why, in one sentence")
 
 
 class SampleReport(_Model):
@@ -113,6 +128,9 @@ class DesignReport(_Model):
     best: int = Field(description="Index of the chosen candidate (argmax Q, ties: larger mean E, then smaller index)")
     search: SearchReport
     grasps: list[GraspReport]
+    ungraspable: list[UngraspableReport] = Field(
+        default_factory=list, description="Parts in stable poses that no sample can grasp; the design serves the others"
+    )
     finger: FingerReport
     timings_s: dict[str, float] = Field(description="Wall time per stage, s (the only field that varies between identical runs)")
     warnings: list[str]

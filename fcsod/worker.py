@@ -31,12 +31,11 @@ from typing import Callable
 import fcso
 import numpy as np
 import trimesh
-from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_part
+from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_parts
 from fcso.output import output_files
-from fcso.parts import Part, validate_mesh
 
 from . import __version__
-from .build3mf import Build, BuildItem, export_build_3mf, read_build
+from .build3mf import Build, BuildItem, export_build_3mf
 from .config import DaemonConfig, JobManifest
 from .jobs import PartInput, check_parts, hash_inputs, job_inputs, read_manifest
 from .messages import (
@@ -209,70 +208,44 @@ def step_inputs(run: JobRun) -> None:
 
 
 def step_load(run: JobRun) -> None:
-    """Load and validate every part mesh (closed volume, units, face limit) and assemble the job's build.
+    """Load and validate every part (closed volume, units, shells, face limit) and assemble the job's build.
 
-    A loose part is designed once and is ``quantity`` build items, placed
-    when its manifest entry has a transform. A 3MF is a placed build: each
-    distinct item mesh is designed once and every item keeps its transform.
+    Parts come from :func:`fcso.load_parts`, the loader ``fcso design`` uses:
+    overlapping shells are one solid, separate solids are separate parts,
+    a 3MF gives one part per distinct object. A loose part is designed once
+    and is ``quantity`` build items, placed when its manifest entry has a
+    transform; a 3MF part keeps the transform of every build item holding it.
     """
     max_faces = run.task.config.limits.max_faces
     items: list[BuildItem] = []
     for part in run.parts:
-        if part.path.suffix.lower() == ".3mf":
-            loaded, placed = _load_build_3mf(part.path, run.manifest.repair, run.task.config.limits.max_3mf_uncompressed_bytes)
-            items.extend(placed)
-            labels = [f"{part.entry.file} item {one.name}" for one in loaded]
-        else:
-            loaded = [load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)]
-            transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
-            items.extend(BuildItem(loaded[0].name, loaded[0].mesh, transform, "part") for _ in range(part.entry.quantity))
-            labels = [part.entry.file]
-        for one, label in zip(loaded, labels):
+        loaded = load_parts(
+            part.path,
+            units=part.entry.units,
+            scale_to_mm=part.entry.scale_to_mm,
+            repair=run.manifest.repair,
+            split_bodies=run.settings.parts.split_bodies,
+            max_uncompressed_bytes=run.task.config.limits.max_3mf_uncompressed_bytes,
+        )
+        for one in loaded:
             if len(one.mesh.faces) > max_faces:
-                raise MeshError(part.path, f"{label}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+                raise MeshError(part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+            if part.path.suffix.lower() == ".3mf":
+                items.extend(BuildItem(one.name, one.mesh, transform, "part") for transform in one.instances)
+            else:
+                transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
+                items.extend(BuildItem(one.name, one.mesh, transform, "part") for _ in range(part.entry.quantity))
             run.loaded.append(one)
-            run.log("info", f"loaded {label}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm")
+            shells = f", {one.shell_note}" if one.shell_note else ""
+            run.log("info", f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm{shells}")
+            for warning in one.warnings:
+                run.log("warning", warning)
     if len(run.loaded) > run.task.config.limits.max_parts:
         raise MeshError(run.folder, f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})")
     _make_names_unique(items)
     run.build = Build(items=items, source=str(run.folder))
     placed = sum(1 for item in items if item.transform is not None)
     run.log("info", f"build: {len(items)} part items, {placed} placed by the job, {len(items) - placed} to pack")
-
-
-def _load_build_3mf(path: Path, repair: bool, max_uncompressed_bytes: int) -> tuple[list[Part], list[BuildItem]]:
-    """The distinct part meshes of a 3MF build and its items, each keeping its transform.
-
-    Items with equal geometry (one 3MF object placed several times) share
-    one validated mesh and are one part to design.
-
-    Parameters
-    ----------
-    path : Path
-        The 3MF file.
-    repair : bool
-        Repair item meshes that are not closed volumes.
-    max_uncompressed_bytes : int
-        Zip-bomb limit of the archive, bytes.
-
-    Returns
-    -------
-    parts : list of Part
-        One per distinct geometry, named after its first item, mm.
-    items : list of BuildItem
-        Every build item with its transform, mm.
-    """
-    parts: dict[str, Part] = {}
-    items = []
-    for item in read_build([path], max_uncompressed_bytes=max_uncompressed_bytes).items:
-        geometry = hashlib.sha256(
-            np.ascontiguousarray(item.mesh.vertices, dtype=np.float64).tobytes() + np.ascontiguousarray(item.mesh.faces, dtype=np.int64).tobytes()
-        ).hexdigest()
-        if geometry not in parts:
-            mesh, repairs = validate_mesh(item.mesh, f"{path} (build item {item.name})", repair=repair)
-            parts[geometry] = Part(name=item.name, path=str(path), mesh=mesh, repairs=repairs)
-        items.append(BuildItem(item.name, parts[geometry].mesh, item.transform, "part"))
-    return list(parts.values()), items
 
 
 def _make_names_unique(items: list[BuildItem]) -> None:
@@ -296,6 +269,11 @@ def step_design(run: JobRun) -> None:
         run.log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
 
     run.result = design(run.loaded, run.settings, progress=progress)
+    # what the design warns of (parts left out as ungraspable, files split into
+    # several solids) travels with the job's done status
+    run.warnings.extend(run.result.report.warnings)
+    for entry in run.result.report.ungraspable:
+        run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
 
 
 def step_record_design(run: JobRun) -> None:

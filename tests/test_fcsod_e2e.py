@@ -171,6 +171,19 @@ def test_bad_jobs_fail_clearly_and_the_next_good_job_runs(cell):
         assert any(line["level"] == "error" and line["message"] == body["error"] for line in record.of(TOPIC_LOG))
 
 
+def test_job_with_an_ungraspable_part_is_delivered_with_a_warning(cell):
+    base, subscriber = cell["base"], cell["subscriber"]
+    # lying flat (pose 0) the 52 x 70 mm plug is wider than the 50 mm opening every way
+    manifest = '[poses]\ncount = 1\nselect = [0]\n[[parts]]\nfile = "cube.stl"\n[[parts]]\nfile = "plug.stl"\n'
+    drop_job(base / "watch" / "with-plug", {"job.toml": manifest, "cube.stl": CUBE, "plug.stl": DATA / "capsela200_plug.stl"})
+    done = finished(subscriber, "with-plug")["body"]
+    assert done["state"] == "done", done
+    assert any("plug in stable pose 0 cannot be grasped" in w for w in done["warnings"]), done["warnings"]
+    report = json.loads((base / "out" / done["job_id"] / "report.json").read_text())
+    assert [u["part"] for u in report["ungraspable"]] == ["plug"]
+    assert [g["part"] for g in report["grasps"]] == ["cube"]
+
+
 def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):
     base, job_id = cell["base"], cube_job
     late = start_subscriber(cell["config"], save=base / "late", extra=["--timeout", "8"])

@@ -20,10 +20,10 @@ from pydantic import ValidationError
 from fcso.config import DesignConfig
 from fcso.errors import MeshError
 from fcso.finger import parametric_finger
+from fcso.parts import check_zip_archive
 from fcsod.build3mf import (
     Build,
     BuildItem,
-    check_zip_archive,
     export_build_3mf,
     parse_transform,
     read_build,
