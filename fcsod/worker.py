@@ -92,6 +92,9 @@ PROGRESS_INTERVAL_S = 1.0
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
 
+#: Number of the job's finger set in ``build.3mf`` (one design per job for now).
+FINGER_SET = 1
+
 
 class TimeLimitExceeded(BaseException):
     """Raised in the worker when the daemon signals that the job ran out of time.
@@ -225,7 +228,7 @@ def step_load(run: JobRun) -> None:
         else:
             loaded = [load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)]
             transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
-            items.extend(BuildItem(loaded[0].name, loaded[0].mesh, transform, "part") for _ in range(part.entry.quantity))
+            items.extend(BuildItem(loaded[0].name, loaded[0].mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity))
             labels = [part.entry.file]
         for one, label in zip(loaded, labels):
             if len(one.mesh.faces) > max_faces:
@@ -271,7 +274,7 @@ def _load_build_3mf(path: Path, repair: bool, max_uncompressed_bytes: int) -> tu
         if geometry not in parts:
             mesh, repairs = validate_mesh(item.mesh, f"{path} (build item {item.name})", repair=repair)
             parts[geometry] = Part(name=item.name, path=str(path), mesh=mesh, repairs=repairs)
-        items.append(BuildItem(item.name, parts[geometry].mesh, item.transform, "part"))
+        items.append(BuildItem(item.name, parts[geometry].mesh, item.transform, "part", path.stem))
     return list(parts.values()), items
 
 
@@ -344,10 +347,12 @@ def step_placement(run: JobRun) -> None:
     and the free build height that was missing.
     """
     result = run.result
-    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name="finger")
+    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name=f"fcso-finger-{FINGER_SET}")
     report = placed.report
     run.recorder.write(TOPIC_PLACEMENT, report)
-    run.files[BUILD_NAME] = export_build_3mf(placed.items)
+    run.files[BUILD_NAME] = export_build_3mf(
+        placed.items, job_id=run.task.job_id, application=f"fcsod {__version__}", creation_date=utc_now(), finger_set=FINGER_SET
+    )
     update: dict = {"placement": report.model_dump(mode="json")}
     if not report.fingers_fit:
         run.warnings.append(report.message)
