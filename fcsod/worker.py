@@ -65,6 +65,7 @@ from .messages import (
     job_key,
     utc_now,
 )
+from .ros2 import record_ros2
 from .recorder import (
     TOPIC_BUS,
     TOPIC_CANDIDATES,
@@ -154,6 +155,11 @@ class JobRun:
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(("log", level, message, fields))
 
+    def record_published(self, message: BusMessage) -> None:
+        """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""
+        self.recorder.write(TOPIC_BUS, message.record())
+        record_ros2(self.recorder, message, self.task.config.ros2)
+
     def status(
         self,
         state: str,
@@ -177,7 +183,7 @@ class JobRun:
         )
         bus = self.task.config.bus
         message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
-        self.recorder.write(TOPIC_BUS, message.record())
+        self.record_published(message)
         self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
         return message
 
@@ -421,7 +427,7 @@ def step_outputs(run: JobRun) -> None:
         *run.outgoing,
     ]
     for message in run.outgoing:
-        run.recorder.write(TOPIC_BUS, message.record())
+        run.record_published(message)
 
 
 #: The job's steps in order; each is logged and flushed to the record when it ends.
