@@ -75,8 +75,8 @@ class BuildItem:
     kind : {'part', 'finger'}
         A job part or a finger copy.
     part_number : str or None
-        The item's part number in ``build.3mf`` (the part file's stem);
-        ``None``: its name (finger copies, ``fcso-finger-<set>-<copy>``).
+        Part number of the item's object in ``build.3mf``: the part file's
+        stem; ``None``: the name (finger objects are ``fcso-finger-<set>``).
     """
 
     name: str
@@ -302,9 +302,10 @@ def export_build_3mf(
     """``build.3mf`` bytes: a production 3MF with one object per distinct mesh and one build item per item.
 
     Items sharing one mesh object (the finger copies) share one 3MF object.
-    Objects are named after their part number (the part file's stem, or
-    ``fcso-finger-<set>``); each item carries its own part number (finger
-    copies ``fcso-finger-<set>-<copy>``). The build, every item and every
+    Objects are named and numbered after their part (the part file's stem,
+    or ``fcso-finger-<set>``); each item's part number is its unique name in
+    the build (``cube``, ``cube_2``, finger copies ``fcso-finger-<set>-<copy>``),
+    which slicers and trimesh show as the item's name. The build, every item and every
     object carry a Production-extension ``p:UUID`` derived from the job id
     and the name (uuid5), so the same job gives the same UUIDs and bytes.
     The model's metadata holds ``Title`` (the job id), ``Application`` and
@@ -352,7 +353,7 @@ def export_build_3mf(
             {
                 "objectid": str(object_ids[key]),
                 "transform": _transform_attribute(item.transform),
-                "partnumber": item.part_number or item.name,
+                "partnumber": item.name,
                 p_uuid: _uuid(job_id, f"item/{item.name}"),
             },
         )
