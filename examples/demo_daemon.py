@@ -4,7 +4,10 @@ Starts ``fcsod run`` on a fresh watch folder under ``demo-out/daemon/``,
 connects ``fcsod subscribe`` (the cell controller's view), drops the bundled
 batch ``examples/jobs/batch-demo`` into the watch folder file by file, shows
 what the subscriber receives, audits the job's MCAP record and stops the
-daemon. The outputs stay in ``demo-out/daemon/out/<job_id>/``.
+daemon. ``[ros2]`` is enabled: a zenoh session of the demo, standing in for a
+ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions and liveliness
+tokens the daemon published and decodes the grasps' PoseArrays. The outputs
+stay in ``demo-out/daemon/out/<job_id>/``.
 """
 
 from __future__ import annotations
@@ -16,11 +19,16 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
 
 REPO = Path(__file__).resolve().parents[1]
 BATCH = REPO / "examples" / "jobs" / "batch-demo"
 BASE = REPO / "demo-out" / "daemon"
+ROS_DOMAIN_ID = 0
 
 
 def _free_port() -> int:
@@ -68,6 +76,41 @@ def _show(line: str) -> None:
         print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
 
 
+class Ros2Cell:
+    """What a ROS 2 cell on rmw_zenoh sees of the daemon: data on ``<domain>/**`` and liveliness tokens under ``@ros2_lv/<domain>/**``."""
+
+    def __init__(self, port: int):
+        config = zenoh.Config()
+        config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(config)
+        self.samples: list[tuple[str, bytes]] = []
+        self.tokens: list[str] = []
+        self._subscriber = self.session.declare_subscriber(f"{ROS_DOMAIN_ID}/**", lambda s: self.samples.append((str(s.key_expr), s.payload.to_bytes())))
+        self._tokens = self.session.liveliness().declare_subscriber(
+            f"@ros2_lv/{ROS_DOMAIN_ID}/**", lambda s: self.tokens.append(str(s.key_expr)), history=True
+        )
+
+    def show(self) -> None:
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        print("ROS 2 (rmw_zenoh wire format) liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
+        for token in dict.fromkeys(self.tokens):
+            print(f"  {token}")
+        print("ROS 2 key expressions published (CDR payloads):")
+        for key, count in Counter(key for key, _ in self.samples).items():
+            print(f"  {key}  ({count} messages)")
+        for key, payload in self.samples:
+            if "/grasps/" in key:
+                message = typestore.deserialize_cdr(payload, "geometry_msgs/msg/PoseArray")
+                for pose in message.poses:
+                    p, q = pose.position, pose.orientation
+                    print(f"  PoseArray in frame {message.header.frame_id}: position ({p.x:.4f}, {p.y:.4f}, {p.z:.4f}) m, "
+                          f"orientation xyzw ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})")
+
+    def close(self) -> None:
+        self.session.close()
+
+
 def main() -> int:
     shutil.rmtree(BASE, ignore_errors=True)
     (BASE / "watch").mkdir(parents=True)
@@ -91,6 +134,11 @@ cell = "demo"
 [zenoh]
 listen = ["tcp/127.0.0.1:{port}"]
 multicast_scouting = false
+
+[ros2]
+enabled = true
+domain_id = {ROS_DOMAIN_ID}
+namespace = "/demo"
 """,
         encoding="utf-8",
     )
@@ -105,6 +153,7 @@ multicast_scouting = false
                 stdout=subprocess.PIPE,
             )
             _wait_for_line(subscriber.stdout, '"alive"', 120)
+            ros2_cell = Ros2Cell(port)
             print("subscriber connected; dropping the batch file by file")
             job = BASE / "watch" / BATCH.name
             job.mkdir()
@@ -116,6 +165,9 @@ multicast_scouting = false
             for line in subscriber.stdout:
                 _show(line)
             subscriber.wait()
+            time.sleep(0.5)
+            ros2_cell.show()
+            ros2_cell.close()
         finally:
             daemon.send_signal(signal.SIGTERM)
             daemon.wait(timeout=60)

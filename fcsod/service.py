@@ -21,6 +21,7 @@ from pathlib import Path
 
 from . import __version__
 from .bus import Bus
+from .ros2 import Ros2Node, node_fqn, record_ros2
 from .config import DaemonConfig
 from .jobs import hash_inputs, job_id, job_inputs
 from .journal import JobRow, Journal, StoredMessage
@@ -89,6 +90,9 @@ class Daemon:
         signal.signal(signal.SIGTERM, self._on_stop_signal)
         signal.signal(signal.SIGINT, self._on_stop_signal)
         self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
+        if self.ros2 is not None:
+            log.info("ROS 2 node " + node_fqn(self.config.ros2), extra={"ros2_key_exprs": [p.key_expr for p in self.ros2.publishers.values()]})
         watch = self.config.watch
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
@@ -142,6 +146,8 @@ class Daemon:
                 shutil.rmtree(self.output_root / f".tmp-{slot.job.job_id}", ignore_errors=True)
                 self.journal.requeue_running()
                 log.info("stopped a running job; it will run again at the next start", extra={"job_id": slot.job.job_id})
+        if self.ros2 is not None:
+            self.ros2.close()
         self.bus.close()
         self.journal.close()
         log.info("fcsod stopped")
@@ -313,6 +319,7 @@ class Daemon:
         status = self._status(row)
         recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
         recorder.write(TOPIC_BUS, status.record())
+        record_ros2(recorder, status, self.config.ros2)
         recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
         recorder.finish()
         for path in work_dir.iterdir():
@@ -366,3 +373,5 @@ class Daemon:
             )
         )
         self.bus.publish(message)
+        if self.ros2 is not None:
+            self.ros2.publish(message)

@@ -64,6 +64,7 @@ from .messages import (
     job_key,
     utc_now,
 )
+from .ros2 import record_ros2
 from .recorder import (
     TOPIC_BUS,
     TOPIC_CANDIDATES,
@@ -90,6 +91,9 @@ PROGRESS_INTERVAL_S = 1.0
 
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
+
+#: Number of the job's finger set in ``build.3mf`` (one design per job for now).
+FINGER_SET = 1
 
 
 class TimeLimitExceeded(BaseException):
@@ -150,6 +154,11 @@ class JobRun:
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(("log", level, message, fields))
 
+    def record_published(self, message: BusMessage) -> None:
+        """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""
+        self.recorder.write(TOPIC_BUS, message.record())
+        record_ros2(self.recorder, message, self.task.config.ros2)
+
     def status(
         self,
         state: str,
@@ -173,7 +182,7 @@ class JobRun:
         )
         bus = self.task.config.bus
         message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
-        self.recorder.write(TOPIC_BUS, message.record())
+        self.record_published(message)
         self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
         return message
 
@@ -231,10 +240,10 @@ def step_load(run: JobRun) -> None:
             if len(one.mesh.faces) > max_faces:
                 raise MeshError(part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
             if part.path.suffix.lower() == ".3mf":
-                items.extend(BuildItem(one.name, one.mesh, transform, "part") for transform in one.instances)
+                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for transform in one.instances)
             else:
                 transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
-                items.extend(BuildItem(one.name, one.mesh, transform, "part") for _ in range(part.entry.quantity))
+                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity))
             run.loaded.append(one)
             shells = f", {one.shell_note}" if one.shell_note else ""
             run.log("info", f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm{shells}")
@@ -322,10 +331,12 @@ def step_placement(run: JobRun) -> None:
     and the free build height that was missing.
     """
     result = run.result
-    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name="finger")
+    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name=f"fcso-finger-{FINGER_SET}")
     report = placed.report
     run.recorder.write(TOPIC_PLACEMENT, report)
-    run.files[BUILD_NAME] = export_build_3mf(placed.items)
+    run.files[BUILD_NAME] = export_build_3mf(
+        placed.items, job_id=run.task.job_id, application=f"fcsod {__version__}", creation_date=utc_now(), finger_set=FINGER_SET
+    )
     update: dict = {"placement": report.model_dump(mode="json")}
     if not report.fingers_fit:
         run.warnings.append(report.message)
@@ -394,7 +405,7 @@ def step_outputs(run: JobRun) -> None:
         *run.outgoing,
     ]
     for message in run.outgoing:
-        run.recorder.write(TOPIC_BUS, message.record())
+        run.record_published(message)
 
 
 #: The job's steps in order; each is logged and flushed to the record when it ends.

@@ -101,8 +101,10 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
         schemas = summary.schemas
         assert set(ALWAYS_RECORDED) | set(DESIGN_RECORDED) <= set(channels)
         for channel in channels.values():
-            assert channel.message_encoding == "json"
-            assert schemas[channel.schema_id].encoding == "jsonschema"
+            # JSON channels, plus the ROS 2 form of the published messages for ros2 bag play
+            expected = ("cdr", "ros2msg") if channel.topic.startswith("/fcsod/") else ("json", "jsonschema")
+            assert (channel.message_encoding, schemas[channel.schema_id].encoding) == expected, channel.topic
+        assert {t for t in channels if t.startswith("/fcsod/")} == {"/fcsod/grasps", "/fcsod/plan", "/fcsod/quality", "/fcsod/status"}
         assert schemas[channels["/scene"].schema_id].name == "foxglove.SceneUpdate"
         counts = summary.statistics.channel_message_counts
         assert all(counts[c.id] > 0 for c in channels.values())
