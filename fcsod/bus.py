@@ -16,6 +16,7 @@ import zenoh
 from .config import BusConfig, ZenohConfig
 from .journal import stored_messages
 from .messages import BusMessage, daemon_key, jobs_key
+from .signing import Signer
 
 log = logging.getLogger("fcsod.bus")
 
@@ -47,8 +48,8 @@ def open_session(settings: ZenohConfig, listen: list[str] | None = None, connect
     return zenoh.open(session_config(settings, listen, connect))
 
 
-def put(session: zenoh.Session, message: BusMessage) -> None:
-    """Publish one message reliably, blocking rather than dropping when the link is congested."""
+def put(session: zenoh.Session, message: BusMessage, signer: Signer) -> None:
+    """Publish one message reliably, signed by ``signer``, blocking rather than dropping when the link is congested."""
     publisher = session.declare_publisher(
         message.key_expr,
         encoding=zenoh.Encoding(message.encoding),
@@ -56,7 +57,7 @@ def put(session: zenoh.Session, message: BusMessage) -> None:
         reliability=zenoh.Reliability.RELIABLE,
     )
     try:
-        publisher.put(message.payload, attachment=message.attachment)
+        publisher.put(message.payload, attachment=signer.attachment(message.key_expr, message.job_id, message.payload, message.attachment))
     finally:
         publisher.undeclare()
 
@@ -76,11 +77,14 @@ class Bus:
         Session settings.
     journal_path : Path
         The SQLite journal the queryable reads.
+    signer : Signer
+        Signs every message published and every reply.
     """
 
-    def __init__(self, bus: BusConfig, settings: ZenohConfig, journal_path: Path):
+    def __init__(self, bus: BusConfig, settings: ZenohConfig, journal_path: Path, signer: Signer):
         self.bus = bus
         self.journal_path = journal_path
+        self.signer = signer
         self.session = open_session(settings)
         self._lock = threading.Lock()
         self._token = self.session.liveliness().declare_token(daemon_key(bus.prefix, bus.cell))
@@ -89,7 +93,7 @@ class Bus:
     def publish(self, message: BusMessage) -> None:
         """Publish one job message."""
         with self._lock:
-            put(self.session, message)
+            put(self.session, message, self.signer)
 
     def _answer(self, query: zenoh.Query) -> None:
         """Reply with every stored message whose key the query's key expression intersects."""
@@ -105,7 +109,8 @@ class Bus:
                         continue
                     payload = path.read_bytes()
                 attachment = stored.attachment.encode() if stored.attachment is not None else None
-                query.reply(stored.key_expr, payload, encoding=zenoh.Encoding(stored.encoding), attachment=attachment)
+                signed = self.signer.attachment(stored.key_expr, stored.job_id, payload, attachment)
+                query.reply(stored.key_expr, payload, encoding=zenoh.Encoding(stored.encoding), attachment=signed)
         except Exception as exc:  # a failing reply must not kill zenoh's callback thread
             log.error("queryable: cannot answer %s: %s", wanted, exc)
             query.reply_err(f"fcsod cannot answer: {exc}")

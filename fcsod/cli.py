@@ -1,4 +1,4 @@
-"""Command line: ``fcsod run | audit | replay | subscribe | schema``.
+"""Command line: ``fcsod run | audit | replay | subscribe | pki | journal | schema``.
 
 Exit codes: 0 success, 1 a check failed (audit) or nothing arrived in time
 (subscribe), 2 bad input (config file, arguments, unreadable record).
@@ -52,6 +52,19 @@ def _parser() -> argparse.ArgumentParser:
     subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results published before this start")
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
+    subscribe.add_argument("--zenoh-config", type=Path, metavar="FILE", help="the client's zenoh config (from fcsod pki init) instead of the daemon's")
+    subscribe.add_argument("--verify-key", type=Path, metavar="FILE", help="the daemon's public key, signing.pub (default: [bus] verify_key)")
+
+    pki = commands.add_parser("pki", help="certificates, keys and zenoh configs for the secure set-up")
+    pki_commands = pki.add_subparsers(dest="pki_command", required=True)
+    init = pki_commands.add_parser("init", help="create a local CA, the daemon's and each cell controller's certificates and configs")
+    init.add_argument("directory", type=Path, metavar="DIR")
+    init.add_argument("--cell", required=True, help="the [bus] cell")
+    init.add_argument("--client", action="append", required=True, metavar="NAME", help="a cell controller (repeat for each)")
+    init.add_argument("--prefix", default="fcso", help="the [bus] prefix (default fcso)")
+    init.add_argument("--host", action="append", metavar="NAME", help="name or address clients reach the daemon at (repeat; default this machine's)")
+    init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
+    init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
 
     schema = commands.add_parser("schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels")
     schema.add_argument("--out", required=True, type=Path)
@@ -70,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
             return _replay(args)
         if args.command == "subscribe":
             return _subscribe(args)
+        if args.command == "pki":
+            return _pki(args)
         return _schema(args)
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
@@ -115,8 +130,10 @@ def _replay(args: argparse.Namespace) -> int:
     from .bus import open_session, put
     from .messages import BusMessage, BusRecord, jobs_key
     from .recorder import TOPIC_BUS, read_record
+    from .signing import Signer, signing_key_path
 
     config = load_daemon_config(args.config)
+    signer = Signer.from_file(signing_key_path(config))
     if not args.record.is_file():
         print(f"fcsod: {args.record}: file not found", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -134,7 +151,7 @@ def _replay(args: argparse.Namespace) -> int:
         matched = probe.matching_status.matching
         probe.undeclare()
         for message in messages:
-            put(session, message)
+            put(session, message, signer)
             print(f"replayed {message.key_expr} ({message.encoding}, {len(message.payload)} bytes)")
         # let the reliable link deliver before the session closes
         time.sleep(0.5)
@@ -159,12 +176,26 @@ def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
     from .bus import open_session
+    from .config import ZenohConfig
     from .messages import ENCODING_JSON, daemon_key, jobs_key
+    from .signing import SignatureError, load_verify_key, verify_key_path, verify_message
 
     config = load_daemon_config(args.config)
     prefix, cell = config.bus.prefix, config.bus.cell
-    # the subscriber must not bind the daemon's listen endpoints
-    session = open_session(config.zenoh, listen=[], connect=_subscriber_endpoints(config, args.connect))
+    verify_key = load_verify_key(args.verify_key or verify_key_path(config))
+    if args.zenoh_config is not None:
+        if not args.zenoh_config.is_file():
+            raise ConfigError(args.zenoh_config, "file not found")
+        settings = ZenohConfig(config_file=args.zenoh_config, multicast_scouting=config.zenoh.multicast_scouting)
+        connect = args.connect
+    else:
+        settings, connect = config.zenoh, _subscriber_endpoints(config, args.connect)
+    try:
+        # the subscriber must not bind the daemon's listen endpoints
+        session = open_session(settings, listen=[], connect=connect)
+    except zenoh.ZError as exc:
+        print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     finished: set[str] = set()
     lock = threading.Lock()
     all_done = threading.Event()
@@ -172,6 +203,14 @@ def _subscribe(args: argparse.Namespace) -> int:
     def show(sample, source: str) -> None:
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
+        attachment_bytes = sample.attachment.to_bytes() if sample.attachment is not None else None
+        try:
+            attachment = verify_message(key, payload, attachment_bytes, verify_key)
+        except SignatureError as exc:
+            # a forged or altered message: shown as refused, never as a result
+            with lock:
+                print(json.dumps({"source": source, "key": key, "rejected": str(exc)}), flush=True)
+            return
         line: dict = {"source": source, "key": key, "topic": key.rsplit("/", 1)[-1], "encoding": str(sample.encoding), "bytes": len(payload)}
         parts = key.split("/")
         line["job_id"] = parts[-2] if len(parts) >= 2 else None
@@ -179,11 +218,10 @@ def _subscribe(args: argparse.Namespace) -> int:
             line["body"] = json.loads(payload)
         else:
             line["sha256"] = hashlib.sha256(payload).hexdigest()
-        if sample.attachment is not None:
-            attachment = json.loads(sample.attachment.to_bytes())
-            line["attachment"] = attachment
-            if "sha256" in attachment:
-                line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
+        line["attachment"] = attachment
+        line["signature_ok"] = True
+        if "sha256" in attachment:
+            line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
         if args.save is not None and line["topic"] == "design":
             args.save.mkdir(parents=True, exist_ok=True)
             target = args.save / f"{line['job_id']}.stl"
@@ -226,4 +264,15 @@ def _schema(args: argparse.Namespace) -> int:
 
     for path in write_fcsod_schemas(args.out):
         print(path)
+    return EXIT_OK
+
+
+def _pki(args: argparse.Namespace) -> int:
+    from .pki import config_lines, init_pki
+
+    files = init_pki(
+        args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir
+    )
+    for line in config_lines(files):
+        print(line)
     return EXIT_OK

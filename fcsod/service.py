@@ -20,12 +20,14 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from . import __version__
-from .bus import Bus
+from .bus import Bus, session_config
 from .config import DaemonConfig
 from .jobs import hash_inputs, job_id, job_inputs
 from .journal import JobRow, Journal, StoredMessage
 from .messages import BusMessage, BusRecord, LogRecord, StateChangeRecord, StatusMessage, utc_now
+from .pki import link_weaknesses
 from .recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record, salvage
+from .signing import daemon_signer, signing_key_path
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
 from .worker import RECORD_NAME, JobTask, worker_main
@@ -88,7 +90,12 @@ class Daemon:
             log.info("re-queued job left running by the previous run", extra={"job_id": job})
         signal.signal(signal.SIGTERM, self._on_stop_signal)
         signal.signal(signal.SIGINT, self._on_stop_signal)
-        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        signer, created = daemon_signer(self.config)
+        if created:
+            log.info("created the message-signing key: give signing.pub to the cell controllers", extra={"path": str(signing_key_path(self.config))})
+        for weakness in link_weaknesses(session_config(self.config.zenoh)):
+            log.warning(f"insecure bus: {weakness}")
+        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path, signer)
         watch = self.config.watch
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
@@ -103,6 +110,7 @@ class Daemon:
                 "output": str(self.output_root),
                 "observer": "polling" if watch.polling else "inotify",
                 "key_prefix": f"{self.config.bus.prefix}/{self.config.bus.cell}",
+                "signing_key_id": signer.key_id,
             },
         )
         notify("READY=1")
