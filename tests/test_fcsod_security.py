@@ -1,0 +1,213 @@
+"""The secure bus: mTLS, access control and end-to-end signatures, with real zenoh sessions in separate processes on loopback.
+
+The daemon (``fcsod run``), the cell controller (``fcsod subscribe``) and the
+attackers (``tests/zenoh_probe.py``) are separate processes; the
+certificates come from :func:`fcsod.pki.init_pki`.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import fcsod
+from fcsod.pki import add_client, init_pki
+from fcsod.signing import generate_signing_key
+
+from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+
+CUBE = DATA / "20mm-xyz-cube.stl"
+TOPICS = {"status", "quality", "grasps", "design", "placement"}
+FORGED = '{"job_id": "forged", "grasps": [{"closing_width_mm": 0.0}]}'
+
+
+def probe(config: Path, *args: str, timeout: float = 60) -> list[dict]:
+    """Run ``tests/zenoh_probe.py`` to its end; its JSON lines."""
+    done = subprocess.run(
+        [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args],
+        cwd=REPO, capture_output=True, text=True, timeout=timeout,
+    )
+    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+
+
+def start_probe(config: Path, *args: str) -> subprocess.Popen:
+    """Start ``tests/zenoh_probe.py`` in the background and wait until its session is open."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args], cwd=REPO, stdout=subprocess.PIPE, text=True
+    )
+    assert json.loads(process.stdout.readline())["event"] == "open"
+    return process
+
+
+def probe_output(process: subprocess.Popen) -> list[dict]:
+    """Lines of a background probe once it has ended."""
+    out, _ = process.communicate(timeout=60)
+    return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+
+
+def client_args(pki: Path, name: str) -> list[str]:
+    folder = pki / "clients" / name
+    return ["--zenoh-config", str(folder / "zenoh.json5"), "--verify-key", str(folder / "signing.pub")]
+
+
+def _cell(base: Path, acl: bool) -> dict:
+    """A daemon on TLS with the PKI of ``init_pki`` (access control on or off), a subscriber ``ctl1`` and one finished job."""
+    port = free_port()
+    pki = base / "pki"
+    files = init_pki(pki, "test", ["ctl1", "ctl2"], hosts=["127.0.0.1", "localhost"], port=port, acl=acl)
+    config = write_config(
+        base, port, scheme="tls", zenoh_extra=f'config_file = "{files.daemon_zenoh_config}"', bus_extra=f'signing_key = "{files.signing_key}"'
+    )
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config, save=base / "received", extra=client_args(pki, "ctl1"))
+    drop_job(base / "watch" / "cube", {"cube.stl": CUBE})
+    done = finished(subscriber, "cube")
+    assert done["body"]["state"] == "done", done
+    return {"base": base, "port": port, "pki": pki, "config": config, "daemon": daemon, "subscriber": subscriber, "job_id": done["job_id"]}
+
+
+@pytest.fixture(scope="module")
+def secure(tmp_path_factory):
+    """The default set-up: mTLS and access control; ``outsider`` holds a certificate of the same CA but is not in the ACL."""
+    cell = _cell(tmp_path_factory.mktemp("secure"), acl=True)
+    add_client(cell["pki"], "outsider", [f"tls/127.0.0.1:{cell['port']}"])
+    yield cell
+    cell["subscriber"].stop()
+    assert cell["daemon"].stop() == 0
+
+
+def _lines(cell: dict, job_id: str) -> list[dict]:
+    return [v for v in cell["subscriber"].json_lines() if v.get("job_id") == job_id]
+
+
+def test_client_with_a_valid_certificate_receives_every_topic_signed(secure):
+    lines = [v for v in _lines(secure, secure["job_id"]) if v["source"] == "live"]
+    assert TOPICS <= {v["topic"] for v in lines}
+    assert all(v["signature_ok"] for v in lines)
+    design = next(v for v in lines if v["topic"] == "design")
+    assert design["sha256_ok"] is True and Path(design["saved"]).read_bytes() == (secure["base"] / "out" / secure["job_id"] / "finger.stl").read_bytes()
+    grasps = next(v for v in lines if v["topic"] == "grasps")["body"]["grasps"]
+    assert grasps and grasps[0]["closing_width_mm"] > 0
+    assert not [v for v in secure["subscriber"].json_lines() if "rejected" in v]
+    daemon = secure["daemon"].json_lines()
+    assert not [v for v in daemon if "insecure bus" in str(v.get("message"))], "the secure set-up must not warn"
+
+
+@pytest.mark.parametrize("client", ["no-certificate", "other-ca", "plain-tcp"])
+def test_clients_without_a_certificate_of_the_ca_cannot_connect(secure, client):
+    folder = secure["pki"] / "clients" / "ctl1"
+    config = json.loads((folder / "zenoh.json5").read_text().split("\n", 2)[2])
+    tls = config["transport"]["link"]["tls"]
+    if client == "no-certificate":
+        del tls["connect_certificate"], tls["connect_private_key"]
+        tls["enable_mtls"] = False
+    elif client == "other-ca":
+        other = init_pki(secure["base"] / "other-ca", "test", ["ctl1"], hosts=["127.0.0.1"], port=secure["port"])
+        config = json.loads((other.clients["ctl1"] / "zenoh.json5").read_text().split("\n", 2)[2])
+    else:
+        config = {"mode": "client", "connect": {"endpoints": [f"tcp/127.0.0.1:{secure['port']}"]}, "scouting": {"multicast": {"enabled": False}}}
+    path = secure["base"] / f"{client}.json5"
+    path.write_text(json.dumps(config))
+    attempt = Process(["subscribe", "--config", str(secure["config"]), "--zenoh-config", str(path),
+                       "--verify-key", str(folder / "signing.pub"), "--timeout", "5"])
+    assert attempt.popen.wait(timeout=60) == 2
+    attempt.stop()
+    assert any("zenoh session cannot open" in line for line in attempt.lines), attempt.lines
+    assert not [line for line in attempt.lines if '"topic"' in line]
+
+
+def test_forged_publish_and_queryable_are_denied_by_access_control(secure):
+    """ctl2 holds a valid certificate and publishes forged grasps under the daemon's keys; ctl1 never sees a byte of them."""
+    pki, job_id = secure["pki"], secure["job_id"]
+    key = f"fcso/test/jobs/{job_id}/grasps"
+    watcher = start_probe(pki / "clients" / "ctl1" / "zenoh.json5", "--subscribe", "fcso/test/jobs/**", "--seconds", "12")
+    forging = start_probe(pki / "clients" / "ctl2" / "zenoh.json5", "--put", key, "--payload", FORGED, "--count", "30",
+                          "--queryable", "fcso/test/jobs/**", "--token", "fcso/test/daemon", "--seconds", "8")
+    time.sleep(2.0)
+    # ctl1 asks while ctl2's queryable is declared: only the daemon answers
+    replies = [e for e in probe(pki / "clients" / "ctl1" / "zenoh.json5", "--query", "fcso/test/jobs/**") if e["event"] == "reply"]
+    forger = probe_output(forging)
+    assert [e["event"] for e in forger][:1] == ["put"], forger
+    # a job published while the raw watcher listens shows that it receives what passes the daemon
+    drop_job(secure["base"] / "watch" / "after-forgery", {"cube.stl": DATA / "capsela200_plug.stl"})
+    finished(secure["subscriber"], "after-forgery")
+    seen = probe_output(watcher)
+
+    received = [e for e in seen if e["event"] == "received"]
+    assert any(e["key"].endswith("/status") for e in received), "the watcher received nothing at all"
+    assert not [e for e in received if "forged" in e["payload"]], "a forged publication passed the access control"
+    assert not [e for e in forger if e["event"] == "queried_by"], "a client's queryable was reached through the daemon"
+    assert {r["key"].rsplit("/", 1)[-1] for r in replies if job_id in r["key"]} == TOPICS
+    public_key = fcsod.load_verify_key(pki / "daemon" / "signing.pub")
+    for reply in replies:
+        fcsod.verify_message(reply["key"], base64.b64decode(reply["payload_base64"]), reply["attachment"].encode(), public_key)
+    assert not [v for v in secure["subscriber"].json_lines() if "rejected" in v or "forged" in json.dumps(v.get("body"))]
+
+
+def test_queryable_and_liveliness_refuse_clients_outside_the_acl(secure):
+    outsider = probe(secure["pki"] / "clients" / "outsider" / "zenoh.json5", "--liveliness", "fcso/test/daemon", "--query", "fcso/test/jobs/**")
+    named = probe(secure["pki"] / "clients" / "ctl2" / "zenoh.json5", "--liveliness", "fcso/test/daemon", "--query", "fcso/test/jobs/**")
+    assert outsider[0]["event"] == "open", "a certificate of the CA opens the TLS link"
+    assert next(e for e in outsider if e["event"] == "liveliness")["holders"] == []
+    assert not [e for e in outsider if e["event"] == "reply"]
+    assert next(e for e in named if e["event"] == "liveliness")["holders"] == ["fcso/test/daemon"]
+    assert len([e for e in named if e["event"] == "reply"]) >= len(TOPICS)
+
+
+def test_verify_message_rejects_altered_unsigned_and_foreign_messages(secure, tmp_path):
+    replies = [e for e in probe(secure["pki"] / "clients" / "ctl2" / "zenoh.json5", "--query", f"fcso/test/jobs/{secure['job_id']}/*") if e["event"] == "reply"]
+    public_key = fcsod.load_verify_key(secure["pki"] / "clients" / "ctl2" / "signing.pub")
+    grasps = next(r for r in replies if r["key"].endswith("/grasps"))
+    key, payload, attachment = grasps["key"], base64.b64decode(grasps["payload_base64"]), grasps["attachment"].encode()
+    assert fcsod.verify_message(key, payload, attachment, public_key)["job_id"] == secure["job_id"]
+    status = next(r for r in replies if r["key"].endswith("/status"))
+    attacker = generate_signing_key(tmp_path / "attacker.key")
+    forged = {
+        "payload changed": (key, FORGED.encode(), attachment),
+        "key changed": (status["key"], payload, attachment),
+        "unsigned": (key, payload, None),
+        "no signature": (key, payload, json.dumps({"job_id": secure["job_id"]}).encode()),
+        "other key": (key, payload, attacker.attachment(key, secure["job_id"], payload, None)),
+    }
+    for what, (k, p, a) in forged.items():
+        with pytest.raises(fcsod.SignatureError):
+            fcsod.verify_message(k, p, a, public_key)
+            pytest.fail(what)
+
+
+def test_without_access_control_forged_messages_fail_signature_verification(tmp_path):
+    """With the ACL off the forgeries reach the cell controller, and fcsod subscribe rejects every one."""
+    cell = _cell(tmp_path, acl=False)
+    try:
+        pki, job_id = cell["pki"], cell["job_id"]
+        warnings = [v["message"] for v in cell["daemon"].json_lines() if v.get("level") == "warning"]
+        assert any("access control is off" in w for w in warnings), warnings
+        real = {v["topic"]: v for v in _lines(cell, job_id) if v["source"] == "live"}
+        key = f"fcso/test/jobs/{job_id}/grasps"
+        attacker = generate_signing_key(tmp_path / "attacker.key")
+        real_grasps = json.dumps(real["grasps"]["body"])
+        attempts = {
+            "unsigned": [],
+            "stolen signature": ["--attachment", json.dumps(real["grasps"]["attachment"])],
+            "signature of another key expression": ["--attachment", json.dumps({**real["status"]["attachment"]})],
+            "attacker's key": ["--attachment", attacker.attachment(key, job_id, FORGED.encode(), None).decode()],
+        }
+        for what, extra in attempts.items():
+            payload = real_grasps if what == "signature of another key expression" else FORGED
+            lines = probe(pki / "clients" / "ctl2" / "zenoh.json5", "--put", key, "--payload", payload, "--count", "3", *extra)
+            assert [e["event"] for e in lines][:2] == ["open", "put"], (what, lines)
+        rejected = cell["subscriber"].wait_for(lambda v: isinstance(v, dict) and len([w for w in cell["subscriber"].json_lines() if "rejected" in w]) >= 12, 30)
+        assert rejected
+    finally:
+        cell["subscriber"].stop()
+        assert cell["daemon"].stop() == 0
+    reasons = [v["rejected"] for v in cell["subscriber"].json_lines() if "rejected" in v]
+    assert any("unsigned" in r for r in reasons) and any("bad signature" in r for r in reasons) and any("signed by key" in r for r in reasons), reasons
+    accepted = [v for v in cell["subscriber"].json_lines() if v.get("topic") == "grasps" and v.get("job_id") == job_id]
+    assert accepted and all(v["body"] == real["grasps"]["body"] for v in accepted), "a forged grasps message was accepted"
