@@ -66,6 +66,13 @@ def _parser() -> argparse.ArgumentParser:
     init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
     init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
 
+    journal = commands.add_parser("journal", help="check the job journal, or rebuild it from the job records")
+    journal_commands = journal.add_subparsers(dest="journal_command", required=True)
+    for name, text in (("check", "exit 0 when the journal is sound, 1 with the defect when not"),
+                       ("rebuild", "move the journal aside and rebuild it from <output>/<job_id>/job.mcap (the daemon must be stopped)")):
+        command = journal_commands.add_parser(name, help=text)
+        command.add_argument("--config", required=True, type=Path, help="daemon settings (state and output folders)")
+
     schema = commands.add_parser("schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels")
     schema.add_argument("--out", required=True, type=Path)
     return parser
@@ -85,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
             return _subscribe(args)
         if args.command == "pki":
             return _pki(args)
+        if args.command == "journal":
+            return _journal(args)
         return _schema(args)
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
@@ -94,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     import zenoh
 
+    from .journal import JournalCorrupt
     from .logs import setup_logging
     from .service import Daemon, StateDirBusy
 
@@ -101,7 +111,7 @@ def _run(args: argparse.Namespace) -> int:
     setup_logging(logging.getLevelName(args.log_level.upper()))
     try:
         return Daemon(config).run()
-    except StateDirBusy as exc:
+    except (StateDirBusy, JournalCorrupt) as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except zenoh.ZError as exc:
@@ -275,4 +285,37 @@ def _pki(args: argparse.Namespace) -> int:
     )
     for line in config_lines(files):
         print(line)
+    return EXIT_OK
+
+
+def _journal(args: argparse.Namespace) -> int:
+    from .journal import journal_problem
+    from .journal_repair import rebuild_journal
+    from .service import StateDirBusy, lock_state_dir
+
+    config = load_daemon_config(args.config)
+    path = config.state.dir / "journal.sqlite3"
+    if args.journal_command == "check":
+        problem = journal_problem(path)
+        if problem is not None:
+            print(f"{path}: corrupt: {problem}")
+            return EXIT_FAILED
+        print(f"{path}: sound" if path.exists() else f"{path}: no journal yet")
+        return EXIT_OK
+    config.state.dir.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = lock_state_dir(config.state.dir)
+    except StateDirBusy as exc:
+        print(f"fcsod: {exc}: stop the daemon first", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        result = rebuild_journal(path, config.output.root)
+    finally:
+        lock.close()
+    if result.moved_aside is not None:
+        print(f"old journal moved to {result.moved_aside}")
+    states = sorted(result.jobs.values())
+    print(f"rebuilt {path} from {len(result.jobs)} job records: " + ", ".join(f"{states.count(s)} {s}" for s in sorted(set(states))))
+    for job_id, why in result.skipped.items():
+        print(f"skipped {job_id}: {why}")
     return EXIT_OK

@@ -23,7 +23,7 @@ from . import __version__
 from .bus import Bus, session_config
 from .config import DaemonConfig
 from .jobs import hash_inputs, job_id, job_inputs
-from .journal import JobRow, Journal, StoredMessage
+from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
 from .messages import BusMessage, BusRecord, LogRecord, StateChangeRecord, StatusMessage, utc_now
 from .pki import link_weaknesses
 from .recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record, salvage
@@ -40,6 +40,23 @@ TICK_S = 0.2
 
 class StateDirBusy(Exception):
     """Another daemon holds the state folder's lock."""
+
+
+def lock_state_dir(state_dir: Path):
+    """Take the state folder's lock (held while the returned file stays open).
+
+    Raises
+    ------
+    StateDirBusy
+        Another fcsod (daemon or journal repair) holds it.
+    """
+    lock_file = open(state_dir / "fcsod.lock", "w")
+    try:
+        fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock_file.close()
+        raise StateDirBusy(f"{state_dir}: another fcsod is running with this state folder") from None
+    return lock_file
 
 
 @dataclass
@@ -83,7 +100,13 @@ class Daemon:
         """Run until SIGTERM or SIGINT; returns the process exit code."""
         self.state_dir.mkdir(parents=True, exist_ok=True)
         self.output_root.mkdir(parents=True, exist_ok=True)
-        self._lock_state_dir()
+        self._lock_file = lock_state_dir(self.state_dir)
+        problem = journal_problem(self.journal_path)
+        if problem is not None:
+            raise JournalCorrupt(
+                f"{self.journal_path}: the journal is corrupt ({problem}); fcsod does not start on it. "
+                "Run `fcsod journal rebuild --config FILE` to rebuild it from the job records (job.mcap) in the output folder"
+            )
         self.journal = Journal(self.journal_path)
         self._clean_work_dirs()
         for job in self.journal.requeue_running():
@@ -123,12 +146,6 @@ class Daemon:
     def _on_stop_signal(self, signum, frame) -> None:
         self.stopping = True
 
-    def _lock_state_dir(self) -> None:
-        self._lock_file = open(self.state_dir / "fcsod.lock", "w")
-        try:
-            fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise StateDirBusy(f"{self.state_dir}: another fcsod is running with this state folder") from None
 
     def _clean_work_dirs(self) -> None:
         """Remove work folders of runs cut off by a crash: a partial result is never left behind."""
@@ -312,22 +329,27 @@ class Daemon:
             self._adopt(row)
             return
         work_dir = self.output_root / f".tmp-{row.job_id}"
-        work_dir.mkdir(parents=True, exist_ok=True)
-        mcap = self.config.mcap
-        salvaged = work_dir / f"salvaged-{RECORD_NAME}"
-        recorder = salvage(work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
         status = self._status(row)
-        recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
-        recorder.write(TOPIC_BUS, status.record())
-        recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
-        recorder.finish()
-        for path in work_dir.iterdir():
-            if path != salvaged:
-                shutil.rmtree(path) if path.is_dir() else path.unlink()
-        os.replace(salvaged, work_dir / RECORD_NAME)
-        os.replace(work_dir, final_dir)
+        try:
+            work_dir.mkdir(parents=True, exist_ok=True)
+            for path in work_dir.iterdir():
+                if path.name != RECORD_NAME:
+                    shutil.rmtree(path) if path.is_dir() else path.unlink()
+            mcap = self.config.mcap
+            salvaged = work_dir / f"salvaged-{RECORD_NAME}"
+            recorder = salvage(work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
+            recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
+            recorder.write(TOPIC_BUS, status.record())
+            recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
+            recorder.finish()
+            os.replace(salvaged, work_dir / RECORD_NAME)
+            os.replace(work_dir, final_dir)
+        except OSError as exc:
+            # e.g. the output disk is full: the journal and the bus still say why the job failed
+            shutil.rmtree(work_dir, ignore_errors=True)
+            log.error(f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)})
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
         self._publish(status)
 
@@ -361,16 +383,5 @@ class Daemon:
 
     def _publish(self, message: BusMessage) -> None:
         """Keep the message for the queryable, then publish it."""
-        design_file = str(self.output_root / message.job_id / "finger.stl") if message.topic == "design" else None
-        self.journal.store_message(
-            StoredMessage(
-                message.job_id,
-                message.topic,
-                message.key_expr,
-                message.encoding,
-                None if design_file else message.payload,
-                message.attachment.decode() if message.attachment is not None else None,
-                design_file,
-            )
-        )
+        self.journal.store_message(stored_message(message, self.output_root))
         self.bus.publish(message)
