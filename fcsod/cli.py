@@ -49,7 +49,7 @@ def _parser() -> argparse.ArgumentParser:
     subscribe.add_argument("--config", required=True, type=Path, help="daemon settings (prefix, cell, zenoh)")
     subscribe.add_argument("--connect", action="append", metavar="ENDPOINT", help="daemon endpoint (default: the config's connect, else its listen endpoints)")
     subscribe.add_argument("--save", type=Path, metavar="DIR", help="save each received design as DIR/<job_id>.stl")
-    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results published before this start")
+    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results it published earlier (asked at start and whenever the daemon reappears)")
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
     subscribe.add_argument("--zenoh-config", type=Path, metavar="FILE", help="the client's zenoh config (from fcsod pki init) instead of the daemon's")
@@ -245,19 +245,27 @@ def _subscribe(args: argparse.Namespace) -> int:
                 if args.exit_after is not None and len(finished) >= args.exit_after:
                     all_done.set()
 
+    # every time the daemon appears (at start, or after it or the network was down) ask it for what was missed
+    ask = threading.Event()
+
     def liveliness(sample) -> None:
         state = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
         with lock:
             print(json.dumps({"source": "liveliness", "key": str(sample.key_expr), "daemon": state}), flush=True)
+        if state == "alive" and not args.no_query:
+            ask.set()
 
+    deadline = time.monotonic() + args.timeout if args.timeout is not None else None
     try:
         subscriber = session.declare_subscriber(jobs_key(prefix, cell), lambda s: show(s, "live"))
         watcher = session.liveliness().declare_subscriber(daemon_key(prefix, cell), liveliness, history=True)
-        if not args.no_query:
-            for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
-                if reply.ok is not None:
-                    show(reply.ok, "query")
-        all_done.wait(timeout=args.timeout)
+        while not all_done.is_set() and (deadline is None or time.monotonic() < deadline):
+            if ask.is_set():
+                ask.clear()
+                for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
+                    if reply.ok is not None:
+                        show(reply.ok, "query")
+            all_done.wait(timeout=0.2)
         subscriber.undeclare()
         watcher.undeclare()
     except KeyboardInterrupt:

@@ -383,7 +383,12 @@ def step_outputs(run: JobRun) -> None:
     """
     run.files = {**output_files(run.result), **run.files}
     for name, data in run.files.items():
-        (run.work_dir / name).write_bytes(data)
+        path = run.work_dir / name
+        try:
+            path.write_bytes(data)
+        except OSError as exc:
+            # a failed write() does not say which file it was writing
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
     run.recorder.write(
         TOPIC_OUTPUTS,
         OutputFilesRecord(
