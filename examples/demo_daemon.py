@@ -1,10 +1,15 @@
 """Demo of the fcsod daemon: ``python -m examples.demo_daemon`` from the repository root.
 
-Starts ``fcsod run`` on a fresh watch folder under ``demo-out/daemon/``,
-connects ``fcsod subscribe`` (the cell controller's view), drops the bundled
-batch ``examples/jobs/batch-demo`` into the watch folder file by file, shows
-what the subscriber receives, audits the job's MCAP record and stops the
-daemon. The outputs stay in ``demo-out/daemon/out/<job_id>/``.
+Makes the secure set-up with ``fcsod pki init`` in ``demo-out/daemon/pki``
+(a local CA, the daemon's and the cell controller's certificates, zenoh
+configs with mTLS and access control, the message-signing key), starts
+``fcsod run`` on a fresh watch folder under ``demo-out/daemon/``, connects
+``fcsod subscribe`` with the controller's certificate (the cell controller's
+view, every message's signature checked), drops the bundled batch
+``examples/jobs/batch-demo`` into the watch folder file by file, shows what
+the subscriber receives, shows that a client without a certificate is
+refused, audits the job's MCAP record and stops the daemon. The outputs stay
+in ``demo-out/daemon/out/<job_id>/``.
 """
 
 from __future__ import annotations
@@ -50,6 +55,9 @@ def _show(line: str) -> None:
     if "daemon" in message:
         print(f"  daemon liveliness: {message['daemon']}")
         return
+    if "rejected" in message:
+        print(f"  REJECTED {message['key']}: {message['rejected']}")
+        return
     topic, body = message["topic"], message.get("body") or {}
     if topic == "status":
         extra = body.get("error") or ", ".join(body.get("outputs", []))
@@ -66,12 +74,39 @@ def _show(line: str) -> None:
               f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}")
     elif topic == "design":
         print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
+    if "signature_ok" in message and message["topic"] == "status" and (message.get("body") or {}).get("state") == "queued":
+        print(f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the daemon's public key, signing.pub)")
+
+
+def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
+    """A client with the CA but no certificate of its own tries to listen in: the daemon refuses the TLS link."""
+    intruder = BASE / "no-certificate.json5"
+    settings = {
+        "mode": "client",
+        "connect": {"endpoints": [f"tls/127.0.0.1:{port}"]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {"tls": {"root_ca_certificate": str(controller / "ca.pem")}}},
+    }
+    intruder.write_text(json.dumps(settings), encoding="utf-8")
+    attempt = subprocess.run(
+        [sys.executable, "-m", "fcsod", "subscribe", "--config", str(config), "--zenoh-config", str(intruder),
+         "--verify-key", str(controller / "signing.pub"), "--timeout", "3"],
+        cwd=REPO, capture_output=True, text=True,
+    )
+    print(f"a client without a certificate: exit code {attempt.returncode}, {attempt.stderr.strip().splitlines()[-1][:140]}")
 
 
 def main() -> int:
     shutil.rmtree(BASE, ignore_errors=True)
     (BASE / "watch").mkdir(parents=True)
     port = _free_port()
+    pki = BASE / "pki"
+    print(f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port {port}")
+    subprocess.run(
+        [sys.executable, "-m", "fcsod", "pki", "init", str(pki), "--cell", "demo", "--client", "demo-controller", "--host", "127.0.0.1", "--port", str(port)],
+        cwd=REPO, check=True,
+    )
+    controller = pki / "clients" / "demo-controller"
     config = BASE / "fcsod.toml"
     config.write_text(
         f"""[watch]
@@ -87,14 +122,16 @@ dir = "state"
 [bus]
 prefix = "fcso"
 cell = "demo"
+signing_key = "pki/daemon/signing.key"
 
 [zenoh]
-listen = ["tcp/127.0.0.1:{port}"]
+config_file = "pki/daemon/zenoh.json5"
+listen = ["tls/127.0.0.1:{port}"]
 multicast_scouting = false
 """,
         encoding="utf-8",
     )
-    print(f"starting fcsod (config {config}, zenoh tcp/127.0.0.1:{port}, log {BASE / 'daemon.log'})")
+    print(f"\nstarting fcsod (config {config}, zenoh tls/127.0.0.1:{port}, log {BASE / 'daemon.log'})")
     with open(BASE / "daemon.log", "w") as log:
         daemon = _fcsod("run", "--config", str(config), stdout=log, stderr=subprocess.STDOUT)
         try:
@@ -102,10 +139,11 @@ multicast_scouting = false
                 _wait_for_line(reader, '"fcsod started"', 120)
             subscriber = _fcsod(
                 "subscribe", "--config", str(config), "--save", str(BASE / "received"), "--exit-after", "1", "--timeout", "600",
+                "--zenoh-config", str(controller / "zenoh.json5"), "--verify-key", str(controller / "signing.pub"),
                 stdout=subprocess.PIPE,
             )
             _wait_for_line(subscriber.stdout, '"alive"', 120)
-            print("subscriber connected; dropping the batch file by file")
+            print("cell controller connected with its certificate; dropping the batch file by file")
             job = BASE / "watch" / BATCH.name
             job.mkdir()
             for path in sorted(BATCH.iterdir()):
@@ -116,6 +154,7 @@ multicast_scouting = false
             for line in subscriber.stdout:
                 _show(line)
             subscriber.wait()
+            _try_without_certificate(config, controller, port)
         finally:
             daemon.send_signal(signal.SIGTERM)
             daemon.wait(timeout=60)
