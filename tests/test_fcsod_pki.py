@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import stat
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -90,3 +91,18 @@ def test_plain_tcp_is_named_as_a_weakness():
     weaknesses = link_weaknesses(config)
     assert any("tcp/0.0.0.0:7447" in w and "without TLS" in w for w in weaknesses)
     assert any("access control is off" in w for w in weaknesses)
+
+
+def test_systemd_unit_loads_every_key_the_configs_name_as_a_credential():
+    """Every file below /run/credentials/fcsod.service in zenoh.json5 and fcsod.toml comes from a LoadCredential= line."""
+    unit = (REPO / "deploy" / "fcsod.service").read_text()
+    loaded = {line.split("=", 1)[1].split(":", 1)[0] for line in unit.splitlines() if line.startswith("LoadCredential=")}
+    credentials = "/run/credentials/fcsod.service/"
+    deployed = zenoh.Config.from_file(str(REPO / "deploy" / "zenoh.json5"))
+    tls = json.loads(deployed.get_json("transport/link/tls"))
+    named = {v.removeprefix(credentials) for v in tls.values() if isinstance(v, str) and v.startswith(credentials)}
+    daemon = tomllib.loads((REPO / "deploy" / "fcsod.toml").read_text())
+    named.add(daemon["bus"]["signing_key"].removeprefix(credentials))
+    assert named == {"ca.pem", "cert.pem", "key.pem", "signing.key"}
+    assert named == loaded
+    assert "RestartPreventExitStatus=2" in unit
