@@ -28,7 +28,6 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from fcso.errors import ConfigError
 
-from .messages import daemon_key
 from .signing import SIGNING_KEY_NAME, VERIFY_KEY_NAME, generate_signing_key, write_private
 
 #: Certificate lifetimes, days.
@@ -156,7 +155,8 @@ def access_control(prefix: str, cell: str, clients: list[str]) -> dict:
     clients : list of str
         Common names of the client certificates allowed in.
     """
-    keys = [f"{prefix}/{cell}/**", daemon_key(prefix, cell)]
+    # ** also matches the liveliness token's key, <prefix>/<cell>/daemon
+    keys = [f"{prefix}/{cell}/**"]
     return {
         "enabled": True,
         "default_permission": "deny",
