@@ -1,7 +1,8 @@
 """Command line: ``fcsod run | audit | replay | subscribe | pki | journal | schema``.
 
-Exit codes: 0 success, 1 a check failed (audit) or nothing arrived in time
-(subscribe), 2 bad input (config file, arguments, unreadable record).
+Exit codes: 0 success, 1 a check failed (audit, journal check) or nothing
+arrived in time (subscribe), 2 bad input (config file, arguments, unreadable
+record, corrupt journal, a zenoh session that cannot open).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ def _parser() -> argparse.ArgumentParser:
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
     subscribe.add_argument("--zenoh-config", type=Path, metavar="FILE", help="the client's zenoh config (from fcsod pki init) instead of the daemon's")
-    subscribe.add_argument("--verify-key", type=Path, metavar="FILE", help="the daemon's public key, signing.pub (default: [bus] verify_key)")
+    subscribe.add_argument("--verify-key", type=Path, metavar="FILE", help="the daemon's public key, signing.pub (default: [bus] verify_key, else signing.pub next to the signing key)")
 
     pki = commands.add_parser("pki", help="certificates, keys and zenoh configs for the secure set-up")
     pki_commands = pki.add_subparsers(dest="pki_command", required=True)

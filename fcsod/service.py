@@ -146,7 +146,6 @@ class Daemon:
     def _on_stop_signal(self, signum, frame) -> None:
         self.stopping = True
 
-
     def _clean_work_dirs(self) -> None:
         """Remove work folders of runs cut off by a crash: a partial result is never left behind."""
         for path in self.output_root.glob(".tmp-*"):
