@@ -66,6 +66,11 @@ def _parser() -> argparse.ArgumentParser:
     init.add_argument("--host", action="append", metavar="NAME", help="name or address clients reach the daemon at (repeat; default this machine's)")
     init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
     init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
+    add = pki_commands.add_parser("add-client", help="issue one more certificate from the CA (a controller or a zenoh router); not added to the access control")
+    add.add_argument("directory", type=Path, metavar="DIR")
+    add.add_argument("name", metavar="NAME", help="the certificate's common name")
+    add.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the daemon's endpoint as this client reaches it, e.g. tls/printserver:7447")
+    add.add_argument("--host", action="append", metavar="NAME", help="name or address this subject is reached at (a router; repeat)")
 
     journal = commands.add_parser("journal", help="check the job journal, or rebuild it from the job records")
     journal_commands = journal.add_subparsers(dest="journal_command", required=True)
@@ -287,8 +292,13 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _pki(args: argparse.Namespace) -> int:
-    from .pki import config_lines, init_pki
+    from .pki import add_client, config_lines, init_pki
 
+    if args.pki_command == "add-client":
+        folder = add_client(args.directory, args.name, args.connect, args.host)
+        print(f"{folder}: certificate, key and zenoh.json5 of {args.name!r}; allow it in by adding {args.name!r} to the "
+              f"cert_common_names of {Path(args.directory) / 'daemon' / 'zenoh.json5'}")
+        return EXIT_OK
     files = init_pki(
         args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir
     )

@@ -237,11 +237,12 @@ def _load_ca(directory: Path) -> tuple[x509.Certificate, ec.EllipticCurvePrivate
     return certificate, key
 
 
-def add_client(directory: str | Path, name: str, connect: list[str]) -> Path:
+def add_client(directory: str | Path, name: str, connect: list[str], hosts: list[str] | None = None) -> Path:
     """Issue a client certificate from the CA in ``directory`` and write the client's folder.
 
     The client is not added to the daemon's access control: only the names
-    given to :func:`init_pki` are (re-run it, or edit ``daemon/zenoh.json5``).
+    given to :func:`init_pki` are (add its name to the ``cert_common_names``
+    in ``daemon/zenoh.json5``).
 
     Parameters
     ----------
@@ -251,6 +252,9 @@ def add_client(directory: str | Path, name: str, connect: list[str]) -> Path:
         The client's common name.
     connect : list of str
         The daemon's endpoints as the client reaches them, e.g. ``tls/printserver:7447``.
+    hosts : list of str, optional
+        Names and addresses the subject is reached at, for a zenoh router the
+        daemon connects to (its certificate's subject alternative names); default ``[name]``.
 
     Returns
     -------
@@ -260,7 +264,7 @@ def add_client(directory: str | Path, name: str, connect: list[str]) -> Path:
     directory = Path(directory)
     ca, ca_key = _load_ca(directory)
     folder = _private_dir(directory / "clients" / name)
-    certificate, key = issue(ca, ca_key, name, [name])
+    certificate, key = issue(ca, ca_key, name, hosts or [name])
     _write_cert(ca, folder / "ca.pem")
     _write_cert(certificate, folder / "cert.pem")
     _write_key(key, folder / "key.pem")

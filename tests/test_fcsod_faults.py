@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from fcsod.journal import journal_problem
+from fcsod.pki import add_client, init_pki
 from fcsod.recorder import TOPIC_STATE, read_record
 
 from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
@@ -96,21 +97,39 @@ def test_disk_full_while_writing_outputs_fails_the_job_cleanly_and_the_next_job_
 
 
 def test_zenoh_router_down_at_start_then_up_late_subscriber_gets_every_result(tmp_path):
-    router_port = free_port()
-    config = write_config(tmp_path, free_port(), zenoh_extra=f'connect = ["tcp/127.0.0.1:{router_port}"]')
+    """The daemon connects over mTLS to a plant router that is down at start-up; a controller behind the router comes later."""
+    port, router_port = free_port(), free_port()
+    pki = tmp_path / "pki"
+    files = init_pki(pki, "test", ["ctl1", "router"], hosts=["127.0.0.1"], port=port)
+    # the router is reached at an address: its certificate must name it
+    router_dir = add_client(pki, "router", [], hosts=["127.0.0.1"])
+    config = write_config(
+        tmp_path, port, scheme="tls", bus_extra=f'signing_key = "{files.signing_key}"',
+        zenoh_extra=f'config_file = "{files.daemon_zenoh_config}"\nconnect = ["tls/127.0.0.1:{router_port}"]',
+    )
     daemon = start_daemon(config)
     router = None
     try:
         drop_job(tmp_path / "watch" / "offline", {"cube.stl": CUBE})
         done = _daemon_says(daemon, "job done")
+        tls = {name: str(router_dir / f"{name}.pem") for name in ("ca", "cert", "key")}
         router_config = tmp_path / "router.json5"
-        router_config.write_text(json.dumps({"mode": "router", "listen": {"endpoints": [f"tcp/127.0.0.1:{router_port}"]},
-                                             "scouting": {"multicast": {"enabled": False}}}))
+        router_config.write_text(json.dumps({
+            "mode": "router",
+            "listen": {"endpoints": [f"tls/127.0.0.1:{router_port}"]},
+            "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+            "transport": {"link": {"tls": {
+                "root_ca_certificate": tls["ca"], "listen_certificate": tls["cert"], "listen_private_key": tls["key"],
+                "connect_certificate": tls["cert"], "connect_private_key": tls["key"], "enable_mtls": True,
+            }}},
+        }))
         router = subprocess.Popen([sys.executable, "-m", "tests.zenoh_probe", "--config", str(router_config), "--seconds", "120"],
                                   cwd=REPO, stdout=subprocess.PIPE, text=True)
         assert json.loads(router.stdout.readline())["event"] == "open"
         # the cell controller reaches the daemon only through the router
-        late = start_subscriber(config, extra=["--connect", f"tcp/127.0.0.1:{router_port}", "--timeout", "10"])
+        controller = pki / "clients" / "ctl1"
+        late = start_subscriber(config, extra=["--zenoh-config", str(controller / "zenoh.json5"), "--verify-key", str(controller / "signing.pub"),
+                                               "--connect", f"tls/127.0.0.1:{router_port}", "--timeout", "10"])
         try:
             late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "design", 30)
         finally:

@@ -106,3 +106,17 @@ def test_systemd_unit_loads_every_key_the_configs_name_as_a_credential():
     assert named == {"ca.pem", "cert.pem", "key.pem", "signing.key"}
     assert named == loaded
     assert "RestartPreventExitStatus=2" in unit
+
+
+def test_pki_add_client_issues_from_the_same_ca_without_touching_the_access_control(tmp_path, capsys):
+    init_pki(tmp_path, "c1", ["a"], hosts=["localhost"])
+    acl_before = (tmp_path / "daemon" / "zenoh.json5").read_text()
+    assert main(["pki", "add-client", str(tmp_path), "plant-router", "--connect", "tls/printer:7447", "--host", "10.0.0.5"]) == 0
+    assert "cert_common_names" in capsys.readouterr().out
+    leaf = _cert(tmp_path / "clients" / "plant-router" / "cert.pem")
+    leaf.verify_directly_issued_by(_cert(tmp_path / "ca" / "ca.pem"))
+    names = leaf.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert [str(ip) for ip in names.get_values_for_type(x509.IPAddress)] == ["10.0.0.5"]
+    assert _mode(tmp_path / "clients" / "plant-router" / "key.pem") == 0o600
+    assert (tmp_path / "daemon" / "zenoh.json5").read_text() == acl_before
+    assert main(["pki", "add-client", str(tmp_path / "nothing"), "x", "--connect", "tls/printer:7447"]) == 2
