@@ -37,7 +37,7 @@ LEAF_DAYS = 825
 #: zenoh messages a named client may send to the daemon (ingress on the daemon's session).
 CLIENT_INGRESS = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
 #: zenoh messages the daemon's session may send to a named client (egress).
-DAEMON_EGRESS = ["put", "delete", "reply", "declare_queryable", "liveliness_token"]
+DAEMON_EGRESS = ["put", "reply", "declare_queryable", "liveliness_token"]
 
 _HEADER = "// {what}\n// Written by `fcsod pki init`; zenoh 1.x configuration (JSON5, plain JSON here).\n"
 
