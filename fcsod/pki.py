@@ -36,7 +36,8 @@ LEAF_DAYS = 825
 
 #: zenoh messages a named client may send to the daemon (ingress on the daemon's session).
 CLIENT_INGRESS = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
-#: zenoh messages the daemon's session may send to a named client (egress).
+#: zenoh messages the daemon's session may send to a named client (egress); a zenoh router between the
+#: daemon and the controllers routes queries only to queryables declared to it, hence declare_queryable.
 DAEMON_EGRESS = ["put", "reply", "declare_queryable", "liveliness_token"]
 
 _HEADER = "// {what}\n// Written by `fcsod pki init`; zenoh 1.x configuration (JSON5, plain JSON here).\n"

@@ -170,24 +170,35 @@ class JobRun:
         record: bool = True,
     ) -> BusMessage:
         """The job's status message, recorded on the bus channel and as a state change (unless ``record`` is false)."""
-        body = StatusMessage(
-            job_id=self.task.job_id,
-            state=state,
-            folder=self.task.folder,
-            attempt=self.task.attempt,
-            queued_at=self.task.queued_at,
-            started_at=self.task.started_at,
-            finished_at=finished_at,
-            error=error,
-            outputs=outputs or [],
-            warnings=warnings or [],
-        )
-        bus = self.task.config.bus
-        message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
+        message = status_message(self.task, state, finished_at, error, outputs, warnings)
         if record:
             self.recorder.write(TOPIC_BUS, message.record())
             self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
         return message
+
+
+def status_message(
+    task: JobTask,
+    state: str,
+    finished_at: str | None = None,
+    error: str | None = None,
+    outputs: list[str] | None = None,
+    warnings: list[str] | None = None,
+) -> BusMessage:
+    """The status message of ``task`` in ``state`` (times UTC ISO 8601)."""
+    body = StatusMessage(
+        job_id=task.job_id,
+        state=state,
+        folder=task.folder,
+        attempt=task.attempt,
+        queued_at=task.queued_at,
+        started_at=task.started_at,
+        finished_at=finished_at,
+        error=error,
+        outputs=outputs or [],
+        warnings=warnings or [],
+    )
+    return BusMessage.json_body(task.config.bus.prefix, task.config.bus.cell, "status", body)
 
 
 # ------------------------------------------------------------------------ steps
@@ -573,14 +584,22 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     work_dir = output_root / f".tmp-{task.job_id}"
     final_dir = output_root / task.job_id
     shutil.rmtree(work_dir, ignore_errors=True)
-    work_dir.mkdir(parents=True)
-    recorder = Recorder(work_dir / RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    try:
+        work_dir.mkdir(parents=True)
+        recorder = Recorder(work_dir / RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    except OSError as exc:
+        # not even the record can start (a full disk): the journal and the bus still say why
+        error = io_failure(exc, Path(task.folder), output_root) or f"internal error: {type(exc).__name__}: {exc}"
+        shutil.rmtree(work_dir, ignore_errors=True)
+        emit(("log", "error", error, {}))
+        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)]))
+        return
     run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
     recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
     emit(("publish", run.status("running")))
-    recorder.flush()
     error = None
     try:
+        recorder.flush()
         for step in STEPS:
             started = time.perf_counter()
             step(run)

@@ -55,7 +55,8 @@ def _fill(path: Path, leave_bytes: int) -> Path:
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="mounting the small filesystem needs root")
-def test_disk_full_while_writing_outputs_fails_the_job_cleanly_and_the_next_job_runs(tmp_path):
+@pytest.mark.parametrize("free_bytes", [96 * 1024, 0], ids=["full-while-writing-outputs", "full-before-the-record-starts"])
+def test_disk_full_while_writing_outputs_fails_the_job_cleanly_and_the_next_job_runs(tmp_path, free_bytes):
     out = tmp_path / "out"
     _mount_tmpfs(out, 8 * 1024 * 1024)
     try:
@@ -63,8 +64,8 @@ def test_disk_full_while_writing_outputs_fails_the_job_cleanly_and_the_next_job_
         daemon = start_daemon(config)
         subscriber = start_subscriber(config, extra=["--no-query"])
         try:
-            # room for the record's first stages, not for the outputs
-            filler = _fill(out, 96 * 1024)
+            # 96 kB: room for the record's first stages, not for the outputs
+            filler = _fill(out, free_bytes)
             drop_job(tmp_path / "watch" / "full", {"cube.stl": CUBE})
             failed = finished(subscriber, "full")
             filler.unlink()
