@@ -606,7 +606,8 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
             run.log("info", f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s", stage=step.__name__.removeprefix("step_"))
             recorder.flush()
     except FcsoError as exc:
-        error = str(exc)
+        # a part that vanished is the symptom; a deleted folder is the cause
+        error = str(exc) if run.folder.is_dir() else str(JobFolderDeleted(run.folder))
     except TimeLimitExceeded:
         error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({config.jobs.time_limit_seconds:g} s)"
     except JobFolderDeleted as exc:

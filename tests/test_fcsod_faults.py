@@ -224,12 +224,17 @@ def test_job_folder_deleted_while_its_job_runs_fails_cleanly(tmp_path):
     daemon = start_daemon(config)
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
-        folder = tmp_path / "watch" / "withdrawn"
+        folder, waiting = tmp_path / "watch" / "withdrawn", tmp_path / "watch" / "withdrawn-while-queued"
         drop_job(folder, {"solar_tracker.stl": SOLAR})
         _daemon_says(daemon, "job started")
         daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+        # one job at a time: this one waits in the queue while the first runs
+        drop_job(waiting, {"cube.stl": CUBE})
+        _daemon_says(daemon, "job queued", folder=str(waiting))
+        shutil.rmtree(waiting)
         shutil.rmtree(folder)
         failed = finished(subscriber, "withdrawn")
+        failed_queued = finished(subscriber, "withdrawn-while-queued")
         drop_job(tmp_path / "watch" / "next", {"cube.stl": CUBE})
         done = finished(subscriber, "next")
     finally:
@@ -241,5 +246,7 @@ def test_job_folder_deleted_while_its_job_runs_fails_cleanly(tmp_path):
     assert sorted(p.name for p in (tmp_path / "out" / failed["job_id"]).iterdir()) == ["job.mcap"]
     published = {v["topic"] for v in subscriber.json_lines() if v.get("job_id") == failed["job_id"]}
     assert published == {"status"}, "a withdrawn job's design must not reach the cell"
+    assert failed_queued["body"]["state"] == "failed"
+    assert failed_queued["body"]["error"].startswith(f"{waiting}: the job folder was deleted while its job ran")
     assert done["body"]["state"] == "done"
     assert not list((tmp_path / "out").glob(".tmp-*"))
