@@ -8,13 +8,17 @@ certificates come from :func:`fcsod.pki.init_pki`.
 from __future__ import annotations
 
 import base64
+import datetime
 import json
+import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
 
 import fcsod
 from fcsod.pki import add_client, init_pki
@@ -99,7 +103,23 @@ def test_client_with_a_valid_certificate_receives_every_topic_signed(secure):
     assert not [v for v in daemon if "insecure bus" in str(v.get("message"))], "the secure set-up must not warn"
 
 
-@pytest.mark.parametrize("client", ["no-certificate", "other-ca", "plain-tcp"])
+def _expire(folder: Path, ca_dir: Path) -> None:
+    """Re-issue the certificate in ``folder`` (same subject and key) valid from 10 days ago to yesterday."""
+    ca = x509.load_pem_x509_certificate((ca_dir / "ca.pem").read_bytes())
+    ca_key = serialization.load_pem_private_key((ca_dir / "ca.key").read_bytes(), password=None)
+    current = x509.load_pem_x509_certificate((folder / "cert.pem").read_bytes())
+    now = datetime.datetime.now(datetime.timezone.utc)
+    builder = (
+        x509.CertificateBuilder().subject_name(current.subject).issuer_name(ca.subject).public_key(current.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(days=10)).not_valid_after(now - datetime.timedelta(days=1))
+    )
+    for extension in current.extensions:
+        builder = builder.add_extension(extension.value, extension.critical)
+    (folder / "cert.pem").write_bytes(builder.sign(ca_key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM))
+
+
+@pytest.mark.parametrize("client", ["no-certificate", "other-ca", "plain-tcp", "expired"])
 def test_clients_without_a_certificate_of_the_ca_cannot_connect(secure, client):
     folder = secure["pki"] / "clients" / "ctl1"
     config = json.loads((folder / "zenoh.json5").read_text().split("\n", 2)[2])
@@ -110,8 +130,15 @@ def test_clients_without_a_certificate_of_the_ca_cannot_connect(secure, client):
     elif client == "other-ca":
         other = init_pki(secure["base"] / "other-ca", "test", ["ctl1"], hosts=["127.0.0.1"], port=secure["port"])
         config = json.loads((other.clients["ctl1"] / "zenoh.json5").read_text().split("\n", 2)[2])
-    else:
+    elif client == "plain-tcp":
         config = {"mode": "client", "connect": {"endpoints": [f"tcp/127.0.0.1:{secure['port']}"]}, "scouting": {"multicast": {"enabled": False}}}
+    else:
+        # ctl2 is in the access control: only the expiry can keep it out
+        expired = secure["base"] / "ctl2-expired"
+        shutil.copytree(secure["pki"] / "clients" / "ctl2", expired)
+        _expire(expired, secure["pki"] / "ca")
+        text = (expired / "zenoh.json5").read_text().replace(str((secure["pki"] / "clients" / "ctl2").resolve()), str(expired.resolve()))
+        config = json.loads(text.split("\n", 2)[2])
     path = secure["base"] / f"{client}.json5"
     path.write_text(json.dumps(config))
     attempt = Process(["subscribe", "--config", str(secure["config"]), "--zenoh-config", str(path),
