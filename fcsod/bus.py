@@ -16,7 +16,6 @@ import zenoh
 from .config import BusConfig, ZenohConfig
 from .journal import stored_messages
 from .messages import BusMessage, daemon_key, jobs_key
-from .signing import Signer
 
 log = logging.getLogger("fcsod.bus")
 
@@ -48,8 +47,8 @@ def open_session(settings: ZenohConfig, listen: list[str] | None = None, connect
     return zenoh.open(session_config(settings, listen, connect))
 
 
-def put(session: zenoh.Session, message: BusMessage, signer: Signer) -> None:
-    """Publish one message reliably, signed by ``signer``, blocking rather than dropping when the link is congested."""
+def put(session: zenoh.Session, message: BusMessage) -> None:
+    """Publish one message reliably, blocking rather than dropping when the link is congested."""
     publisher = session.declare_publisher(
         message.key_expr,
         encoding=zenoh.Encoding(message.encoding),
@@ -57,7 +56,7 @@ def put(session: zenoh.Session, message: BusMessage, signer: Signer) -> None:
         reliability=zenoh.Reliability.RELIABLE,
     )
     try:
-        publisher.put(message.payload, attachment=signer.attachment(message.key_expr, message.job_id, message.payload, message.attachment))
+        publisher.put(message.payload, attachment=message.attachment)
     finally:
         publisher.undeclare()
 
@@ -77,14 +76,11 @@ class Bus:
         Session settings.
     journal_path : Path
         The SQLite journal the queryable reads.
-    signer : Signer
-        Signs every message published and every reply.
     """
 
-    def __init__(self, bus: BusConfig, settings: ZenohConfig, journal_path: Path, signer: Signer):
+    def __init__(self, bus: BusConfig, settings: ZenohConfig, journal_path: Path):
         self.bus = bus
         self.journal_path = journal_path
-        self.signer = signer
         self.session = open_session(settings)
         self._lock = threading.Lock()
         self._token = self.session.liveliness().declare_token(daemon_key(bus.prefix, bus.cell))
@@ -93,7 +89,7 @@ class Bus:
     def publish(self, message: BusMessage) -> None:
         """Publish one job message."""
         with self._lock:
-            put(self.session, message, self.signer)
+            put(self.session, message)
 
     def _answer(self, query: zenoh.Query) -> None:
         """Reply with every stored message whose key the query's key expression intersects."""
@@ -109,8 +105,7 @@ class Bus:
                         continue
                     payload = path.read_bytes()
                 attachment = stored.attachment.encode() if stored.attachment is not None else None
-                signed = self.signer.attachment(stored.key_expr, stored.job_id, payload, attachment)
-                query.reply(stored.key_expr, payload, encoding=zenoh.Encoding(stored.encoding), attachment=signed)
+                query.reply(stored.key_expr, payload, encoding=zenoh.Encoding(stored.encoding), attachment=attachment)
         except Exception as exc:  # a failing reply must not kill zenoh's callback thread
             log.error("queryable: cannot answer %s: %s", wanted, exc)
             query.reply_err(f"fcsod cannot answer: {exc}")

@@ -167,7 +167,7 @@ def _replay(args: argparse.Namespace) -> int:
         matched = probe.matching_status.matching
         probe.undeclare()
         for message in messages:
-            put(session, message, signer)
+            put(session, signer.sign(message))
             print(f"replayed {message.key_expr} ({message.encoding}, {len(message.payload)} bytes)")
         # let the reliable link deliver before the session closes
         time.sleep(0.5)
@@ -311,6 +311,7 @@ def _journal(args: argparse.Namespace) -> int:
     from .journal import journal_problem
     from .journal_repair import rebuild_journal
     from .service import StateDirBusy, lock_state_dir
+    from .signing import daemon_signer
 
     config = load_daemon_config(args.config)
     path = config.state.dir / "journal.sqlite3"
@@ -328,7 +329,8 @@ def _journal(args: argparse.Namespace) -> int:
         print(f"fcsod: {exc}: stop the daemon first", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        result = rebuild_journal(path, config.output.root)
+        signer, _ = daemon_signer(config)
+        result = rebuild_journal(path, config.output.root, signer)
     finally:
         lock.close()
     if result.moved_aside is not None:

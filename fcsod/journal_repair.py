@@ -18,6 +18,7 @@ from pathlib import Path
 from .journal import JobRow, Journal, stored_message
 from .messages import BusMessage, BusRecord, StatusMessage
 from .recorder import TOPIC_BUS, TOPIC_STATE, read_record
+from .signing import Signer
 from .worker import RECORD_NAME
 
 
@@ -55,7 +56,7 @@ def job_row_from_record(job_id: str, record: Path) -> tuple[JobRow, list[BusMess
     return row, list(latest.values())
 
 
-def rebuild_journal(journal_path: str | Path, output_root: str | Path) -> RebuildResult:
+def rebuild_journal(journal_path: str | Path, output_root: str | Path, signer: Signer) -> RebuildResult:
     """Write a new journal from every ``<output_root>/<job_id>/job.mcap``; an existing journal file is moved aside, never deleted.
 
     Parameters
@@ -64,6 +65,8 @@ def rebuild_journal(journal_path: str | Path, output_root: str | Path) -> Rebuil
         ``<state.dir>/journal.sqlite3``.
     output_root : path
         ``[output] root``.
+    signer : Signer
+        The daemon's signer: the records keep messages as the worker made them, unsigned.
 
     Returns
     -------
@@ -95,7 +98,7 @@ def rebuild_journal(journal_path: str | Path, output_root: str | Path) -> Rebuil
         for row, messages in sorted(rows, key=lambda item: item[0].queued_at or ""):
             journal.restore(row)
             for message in messages:
-                journal.store_message(stored_message(message, output_root))
+                journal.store_message(stored_message(signer.sign(message), output_root))
             result.jobs[row.job_id] = row.state
     finally:
         journal.close()

@@ -118,7 +118,8 @@ class Daemon:
             log.info("created the message-signing key: give signing.pub to the cell controllers", extra={"path": str(signing_key_path(self.config))})
         for weakness in link_weaknesses(session_config(self.config.zenoh)):
             log.warning(f"insecure bus: {weakness}")
-        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path, signer)
+        self.signer = signer
+        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
         watch = self.config.watch
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
@@ -381,6 +382,7 @@ class Daemon:
         return BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", body)
 
     def _publish(self, message: BusMessage) -> None:
-        """Keep the message for the queryable, then publish it."""
+        """Sign the message, keep it for the queryable, then publish it."""
+        message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
         self.bus.publish(message)

@@ -3,6 +3,9 @@
 Every message the daemon publishes, and every reply of its queryable,
 carries in its attachment (a JSON object) a ``signature`` made with the
 daemon's Ed25519 key over the message's key expression, job id and payload.
+A message is signed once, when it is first published; the journal keeps the
+signed attachment and the queryable replies with it, so a payload changed
+on disk afterwards (the journal, a finger.stl) fails verification too.
 TLS protects one link; the signature protects the message across every
 zenoh router between the print server and the cell, which the print server
 may not control. A cell controller checks each message with
@@ -19,6 +22,7 @@ import base64
 import hashlib
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 
 from cryptography.exceptions import InvalidSignature
@@ -27,7 +31,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from fcso.errors import ConfigError
 
 from .config import DaemonConfig
-from .messages import MessageSignature
+from .messages import BusMessage, MessageSignature
 
 #: Domain separation: a signature made for anything else never verifies here.
 SIGNATURE_CONTEXT = b"fcsod-signature-v1"
@@ -81,6 +85,10 @@ class Signer:
             Missing or unreadable file, or not an Ed25519 private key.
         """
         return cls(_load_private_key(Path(path)))
+
+    def sign(self, message: BusMessage) -> BusMessage:
+        """``message`` with its signed attachment (see :meth:`attachment`)."""
+        return replace(message, attachment=self.attachment(message.key_expr, message.job_id, message.payload, message.attachment))
 
     def attachment(self, key_expr: str, job_id: str, payload: bytes, attachment: bytes | None) -> bytes:
         """The attachment to send: ``attachment``'s JSON object (or ``{"job_id": ...}``) plus ``signature``.

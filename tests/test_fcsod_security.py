@@ -11,6 +11,7 @@ import base64
 import datetime
 import json
 import shutil
+import sqlite3
 import subprocess
 import sys
 import time
@@ -231,6 +232,15 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
             assert [e["event"] for e in lines][:2] == ["open", "put"], (what, lines)
         rejected = cell["subscriber"].wait_for(lambda v: isinstance(v, dict) and len([w for w in cell["subscriber"].json_lines() if "rejected" in w]) >= 12, 30)
         assert rejected
+
+        # messages are signed once, when published: what is changed on disk afterwards fails verification in a late joiner
+        finger = cell["base"] / "out" / job_id / "finger.stl"
+        finger.write_bytes(finger.read_bytes()[:-50] + bytes(50))
+        with sqlite3.connect(cell["base"] / "state" / "journal.sqlite3") as db:
+            db.execute("UPDATE messages SET payload = ? WHERE job_id = ? AND topic = 'grasps'", (FORGED.encode(), job_id))
+        late = start_subscriber(cell["config"], extra=[*client_args(pki, "ctl1"), "--timeout", "8"])
+        late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status", 30)
+        late.stop()
     finally:
         cell["subscriber"].stop()
         assert cell["daemon"].stop() == 0
@@ -238,3 +248,7 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
     assert any("unsigned" in r for r in reasons) and any("bad signature" in r for r in reasons) and any("signed by key" in r for r in reasons), reasons
     accepted = [v for v in cell["subscriber"].json_lines() if v.get("topic") == "grasps" and v.get("job_id") == job_id]
     assert accepted and all(v["body"] == real["grasps"]["body"] for v in accepted), "a forged grasps message was accepted"
+    replies = late.json_lines()
+    refused = {v["key"].rsplit("/", 1)[-1] for v in replies if v.get("source") == "query" and "rejected" in v}
+    answered = {v["topic"] for v in replies if v.get("source") == "query" and v.get("job_id") == job_id}
+    assert refused == {"design", "grasps"} and answered == TOPICS - refused, (refused, answered)
