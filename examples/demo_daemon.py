@@ -8,8 +8,13 @@ configs with mTLS and access control, the message-signing key), starts
 view, every message's signature checked), drops the bundled batch
 ``examples/jobs/batch-demo`` into the watch folder file by file, shows what
 the subscriber receives, shows that a client without a certificate is
-refused, audits the job's MCAP record and stops the daemon. The outputs stay
-in ``demo-out/daemon/out/<job_id>/``.
+refused, audits the job's MCAP record and stops the daemon. ``[ros2]`` is
+enabled: a zenoh session of the demo with the controller's certificate,
+standing in for a ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions
+and liveliness tokens the daemon published (unsigned: rmw_zenoh's format has
+no room for a signature; mTLS and the access control cover them) and
+decodes the grasps' PoseArrays. The outputs stay in
+``demo-out/daemon/out/<job_id>/``.
 """
 
 from __future__ import annotations
@@ -21,11 +26,16 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
+
+import zenoh
+from rosbags.typesys import Stores, get_typestore
 
 REPO = Path(__file__).resolve().parents[1]
 BATCH = REPO / "examples" / "jobs" / "batch-demo"
 BASE = REPO / "demo-out" / "daemon"
+ROS_DOMAIN_ID = 0
 
 
 def _free_port() -> int:
@@ -96,14 +106,47 @@ def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
     print(f"a client without a certificate: exit code {attempt.returncode}, {attempt.stderr.strip().splitlines()[-1][:140]}")
 
 
+class Ros2Cell:
+    """What a ROS 2 cell on rmw_zenoh sees of the daemon: data on ``<domain>/**`` and liveliness tokens under ``@ros2_lv/<domain>/**``."""
+
+    def __init__(self, zenoh_config: Path):
+        self.session = zenoh.open(zenoh.Config.from_file(str(zenoh_config)))
+        self.samples: list[tuple[str, bytes]] = []
+        self.tokens: list[str] = []
+        self._subscriber = self.session.declare_subscriber(f"{ROS_DOMAIN_ID}/**", lambda s: self.samples.append((str(s.key_expr), s.payload.to_bytes())))
+        self._tokens = self.session.liveliness().declare_subscriber(
+            f"@ros2_lv/{ROS_DOMAIN_ID}/**", lambda s: self.tokens.append(str(s.key_expr)), history=True
+        )
+
+    def show(self) -> None:
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        print("ROS 2 (rmw_zenoh wire format) liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
+        for token in dict.fromkeys(self.tokens):
+            print(f"  {token}")
+        print("ROS 2 key expressions published (CDR payloads):")
+        for key, count in Counter(key for key, _ in self.samples).items():
+            print(f"  {key}  ({count} messages)")
+        for key, payload in self.samples:
+            if "/grasps/" in key:
+                message = typestore.deserialize_cdr(payload, "geometry_msgs/msg/PoseArray")
+                for pose in message.poses:
+                    p, q = pose.position, pose.orientation
+                    print(f"  PoseArray in frame {message.header.frame_id}: position ({p.x:.4f}, {p.y:.4f}, {p.z:.4f}) m, "
+                          f"orientation xyzw ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})")
+
+    def close(self) -> None:
+        self.session.close()
+
+
 def main() -> int:
     shutil.rmtree(BASE, ignore_errors=True)
     (BASE / "watch").mkdir(parents=True)
     port = _free_port()
     pki = BASE / "pki"
-    print(f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port {port}")
+    print(f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port {port} --ros2-domain-id {ROS_DOMAIN_ID}")
     subprocess.run(
-        [sys.executable, "-m", "fcsod", "pki", "init", str(pki), "--cell", "demo", "--client", "demo-controller", "--host", "127.0.0.1", "--port", str(port)],
+        [sys.executable, "-m", "fcsod", "pki", "init", str(pki), "--cell", "demo", "--client", "demo-controller", "--host", "127.0.0.1", "--port", str(port),
+         "--ros2-domain-id", str(ROS_DOMAIN_ID)],
         cwd=REPO, check=True,
     )
     controller = pki / "clients" / "demo-controller"
@@ -128,6 +171,11 @@ signing_key = "pki/daemon/signing.key"
 config_file = "pki/daemon/zenoh.json5"
 listen = ["tls/127.0.0.1:{port}"]
 multicast_scouting = false
+
+[ros2]
+enabled = true
+domain_id = {ROS_DOMAIN_ID}
+namespace = "/demo"
 """,
         encoding="utf-8",
     )
@@ -143,6 +191,7 @@ multicast_scouting = false
                 stdout=subprocess.PIPE,
             )
             _wait_for_line(subscriber.stdout, '"alive"', 120)
+            ros2_cell = Ros2Cell(controller / "zenoh.json5")
             print("cell controller connected with its certificate; dropping the batch file by file")
             job = BASE / "watch" / BATCH.name
             job.mkdir()
@@ -154,6 +203,9 @@ multicast_scouting = false
             for line in subscriber.stdout:
                 _show(line)
             subscriber.wait()
+            time.sleep(0.5)
+            ros2_cell.show()
+            ros2_cell.close()
             _try_without_certificate(config, controller, port)
         finally:
             daemon.send_signal(signal.SIGTERM)

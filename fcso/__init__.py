@@ -12,7 +12,7 @@ from .config import DesignConfig, load_config  # noqa: E402
 from .design import DesignResult, design  # noqa: E402
 from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError  # noqa: E402
 from .output import output_files, write_outputs  # noqa: E402
-from .parts import Part, load_part  # noqa: E402
+from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
 from .rles import rles  # noqa: E402
 
@@ -24,10 +24,13 @@ __all__ = [
     "GeometryError",
     "MeshError",
     "NoGraspError",
+    "MeshItem",
     "Part",
     "design",
     "load_config",
     "load_part",
+    "load_parts",
+    "read_3mf_items",
     "output_files",
     "write_outputs",
     "rles",

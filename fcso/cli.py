@@ -12,7 +12,7 @@ from .design import design
 from .errors import FcsoError, GeometryError
 from .html_report import rebuild_report
 from .output import write_outputs
-from .parts import load_part
+from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
 from .table import quality_table
@@ -37,11 +37,12 @@ class ProgressLine:
         self.enabled = enabled
         self.stage = None
         self.last = (0, 0)
+        self.note = ""
         self.started = time.perf_counter()
         self.last_draw = 0.0
 
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        """``progress(stage, done, total)`` as :func:`fcso.design.design` calls it."""
+    def __call__(self, stage: str, done: int, total: int, note: str = "") -> None:
+        """``progress(stage, done, total, note)`` as :func:`fcso.design.design` calls it."""
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -52,16 +53,18 @@ class ProgressLine:
                 self.stream.write("\n")
             self.stage = stage
         elif done < total and now - self.last_draw < 0.1:
-            self.last = (done, total)
+            self.last, self.note = (done, total), note
             return
         self.last = (done, total)
+        self.note = note
         self._draw(now)
 
     def _draw(self, now: float) -> None:
         done, total = self.last
         fraction = min(done / total, 1.0) if total else 1.0
         bar = "#" * int(fraction * 30)
-        self.stream.write(f"\r{self.stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s")
+        note = f"  {self.note}" if self.note else ""
+        self.stream.write(f"\r{self.stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s{note}\033[K")
         self.stream.flush()
         self.last_draw = now
 
@@ -78,7 +81,9 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("design", help="design a fingerpad and finger for one or more parts")
-    run.add_argument("parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY)")
+    run.add_argument(
+        "parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object"
+    )
     run.add_argument("--out", required=True, type=Path, help="output folder")
     run.add_argument("--config", type=Path, help="settings (TOML)")
     run.add_argument("--units", default="mm", help="unit of the part files: mm, inch or a factor to mm")
@@ -87,6 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="seed of the random pose choice (poses.seed)")
     run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
+    run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
 
     report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
@@ -136,6 +142,8 @@ def _config(args) -> DesignConfig:
         overrides.setdefault("poses", {})["seed"] = args.seed
     if args.finger is not None:
         overrides.setdefault("finger", {})["mesh"] = args.finger
+    if getattr(args, "jobs", None) is not None:
+        overrides.setdefault("search", {})["jobs"] = args.jobs
     if not overrides:
         return config
     from pydantic import ValidationError
@@ -150,7 +158,11 @@ def _config(args) -> DesignConfig:
 
 def _design(args) -> int:
     config = _config(args)
-    parts = [load_part(p, units=args.units, scale_to_mm=args.scale_to, repair=args.repair) for p in args.parts]
+    parts = [
+        part
+        for path in args.parts
+        for part in load_parts(path, units=args.units, scale_to_mm=args.scale_to, repair=args.repair, split_bodies=config.parts.split_bodies)
+    ]
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
         result = design(parts, config, progress=progress, repair=args.repair)
@@ -158,6 +170,11 @@ def _design(args) -> int:
     finally:
         progress.close()
     if not args.quiet:
+        for entry in result.report.parts:
+            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
+            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
+        for entry in result.report.ungraspable:
+            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
         print(quality_table(result.report))
         for warning in result.report.warnings:
             print(f"warning: {warning}")

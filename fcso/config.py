@@ -107,11 +107,22 @@ class ContactConfig(_Section):
 
 
 class SearchConfig(_Section):
-    """Candidate enumeration (METHOD §8)."""
+    """Candidate search (METHOD §8, §8b): screening ranks, the best are re-evaluated exactly."""
 
-    max_exhaustive: int = Field(4096, ge=1, description="Evaluate every candidate when there are at most this many")
+    max_exhaustive: int = Field(20000, ge=1, description="Screen every candidate when there are at most this many")
     max_evaluations: int = Field(
-        4096, ge=1, description="Budget of the branch-and-bound search beyond max_exhaustive, candidates"
+        20000, ge=1, description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds"
+    )
+    exact_top_k: int = Field(8, ge=8, description="Best screened candidates re-evaluated exactly (METHOD §8b: k >= 8)")
+    report_candidates: int = Field(1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)")
+    jobs: int = Field(0, ge=0, description="Worker processes; 0: every available core")
+
+
+class PartsConfig(_Section):
+    """How part files become parts (overlapping shells are always united)."""
+
+    split_bodies: bool = Field(
+        True, description="Separate solids in one file become separate parts <file>#<k>; false refuses such a file"
     )
 
 
@@ -142,13 +153,14 @@ class FingerConfig(_Section):
         if self.mesh is not None:
             missing = [k for k in ("contact_origin_mm", "contact_normal", "up") if getattr(self, k) is None]
             if missing:
-                raise ValueError(f"a finger mesh needs its contact-face frame: set {', '.join(missing)}")
+                raise ValueError(f"finger mesh {self.mesh} needs its contact-face frame: set {', '.join(missing)} in [finger]")
         return self
 
 
 class DesignConfig(_Section):
     """Every setting of ``fcso design``."""
 
+    parts: PartsConfig = Field(default_factory=PartsConfig)
     sampler: SamplerConfig = Field(default_factory=SamplerConfig)
     gripper: GripperConfig = Field(default_factory=GripperConfig)
     filter: FilterConfig = Field(default_factory=FilterConfig)
@@ -205,7 +217,7 @@ def load_config(path: str | Path) -> DesignConfig:
     Parameters
     ----------
     path : str or Path
-        TOML file with sections ``[sampler] [gripper] [filter] [poses]
+        TOML file with sections ``[parts] [sampler] [gripper] [filter] [poses]
         [contact] [search] [finger]``.
 
     Returns

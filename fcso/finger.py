@@ -10,8 +10,9 @@ import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
 from .errors import ConfigError, GeometryError
-from .geometry import affine_3x4, box, to_manifold, to_trimesh
+from .geometry import affine_3x4, box, clip_to_box, to_manifold, to_trimesh, transform_points
 from .parts import read_mesh, unit_factor, validate_mesh
+from .sampler import FingerPlate
 
 #: Built-in finger: plate thickness and mounting flange, mm (Robotiq Hand-E sized).
 PLATE_THICKNESS_MM = 8.0
@@ -103,10 +104,10 @@ def load_finger(config: FingerConfig, repair: bool = False) -> FlatFinger:
     mesh, changes = validate_mesh(mesh, path, repair=repair)
     factor = unit_factor(config.units, path)
     mesh.apply_scale(factor)
-    normal = _unit(config.contact_normal, "finger.contact_normal")
-    up = _unit(config.up, "finger.up")
+    normal = _unit(config.contact_normal, path, "finger.contact_normal")
+    up = _unit(config.up, path, "finger.up")
     if abs(float(normal @ up)) > 1e-3:
-        raise ConfigError("finger.up", "must be perpendicular to finger.contact_normal")
+        raise ConfigError(path, "finger.up must be perpendicular to finger.contact_normal")
     return FlatFinger(
         mesh=mesh,
         contact_origin=np.asarray(config.contact_origin_mm, dtype=float),
@@ -117,11 +118,11 @@ def load_finger(config: FingerConfig, repair: bool = False) -> FlatFinger:
     )
 
 
-def _unit(vector, key: str) -> np.ndarray:
+def _unit(vector, path, key: str) -> np.ndarray:
     vector = np.asarray(vector, dtype=float)
     norm = float(np.linalg.norm(vector))
     if not np.isfinite(norm) or norm < 1e-9:
-        raise ConfigError(key, "must be a non-zero direction")
+        raise ConfigError(path, f"{key} must be a non-zero direction")
     return vector / norm
 
 
@@ -141,6 +142,34 @@ def pad_to_finger(finger: FlatFinger, sampler: SamplerConfig) -> np.ndarray:
         sampler.thickness_mm * outward + sampler.length_mm / 2.0 * along + sampler.width_mm / 2.0 * up
     )
     return matrix
+
+
+def finger_plate(finger: FlatFinger, sampler: SamplerConfig, gripper: GripperConfig) -> FingerPlate:
+    """The finger's body behind its pad, as the sampler's collision checks need it.
+
+    Measured on the finger mesh itself (the built-in plate or a user's
+    finger): the part of the finger behind the contact face (``u >= T`` in
+    the pad frame) between the pad's bottom edge and ``W + finger_height_mm``.
+
+    Returns
+    -------
+    FingerPlate
+        Thickness behind the pad's back face and extent along the pad
+        length, mm; thickness 0 when the finger has nothing there.
+    """
+    to_pad = np.linalg.inv(pad_to_finger(finger, sampler))
+    vertices = transform_points(to_pad, np.asarray(finger.mesh.vertices, dtype=np.float64))
+    # just below the top so a flange starting at that height is not counted
+    top = sampler.width_mm + gripper.finger_height_mm - 1e-6
+    inside_v, inside_f = clip_to_box(vertices, finger.mesh.faces, (sampler.thickness_mm, -np.inf, 0.0), (np.inf, np.inf, top))
+    if len(inside_f) == 0:
+        return FingerPlate(thickness_mm=0.0, v_min_mm=0.0, v_max_mm=sampler.length_mm)
+    used = inside_v[inside_f].reshape(-1, 3)
+    return FingerPlate(
+        thickness_mm=float(used[:, 0].max() - sampler.thickness_mm),
+        v_min_mm=float(min(used[:, 1].min(), 0.0)),
+        v_max_mm=float(max(used[:, 1].max(), sampler.length_mm)),
+    )
 
 
 @dataclass
@@ -170,12 +199,12 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
     pad_in_finger = (pad + backing).transform(affine_3x4(pad_to_finger(finger, sampler)))
     fused = to_manifold(finger.mesh) + pad_in_finger
     if fused.status() != manifold3d.Error.NoError:
-        raise GeometryError(f"finger union failed: {fused.status()}")
+        raise GeometryError(f"{finger.source}: finger union failed: {fused.status()}")
     mesh = to_trimesh(fused)
     bodies = len(fused.decompose())
     if not mesh.is_watertight or bodies != 1 or not fused.volume() > 0:
         raise GeometryError(
-            f"fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
+            f"{finger.source}: fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
             "check the finger's contact_origin_mm and contact_normal"
         )
     return FusedFinger(mesh=mesh, bodies=bodies, volume_mm3=float(fused.volume()), min_pad_thickness_mm=pad_thickness(pad, sampler))

@@ -25,7 +25,8 @@ from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .pad import surface_in_pad
-from .parts import load_part
+from .parallel import WorkerPool, resolve_jobs
+from .parts import Part, load_parts
 from .render import (
     PadPlacement,
     finger_picture,
@@ -147,9 +148,7 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
     fingerpad = _read_stl(directory / "fingerpad.stl")
     flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
     pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
-    parts = [
-        load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name) for p in report.parts
-    ]
+    parts = _reload_parts(report, directory)
     part_number = 0
     grasps = []
     for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
@@ -186,6 +185,36 @@ def _read_stl(path: Path) -> trimesh.Trimesh:
         raise MeshError(path, "file not found")
     # merged vertices: the signed distance used for seating needs a closed mesh
     return trimesh.load(str(path), force="mesh", process=True)
+
+
+def _reload_parts(report: DesignReport, directory: Path) -> list[Part]:
+    """The report's parts read again from their files, in the report's order, mm.
+
+    A file is read once with the scale recorded for it (a 3MF in its own unit,
+    then scaled), and its parts are matched by name (a one-part file whatever
+    its name in the report).
+    """
+    by_file: dict[tuple[str, float, bool], dict[str, Part]] = {}
+    parts = []
+    for entry in report.parts:
+        path = _part_path(entry.file, directory)
+        key = (str(path), entry.scale_to_mm, bool(entry.repairs))
+        if key not in by_file:
+            is_3mf = path.suffix.lower() == ".3mf"
+            loaded = load_parts(path, units=1.0 if is_3mf else entry.scale_to_mm, repair=bool(entry.repairs))
+            for part in loaded:
+                if is_3mf and entry.scale_to_mm != 1.0:
+                    part.mesh.apply_scale(entry.scale_to_mm)
+            by_file[key] = {part.name: part for part in loaded}
+        found = by_file[key]
+        if entry.name in found:
+            parts.append(found[entry.name])
+        elif len(found) == 1:
+            # a one-part file designed under another name
+            parts.append(next(iter(found.values())))
+        else:
+            raise MeshError(path, f"holds no part named {entry.name!r} any more (the file changed since the design)")
+    return parts
 
 
 def _part_path(file: str, directory: Path) -> Path:
@@ -235,12 +264,16 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
             (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
         ]
     report_progress = progress or (lambda stage, done, total: None)
-    rendered = {}
-    for done, (name, draw) in enumerate(jobs):
-        report_progress("pictures", done, len(jobs))
-        rendered[name] = draw()
+    report_progress("pictures", 0, len(jobs))
+    # the drawings are closures: forked workers inherit them, only PNG bytes come back
+    with WorkerPool([draw for _, draw in jobs], resolve_jobs(report.settings.search.jobs)) as pool:
+        images = pool.map(_draw, list(range(len(jobs))))
     report_progress("pictures", len(jobs), len(jobs))
-    return rendered
+    return {name: image for (name, _), image in zip(jobs, images)}
+
+
+def _draw(drawings: list[Callable[[], bytes]], index: int) -> bytes:
+    return drawings[index]()
 
 
 def _scenario_titles(report: DesignReport) -> list[str]:
@@ -357,8 +390,10 @@ def _summary(report: DesignReport, chosen) -> str:
     rows = [
         ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
         ("scenarios", len(report.scenarios)),
-        ("search", f"{report.search.kind}: {report.search.evaluated} of C = {report.search.candidates_total} candidates evaluated"
-         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}"),
+        ("search", f"{report.search.kind}: {report.search.screened} of C = {report.search.candidates_total} candidates screened, "
+         f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
+         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
+         f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is {report.search.gap or 0:.0%} of it"),
         ("chosen candidate", f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad"),
         ("finger", f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
          f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}"),

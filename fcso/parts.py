@@ -1,20 +1,49 @@
-"""Loading part and finger meshes: formats, units, validation and explicit repair."""
+"""Loading part and finger meshes: formats, units, validation, shells and explicit repair.
+
+One loader serves ``fcso design`` and ``fcsod``: a plain mesh file is one
+mesh, a 3MF is its build items (each object once, with the transforms of the
+items that place it). Each mesh is then split into solids the way a slicer
+prints it: shells that overlap or touch are one solid (manifold3d union), a
+shell nested inside another (an internal void, or a piece inside that void)
+stays with its outer solid, and separate solids are separate parts.
+"""
 
 from __future__ import annotations
 
+import hashlib
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import manifold3d
 import numpy as np
 import trimesh
 
 from .errors import MeshError
+from .geometry import to_manifold, to_trimesh
 
 #: Length of one unit in millimetres.
 UNIT_MM = {"mm": 1.0, "inch": 25.4, "m": 1000.0}
 
 #: File endings trimesh reads that fcso accepts.
 MESH_SUFFIXES = (".stl", ".3mf", ".obj", ".ply", ".dae")
+
+#: Refuse a 3MF whose entries would inflate beyond this many bytes in memory.
+MAX_3MF_UNCOMPRESSED_BYTES = 1 << 30
+#: Refuse a 3MF entry that inflates more than this many times (zip bomb).
+MAX_3MF_COMPRESSION_RATIO = 1000.0
+#: Refuse a 3MF archive with more entries than this.
+MAX_3MF_ENTRIES = 10_000
+
+# 3MF's unit names and their length in millimetres
+_3MF_UNIT_MM = {
+    "micron": 1e-3,
+    "millimeter": 1.0,
+    "centimeter": 10.0,
+    "inch": 25.4,
+    "foot": 304.8,
+    "meter": 1000.0,
+}
 
 
 @dataclass
@@ -33,6 +62,18 @@ class Part:
         Factor applied to the file's coordinates to get mm.
     repairs : list of str
         What ``repair=True`` changed, empty when nothing was repaired.
+    shells : int
+        Closed shells of the file's mesh that make up this part.
+    solid_index : int or None
+        ``k`` of the name ``<file>#<k>`` when the file held several separate
+        solids (1 = the largest), else None.
+    shell_note : str or None
+        How the shells were made one solid, in words; None for one shell.
+    warnings : list of str
+        What a user should know about how the file was read.
+    instances : list of (4, 4) float or None
+        Transforms (mesh frame to build frame, mm) of the file's build items
+        that hold this part: one per 3MF item, ``[None]`` for a plain mesh file.
     """
 
     name: str
@@ -40,6 +81,30 @@ class Part:
     mesh: trimesh.Trimesh
     scale: float = 1.0
     repairs: list[str] = field(default_factory=list)
+    shells: int = 1
+    solid_index: int | None = None
+    shell_note: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    instances: list[np.ndarray | None] = field(default_factory=lambda: [None])
+
+
+@dataclass
+class MeshItem:
+    """One mesh of a file as it was read: a plain mesh file's mesh or a 3MF build item.
+
+    Attributes
+    ----------
+    name : str
+        The file stem, or ``<stem>/<item>`` for a 3MF build item.
+    mesh : trimesh.Trimesh
+        Geometry in its own frame; a 3MF item is already in mm.
+    transform : (4, 4) float or None
+        3MF item transform (mesh frame to build frame, mm); None for a plain mesh file.
+    """
+
+    name: str
+    mesh: trimesh.Trimesh
+    transform: np.ndarray | None = None
 
 
 def unit_factor(units: str | float, source: str | Path = "units") -> float:
@@ -198,6 +263,280 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     return mesh, changes
 
 
+def check_zip_archive(
+    path: str | Path,
+    max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
+    max_ratio: float = MAX_3MF_COMPRESSION_RATIO,
+) -> None:
+    """Refuse a zip (3MF) archive that would inflate too much before reading it.
+
+    Python's zipfile stops each entry at its declared size, so checking the
+    declared sizes bounds the memory a reader can take.
+
+    Raises
+    ------
+    MeshError
+        Not a zip archive, too many entries, total inflated size above
+        ``max_uncompressed_bytes`` or an entry inflating more than ``max_ratio``
+        times.
+    """
+    try:
+        with zipfile.ZipFile(path) as archive:
+            entries = archive.infolist()
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise MeshError(path, f"not a readable 3MF (zip) archive: {exc}") from None
+    if len(entries) > MAX_3MF_ENTRIES:
+        raise MeshError(path, f"3MF archive holds {len(entries)} entries (limit {MAX_3MF_ENTRIES})")
+    total = sum(entry.file_size for entry in entries)
+    if total > max_uncompressed_bytes:
+        raise MeshError(path, f"3MF inflates to {total} bytes (limit {max_uncompressed_bytes}): refused as a zip bomb")
+    for entry in entries:
+        ratio = entry.file_size / max(entry.compress_size, 1)
+        if ratio > max_ratio:
+            raise MeshError(
+                path, f"3MF entry {entry.filename!r} inflates {ratio:.0f} times (limit {max_ratio:.0f}): refused as a zip bomb"
+            )
+
+
+def read_3mf_items(path: str | Path, max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES) -> list[MeshItem]:
+    """The build items of a 3MF file, each with its transform, in millimetres.
+
+    Every mesh instance of the build becomes an item (trimesh flattens
+    components, so a build item made of several bodies gives one item per
+    body), named ``<stem>/<node>``.
+
+    Raises
+    ------
+    MeshError
+        A zip bomb, an unreadable file or a build without items.
+    """
+    path = Path(path)
+    check_zip_archive(path, max_uncompressed_bytes)
+    try:
+        scene = trimesh.load(str(path), file_type="3mf", force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        raise MeshError(path, f"cannot be read as 3MF: {exc}") from None
+    # trimesh keeps 3MF coordinates in the file's unit (it reports the unit name)
+    unit = str(scene.units or "millimeter").lower().rstrip("s")
+    if unit not in _3MF_UNIT_MM:
+        raise MeshError(path, f"unknown 3MF unit {scene.units!r}")
+    to_mm = _3MF_UNIT_MM[unit]
+    items = []
+    for node in sorted(scene.graph.nodes_geometry):
+        matrix, geometry_name = scene.graph[node]
+        mesh = scene.geometry[geometry_name]
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            continue
+        mesh = mesh.copy()
+        mesh.apply_scale(to_mm)
+        transform = np.array(matrix, dtype=float)
+        transform[:3, 3] *= to_mm
+        items.append(MeshItem(name=f"{path.stem}/{node}", mesh=mesh, transform=transform))
+    if not items:
+        raise MeshError(path, "3MF build holds no mesh items")
+    return items
+
+
+@dataclass
+class Solid:
+    """One solid of a mesh as a slicer prints it.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Closed mesh of the solid, with its internal voids, mm.
+    shells : int
+        Shells of the input mesh that went into it.
+    """
+
+    mesh: trimesh.Trimesh
+    shells: int
+
+
+def mesh_solids(mesh: trimesh.Trimesh, source: str | Path) -> tuple[list[Solid], int]:
+    """Split a closed mesh into the solids a slicer would print, largest first.
+
+    Shells that overlap or touch are united (manifold3d); an inward shell (a
+    void) and any shell inside a void stay with the outermost solid that
+    encloses them.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        A validated closed, oriented mesh.
+    source : str or Path
+        Names the file in errors.
+
+    Returns
+    -------
+    solids : list of Solid
+        Largest volume first. With one shell, the mesh itself.
+    shells : int
+        Number of shells of ``mesh``.
+
+    Raises
+    ------
+    MeshError
+        A shell manifold3d cannot take as a closed manifold.
+    """
+    shells = mesh.split(only_watertight=False)
+    if len(shells) <= 1:
+        return [Solid(mesh=mesh, shells=1)], 1
+    manifolds = []
+    for number, shell in enumerate(shells):
+        if shell.volume < 0:
+            shell = shell.copy()
+            shell.invert()
+        try:
+            manifolds.append(to_manifold(shell))
+        except Exception as exc:
+            raise MeshError(source, f"shell {number + 1} of {len(shells)} is not a closed manifold ({exc})") from None
+    outward = [shell.volume > 0 for shell in shells]
+    voids = [m for m, out in zip(manifolds, outward) if not out]
+    void_union = manifold3d.Manifold.batch_boolean(voids, manifold3d.OpType.Add) if voids else None
+    # a shell inside a void is a piece in that cavity: added back after the voids are cut
+    islands = [
+        out and void_union is not None and (m ^ void_union).volume() >= m.volume() * (1 - 1e-6) for m, out in zip(manifolds, outward)
+    ]
+    solid = manifold3d.Manifold.batch_boolean(
+        [m for m, out, island in zip(manifolds, outward, islands) if out and not island], manifold3d.OpType.Add
+    )
+    if void_union is not None:
+        solid = solid - void_union
+    if any(islands):
+        solid = manifold3d.Manifold.batch_boolean([solid] + [m for m, island in zip(manifolds, islands) if island], manifold3d.OpType.Add)
+    components = [to_trimesh(c) for c in solid.decompose()]
+    outer = [c for c in components if c.volume > 0]
+    owners = [_outermost_container(c, outer) for c in components]
+    solids = []
+    for index, component in enumerate(components):
+        if owners[index] is not None:
+            continue
+        members = [c for c, owner in zip(components, owners) if owner is component or c is component]
+        whole = trimesh.util.concatenate(members) if len(members) > 1 else component
+        filled = to_manifold(component)
+        count = sum(1 for m, out in zip(manifolds, outward) if (m ^ filled).volume() > 1e-9 * abs(filled.volume()))
+        solids.append(Solid(mesh=whole, shells=max(count, 1)))
+    solids.sort(key=lambda s: -s.mesh.volume)
+    return solids, len(shells)
+
+
+def _outermost_container(component: trimesh.Trimesh, outer: list[trimesh.Trimesh]) -> trimesh.Trimesh | None:
+    """The largest outward shell other than ``component`` that encloses it, or None."""
+    probe = component.triangles_center[:1]
+    containers = [o for o in outer if o is not component and o.contains(probe)[0]]
+    return max(containers, key=lambda o: o.volume) if containers else None
+
+
+def _geometry_key(mesh: trimesh.Trimesh) -> str:
+    return hashlib.sha256(
+        np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes() + np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes()
+    ).hexdigest()
+
+
+def load_parts(
+    path: str | Path,
+    units: str | float = "mm",
+    scale_to_mm: float | None = None,
+    repair: bool = False,
+    split_bodies: bool = True,
+    max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
+) -> list[Part]:
+    """Load every part of a mesh file, as a slicer would print it.
+
+    Parameters
+    ----------
+    path : str or Path
+        STL, 3MF, OBJ, PLY (or DAE) file. A 3MF gives one part per distinct
+        object of its build (its own unit; ``units`` is not applied).
+    units : {'mm', 'inch', 'm'} or float
+        Unit of a plain mesh file's coordinates, or a factor to millimetres.
+    scale_to_mm : float, optional
+        Scale each mesh uniformly so its longest bounding-box side is this
+        long (mm), before splitting it into solids.
+    repair : bool
+        Try :func:`repair_mesh` before validating.
+    split_bodies : bool
+        Separate solids become separate parts ``<name>#<k>`` (largest first);
+        False refuses such a file.
+    max_uncompressed_bytes : int
+        Zip-bomb limit of a 3MF, bytes.
+
+    Returns
+    -------
+    list of Part
+        Overlapping or touching shells united into one solid each.
+
+    Raises
+    ------
+    MeshError
+        Naming the file and the defect (also several solids with
+        ``split_bodies=False``).
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".3mf":
+        items = read_3mf_items(path, max_uncompressed_bytes)
+        factor = 1.0
+    else:
+        items = [MeshItem(name=path.stem, mesh=read_mesh(path))]
+        factor = unit_factor(units, path)
+    distinct: dict[str, tuple[MeshItem, list[np.ndarray | None]]] = {}
+    for item in items:
+        distinct.setdefault(_geometry_key(item.mesh), (item, []))[1].append(item.transform)
+    one_object = len(distinct) == 1
+    parts = []
+    for item, transforms in distinct.values():
+        name = path.stem if one_object else item.name
+        where = path if one_object or not path.suffix.lower() == ".3mf" else f"{path} (build item {item.name})"
+        mesh = item.mesh
+        if not np.all(np.isfinite(mesh.vertices)) and not repair:
+            raise MeshError(where, mesh_defects(mesh)[0])
+        mesh, changes = validate_mesh(mesh, where, repair=repair)
+        scale = factor
+        if scale_to_mm is not None:
+            if not scale_to_mm > 0:
+                raise MeshError(path, f"scale-to length must be positive, got {scale_to_mm}")
+            scale = scale_to_mm / float(mesh.extents.max())
+        mesh.apply_scale(scale)
+        solids, shells = mesh_solids(mesh, where)
+        if len(solids) > 1 and not split_bodies:
+            raise MeshError(where, f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting")
+        warnings = []
+        if len(solids) > 1:
+            names = ", ".join(f"{name}#{k}" for k in range(1, len(solids) + 1))
+            warnings.append(f"{where} holds {len(solids)} separate solids ({shells} shells): designed as separate parts {names}")
+        for k, solid in enumerate(solids, start=1):
+            parts.append(
+                Part(
+                    name=f"{name}#{k}" if len(solids) > 1 else name,
+                    path=str(path),
+                    mesh=solid.mesh,
+                    scale=scale,
+                    repairs=changes,
+                    shells=solid.shells,
+                    solid_index=k if len(solids) > 1 else None,
+                    shell_note=_shell_note(solid, k, len(solids), shells, float(mesh.volume)),
+                    warnings=warnings,
+                    instances=transforms,
+                )
+            )
+    return parts
+
+
+def _shell_note(solid: Solid, k: int, solids: int, shells: int, shell_sum_mm3: float) -> str | None:
+    """How one part was made from a file's shells, for its report entry."""
+    if shells == 1:
+        return None
+    volume = f"volume {solid.mesh.volume:.1f} mm³"
+    if solids == 1:
+        return (
+            f"{shells} overlapping or touching shells united into one solid with manifold3d: "
+            f"{volume}, where the shells add up to {shell_sum_mm3:.1f} mm³"
+        )
+    made = f"{solid.shells} of its {shells} shells united with manifold3d" if solid.shells > 1 else f"1 of its {shells} shells"
+    return f"solid {k} of {solids} in the file (largest first), {made}; {volume}"
+
+
 def load_part(
     path: str | Path,
     units: str | float = "mm",
@@ -205,7 +544,7 @@ def load_part(
     repair: bool = False,
     name: str | None = None,
 ) -> Part:
-    """Load a part mesh and check it is a closed, positive-volume solid.
+    """Load a file that holds exactly one part (see :func:`load_parts`).
 
     Parameters
     ----------
@@ -225,21 +564,18 @@ def load_part(
     Returns
     -------
     Part
+        Overlapping or touching shells united into one solid.
 
     Raises
     ------
     MeshError
-        Naming the file and the defect.
+        Naming the file and the defect, also when the file holds several
+        separate solids or 3MF objects.
     """
-    path = Path(path)
-    mesh = read_mesh(path)
-    factor = unit_factor(units, path)
-    if not np.all(np.isfinite(mesh.vertices)) and not repair:
-        raise MeshError(path, mesh_defects(mesh)[0])
-    mesh, changes = validate_mesh(mesh, path, repair=repair)
-    if scale_to_mm is not None:
-        if not scale_to_mm > 0:
-            raise MeshError(path, f"scale-to length must be positive, got {scale_to_mm}")
-        factor = scale_to_mm / float(mesh.extents.max())
-    mesh.apply_scale(factor)
-    return Part(name=name or path.stem, path=str(path), mesh=mesh, scale=factor, repairs=changes)
+    parts = load_parts(path, units=units, scale_to_mm=scale_to_mm, repair=repair)
+    if len(parts) > 1:
+        raise MeshError(path, f"holds {len(parts)} parts (separate solids or 3MF objects): load it with fcso.load_parts")
+    part = parts[0]
+    if name is not None:
+        part.name = name
+    return part

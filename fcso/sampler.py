@@ -13,6 +13,9 @@ from .geometry import clip_to_box, triangle_areas_normals
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
 
+#: Sides of a grasp: the "+" pad and the "-" pad.
+SIDES = (1, -1)
+
 _INF = np.inf
 
 
@@ -83,6 +86,28 @@ class GraspSample:
         return matrix
 
 
+@dataclass(frozen=True)
+class FingerPlate:
+    """The flat finger's body that carries a pad, in that pad's frame (METHOD §3, item 3).
+
+    The plate starts at the pad's back face: it spans ``u in [T, T + thickness_mm]``,
+    ``v in [v_min_mm, v_max_mm]`` (the pad spans ``[0, L]``) and runs from the
+    pad's bottom edge ``w = 0`` to ``W + finger_height_mm``. Beside the pad
+    the plate is as wide as the real finger, so part material there counts too.
+
+    Attributes
+    ----------
+    thickness_mm : float
+        Plate thickness behind the pad's back face, mm.
+    v_min_mm, v_max_mm : float
+        Plate extent along the pad length, mm.
+    """
+
+    thickness_mm: float
+    v_min_mm: float
+    v_max_mm: float
+
+
 @dataclass
 class SamplerResult:
     """Valid samples of one scenario and what was rejected (reason -> count)."""
@@ -92,7 +117,7 @@ class SamplerResult:
     tried: int
 
 
-def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: GripperConfig) -> SamplerResult:
+def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: GripperConfig, plate: FingerPlate) -> SamplerResult:
     """Slide a pair of pad boxes over a part resting on the table.
 
     Parameters
@@ -104,6 +129,8 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
         least contact area.
     gripper : GripperConfig
         Opening range and finger height.
+    plate : FingerPlate
+        The flat finger's plate behind each pad (:func:`fcso.finger.finger_plate`).
 
     Returns
     -------
@@ -115,6 +142,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
     thickness, depth = sampler.thickness_mm, sampler.penetration_mm
     stride, clearance = sampler.stride, sampler.table_clearance_mm
     open_half = gripper.max_opening_mm / 2.0
+    plate_height = width + gripper.finger_height_mm
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     top = float(vertices[:, 2].max())
@@ -125,7 +153,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
         yaw = np.radians(yaw_deg)
         a = np.array([np.cos(yaw), np.sin(yaw), 0.0])
         b = np.cross([0.0, 0.0, 1.0], a)
-        # (a, b, z) coordinates: every footprint is an axis-aligned prism here
+        # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
         centres = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
@@ -135,6 +163,14 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
             slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
             if len(slab_f) == 0:
                 continue
+            # "+" plate: v = b - (s - L/2); "-" plate: v = (s + L/2) - b
+            plate_b = {
+                1: (s - length / 2.0 + plate.v_min_mm, s - length / 2.0 + plate.v_max_mm),
+                -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
+            }
+            plate_slabs = {
+                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
+            }
             heights = np.arange(clearance, top, stride)
             for h in heights:
                 prism_v, prism_f = clip_to_box(slab_v, slab_f, (-_INF, -_INF, h), (_INF, _INF, h + width))
@@ -154,14 +190,19 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                 if not (fits_open and fits_closed):
                     rejected["fit"] += 1
                     continue
-                above = _a_range(slab_v, slab_f, h + width, h + width + gripper.finger_height_mm)
-                if above is not None and (above[1] > a_max - depth + 1e-9 or above[0] < a_min + depth - 1e-9):
+                closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
+                if any(
+                    plate_slabs[side].meets_box(*_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height))
+                    for side in SIDES
+                ):
                     rejected["collision_finger"] += 1
                     continue
                 centre = (a_max + a_min) / 2.0
                 column = _a_range(slab_v, slab_f, h, _INF)
-                if column is not None and (
-                    column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness
+                open_back = {1: centre + open_half, -1: centre - open_half}
+                if (column is not None and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)) or any(
+                    plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
+                    for side in SIDES
                 ):
                     rejected["collision_descent"] += 1
                     continue
@@ -177,6 +218,67 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                     )
                 )
     return SamplerResult(samples=samples, rejected=rejected, tried=tried)
+
+
+def _plate_box(back_face_a: float, side: int, plate_thickness: float, b_range, z_low: float, z_high: float):
+    """Corners (a, b, z) of a finger plate whose front lies on a pad's back face at ``back_face_a``."""
+    a_low, a_high = sorted((back_face_a, back_face_a + side * plate_thickness))
+    return (a_low, b_range[0], z_low), (a_high, b_range[1], z_high)
+
+
+class _Slab:
+    """The part surface inside a slab of the sliding axis, for exact box-intersection tests.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The part surface clipped to the slab, ``(a, b, z)`` coordinates.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices, self.faces = vertices, faces
+        self.triangles = vertices[faces] if len(faces) else np.zeros((0, 3, 3))
+        self.lower = self.triangles.min(axis=1) if len(faces) else np.zeros((0, 3))
+        self.upper = self.triangles.max(axis=1) if len(faces) else np.zeros((0, 3))
+
+    def meets_box(self, lower, upper) -> bool:
+        """Whether the part's solid intersects the box ``[lower, upper]`` (within the slab), exactly.
+
+        The solid meets the box when its surface enters the box; with no
+        surface inside, the box is wholly inside or wholly outside the
+        solid, and the parity of the surface crossings of one ray from a
+        point of the box decides.
+        """
+        if len(self.faces) == 0:
+            return False
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        near = np.all(self.upper >= lower, axis=1) & np.all(self.lower <= upper, axis=1)
+        if near.any() and len(clip_to_box(self.vertices, self.faces[near], lower, upper)[1]):
+            return True
+        span_low, span_high = self.lower.min(axis=0), self.upper.max(axis=0)
+        if np.any(upper < span_low) or np.any(lower > span_high):
+            return False
+        point = np.clip((lower + upper) / 2.0, span_low, span_high)
+        return _inside(self.triangles, point)
+
+
+def _inside(triangles: np.ndarray, point: np.ndarray) -> bool:
+    """Whether ``point`` lies inside the closed surface ``triangles`` (parity of crossings of a ray along +a).
+
+    Only triangles of the slab are given: a ray along ``a`` stays in the slab,
+    so it crosses exactly the surface the slab holds.
+    """
+    b, z = triangles[:, :, 1], triangles[:, :, 2]
+    det = (b[:, 1] - b[:, 0]) * (z[:, 2] - z[:, 0]) - (b[:, 2] - b[:, 0]) * (z[:, 1] - z[:, 0])
+    usable = np.abs(det) > 1e-12
+    b, z, a, det = b[usable], z[usable], triangles[usable][:, :, 0], det[usable]
+    # a tiny fixed offset keeps the ray off shared edges and vertices
+    pb, pz = point[1] + 1.234567e-7, point[2] + 2.345678e-7
+    s = ((pb - b[:, 0]) * (z[:, 2] - z[:, 0]) - (b[:, 2] - b[:, 0]) * (pz - z[:, 0])) / det
+    t = ((b[:, 1] - b[:, 0]) * (pz - z[:, 0]) - (pb - b[:, 0]) * (z[:, 1] - z[:, 0])) / det
+    hit = (s >= 0) & (t >= 0) & (s + t <= 1)
+    crossing = a[:, 0] + s * (a[:, 1] - a[:, 0]) + t * (a[:, 2] - a[:, 0])
+    return bool(np.count_nonzero(hit & (crossing > point[0])) % 2)
 
 
 def _area(vertices: np.ndarray, faces: np.ndarray) -> float:

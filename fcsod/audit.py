@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,6 +76,8 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
         for item in inputs["files"]:
             say(f"  input {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}")
     for message in content.messages:
+        if message.message_encoding != "json":
+            continue
         body = message.json()
         if message.topic == TOPIC_STATE:
             say(f"{body['at']} state {body['state']}" + (f": {body['error']}" if body.get("error") else ""))
@@ -82,7 +85,7 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
             say(f"  {body['level']}: {body['message']}")
     poses = content.of(TOPIC_POSES)
     if poses:
-        say(f"poses: " + ", ".join(f"{p['part']} #{p['pose_index']} (p={p['probability']:.3f})" for p in poses))
+        say("poses: " + ", ".join(f"{p['part']} #{p['pose_index']} (p={p['probability']:.3f})" for p in poses))
     for samples in content.of(TOPIC_SAMPLES):
         rejected = ", ".join(f"{k} {v}" for k, v in samples["rejected"].items() if v) or "none"
         say(f"samples {samples['part']} #{samples['pose_index']}: {samples['valid_samples']} valid of {samples['tried_samples']} (rejected: {rejected})")
@@ -119,6 +122,9 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
             actual = hashlib.sha256(base64.b64decode(body["payload_base64"])).hexdigest()
             if announced != actual:
                 result.problems.append(f"{body['key_expr']}: payload hashes to {actual}, attachment announces {announced}")
+    ros2 = Counter((m.topic, m.schema_name) for m in content.messages if m.message_encoding == "cdr")
+    for (topic, type_name), count in ros2.items():
+        say(f"ROS 2 {topic} ({type_name}, cdr): {count} messages, for ros2 bag play")
     outputs = [f for o in content.of(TOPIC_OUTPUTS) for f in o["files"]]
     for item in outputs:
         say(f"  output {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}")

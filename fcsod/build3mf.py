@@ -8,6 +8,7 @@ item's mesh frame to the build-volume frame; ``None`` means not placed yet.
 from __future__ import annotations
 
 import io
+import uuid
 import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -19,16 +20,14 @@ import trimesh
 from lxml import etree
 
 from fcso.errors import MeshError
-from fcso.parts import read_mesh, unit_factor
-
-#: Refuse a 3MF whose entries would inflate beyond this many bytes in memory.
-MAX_3MF_UNCOMPRESSED_BYTES = 1 << 30
-#: Refuse a 3MF entry that inflates more than this many times (zip bomb).
-MAX_3MF_COMPRESSION_RATIO = 1000.0
-#: Refuse a 3MF archive with more entries than this.
-MAX_3MF_ENTRIES = 10_000
+from fcso.parts import MAX_3MF_UNCOMPRESSED_BYTES, read_3mf_items, read_mesh, unit_factor
 
 _CORE_NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+_PRODUCTION_NS = "http://schemas.microsoft.com/3dmanufacturing/production/2015/06"
+#: Namespace of fcsod's own metadata (``fcso:job_id``, ``fcso:finger_set``) in ``build.3mf``.
+FCSO_3MF_NS = "urn:fcsod:3mf:2026"
+#: Namespace of the deterministic UUIDs of ``build.3mf`` (uuid5 of job id and item).
+_UUID_NAMESPACE = uuid.UUID("5b0a7c52-4f6e-5d1c-9a57-2f1b0d3c6e11")
 _CONTENT_TYPES = (
     b'<?xml version="1.0" encoding="UTF-8"?>\n'
     b'<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
@@ -43,17 +42,6 @@ _RELS = (
     b'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>'
     b"</Relationships>"
 )
-# 3MF's unit names and their length in millimetres
-_3MF_UNIT_MM = {
-    "micron": 1e-3,
-    "millimeter": 1.0,
-    "centimeter": 10.0,
-    "inch": 25.4,
-    "foot": 304.8,
-    "meter": 1000.0,
-}
-
-
 @dataclass
 class BuildItem:
     """One object of a build.
@@ -68,12 +56,16 @@ class BuildItem:
         Mesh frame to build-volume frame; ``None`` when not placed.
     kind : {'part', 'finger'}
         A job part or a finger copy.
+    part_number : str or None
+        Part number of the item's object in ``build.3mf``: the part file's
+        stem; ``None``: the name (finger objects are ``fcso-finger-<set>``).
     """
 
     name: str
     mesh: trimesh.Trimesh
     transform: np.ndarray | None = None
     kind: Literal["part", "finger"] = "part"
+    part_number: str | None = None
 
     def placed_mesh(self) -> trimesh.Trimesh:
         """The mesh moved by its transform (a copy); the item must be placed."""
@@ -140,78 +132,20 @@ def parse_transform(value, source: str = "transform") -> np.ndarray:
     return matrix
 
 
-def check_zip_archive(
-    path: str | Path,
-    max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
-    max_ratio: float = MAX_3MF_COMPRESSION_RATIO,
-) -> None:
-    """Refuse a zip (3MF) archive that would inflate too much before reading it.
-
-    Python's zipfile stops each entry at its declared size, so checking the
-    declared sizes bounds the memory a reader can take.
-
-    Raises
-    ------
-    MeshError
-        Not a zip archive, too many entries, total inflated size above
-        ``max_uncompressed_bytes`` or an entry inflating more than ``max_ratio``
-        times.
-    """
-    try:
-        with zipfile.ZipFile(path) as archive:
-            entries = archive.infolist()
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise MeshError(path, f"not a readable 3MF (zip) archive: {exc}") from None
-    if len(entries) > MAX_3MF_ENTRIES:
-        raise MeshError(path, f"3MF archive holds {len(entries)} entries (limit {MAX_3MF_ENTRIES})")
-    total = sum(entry.file_size for entry in entries)
-    if total > max_uncompressed_bytes:
-        raise MeshError(path, f"3MF inflates to {total} bytes (limit {max_uncompressed_bytes}): refused as a zip bomb")
-    for entry in entries:
-        ratio = entry.file_size / max(entry.compress_size, 1)
-        if ratio > max_ratio:
-            raise MeshError(
-                path, f"3MF entry {entry.filename!r} inflates {ratio:.0f} times (limit {max_ratio:.0f}): refused as a zip bomb"
-            )
-
-
 def read_build_3mf(path: str | Path, max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES) -> list[BuildItem]:
-    """The build items of a 3MF file, placed, in millimetres.
+    """The build items of a 3MF file, placed, in millimetres (:func:`fcso.read_3mf_items`).
 
-    Every mesh instance of the build (trimesh flattens components, so a build
-    item made of several bodies gives one item per body) becomes a part with
-    its transform.
+    Items are named after their build items (without the file stem).
 
     Raises
     ------
     MeshError
         A zip bomb, an unreadable file or a build without items.
     """
-    path = Path(path)
-    check_zip_archive(path, max_uncompressed_bytes)
-    try:
-        scene = trimesh.load(str(path), file_type="3mf", force="scene", process=False)
-    except Exception as exc:  # trimesh raises many types for malformed files
-        raise MeshError(path, f"cannot be read as 3MF: {exc}") from None
-    # trimesh keeps 3MF coordinates in the file's unit (it reports the unit name)
-    unit = str(scene.units or "millimeter").lower().rstrip("s")
-    if unit not in _3MF_UNIT_MM:
-        raise MeshError(path, f"unknown 3MF unit {scene.units!r}")
-    to_mm = _3MF_UNIT_MM[unit]
-    items = []
-    for node in sorted(scene.graph.nodes_geometry):
-        matrix, geometry_name = scene.graph[node]
-        mesh = scene.geometry[geometry_name]
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            continue
-        mesh = mesh.copy()
-        mesh.apply_scale(to_mm)
-        transform = np.array(matrix, dtype=float)
-        transform[:3, 3] *= to_mm
-        items.append(BuildItem(name=str(node), mesh=mesh, transform=transform))
-    if not items:
-        raise MeshError(path, "3MF build holds no mesh items")
-    return items
+    return [
+        BuildItem(name=item.name.split("/", 1)[1], mesh=item.mesh, transform=item.transform)
+        for item in read_3mf_items(path, max_uncompressed_bytes)
+    ]
 
 
 def read_build(
@@ -255,13 +189,14 @@ def read_build(
         if path.suffix.lower() == ".3mf":
             for item in read_build_3mf(path, max_uncompressed_bytes):
                 item.name = f"{path.stem}/{item.name}"
+                item.part_number = path.stem
                 items.append(item)
             continue
         mesh = read_mesh(path)
         mesh.apply_scale(unit_factor(_by_file(units, path, "mm"), path))
         value = _by_file(transforms, path, None)
         transform = None if value is None else parse_transform(value, f"{path.name}: transform")
-        items.append(BuildItem(name=path.stem, mesh=mesh, transform=transform))
+        items.append(BuildItem(name=path.stem, mesh=mesh, transform=transform, part_number=path.stem))
     _make_names_unique(items)
     return Build(items=items, source=", ".join(str(p) for p in paths))
 
@@ -281,42 +216,75 @@ def _make_names_unique(items: Sequence[BuildItem]) -> None:
             item.name = f"{item.name}_{count}"
 
 
-def export_build_3mf(items: Sequence[BuildItem]) -> bytes:
-    """``build.3mf`` bytes: one object per distinct mesh, one build item per item.
+def export_build_3mf(
+    items: Sequence[BuildItem],
+    job_id: str = "",
+    application: str = "fcsod",
+    creation_date: str = "1980-01-01",
+    finger_set: int = 1,
+) -> bytes:
+    """``build.3mf`` bytes: a production 3MF with one object per distinct mesh and one build item per item.
 
     Items sharing one mesh object (the finger copies) share one 3MF object.
-    The output is deterministic: the same items give the same bytes.
+    Objects are named and numbered after their part (the part file's stem,
+    or ``fcso-finger-<set>``); each item's part number is its unique name in
+    the build (``cube``, ``cube_2``, finger copies ``fcso-finger-<set>-<copy>``),
+    which slicers and trimesh show as the item's name. The build, every item and every
+    object carry a Production-extension ``p:UUID`` derived from the job id
+    and the name (uuid5), so the same job gives the same UUIDs and bytes.
+    The model's metadata holds ``Title`` (the job id), ``Application`` and
+    ``CreationDate``; finger items carry ``fcso:job_id`` and
+    ``fcso:finger_set``. Meshes are written with outward normals (a mesh of
+    negative volume is flipped).
 
     Parameters
     ----------
     items : sequence of BuildItem
         Placed items (every transform set), mm.
+    job_id : str
+        The job, for the title, the UUIDs and the finger metadata.
+    application : str
+        ``Application`` metadata (``fcsod <version>``).
+    creation_date : str
+        ``CreationDate`` metadata, ISO 8601 (UTC date and time).
+    finger_set : int
+        Number of the finger set (the ``<set>`` of the finger part numbers).
 
     Returns
     -------
     bytes
-        A 3MF (core specification, unit millimeter) that trimesh and slicers
-        load; each build item carries its name as ``partnumber``.
+        A 3MF (core and production specifications, unit millimeter).
     """
+    p_uuid = f"{{{_PRODUCTION_NS}}}UUID"
     object_ids: dict[int, int] = {}
-    model = etree.Element(f"{{{_CORE_NS}}}model", nsmap={None: _CORE_NS}, unit="millimeter")
+    model = etree.Element(f"{{{_CORE_NS}}}model", nsmap={None: _CORE_NS, "p": _PRODUCTION_NS, "fcso": FCSO_3MF_NS}, unit="millimeter")
     model.set("{http://www.w3.org/XML/1998/namespace}lang", "en-US")
+    for name, value in (("Title", job_id), ("Application", application), ("CreationDate", creation_date)):
+        etree.SubElement(model, f"{{{_CORE_NS}}}metadata", name=name).text = value
     resources = etree.SubElement(model, f"{{{_CORE_NS}}}resources")
-    build = etree.SubElement(model, f"{{{_CORE_NS}}}build")
+    build = etree.SubElement(model, f"{{{_CORE_NS}}}build", {p_uuid: _uuid(job_id, "build")})
     for item in items:
         if item.transform is None:
             raise ValueError(f"build item {item.name!r} has no transform")
         key = id(item.mesh)
         if key not in object_ids:
             object_ids[key] = len(object_ids) + 1
-            _add_mesh_object(resources, object_ids[key], item.name, item.mesh)
-        etree.SubElement(
+            object_part_number = f"fcso-finger-{finger_set}" if item.kind == "finger" else item.part_number or item.name
+            _add_mesh_object(resources, object_ids[key], object_part_number, item.mesh, _uuid(job_id, f"object/{object_ids[key]}"))
+        element = etree.SubElement(
             build,
             f"{{{_CORE_NS}}}item",
-            objectid=str(object_ids[key]),
-            transform=_transform_attribute(item.transform),
-            partnumber=item.name,
+            {
+                "objectid": str(object_ids[key]),
+                "transform": _transform_attribute(item.transform),
+                "partnumber": item.name,
+                p_uuid: _uuid(job_id, f"item/{item.name}"),
+            },
         )
+        if item.kind == "finger":
+            group = etree.SubElement(element, f"{{{_CORE_NS}}}metadatagroup")
+            for name, value in (("fcso:job_id", job_id), ("fcso:finger_set", str(finger_set))):
+                etree.SubElement(group, f"{{{_CORE_NS}}}metadata", name=name, preserve="1").text = value
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         for name, data in (
@@ -329,6 +297,11 @@ def export_build_3mf(items: Sequence[BuildItem]) -> bytes:
     return buffer.getvalue()
 
 
+def _uuid(job_id: str, name: str) -> str:
+    """A UUID fixed by the job and the element's name (uuid5), as 3MF writes it."""
+    return str(uuid.uuid5(_UUID_NAMESPACE, f"{job_id}/{name}"))
+
+
 def write_build_3mf(items: Sequence[BuildItem], path: str | Path) -> Path:
     """Write :func:`export_build_3mf` to ``path`` (the caller renames it into place)."""
     path = Path(path)
@@ -336,15 +309,23 @@ def write_build_3mf(items: Sequence[BuildItem], path: str | Path) -> Path:
     return path
 
 
-def _add_mesh_object(resources, object_id: int, name: str, mesh: trimesh.Trimesh) -> None:
-    """Append a 3MF ``object`` holding ``mesh`` to ``resources``."""
-    obj = etree.SubElement(resources, f"{{{_CORE_NS}}}object", id=str(object_id), type="model", name=name)
+def _add_mesh_object(resources, object_id: int, part_number: str, mesh: trimesh.Trimesh, object_uuid: str) -> None:
+    """Append a 3MF ``object`` named and numbered ``part_number`` holding ``mesh``, faces wound outward, to ``resources``."""
+    obj = etree.SubElement(
+        resources,
+        f"{{{_CORE_NS}}}object",
+        {"id": str(object_id), "type": "model", "name": part_number, "partnumber": part_number, f"{{{_PRODUCTION_NS}}}UUID": object_uuid},
+    )
     mesh_element = etree.SubElement(obj, f"{{{_CORE_NS}}}mesh")
     vertices = etree.SubElement(mesh_element, f"{{{_CORE_NS}}}vertices")
     for x, y, z in np.asarray(mesh.vertices, dtype=float).tolist():
         etree.SubElement(vertices, f"{{{_CORE_NS}}}vertex", x=repr(x), y=repr(y), z=repr(z))
     triangles = etree.SubElement(mesh_element, f"{{{_CORE_NS}}}triangles")
-    for v1, v2, v3 in np.asarray(mesh.faces, dtype=np.int64).tolist():
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    # a closed mesh of negative signed volume is wound inward: 3MF wants outward normals
+    if mesh.is_watertight and mesh.volume < 0:
+        faces = faces[:, ::-1]
+    for v1, v2, v3 in faces.tolist():
         etree.SubElement(triangles, f"{{{_CORE_NS}}}triangle", v1=str(v1), v2=str(v2), v3=str(v3))
 
 

@@ -65,6 +65,7 @@ def _parser() -> argparse.ArgumentParser:
     init.add_argument("--prefix", default="fcso", help="the [bus] prefix (default fcso)")
     init.add_argument("--host", action="append", metavar="NAME", help="name or address clients reach the daemon at (repeat; default this machine's)")
     init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
+    init.add_argument("--ros2-domain-id", type=int, metavar="N", help="the [ros2] domain_id when [ros2] is enabled: let its ROS 2 key expressions through")
     init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
     add = pki_commands.add_parser("add-client", help="issue one more certificate from the CA (a controller or a zenoh router); not added to the access control")
     add.add_argument("directory", type=Path, metavar="DIR")
@@ -300,7 +301,8 @@ def _pki(args: argparse.Namespace) -> int:
               f"cert_common_names of {Path(args.directory) / 'daemon' / 'zenoh.json5'}")
         return EXIT_OK
     files = init_pki(
-        args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir
+        args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir,
+        ros2_domain_id=args.ros2_domain_id,
     )
     for line in config_lines(files):
         print(line)

@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from .build3mf import parse_transform
 from .placement import BuildConfig
+from .ros2 import Ros2Config
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"
@@ -135,6 +136,7 @@ class DaemonConfig(_Section):
     build: BuildConfig = Field(
         default_factory=BuildConfig, description="Default build volume, spacing and finger copies of every job's build.3mf"
     )
+    ros2: Ros2Config = Field(default_factory=Ros2Config, description="The daemon as a ROS 2 node over zenoh (rmw_zenoh's wire format)")
 
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> "DaemonConfig":

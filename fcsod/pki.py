@@ -28,6 +28,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from fcso.errors import ConfigError
 
+from .ros2 import LIVELINESS_ADMIN_SPACE
 from .signing import SIGNING_KEY_NAME, VERIFY_KEY_NAME, generate_signing_key, write_private
 
 #: Certificate lifetimes, days.
@@ -141,7 +142,7 @@ def issue(
     return certificate, key
 
 
-def access_control(prefix: str, cell: str, clients: list[str]) -> dict:
+def access_control(prefix: str, cell: str, clients: list[str], ros2_domain_id: int | None = None) -> dict:
     """The daemon's zenoh ``access_control``: default deny; the named clients may subscribe, query and watch liveliness.
 
     Only the daemon publishes and answers under ``<prefix>/<cell>/**`` (egress
@@ -155,9 +156,19 @@ def access_control(prefix: str, cell: str, clients: list[str]) -> dict:
         The ``[bus]`` keys.
     clients : list of str
         Common names of the client certificates allowed in.
+    ros2_domain_id : int, optional
+        The ``[ros2] domain_id`` when ``[ros2]`` is enabled: the same rules
+        then cover the daemon's ROS 2 data, ``<domain_id>/**`` (with the
+        AdvancedPublisher's cache, heartbeat and detection token under
+        ``<domain_id>/**/@adv/**``), and its rmw_zenoh liveliness tokens,
+        ``@ros2_lv/<domain_id>/**``.
     """
     # ** also matches the liveliness token's key, <prefix>/<cell>/daemon
     keys = [f"{prefix}/{cell}/**"]
+    if ros2_domain_id is not None:
+        # ** never matches a verbatim chunk such as @adv: the AdvancedPublisher's cache,
+        # heartbeat and detection token (<topic key>/@adv/pub/...) need their own key
+        keys += [f"{ros2_domain_id}/**", f"{ros2_domain_id}/**/@adv/**", f"{LIVELINESS_ADMIN_SPACE}/{ros2_domain_id}/**"]
     return {
         "enabled": True,
         "default_permission": "deny",
@@ -291,6 +302,7 @@ def init_pki(
     port: int = 7447,
     runtime_dir: str | Path | None = None,
     acl: bool = True,
+    ros2_domain_id: int | None = None,
 ) -> PkiFiles:
     """Create the CA, the daemon's and each client's certificate and keys, and their zenoh configs.
 
@@ -316,6 +328,9 @@ def init_pki(
         default ``directory/daemon``.
     acl : bool
         Put access control into the daemon's config (off only to test what the signatures alone stop).
+    ros2_domain_id : int, optional
+        The ``[ros2] domain_id`` when the daemon runs with ``[ros2]`` enabled:
+        the access control then lets its ROS 2 topics and liveliness tokens through.
 
     Raises
     ------
@@ -344,7 +359,7 @@ def init_pki(
     write_json5(
         daemon_dir / "zenoh.json5",
         f"zenoh session of the fcsod daemon of cell {cell!r}: TLS with client certificates, access control",
-        daemon_zenoh_config(listen, key_dir, access_control(prefix, cell, clients) if acl else None),
+        daemon_zenoh_config(listen, key_dir, access_control(prefix, cell, clients, ros2_domain_id) if acl else None),
     )
     host = hosts[0]
     connect = [f"tls/{f'[{host}]' if ':' in host else host}:{port}"]

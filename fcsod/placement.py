@@ -25,6 +25,8 @@ Lengths are millimetres; the build volume spans ``origin_mm`` to
 
 from __future__ import annotations
 
+import dataclasses
+
 import itertools
 import time
 from collections.abc import Sequence
@@ -630,7 +632,7 @@ def _place_movables(
             transform = np.eye(4)
             transform[:3, :3] = pose.rotation
             transform[:3, 3] = origin + np.array(choice[1]) * voxel + pose.offset
-            candidate = BuildItem(item.name, item.mesh, transform, item.kind)
+            candidate = dataclasses.replace(item, transform=transform)
             bounds = _vertex_bounds(_placed_vertices(candidate))
             solid = _placed_solid(solids[id(item.mesh)], transform)
             if not _clear_of(bounds, solid, neighbours, config.spacing_mm):
@@ -742,7 +744,7 @@ def place_fingers(
         placer prefers orientations turning it to +z (pad printed face up)
         among those of equal build height. The built-in finger's is -x.
     finger_name : str
-        Finger copies are named ``{finger_name}_1``, ``{finger_name}_2``...
+        Finger copies are named ``{finger_name}-1``, ``{finger_name}-2``...
 
     Returns
     -------
@@ -756,7 +758,7 @@ def place_fingers(
     fixed = [item for item in build.items if item.transform is not None]
     unplaced_parts = [item for item in build.items if item.transform is None]
     copies = config.finger_copies + config.spare_fingers
-    fingers = [BuildItem(f"{finger_name}_{k + 1}", finger, None, "finger") for k in range(copies)]
+    fingers = [BuildItem(f"{finger_name}-{k + 1}", finger, None, "finger") for k in range(copies)]
     required = fingers[: config.finger_copies]
     spares = fingers[config.finger_copies :]
 

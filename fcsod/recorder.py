@@ -2,7 +2,8 @@
 
 Messages are JSON (``message_encoding="json"``) with JSON Schema schemas
 (``encoding="jsonschema"``) generated from the pydantic models of
-:mod:`fcsod.messages`. Chunks are small and flushed after every stage, so a
+:mod:`fcsod.messages`, plus the ROS 2 form of the published messages
+(``cdr`` with ``ros2msg`` schemas, written by :func:`fcsod.ros2.record_ros2`). Chunks are small and flushed after every stage, so a
 job cut off by a crash leaves a record readable up to the last flush.
 """
 
@@ -12,7 +13,7 @@ import json
 import os
 import struct
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
@@ -107,13 +108,13 @@ class Recorder:
         self._sequence = 0
         self.finished = False
 
-    def _channel(self, topic: str, name: str, schema: bytes) -> int:
+    def _channel(self, topic: str, name: str, schema: bytes, schema_encoding: str, message_encoding: str, metadata: dict[str, str] | None) -> int:
         if topic not in self._channels:
             key = (name, schema)
             if key not in self._schemas:
-                self._schemas[key] = self._writer.register_schema(name=name, encoding="jsonschema", data=schema)
+                self._schemas[key] = self._writer.register_schema(name=name, encoding=schema_encoding, data=schema)
             self._channels[topic] = self._writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=self._schemas[key]
+                topic=topic, message_encoding=message_encoding, schema_id=self._schemas[key], metadata=metadata or {}
             )
         return self._channels[topic]
 
@@ -122,9 +123,23 @@ class Recorder:
         model = type(message)
         self.write_raw(topic, schema_name(model), schema_text(model).encode(), message.model_dump_json().encode(), log_time_ns)
 
-    def write_raw(self, topic: str, name: str, schema: bytes, data: bytes, log_time_ns: int | None = None) -> None:
-        """Record already-encoded JSON ``data`` under a schema given by name and JSON Schema text."""
-        channel = self._channel(topic, name, schema)
+    def write_raw(
+        self,
+        topic: str,
+        name: str,
+        schema: bytes,
+        data: bytes,
+        log_time_ns: int | None = None,
+        schema_encoding: str = "jsonschema",
+        message_encoding: str = "json",
+        metadata: dict[str, str] | None = None,
+    ) -> None:
+        """Record already-encoded ``data`` under a schema given by name and text.
+
+        JSON with a JSON Schema by default; the ROS 2 channels pass ``ros2msg``
+        and ``cdr`` (and channel ``metadata``, kept from a channel's first message).
+        """
+        channel = self._channel(topic, name, schema, schema_encoding, message_encoding, metadata)
         now = log_time_ns if log_time_ns is not None else time.time_ns()
         self._writer.add_message(channel_id=channel, log_time=now, data=data, publish_time=now, sequence=self._sequence)
         self._sequence += 1
@@ -162,6 +177,9 @@ class RecordedMessage:
     schema_data: bytes
     log_time_ns: int
     data: bytes
+    schema_encoding: str = "jsonschema"
+    message_encoding: str = "json"
+    metadata: dict[str, str] = field(default_factory=dict)
 
     def json(self) -> dict:
         """The message body as a dict."""
@@ -178,8 +196,8 @@ class RecordContent:
     problem: str | None
 
     def of(self, topic: str) -> list[dict]:
-        """Bodies of the messages on one channel, in order."""
-        return [m.json() for m in self.messages if m.topic == topic]
+        """Bodies of the JSON messages on one channel, in order."""
+        return [m.json() for m in self.messages if m.topic == topic and m.message_encoding == "json"]
 
 
 def read_record(path: str | Path) -> RecordContent:
@@ -203,7 +221,16 @@ def read_record(path: str | Path) -> RecordContent:
             for schema, channel, message in reader.iter_messages(log_time_order=False):
                 channels[channel.topic] = schema.name if schema else ""
                 messages.append(
-                    RecordedMessage(channel.topic, schema.name if schema else "", schema.data if schema else b"", message.log_time, message.data)
+                    RecordedMessage(
+                        channel.topic,
+                        schema.name if schema else "",
+                        schema.data if schema else b"",
+                        message.log_time,
+                        message.data,
+                        schema.encoding if schema else "",
+                        channel.message_encoding,
+                        dict(channel.metadata),
+                    )
                 )
         # the stream reader stops at the footer; anything raised before it
         # means the file was cut off (a short read surfaces as struct.error)
@@ -230,5 +257,14 @@ def salvage(source: Path, target: Path, compression: str, chunk_size_bytes: int)
     content = read_record(source) if source.is_file() else RecordContent([], {}, True, "no record was written")
     recorder = Recorder(target, compression, chunk_size_bytes)
     for message in content.messages:
-        recorder.write_raw(message.topic, message.schema_name, message.schema_data, message.data, message.log_time_ns)
+        recorder.write_raw(
+            message.topic,
+            message.schema_name,
+            message.schema_data,
+            message.data,
+            message.log_time_ns,
+            message.schema_encoding,
+            message.message_encoding,
+            message.metadata,
+        )
     return recorder

@@ -27,6 +27,7 @@ from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_me
 from .messages import BusMessage, BusRecord, LogRecord, StateChangeRecord, StatusMessage, utc_now
 from .pki import link_weaknesses
 from .recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record, salvage
+from .ros2 import Ros2Node, node_fqn, record_ros2
 from .signing import daemon_signer, signing_key_path
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
@@ -120,6 +121,9 @@ class Daemon:
             log.warning(f"insecure bus: {weakness}")
         self.signer = signer
         self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
+        if self.ros2 is not None:
+            log.info("ROS 2 node " + node_fqn(self.config.ros2), extra={"ros2_key_exprs": [p.key_expr for p in self.ros2.publishers.values()]})
         watch = self.config.watch
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
@@ -167,6 +171,8 @@ class Daemon:
                 shutil.rmtree(self.output_root / f".tmp-{slot.job.job_id}", ignore_errors=True)
                 self.journal.requeue_running()
                 log.info("stopped a running job; it will run again at the next start", extra={"job_id": slot.job.job_id})
+        if self.ros2 is not None:
+            self.ros2.close()
         self.bus.close()
         self.journal.close()
         log.info("fcsod stopped")
@@ -342,6 +348,7 @@ class Daemon:
             recorder = salvage(work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
             recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
             recorder.write(TOPIC_BUS, status.record())
+            record_ros2(recorder, status, self.config.ros2)
             recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
             recorder.finish()
             os.replace(salvaged, work_dir / RECORD_NAME)
@@ -386,3 +393,5 @@ class Daemon:
         message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
         self.bus.publish(message)
+        if self.ros2 is not None:
+            self.ros2.publish(message)

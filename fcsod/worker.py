@@ -32,12 +32,11 @@ from typing import Callable
 import fcso
 import numpy as np
 import trimesh
-from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_part
+from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_parts
 from fcso.output import output_files
-from fcso.parts import Part, validate_mesh
 
 from . import __version__
-from .build3mf import Build, BuildItem, export_build_3mf, read_build
+from .build3mf import Build, BuildItem, export_build_3mf
 from .config import DaemonConfig, JobManifest
 from .jobs import PartInput, check_parts, hash_inputs, job_inputs, read_manifest
 from .messages import (
@@ -66,6 +65,7 @@ from .messages import (
     job_key,
     utc_now,
 )
+from .ros2 import record_ros2
 from .recorder import (
     TOPIC_BUS,
     TOPIC_CANDIDATES,
@@ -93,6 +93,9 @@ PROGRESS_INTERVAL_S = 1.0
 
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
+
+#: Number of the job's finger set in ``build.3mf`` (one design per job for now).
+FINGER_SET = 1
 
 
 class JobFolderDeleted(Exception):
@@ -160,6 +163,11 @@ class JobRun:
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(("log", level, message, fields))
 
+    def record_published(self, message: BusMessage) -> None:
+        """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""
+        self.recorder.write(TOPIC_BUS, message.record())
+        record_ros2(self.recorder, message, self.task.config.ros2)
+
     def status(
         self,
         state: str,
@@ -169,10 +177,10 @@ class JobRun:
         warnings: list[str] | None = None,
         record: bool = True,
     ) -> BusMessage:
-        """The job's status message, recorded on the bus channel and as a state change (unless ``record`` is false)."""
+        """The job's status message, recorded on the bus and ROS 2 channels and as a state change (unless ``record`` is false)."""
         message = status_message(self.task, state, finished_at, error, outputs, warnings)
         if record:
-            self.recorder.write(TOPIC_BUS, message.record())
+            self.record_published(message)
             self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
         return message
 
@@ -231,70 +239,44 @@ def step_inputs(run: JobRun) -> None:
 
 
 def step_load(run: JobRun) -> None:
-    """Load and validate every part mesh (closed volume, units, face limit) and assemble the job's build.
+    """Load and validate every part (closed volume, units, shells, face limit) and assemble the job's build.
 
-    A loose part is designed once and is ``quantity`` build items, placed
-    when its manifest entry has a transform. A 3MF is a placed build: each
-    distinct item mesh is designed once and every item keeps its transform.
+    Parts come from :func:`fcso.load_parts`, the loader ``fcso design`` uses:
+    overlapping shells are one solid, separate solids are separate parts,
+    a 3MF gives one part per distinct object. A loose part is designed once
+    and is ``quantity`` build items, placed when its manifest entry has a
+    transform; a 3MF part keeps the transform of every build item holding it.
     """
     max_faces = run.task.config.limits.max_faces
     items: list[BuildItem] = []
     for part in run.parts:
-        if part.path.suffix.lower() == ".3mf":
-            loaded, placed = _load_build_3mf(part.path, run.manifest.repair, run.task.config.limits.max_3mf_uncompressed_bytes)
-            items.extend(placed)
-            labels = [f"{part.entry.file} item {one.name}" for one in loaded]
-        else:
-            loaded = [load_part(part.path, units=part.entry.units, scale_to_mm=part.entry.scale_to_mm, repair=run.manifest.repair)]
-            transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
-            items.extend(BuildItem(loaded[0].name, loaded[0].mesh, transform, "part") for _ in range(part.entry.quantity))
-            labels = [part.entry.file]
-        for one, label in zip(loaded, labels):
+        loaded = load_parts(
+            part.path,
+            units=part.entry.units,
+            scale_to_mm=part.entry.scale_to_mm,
+            repair=run.manifest.repair,
+            split_bodies=run.settings.parts.split_bodies,
+            max_uncompressed_bytes=run.task.config.limits.max_3mf_uncompressed_bytes,
+        )
+        for one in loaded:
             if len(one.mesh.faces) > max_faces:
-                raise MeshError(part.path, f"{label}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+                raise MeshError(part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+            if part.path.suffix.lower() == ".3mf":
+                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for transform in one.instances)
+            else:
+                transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
+                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity))
             run.loaded.append(one)
-            run.log("info", f"loaded {label}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm")
+            shells = f", {one.shell_note}" if one.shell_note else ""
+            run.log("info", f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm{shells}")
+            for warning in one.warnings:
+                run.log("warning", warning)
     if len(run.loaded) > run.task.config.limits.max_parts:
         raise MeshError(run.folder, f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})")
     _make_names_unique(items)
     run.build = Build(items=items, source=str(run.folder))
     placed = sum(1 for item in items if item.transform is not None)
     run.log("info", f"build: {len(items)} part items, {placed} placed by the job, {len(items) - placed} to pack")
-
-
-def _load_build_3mf(path: Path, repair: bool, max_uncompressed_bytes: int) -> tuple[list[Part], list[BuildItem]]:
-    """The distinct part meshes of a 3MF build and its items, each keeping its transform.
-
-    Items with equal geometry (one 3MF object placed several times) share
-    one validated mesh and are one part to design.
-
-    Parameters
-    ----------
-    path : Path
-        The 3MF file.
-    repair : bool
-        Repair item meshes that are not closed volumes.
-    max_uncompressed_bytes : int
-        Zip-bomb limit of the archive, bytes.
-
-    Returns
-    -------
-    parts : list of Part
-        One per distinct geometry, named after its first item, mm.
-    items : list of BuildItem
-        Every build item with its transform, mm.
-    """
-    parts: dict[str, Part] = {}
-    items = []
-    for item in read_build([path], max_uncompressed_bytes=max_uncompressed_bytes).items:
-        geometry = hashlib.sha256(
-            np.ascontiguousarray(item.mesh.vertices, dtype=np.float64).tobytes() + np.ascontiguousarray(item.mesh.faces, dtype=np.int64).tobytes()
-        ).hexdigest()
-        if geometry not in parts:
-            mesh, repairs = validate_mesh(item.mesh, f"{path} (build item {item.name})", repair=repair)
-            parts[geometry] = Part(name=item.name, path=str(path), mesh=mesh, repairs=repairs)
-        items.append(BuildItem(item.name, parts[geometry].mesh, item.transform, "part"))
-    return list(parts.values()), items
 
 
 def _make_names_unique(items: list[BuildItem]) -> None:
@@ -310,14 +292,19 @@ def step_design(run: JobRun) -> None:
     """Run fcso's design, logging progress per stage."""
     last: dict[str, float] = {}
 
-    def progress(stage: str, done: int, total: int) -> None:
+    def progress(stage: str, done: int, total: int, note: str = "") -> None:
         now = time.monotonic()
         if stage in last and done < total and now - last[stage] < PROGRESS_INTERVAL_S:
             return
         last[stage] = now
-        run.log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
+        run.log("info", f"{stage} {done}/{total}" + (f": {note}" if note else ""), stage=stage, done=done, total=total)
 
     run.result = design(run.loaded, run.settings, progress=progress)
+    # what the design warns of (parts left out as ungraspable, files split into
+    # several solids) travels with the job's done status
+    run.warnings.extend(run.result.report.warnings)
+    for entry in run.result.report.ungraspable:
+        run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
 
 
 def step_record_design(run: JobRun) -> None:
@@ -366,10 +353,12 @@ def step_placement(run: JobRun) -> None:
     and the free build height that was missing.
     """
     result = run.result
-    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name="finger")
+    placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name=f"fcso-finger-{FINGER_SET}")
     report = placed.report
     run.recorder.write(TOPIC_PLACEMENT, report)
-    run.files[BUILD_NAME] = export_build_3mf(placed.items)
+    run.files[BUILD_NAME] = export_build_3mf(
+        placed.items, job_id=run.task.job_id, application=f"fcsod {__version__}", creation_date=utc_now(), finger_set=FINGER_SET
+    )
     update: dict = {"placement": report.model_dump(mode="json")}
     if not report.fingers_fit:
         run.warnings.append(report.message)
@@ -443,7 +432,7 @@ def step_outputs(run: JobRun) -> None:
         *run.outgoing,
     ]
     for message in run.outgoing:
-        run.recorder.write(TOPIC_BUS, message.record())
+        run.record_published(message)
 
 
 def step_folder_kept(run: JobRun) -> None:
@@ -687,6 +676,7 @@ def _finish_failed(run: JobRun, error: str) -> BusMessage:
         recorder = salvage(run.work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
         recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
         recorder.write(TOPIC_BUS, final.record())
+        record_ros2(recorder, final, run.task.config.ros2)
         recorder.write(TOPIC_STATE, StateChangeRecord(job_id=run.task.job_id, state="failed", at=utc_now(), error=error))
         recorder.finish()
         os.replace(salvaged, run.work_dir / RECORD_NAME)

@@ -92,16 +92,18 @@ class Process:
     Parameters
     ----------
     args : list of str
-        Arguments after ``python -m fcsod``.
+        Arguments after ``python -m <module>``.
     env : dict, optional
         Extra environment variables.
+    module : str
+        The module to run (``fcsod``, or a test helper such as ``tests.ros2_cell``).
     """
 
-    def __init__(self, args: list[str], env: dict | None = None):
+    def __init__(self, args: list[str], env: dict | None = None, module: str = "fcsod"):
         self.lines: list[str] = []
         self._queue: queue.Queue[str] = queue.Queue()
         self.popen = subprocess.Popen(
-            [sys.executable, "-m", "fcsod", *args],
+            [sys.executable, "-m", module, *args],
             cwd=REPO,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,

@@ -42,8 +42,8 @@ def test_hande_visual_finger_without_repair(tmp_path):
 
 
 def test_finger_without_frame_and_unknown_config_key(tmp_path):
-    run = fcso("design", data_path("20mm-xyz-cube.stl"), "--out", tmp_path, "--finger", data_path("20mm-xyz-cube.stl"))
-    assert_bad_input(run, "contact_origin_mm")
+    run = fcso("design", data_path("20mm-xyz-cube.stl"), "--out", tmp_path, "--finger", data_path("robotiq_hande_finger_visual.dae"))
+    assert_bad_input(run, "robotiq_hande_finger_visual.dae", "contact_origin_mm")
     config = tmp_path / "bad.toml"
     config.write_text("[sampler]\nlenght_mm = 20\n")
     assert_bad_input(fcso("design", data_path("20mm-xyz-cube.stl"), "--out", tmp_path, "--config", config), "bad.toml", "sampler.lenght_mm", "unknown key")
@@ -93,3 +93,58 @@ def test_schemas_in_the_repository_match_the_models(tmp_path):
         committed = REPO / "schemas" / written.name
         assert committed.is_file(), f"schemas/{written.name} missing: run `fcso schema --out schemas/`"
         assert committed.read_text() == written.read_text(), f"schemas/{written.name} drifted: run `fcso schema --out schemas/`"
+
+
+FAST = "[sampler]\nlength_mm = 10.0\nwidth_mm = 10.0\nthickness_mm = 4.0\npenetration_mm = 3.0\nstride_mm = 8.0\n" \
+    "[poses]\ncount = 1\nselect = \"most_probable\"\n[search]\nmax_exhaustive = 1\nmax_evaluations = 8\n"
+
+
+def test_design_prints_and_reports_shell_union_and_split_solids(tmp_path):
+    config = tmp_path / "fast.toml"
+    config.write_text(FAST)
+    out = tmp_path / "out"
+    run = fcso("design", data_path("solar_tracker.stl"), data_path("DC-DC_case.stl"), "--out", out, "--config", config)
+    assert run.returncode == 0, run.stderr
+    solar = next(line for line in run.stdout.splitlines() if line.startswith("part solar_tracker:"))
+    assert float(solar.split(":")[1].split("mm³")[0]) == pytest.approx(10_629.0, rel=0.01)
+    assert "4 overlapping or touching shells united" in solar
+    assert "part DC-DC_case#1:" in run.stdout and "part DC-DC_case#2:" in run.stdout
+    assert "warning:" in run.stdout and "DC-DC_case.stl holds 2 separate solids" in run.stdout
+    report = json.loads((out / "report.json").read_text())
+    assert [p["name"] for p in report["parts"]] == ["solar_tracker", "DC-DC_case#1", "DC-DC_case#2"]
+    assert report["parts"][0]["volume_mm3"] == pytest.approx(10_629.0, rel=0.01)
+    assert report["parts"][0]["shells"] == 4
+    # the page is rebuilt from the files, the split parts found again by name
+    rebuilt = fcso("report", out)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    config.write_text(FAST + "[parts]\nsplit_bodies = false\n")
+    assert_bad_input(fcso("design", data_path("DC-DC_case.stl"), "--out", tmp_path / "refused", "--config", config), "DC-DC_case.stl", "2 separate solids")
+
+
+def test_design_of_a_3mf_build_takes_each_object_as_a_part(tmp_path):
+    scene = trimesh.Scene()
+    for name, file, offset in (("cube", "20mm-xyz-cube.stl", 0.0), ("solar", "solar_tracker.stl", 60.0)):
+        scene.add_geometry(trimesh.load(data_path(file)), node_name=name, transform=trimesh.transformations.translation_matrix([offset, 0, 0]))
+    build = tmp_path / "build.3mf"
+    scene.export(build)
+    config = tmp_path / "fast.toml"
+    config.write_text(FAST)
+    run = fcso("design", build, "--out", tmp_path / "out", "--config", config)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert len(report["parts"]) == 2
+    assert max(max(p["extents_mm"]) for p in report["parts"]) < 100.0
+    cube_volume = trimesh.load(data_path("20mm-xyz-cube.stl")).volume
+    assert sorted(p["volume_mm3"] for p in report["parts"]) == pytest.approx([cube_volume, 10_629.0], rel=0.01)
+
+
+def test_ungraspable_part_is_listed_and_the_others_designed(tmp_path):
+    config = tmp_path / "flat.toml"
+    config.write_text(FAST.replace('select = \"most_probable\"', "select = [0]"))
+    out = tmp_path / "out"
+    run = fcso("design", data_path("20mm-xyz-cube.stl"), data_path("capsela200_plug.stl"), "--out", out, "--config", config)
+    assert run.returncode == 0, run.stderr
+    assert "ungraspable: capsela200_plug in stable pose 0" in run.stdout
+    report = json.loads((out / "report.json").read_text())
+    assert [u["part"] for u in report["ungraspable"]] == ["capsela200_plug"]
+    assert (out / "finger.stl").is_file()

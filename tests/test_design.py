@@ -14,7 +14,7 @@ from fcso.sampler import GraspSample
 
 from .conftest import data_path, small_config
 
-TWO_PARTS = ("20mm-xyz-cube.stl", "DC-DC_case.stl")
+TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def two_part_design():
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):
     report = two_part_design.report
-    assert [s.part for s in report.scenarios] == ["20mm-xyz-cube", "DC-DC_case"]
+    assert [s.part for s in report.scenarios] == ["20mm-xyz-cube", "solar_tracker"]
     counts = [s.valid_samples for s in report.scenarios]
     assert all(s.valid_samples == len(s.samples) for s in report.scenarios)
     assert report.search.candidates_total == int(np.prod(counts)) == len(report.candidates)
@@ -38,13 +38,16 @@ def test_counts_qualities_and_best_are_consistent(two_part_design):
             assert 0.0 < quality.rles <= 2.0
             assert quality.effective_area == pytest.approx(quality.contact_area_mm2 / quality.rles, rel=1e-5, abs=1e-5)
         assert candidate.quality == min(q.effective_area for q in candidate.per_scenario)
-    best = max(report.candidates, key=lambda c: (c.quality, c.mean_effective_area, -c.index))
+    # the design is the best exactly re-evaluated candidate (METHOD §8b)
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    assert len(exact) == report.search.exact == report.settings.search.exact_top_k
+    best = max(exact, key=lambda c: (c.quality, c.mean_effective_area, -c.index))
     assert report.best == best.index
     assert {c.pad_case for c in report.candidates} == {"good", "bad", "mixed"}
     for scenario in report.scenarios:
         assert set(scenario.rejected) == {"contact", "fit", "collision_finger", "collision_descent"}
         assert scenario.tried_samples == scenario.valid_samples + sum(scenario.rejected.values())
-    assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "search", "finger"}
+    assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "screening", "exact", "finger"}
     assert report.settings.sampler.length_mm == 10.0
 
 
@@ -119,3 +122,30 @@ def test_user_finger_mesh_with_its_frame(tmp_path):
 def test_part_too_wide_for_the_gripper_has_no_grasp():
     with pytest.raises(fcso.NoGraspError, match="capsela200_plug.stl: no valid grasp"):
         fcso.design([data_path("capsela200_plug.stl")], small_config(poses={"select": [0]}))
+
+
+def test_ungraspable_part_is_listed_and_the_rest_designed():
+    # the plug is too wide for the gripper in its first pose; the cube is not
+    config = small_config(poses={"select": [0]})
+    report = fcso.design([data_path("20mm-xyz-cube.stl"), data_path("capsela200_plug.stl")], config).report
+    assert [s.part for s in report.scenarios] == ["20mm-xyz-cube"]
+    assert [g.part for g in report.grasps] == ["20mm-xyz-cube"]
+    assert len(report.ungraspable) == 1
+    entry = report.ungraspable[0]
+    assert (entry.part, entry.pose_index) == ("capsela200_plug", 0)
+    assert entry.rejected["fit"] > 0 and entry.tried_samples == sum(entry.rejected.values())
+    assert "too wide for the open gripper" in entry.reason
+    assert any("capsela200_plug in stable pose 0 cannot be grasped" in w for w in report.warnings)
+
+
+def test_separate_solids_of_one_file_are_designed_as_separate_parts():
+    config = small_config(sampler={"stride_mm": 8.0}, search={"max_exhaustive": 1, "max_evaluations": 8})
+    report = fcso.design([data_path("DC-DC_case.stl")], config).report
+    assert [p.name for p in report.parts] == ["DC-DC_case#1", "DC-DC_case#2"]
+    assert [p.solid_index for p in report.parts] == [1, 2]
+    assert all(p.shell_handling.startswith(f"solid {k} of 2") for k, p in zip((1, 2), report.parts))
+    assert [s.part for s in report.scenarios] == ["DC-DC_case#1", "DC-DC_case#2"]
+    assert any("holds 2 separate solids" in w for w in report.warnings)
+    refused = config.updated({"parts": {"split_bodies": False}})
+    with pytest.raises(fcso.MeshError, match="DC-DC_case.stl: holds 2 separate solids"):
+        fcso.design([data_path("DC-DC_case.stl")], refused)

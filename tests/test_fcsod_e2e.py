@@ -101,8 +101,10 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
         schemas = summary.schemas
         assert set(ALWAYS_RECORDED) | set(DESIGN_RECORDED) <= set(channels)
         for channel in channels.values():
-            assert channel.message_encoding == "json"
-            assert schemas[channel.schema_id].encoding == "jsonschema"
+            # JSON channels, plus the ROS 2 form of the published messages for ros2 bag play
+            expected = ("cdr", "ros2msg") if channel.topic.startswith("/fcsod/") else ("json", "jsonschema")
+            assert (channel.message_encoding, schemas[channel.schema_id].encoding) == expected, channel.topic
+        assert {t for t in channels if t.startswith("/fcsod/")} == {"/fcsod/grasps", "/fcsod/plan", "/fcsod/quality", "/fcsod/status"}
         assert schemas[channels["/scene"].schema_id].name == "foxglove.SceneUpdate"
         counts = summary.statistics.channel_message_counts
         assert all(counts[c.id] > 0 for c in channels.values())
@@ -113,7 +115,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert [s["state"] for s in record.of(TOPIC_STATE)] == ["queued", "running", "done"]
     published = [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)]
     assert published == ["status", "quality", "grasps", "design", "placement", "status"]
-    assert any(b.get("stage") == "candidates" for b in record.of(TOPIC_LOG))
+    assert any(b.get("stage") == "screening" for b in record.of(TOPIC_LOG))
     scene = record.of("/scene")[0]
     assert len(scene["entities"][0]["triangles"]) == 5
 
@@ -169,6 +171,19 @@ def test_bad_jobs_fail_clearly_and_the_next_good_job_runs(cell):
         assert (last_state["state"], last_state["error"]) == ("failed", body["error"])
         assert json.loads(record.of(TOPIC_BUS)[-1]["payload_text"])["error"] == body["error"]
         assert any(line["level"] == "error" and line["message"] == body["error"] for line in record.of(TOPIC_LOG))
+
+
+def test_job_with_an_ungraspable_part_is_delivered_with_a_warning(cell):
+    base, subscriber = cell["base"], cell["subscriber"]
+    # lying flat (pose 0) the 52 x 70 mm plug is wider than the 50 mm opening every way
+    manifest = '[poses]\ncount = 1\nselect = [0]\n[[parts]]\nfile = "cube.stl"\n[[parts]]\nfile = "plug.stl"\n'
+    drop_job(base / "watch" / "with-plug", {"job.toml": manifest, "cube.stl": CUBE, "plug.stl": DATA / "capsela200_plug.stl"})
+    done = finished(subscriber, "with-plug")["body"]
+    assert done["state"] == "done", done
+    assert any("plug in stable pose 0 cannot be grasped" in w for w in done["warnings"]), done["warnings"]
+    report = json.loads((base / "out" / done["job_id"] / "report.json").read_text())
+    assert [u["part"] for u in report["ungraspable"]] == ["plug"]
+    assert [g["part"] for g in report["grasps"]] == ["cube"]
 
 
 def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):

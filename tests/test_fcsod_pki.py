@@ -65,6 +65,14 @@ def test_pki_init_writes_keys_0600_and_a_chain_to_its_ca(tmp_path, capsys):
     assert (directory / "clients" / "robot-a" / "signing.pub").read_bytes() == (directory / "daemon" / "signing.pub").read_bytes()
 
 
+@pytest.mark.parametrize("ros2_args, ros2_keys", [([], []), (["--ros2-domain-id", "3"], ["3/**", "3/**/@adv/**", "@ros2_lv/3/**"])])
+def test_pki_init_lets_the_ros2_key_expressions_through_only_when_asked(tmp_path, capsys, ros2_args, ros2_keys):
+    directory = tmp_path / "pki"
+    assert main(["pki", "init", str(directory), "--cell", "c7", "--client", "robot-a", "--host", "localhost", *ros2_args]) == 0
+    acl = json.loads(zenoh.Config.from_file(str(directory / "daemon" / "zenoh.json5")).get_json("access_control"))
+    assert [rule["key_exprs"] for rule in acl["rules"]] == [["fcso/c7/**", *ros2_keys]] * 2
+
+
 def test_pki_init_refuses_a_folder_with_a_ca(tmp_path):
     init_pki(tmp_path, "c1", ["a"], hosts=["localhost"])
     with pytest.raises(ConfigError, match="already holds a CA"):

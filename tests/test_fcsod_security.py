@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
+from rosbags.typesys import Stores, get_typestore
 
 import fcsod
 from fcsod.pki import add_client, init_pki
@@ -30,6 +31,9 @@ from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_po
 CUBE = DATA / "20mm-xyz-cube.stl"
 TOPICS = {"status", "quality", "grasps", "design", "placement"}
 FORGED = '{"job_id": "forged", "grasps": [{"closing_width_mm": 0.0}]}'
+ROS2_DOMAIN = 7
+ROS2 = f'[ros2]\nenabled = true\ndomain_id = {ROS2_DOMAIN}\nnamespace = "/cell1"\n'
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 def probe(config: Path, *args: str, timeout: float = 60) -> list[dict]:
@@ -61,30 +65,49 @@ def client_args(pki: Path, name: str) -> list[str]:
     return ["--zenoh-config", str(folder / "zenoh.json5"), "--verify-key", str(folder / "signing.pub")]
 
 
+def _ros2_cell(pki: Path, name: str, late: str | None = None) -> Process:
+    """``tests/ros2_cell.py`` (a ROS 2 cell on rmw_zenoh) with the zenoh config and certificate of client ``name``."""
+    args = ["--zenoh-config", str(pki / "clients" / name / "zenoh.json5"), "--domain", str(ROS2_DOMAIN), *(["--late", late] if late else [])]
+    cell = Process(args, module="tests.ros2_cell")
+    cell.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "ready", timeout=60)
+    return cell
+
+
 def _cell(base: Path, acl: bool) -> dict:
-    """A daemon on TLS with the PKI of ``init_pki`` (access control on or off), a subscriber ``ctl1`` and one finished job."""
+    """A daemon on TLS with the PKI of ``init_pki`` (access control on or off) and ``[ros2]`` enabled, a subscriber ``ctl1``,
+    ROS 2 cells with the certificates of ``ctl1`` and of ``outsider`` (of the CA, not in the access control) and one finished job."""
     port = free_port()
     pki = base / "pki"
-    files = init_pki(pki, "test", ["ctl1", "ctl2"], hosts=["127.0.0.1", "localhost"], port=port, acl=acl)
+    files = init_pki(pki, "test", ["ctl1", "ctl2"], hosts=["127.0.0.1", "localhost"], port=port, acl=acl, ros2_domain_id=ROS2_DOMAIN)
+    add_client(pki, "outsider", [f"tls/127.0.0.1:{port}"])
     config = write_config(
-        base, port, scheme="tls", zenoh_extra=f'config_file = "{files.daemon_zenoh_config}"', bus_extra=f'signing_key = "{files.signing_key}"'
+        base, port, scheme="tls", zenoh_extra=f'config_file = "{files.daemon_zenoh_config}"', bus_extra=f'signing_key = "{files.signing_key}"',
+        extra=ROS2,
     )
     daemon = start_daemon(config)
     subscriber = start_subscriber(config, save=base / "received", extra=client_args(pki, "ctl1"))
+    ros2_cells = {name: _ros2_cell(pki, name) for name in ("ctl1", "outsider")}
     drop_job(base / "watch" / "cube", {"cube.stl": CUBE})
     done = finished(subscriber, "cube")
     assert done["body"]["state"] == "done", done
-    return {"base": base, "port": port, "pki": pki, "config": config, "daemon": daemon, "subscriber": subscriber, "job_id": done["job_id"]}
+    return {
+        "base": base, "port": port, "pki": pki, "config": config, "daemon": daemon, "subscriber": subscriber, "ros2_cells": ros2_cells,
+        "job_id": done["job_id"],
+    }
+
+
+def _stop(cell: dict) -> None:
+    for process in (cell["subscriber"], *cell["ros2_cells"].values()):
+        process.stop()
+    assert cell["daemon"].stop() == 0
 
 
 @pytest.fixture(scope="module")
 def secure(tmp_path_factory):
     """The default set-up: mTLS and access control; ``outsider`` holds a certificate of the same CA but is not in the ACL."""
     cell = _cell(tmp_path_factory.mktemp("secure"), acl=True)
-    add_client(cell["pki"], "outsider", [f"tls/127.0.0.1:{cell['port']}"])
     yield cell
-    cell["subscriber"].stop()
-    assert cell["daemon"].stop() == 0
+    _stop(cell)
 
 
 def _lines(cell: dict, job_id: str) -> list[dict]:
@@ -102,6 +125,44 @@ def test_client_with_a_valid_certificate_receives_every_topic_signed(secure):
     assert not [v for v in secure["subscriber"].json_lines() if "rejected" in v]
     daemon = secure["daemon"].json_lines()
     assert not [v for v in daemon if "insecure bus" in str(v.get("message"))], "the secure set-up must not warn"
+
+
+def _ros2_samples(cell: Process, topic: str) -> list[dict]:
+    return [v for v in cell.json_lines() if v.get("event") == "sample" and v["source"] == "ros2" and f"/fcsod/{topic}/" in v["key_expr"]]
+
+
+def test_ros2_topics_pass_the_access_control_unsigned_to_listed_clients_only(secure):
+    """With ``pki init --ros2-domain-id`` a listed certificate gets the ROS 2 data and tokens; rmw_zenoh's attachment has no signature."""
+    listed, outsider = secure["ros2_cells"]["ctl1"], secure["ros2_cells"]["outsider"]
+    status = listed.wait_for(lambda v: isinstance(v, dict) and '"done"' in _cdr_string(v, "/fcsod/status/"), timeout=60)
+    assert status["key_expr"].startswith(f"{ROS2_DOMAIN}/cell1/fcsod/status/std_msgs::msg::dds_::String_/RIHS01_")
+    assert len(bytes.fromhex(status["attachment"])) == 8 + 8 + 1 + 16, "rmw_zenoh's attachment: sequence number, timestamp, GID"
+    native = next(v for v in _lines(secure, secure["job_id"]) if v["source"] == "live" and v["topic"] == "grasps")
+    poses = [TYPESTORE.deserialize_cdr(bytes.fromhex(v["payload"]), "geometry_msgs/msg/PoseArray") for v in _ros2_samples(listed, "grasps")]
+    assert [p.header.frame_id for p in poses] == [f"fcso_{g['part']}_rest{g['pose_index']}" for g in native["body"]["grasps"]]
+    tokens = {v["key_expr"] for v in listed.json_lines() if v.get("event") == "token"}
+    assert any(t.startswith(f"@ros2_lv/{ROS2_DOMAIN}/") and "/0/0/NN/%/%cell1/fcsod" in t for t in tokens), tokens
+    assert len([t for t in tokens if "/MP/" in t]) == 4, tokens
+    seen_by_outsider = [v for v in outsider.json_lines() if v.get("event") in ("sample", "token")]
+    assert seen_by_outsider == [], "a certificate outside the access control read ROS 2 data or tokens"
+
+
+def test_a_late_transient_local_ros2_subscriber_gets_the_last_job_through_the_access_control(secure):
+    """rmw_zenoh's transient-local subscription queries the AdvancedPublisher's cache: that passes the access control too."""
+    (key,) = {v["key_expr"] for v in _ros2_samples(secure["ros2_cells"]["ctl1"], "grasps")}
+    late = _ros2_cell(secure["pki"], "ctl2", late=key)
+    try:
+        value = late.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "sample", timeout=30)
+    finally:
+        late.stop()
+    assert value["source"] == "history" and value["key_expr"] == key
+
+
+def _cdr_string(value, key_part: str) -> str:
+    """The text of a std_msgs/String sample of a ROS 2 cell line on a key containing ``key_part``; "" for any other line."""
+    if not (isinstance(value, dict) and value.get("event") == "sample" and value["source"] == "ros2" and key_part in value["key_expr"]):
+        return ""
+    return TYPESTORE.deserialize_cdr(bytes.fromhex(value["payload"]), "std_msgs/msg/String").data
 
 
 def _expire(folder: Path, ca_dir: Path) -> None:
@@ -242,8 +303,7 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
         late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status", 30)
         late.stop()
     finally:
-        cell["subscriber"].stop()
-        assert cell["daemon"].stop() == 0
+        _stop(cell)
     reasons = [v["rejected"] for v in cell["subscriber"].json_lines() if "rejected" in v]
     assert any("unsigned" in r for r in reasons) and any("bad signature" in r for r in reasons) and any("signed by key" in r for r in reasons), reasons
     accepted = [v for v in cell["subscriber"].json_lines() if v.get("topic") == "grasps" and v.get("job_id") == job_id]

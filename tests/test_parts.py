@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fcso import MeshError, load_part
+from fcso import MeshError, load_part, load_parts
+from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import unit_factor
 
 from .conftest import data_path
@@ -38,7 +39,9 @@ def test_other_formats_load_the_same_solid(tmp_path, suffix):
     path = tmp_path / f"solar{suffix}"
     original.export(path)
     part = load_part(path)
-    assert part.mesh.volume == pytest.approx(original.volume, rel=1e-6)
+    # the four overlapping shells united, as from the STL
+    assert part.mesh.volume == pytest.approx(10_629.0, rel=0.01)
+    assert part.shells == 4
 
 
 def test_open_mesh_is_refused_with_file_and_defect():
@@ -107,3 +110,78 @@ def test_unknown_unit_and_missing_file(tmp_path):
     text.write_text("not a mesh")
     with pytest.raises(MeshError, match="unsupported file type"):
         load_part(text)
+
+
+# ---------------------------------------------------------------- shells and solids
+# Figures from the fixtures' own shells (tests/data/README.md): solar_tracker.stl's
+# four shells add up to 11 745 mm³ and their union is 10 629 mm³.
+
+
+def test_overlapping_shells_are_one_solid():
+    part = load_part(data_path("solar_tracker.stl"))
+    raw = trimesh.load(data_path("solar_tracker.stl"))
+    assert raw.volume == pytest.approx(11_745.0, rel=0.001)
+    assert part.mesh.volume == pytest.approx(10_629.0, rel=0.01)
+    assert part.mesh.is_watertight and part.shells == 4 and part.solid_index is None
+    assert "4 overlapping or touching shells united" in part.shell_note
+    assert part.warnings == []
+    plug = load_part(data_path("capsela200_plug.stl"))
+    assert plug.shells == 2 and plug.mesh.volume < trimesh.load(data_path("capsela200_plug.stl")).volume - 100.0
+
+
+def test_touching_shells_are_one_solid():
+    parts = load_parts(data_path("box.STL"))
+    assert len(parts) == 1
+    assert parts[0].shells == 10 and parts[0].mesh.is_watertight
+    assert len(parts[0].mesh.split(only_watertight=False)) == 1
+
+
+def test_separate_solids_are_separate_parts_largest_first():
+    parts = load_parts(data_path("DC-DC_case.stl"))
+    assert [p.name for p in parts] == ["DC-DC_case#1", "DC-DC_case#2"]
+    assert [p.solid_index for p in parts] == [1, 2]
+    assert parts[0].mesh.volume > parts[1].mesh.volume > 0
+    assert all(p.mesh.is_watertight for p in parts)
+    assert any("DC-DC_case.stl holds 2 separate solids" in w for w in parts[0].warnings)
+    # the two solids do not overlap
+    assert (to_manifold(parts[0].mesh) ^ to_manifold(parts[1].mesh)).volume() == pytest.approx(0.0, abs=1e-6)
+
+
+def test_separate_solids_refused_without_splitting():
+    with pytest.raises(MeshError, match=r"DC-DC_case.stl: holds 2 separate solids"):
+        load_parts(data_path("DC-DC_case.stl"), split_bodies=False)
+    with pytest.raises(MeshError, match=r"DC-DC_case.stl: holds 2 parts"):
+        load_part(data_path("DC-DC_case.stl"))
+
+
+def test_void_and_the_piece_inside_it_stay_with_their_solid(tmp_path):
+    hollow = box((0, 0, 0), (20, 20, 20)) - box((5, 5, 5), (15, 15, 15))
+    inside = box((8, 8, 8), (12, 12, 12))
+    apart = box((30, 0, 0), (40, 10, 10))
+    overlapping = box((35, 5, 5), (45, 12, 12))
+    path = tmp_path / "nested.stl"
+    trimesh.util.concatenate([to_trimesh(m) for m in (hollow, inside, apart, overlapping)]).export(path)
+    parts = load_parts(path)
+    assert [p.name for p in parts] == ["nested#1", "nested#2"]
+    # 20³ - 10³ + 4³ and 10³ + 10 x 7 x 7 - 5 x 5 x 5
+    assert parts[0].mesh.volume == pytest.approx(8000 - 1000 + 64, abs=1e-3)
+    assert parts[1].mesh.volume == pytest.approx(1000 + 490 - 125, abs=1e-3)
+    assert parts[0].shells == 3 and parts[1].shells == 2
+
+
+def test_3mf_build_gives_one_part_per_object(tmp_path):
+    scene = trimesh.Scene()
+    cube = load_part(data_path("20mm-xyz-cube.stl")).mesh
+    plug = load_part(data_path("capsela200_plug.stl")).mesh
+    scene.add_geometry(cube, node_name="cube_a", transform=trimesh.transformations.translation_matrix([0, 0, 0]))
+    scene.add_geometry(cube, node_name="cube_b", transform=trimesh.transformations.translation_matrix([40, 0, 0]))
+    scene.add_geometry(plug, node_name="plug", transform=trimesh.transformations.translation_matrix([0, 60, 0]))
+    path = tmp_path / "build.3mf"
+    scene.export(path)
+    parts = load_parts(path)
+    assert len(parts) == 2
+    volumes = sorted(p.mesh.volume for p in parts)
+    assert volumes == pytest.approx(sorted([cube.volume, plug.volume]), rel=1e-4)
+    by_count = sorted(len(p.instances) for p in parts)
+    assert by_count == [1, 2]
+    assert all(name.startswith("build/") for name in (p.name for p in parts))

@@ -20,10 +20,10 @@ from pydantic import ValidationError
 from fcso.config import DesignConfig
 from fcso.errors import MeshError
 from fcso.finger import parametric_finger
+from fcso.parts import check_zip_archive
 from fcsod.build3mf import (
     Build,
     BuildItem,
-    check_zip_archive,
     export_build_3mf,
     parse_transform,
     read_build,
@@ -163,7 +163,7 @@ def test_no_room_says_so_and_suggests_the_height(finger, plate):
 
     report = result.report
     assert not result.fingers_fit and not report.all_items_placed
-    assert report.finger_copies_placed == 0 and report.unplaced_items == ["finger_1", "finger_2"]
+    assert report.finger_copies_placed == 0 and report.unplaced_items == ["finger-1", "finger-2"]
     assert "do not fit" in report.message and "more free build height" in report.message
     assert report.extra_height_needed_mm > 0
     # the parts are still a valid build, and build.3mf can still be written

@@ -6,11 +6,14 @@ import pytest
 import trimesh
 
 from fcso import load_part, stable_poses
-from fcso.config import DesignConfig, GripperConfig, SamplerConfig
+from fcso.config import DesignConfig, FingerConfig, GripperConfig, SamplerConfig
+from fcso.finger import finger_plate, load_finger, parametric_finger
 from fcso.geometry import box, to_manifold, to_trimesh
-from fcso.sampler import REJECTION_REASONS, sample_grasps
+from fcso.sampler import REJECTION_REASONS, FingerPlate, sample_grasps
 
-from .conftest import data_path
+from fcso.config import load_config
+
+from .conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
 
@@ -20,17 +23,43 @@ def block_part() -> trimesh.Trimesh:
     return to_trimesh(box((-15.0, -10.0, 0.0), (15.0, 10.0, 15.0)))
 
 
-def run(mesh, gripper=None, **sampler):
-    return sample_grasps(mesh, SamplerConfig(**{**PAD, **sampler}), gripper or GripperConfig())
+def built_in_plate(sampler: SamplerConfig, gripper: GripperConfig) -> FingerPlate:
+    return finger_plate(parametric_finger(sampler, gripper), sampler, gripper)
+
+
+def run(mesh, gripper=None, plate=None, **sampler):
+    sampler = SamplerConfig(**{**PAD, **sampler})
+    gripper = gripper or GripperConfig()
+    return sample_grasps(mesh, sampler, gripper, plate or built_in_plate(sampler, gripper))
+
+
+def test_built_in_plate_is_measured_from_the_finger():
+    # the built-in plate is 8 mm thick and max(L + 4, 20) mm wide, centred on the pad
+    plate = built_in_plate(SamplerConfig(**PAD), GripperConfig())
+    assert (plate.thickness_mm, plate.v_min_mm, plate.v_max_mm) == pytest.approx((8.0, -5.0, 15.0))
+    wide = built_in_plate(SamplerConfig(**{**PAD, "length_mm": 30.0, "stride_mm": 6.0}), GripperConfig())
+    assert (wide.thickness_mm, wide.v_min_mm, wide.v_max_mm) == pytest.approx((8.0, -2.0, 32.0))
+
+
+def test_user_finger_plate_is_its_extent_behind_the_contact_face(tmp_path):
+    # a 12 mm thick, 40 mm wide, 60 mm tall bar whose contact face is x = 0, pad centred 5 mm above its tip
+    path = tmp_path / "bar_finger.stl"
+    to_trimesh(box((0.0, -15.0, 0.0), (12.0, 25.0, 60.0))).export(path)
+    finger = load_finger(FingerConfig(mesh=path, contact_origin_mm=(0.0, 0.0, 10.0), contact_normal=(-1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)))
+    sampler = SamplerConfig(**PAD)
+    plate = finger_plate(finger, sampler, GripperConfig())
+    # v runs along up x outward = +y from y = -L/2: y in [-15, 25] -> v in [-10, 30]
+    assert (plate.thickness_mm, plate.v_min_mm, plate.v_max_mm) == pytest.approx((12.0, -10.0, 30.0))
 
 
 def test_block_counts_follow_from_its_dimensions():
     # yaw 0: s in {-5, 0, 5}, yaw 90: s in {-10, ..., 10}; h in {1, 6, 11}.
-    # h = 1 leaves the block beside the finger body above the pad -> collision
+    # the block's straight sides above a low pad stand in front of the finger
+    # plate (u < T), so every height is valid (METHOD §3 revision 2)
     result = run(block_part(), min_contact_area_mm2=10.0)
     assert result.tried == 3 * 3 + 5 * 3
-    assert result.rejected["collision_finger"] == 3 + 5
-    assert len(result.samples) == 2 * 3 + 2 * 5
+    assert result.rejected["collision_finger"] == 0
+    assert len(result.samples) == 3 * 3 + 5 * 3
     assert sum(result.rejected.values()) + len(result.samples) == result.tried
     assert set(result.rejected) == set(REJECTION_REASONS)
 
@@ -85,7 +114,8 @@ def test_valid_bunny_samples_pass_every_check_independently():
     mesh = part.mesh.copy()
     mesh.apply_transform(transforms[1])
     sampler, gripper = config.sampler, config.gripper
-    result = sample_grasps(mesh, sampler, gripper)
+    plate = built_in_plate(sampler, gripper)
+    result = sample_grasps(mesh, sampler, gripper, plate)
     assert len(result.samples) > 0
     assert result.tried == len(result.samples) + sum(result.rejected.values())
     solid = to_manifold(mesh)
@@ -106,8 +136,69 @@ def test_valid_bunny_samples_pass_every_check_independently():
         # fits between the open pads, closes within range
         span = sample.a_max_mm - sample.a_min_mm
         assert span + sampler.table_clearance_mm <= gripper.max_opening_mm - 2 * T
-        # finger bodies above the closed pads are free
+        # the 8 mm, 24 mm wide plates behind the closed pads are free
         top = h + W + gripper.finger_height_mm
-        assert _volume_inside(local, (sample.a_max_mm - D + 1e-3, b0, h + W), (sample.a_max_mm - D + T, b1, top)) == pytest.approx(0.0, abs=1e-6)
-        assert _volume_inside(local, (sample.a_min_mm + D - T, b0, h + W), (sample.a_min_mm + D - 1e-3, b1, top)) == pytest.approx(0.0, abs=1e-6)
+        plus_back, minus_back = sample.a_max_mm - D + T, sample.a_min_mm + D - T
+        assert _volume_inside(local, (plus_back, b0 - 2.0, h), (plus_back + 8.0, b1 + 2.0, top)) == pytest.approx(0.0, abs=1e-6)
+        assert _volume_inside(local, (minus_back - 8.0, b0 - 2.0, h), (minus_back, b1 + 2.0, top)) == pytest.approx(0.0, abs=1e-6)
         assert h >= sampler.table_clearance_mm
+
+
+def test_cube_is_gripped_below_its_top():
+    # METHOD §3 revision 2: straight sides stand in front of the finger plate
+    mesh = load_part(data_path("20mm-xyz-cube.stl")).mesh.copy()
+    mesh.apply_translation(-mesh.bounds[0] * [0.0, 0.0, 1.0] - mesh.centroid * [1.0, 1.0, 0.0])
+    top = float(mesh.bounds[1, 2])
+    result = run(mesh, min_contact_area_mm2=10.0)
+    low = [s for s in result.samples if s.h_mm + PAD["width_mm"] <= top - 5.0]
+    assert len(low) >= 2
+    assert {s.yaw_deg for s in low} == {0.0, 90.0}
+
+
+def _stem_with_cap(overhang_mm: float) -> trimesh.Trimesh:
+    """A 20 mm stem up to z = 20 under a 5 mm cap reaching ``overhang_mm`` beyond it along x."""
+    stem = box((-10.0, -10.0, 0.0), (10.0, 10.0, 20.0))
+    cap = box((-10.0 - overhang_mm, -10.0, 19.9), (10.0 + overhang_mm, 10.0, 25.0))
+    return to_trimesh(stem + cap)
+
+
+def test_undercut_reaching_the_plate_is_rejected():
+    # T - D = 1 mm: a cap overhanging the stem by 3 mm reaches u >= T above
+    # every pad on the stem, so the finger plate hits it
+    capped = run(_stem_with_cap(3.0), yaw_deg=[0.0], min_contact_area_mm2=10.0)
+    on_stem = [s for s in capped.samples if s.h_mm + PAD["width_mm"] <= 19.9]
+    assert on_stem == []
+    assert capped.rejected["collision_finger"] == 3 * 2  # s in {-5, 0, 5}, h in {1, 6}
+    assert capped.rejected["collision_descent"] == 0
+    # a 0.5 mm lip stays in front of the plate (u < T): the stem is gripped below it
+    lipped = run(_stem_with_cap(0.5), yaw_deg=[0.0], min_contact_area_mm2=10.0)
+    assert lipped.rejected["collision_finger"] == 0
+    assert len([s for s in lipped.samples if s.h_mm + PAD["width_mm"] <= 19.9]) == 3 * 2
+
+
+def test_thicker_plate_meets_what_a_thin_one_misses():
+    # a stem and, beside its top, two loose bars 3 mm out (the sampler takes any
+    # closed mesh): the plate's front face is at x = 10 - D + T = 11, so a plate
+    # 1.5 mm thick ends short of the bars at x = 13 and a 3 mm one reaches them
+    stem = box((-10.0, -10.0, 0.0), (10.0, 10.0, 20.0))
+    bars = box((13.0, -10.0, 19.9), (20.0, 10.0, 25.0)) + box((-20.0, -10.0, 19.9), (-13.0, 10.0, 25.0))
+    mesh = to_trimesh(stem + bars)
+    sampler = SamplerConfig(**{**PAD, "yaw_deg": [0.0]})
+    gripper = GripperConfig(max_opening_mm=80.0)
+    thin = sample_grasps(mesh, sampler, gripper, FingerPlate(thickness_mm=1.5, v_min_mm=0.0, v_max_mm=10.0))
+    thick = sample_grasps(mesh, sampler, gripper, FingerPlate(thickness_mm=3.0, v_min_mm=0.0, v_max_mm=10.0))
+    low = lambda result: [s for s in result.samples if s.h_mm + PAD["width_mm"] <= 19.9]  # noqa: E731
+    assert len(low(thin)) == 3 * 2
+    assert low(thick) == []
+    assert thick.rejected["collision_finger"] == 3 * 2
+
+
+def test_paper_bunny_has_base_level_grasps():
+    # the paper found grasps "along the extrusions at the base" (METHOD §10)
+    config = load_config(REPO / "examples" / "paper.toml")
+    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
+    transforms, _ = stable_poses(part.mesh)
+    mesh = part.mesh.copy()
+    mesh.apply_transform(transforms[1])
+    result = sample_grasps(mesh, config.sampler, config.gripper, built_in_plate(config.sampler, config.gripper))
+    assert any(s.h_mm <= 10.0 for s in result.samples)
