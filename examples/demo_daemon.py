@@ -120,7 +120,9 @@ class Ros2Cell:
 
     def show(self) -> None:
         typestore = get_typestore(Stores.ROS2_JAZZY)
-        print("ROS 2 (rmw_zenoh wire format) liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
+        print("ROS 2 (rmw_zenoh wire format, read over TLS with the controller's certificate through the access control;"
+              " unsigned: rmw_zenoh's attachment has no room for a signature)")
+        print("liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
         for token in dict.fromkeys(self.tokens):
             print(f"  {token}")
         print("ROS 2 key expressions published (CDR payloads):")
