@@ -1,0 +1,239 @@
+"""Collision geometry that keeps concavities, and its fidelity (METHOD §12).
+
+MuJoCo collides a mesh by its convex hull, so
+
+- the part is split into convex pieces (CoACD), cached by content hash;
+- the fingerpad, a box minus carved regions reached along its thickness u,
+  becomes a height field over its face: the pad's thickness in front of the
+  back face at every grid point, which is exact for everything a pad
+  approaching along u can touch (a pocket behind pad material cannot be
+  reached by a part closing along u);
+- the finger body behind the pad is the convex hull of the finger's
+  material behind the pad's back face.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import manifold3d
+import numpy as np
+import trimesh
+
+from ..geometry import box, to_manifold
+
+#: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
+CACHE_VERSION = "coacd-1"
+
+
+@dataclass
+class ConvexPieces:
+    """A part as convex pieces.
+
+    Attributes
+    ----------
+    pieces : list of (vertices (n, 3) float, faces (m, 3) int)
+        Convex meshes in the part's frame, mm.
+    volume_error : float
+        (volume of the union of the pieces - part volume) / part volume.
+    missing_fraction : float
+        Share of the part's volume not covered by any piece.
+    seconds : float
+        Time the decomposition took when it was computed (0 when cached... see ``cached``).
+    cached : bool
+        Whether the pieces came from the cache.
+    """
+
+    pieces: list[tuple[np.ndarray, np.ndarray]]
+    volume_error: float
+    missing_fraction: float
+    cached: bool
+
+
+def mesh_key(vertices: np.ndarray, faces: np.ndarray, threshold: float) -> str:
+    """Content hash of a mesh and the decomposition settings (hex sha256)."""
+    digest = hashlib.sha256(CACHE_VERSION.encode())
+    digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
+    digest.update(np.ascontiguousarray(faces, dtype="<i8").tobytes())
+    digest.update(repr(float(threshold)).encode())
+    return digest.hexdigest()
+
+
+def convex_pieces(mesh: trimesh.Trimesh, threshold: float, cache_dir: Path | None) -> ConvexPieces:
+    """Convex decomposition of a closed part mesh, cached by content hash.
+
+    A part that is already convex (its hull's volume within 0.1 % of its
+    own) is its own hull; otherwise CoACD with the given concavity threshold.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Closed part mesh (any frame), mm.
+    threshold : float
+        CoACD concavity threshold (fraction of the part's size).
+    cache_dir : Path or None
+        Folder of cached decompositions (created when missing); None: no cache.
+
+    Returns
+    -------
+    ConvexPieces
+    """
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    key = mesh_key(vertices, faces, threshold)
+    path = None if cache_dir is None else Path(cache_dir) / f"{key}.npz"
+    if path is not None and path.exists():
+        pieces = _read_pieces(path.read_bytes())
+        cached = True
+    else:
+        pieces = _decompose(mesh, threshold)
+        cached = False
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            temporary = path.with_suffix(".tmp")
+            temporary.write_bytes(_write_pieces(pieces))
+            temporary.replace(path)
+    excess, missing = union_volume_errors(mesh, pieces)
+    return ConvexPieces(pieces=pieces, volume_error=excess - missing, missing_fraction=missing, cached=cached)
+
+
+def _decompose(mesh: trimesh.Trimesh, threshold: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    hull = mesh.convex_hull
+    if hull.volume <= mesh.volume * 1.001:
+        return [(np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int64))]
+    import coacd
+
+    coacd.set_log_level("error")
+    result = coacd.run_coacd(
+        coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)),
+        threshold=threshold,
+        seed=0,
+    )
+    pieces = []
+    for piece_vertices, piece_faces in result:
+        piece = trimesh.Trimesh(piece_vertices, piece_faces, process=True).convex_hull
+        if piece.volume > 1e-6:
+            pieces.append((np.asarray(piece.vertices, dtype=np.float64), np.asarray(piece.faces, dtype=np.int64)))
+    return pieces
+
+
+def _write_pieces(pieces) -> bytes:
+    buffer = io.BytesIO()
+    arrays = {}
+    for k, (v, f) in enumerate(pieces):
+        arrays[f"v{k}"], arrays[f"f{k}"] = v, f
+    np.savez_compressed(buffer, count=len(pieces), **arrays)
+    return buffer.getvalue()
+
+
+def _read_pieces(data: bytes) -> list[tuple[np.ndarray, np.ndarray]]:
+    with np.load(io.BytesIO(data)) as stored:
+        return [(stored[f"v{k}"], stored[f"f{k}"]) for k in range(int(stored["count"]))]
+
+
+def union_volume_errors(mesh: trimesh.Trimesh, pieces) -> tuple[float, float]:
+    """Excess and missing volume of a set of convex pieces against the part.
+
+    Returns
+    -------
+    excess, missing : float
+        Volume of (union - part) and of (part - union), each over the part's volume.
+    """
+    part = to_manifold(mesh)
+    union = manifold3d.Manifold.batch_boolean(
+        [manifold3d.Manifold.hull_points(np.asarray(v, dtype=np.float64)) for v, _ in pieces], manifold3d.OpType.Add
+    )
+    volume = part.volume()
+    return float((union - part).volume() / volume), float((part - union).volume() / volume)
+
+
+@dataclass
+class PadHeightField:
+    """A fingerpad as a height field over its face.
+
+    Attributes
+    ----------
+    thickness_mm : (rows, cols) float
+        Pad material in front of the back face (u = T) at each grid point;
+        row r at w = W - r * spacing (top row first), column c at v = c * spacing.
+    spacing_mm : (2,) float
+        Grid spacing along w (rows) and v (columns).
+    volume_error : float
+        (height-field volume - pad volume) / pad volume.
+    """
+
+    thickness_mm: np.ndarray
+    spacing_mm: np.ndarray
+    volume_error: float
+
+
+def pad_height_field(pad: trimesh.Trimesh | None, size_mm: tuple[float, float, float], grid_mm: float, flat_depth_mm: float = 0.0) -> PadHeightField:
+    """Height field of a fingerpad in its pad frame (box ``[0, T] x [0, L] x [0, W]``).
+
+    Parameters
+    ----------
+    pad : trimesh.Trimesh or None
+        The carved pad in its pad frame, mm; None for a flat pad.
+    size_mm : (T, L, W)
+    grid_mm : float
+        Largest grid spacing, mm.
+    flat_depth_mm : float
+        For a flat pad: its front face is at u = flat_depth_mm (thickness T - flat_depth_mm).
+
+    Returns
+    -------
+    PadHeightField
+    """
+    thickness, length, width = size_mm
+    cols = int(np.ceil(length / grid_mm)) + 1
+    rows = int(np.ceil(width / grid_mm)) + 1
+    v = np.linspace(0.0, length, cols)
+    w = np.linspace(width, 0.0, rows)
+    if pad is None:
+        field = np.full((rows, cols), thickness - flat_depth_mm)
+        return PadHeightField(field, np.array([width / (rows - 1), length / (cols - 1)]), 0.0)
+    # rays just inside the face's edges, so the pad's side walls are not hit edge-on
+    inset = 1e-4
+    grid_v, grid_w = np.meshgrid(np.clip(v, inset, length - inset), np.clip(w, inset, width - inset))
+    origins = np.column_stack([np.full(grid_v.size, -1.0), grid_v.ravel(), grid_w.ravel()])
+    directions = np.tile([1.0, 0.0, 0.0], (len(origins), 1))
+    locations, rays, _ = pad.ray.intersects_location(origins, directions, multiple_hits=True)
+    front = np.full(len(origins), thickness)
+    np.minimum.at(front, rays, locations[:, 0])
+    field = (thickness - np.clip(front, 0.0, thickness)).reshape(rows, cols)
+    cell = (width / (rows - 1)) * (length / (cols - 1))
+    # trapezoid rule over the bilinear cells
+    field_volume = float(cell * (field[:-1, :-1] + field[1:, :-1] + field[:-1, 1:] + field[1:, 1:]).sum() / 4.0)
+    volume = float(pad.volume)
+    return PadHeightField(field, np.array([width / (rows - 1), length / (cols - 1)]), (field_volume - volume) / volume)
+
+
+def finger_body_hull(finger: trimesh.Trimesh, pad_to_finger: np.ndarray, thickness_mm: float) -> np.ndarray:
+    """Vertices (pad frame, mm) of the hull of the finger's material behind the pad's back face.
+
+    Parameters
+    ----------
+    finger : trimesh.Trimesh
+        The finger (finger frame, mm), with or without the pad fused on.
+    pad_to_finger : (4, 4) float
+        Pad frame to finger frame.
+    thickness_mm : float
+        Pad thickness T: the back face is u = T.
+
+    Returns
+    -------
+    (n, 3) float
+        Hull vertices; empty when the finger has no material behind the pad.
+    """
+    in_pad = finger.copy()
+    in_pad.apply_transform(np.linalg.inv(pad_to_finger))
+    extent = float(np.abs(in_pad.vertices).max()) + 1.0
+    behind = to_manifold(in_pad) ^ box((thickness_mm, -extent, -extent), (extent, extent, extent))
+    mesh = behind.to_mesh()
+    points = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
+    if len(points) < 4:
+        return np.zeros((0, 3))
+    return np.asarray(trimesh.convex.convex_hull(points).vertices, dtype=np.float64)
