@@ -33,10 +33,15 @@ class VerifyConfig(BaseModel):
     slip_deg: float = Field(2.0, gt=0, description="... or turned this far, degrees")
     success_mm: float = Field(0.3, gt=0, description="Precision trial succeeds within this position error, mm")
     success_deg: float = Field(1.0, gt=0, description="... and this rotation error, degrees")
+    pass_success_rate: float = Field(
+        1.0, ge=0, le=1, description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10)"
+    )
     timestep_s: float = Field(0.0005, gt=0, description="Physics time step, s")
-    pad_grid_mm: float = Field(0.25, gt=0, description="Grid spacing of the pad's height-field collision geometry, mm")
+    open_margin_mm: float = Field(
+        5.0, gt=0, description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm"
+    )
     decomposition_threshold: float = Field(
-        0.02, gt=0, description="CoACD concavity threshold of the part's convex decomposition (fraction of its size)"
+        0.05, gt=0, description="CoACD concavity threshold of the part's and the pad's convex decompositions (fraction of the size)"
     )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"

@@ -25,7 +25,6 @@ import mujoco
 import numpy as np
 import trimesh
 
-from .collision import PadHeightField
 from .config import VerifyConfig
 
 #: mm to MuJoCo's metres.
@@ -114,7 +113,7 @@ def _quat(rotation: np.ndarray) -> str:
 def build_scene(
     case: GraspCase,
     part_pieces: list[tuple[np.ndarray, np.ndarray]],
-    pad: PadHeightField | None,
+    pad_pieces: list[tuple[np.ndarray, np.ndarray]] | None,
     finger_hull_mm: np.ndarray,
     config: VerifyConfig,
 ) -> Scene:
@@ -125,8 +124,9 @@ def build_scene(
     case : GraspCase
     part_pieces : list of (vertices, faces)
         Convex pieces of the part, resting frame, mm.
-    pad : PadHeightField or None
-        The carved pad; None for the flat control (a plain pad of thickness T - D).
+    pad_pieces : list of (vertices, faces) or None
+        Convex pieces of the carved pad, pad frame, mm; None for the flat
+        control (a plain pad of thickness T - D, a box).
     finger_hull_mm : (n, 3) float
         Finger body behind the pad (pad frame, mm); may be empty.
     config : VerifyConfig
@@ -150,20 +150,17 @@ def build_scene(
         part_geoms.append(f'<geom name="part{k}" type="mesh" mesh="part{k}" class="contact"/>')
     if len(finger_hull_mm):
         assets.append(f'<mesh name="finger_body" vertex="{_vec(np.asarray(finger_hull_mm) * M)}"/>')
-    if pad is not None:
-        rows, cols = pad.thickness_mm.shape
-        assets.append(f'<hfield name="pad" nrow="{rows}" ncol="{cols}" size="{_vec([length / 2 * M, width / 2 * M, thickness * M, 1.0 * M])}"/>')
-    hfield_rotation = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]]).T
+    for k, (vertices, _) in enumerate(pad_pieces or []):
+        assets.append(f'<mesh name="pad{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
     for side, name in ((1, "plus"), (-1, "minus")):
         geoms = finger_geoms[side]
-        if pad is not None:
-            geoms.append(
-                f'<geom name="pad_{name}" type="hfield" hfield="pad" class="contact" '
-                f'pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" quat="{_quat(hfield_rotation)}"/>'
+        if pad_pieces is not None:
+            geoms.extend(
+                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact"/>' for k in range(len(pad_pieces))
             )
         else:
             geoms.append(
-                f'<geom name="pad_{name}" type="box" class="contact" '
+                f'<geom name="pad_{name}0" type="box" class="contact" '
                 f'pos="{_vec(np.array([(thickness + depth) / 2, length / 2, width / 2]) * M)}" '
                 f'size="{_vec(np.array([(thickness - depth) / 2, length / 2, width / 2]) * M)}"/>'
             )
@@ -213,10 +210,8 @@ def build_scene(
   </actuator>
 </mujoco>"""
     model = mujoco.MjModel.from_xml_string(xml)
-    if pad is not None:
-        model.hfield_data[:] = (pad.thickness_mm / thickness).ravel()
     part_body = model.body("part").id
-    pad_geoms = np.array([model.geom(f"pad_{n}").id for n in ("plus", "minus")])
+    pad_geoms = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("pad_")])
     return Scene(
         model=model,
         part_body=part_body,

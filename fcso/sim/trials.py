@@ -122,7 +122,8 @@ def run_grasp(scene: Scene, case: GraspCase, part_pose: np.ndarray, config: Veri
     vertices = np.asarray(case.part.vertices) @ part_pose[:3, :3].T + part_pose[:3, 3]
     pad_bottom = tcp[2, 3] - case.pad_size_mm[2] / 2.0
     raise_mm = max(0.0, float(vertices[:, 2].max()) - pad_bottom) + APPROACH_CLEARANCE_MM
-    q_min, q_open = case.joint_range_mm
+    q_min, q_max = case.joint_range_mm
+    q_open = min(q_max, config.open_margin_mm)
     _set_part(model, data, part_pose)
     for joint in scene.joints:
         data.qpos[model.jnt_qposadr[joint]] = q_open * M

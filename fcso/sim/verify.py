@@ -1,0 +1,282 @@
+"""Verify a design in simulation: precision and holding tests, designed pads against flat ones (METHOD §12)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import mujoco
+import numpy as np
+import trimesh
+
+from .. import __version__
+from ..errors import MeshError
+from ..finger import load_finger, pad_to_finger, parametric_finger
+from ..parts import load_part
+from ..report import DesignReport, GraspReport
+from .collision import ConvexPieces, convex_pieces, finger_body_hull
+from .config import VerifyConfig
+from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
+from .scene import GraspCase, build_scene
+from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
+
+#: ``progress(stage, done, total)``.
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass
+class DesignUnderTest:
+    """What the simulation needs from a design.
+
+    Attributes
+    ----------
+    cases : list of GraspCase
+        One per scenario (part in a pose with its chosen grasp).
+    fingerpad : trimesh.Trimesh
+        The carved pad, pad frame, mm.
+    finger_hull_mm : (n, 3) float
+        Finger body behind the pad, pad frame, mm.
+    """
+
+    cases: list[GraspCase]
+    fingerpad: trimesh.Trimesh
+    finger_hull_mm: np.ndarray
+
+
+def tcp_matrix(grasp: GraspReport) -> np.ndarray:
+    """4x4 TCP pose (resting frame, mm) of a reported grasp."""
+    matrix = trimesh.transformations.quaternion_matrix(grasp.quaternion_wxyz)
+    matrix[:3, 3] = grasp.position_mm
+    return matrix
+
+
+def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.Trimesh) -> GraspCase:
+    """The simulation case of one reported grasp.
+
+    Parameters
+    ----------
+    report : DesignReport
+        For the pad size and the gripper.
+    grasp : GraspReport
+    part_mesh_mm : trimesh.Trimesh
+        The part in its file frame, scaled to mm.
+    """
+    sampler, gripper = report.settings.sampler, report.settings.gripper
+    mesh = part_mesh_mm.copy()
+    mesh.apply_transform(np.asarray(grasp.rest_transform, dtype=float))
+    return GraspCase(
+        name=f"{grasp.part} pose {grasp.pose_index}",
+        part=mesh,
+        tcp=tcp_matrix(grasp),
+        pad_gap_mm=grasp.pad_gap_mm,
+        pad_size_mm=(sampler.thickness_mm, sampler.length_mm, sampler.width_mm),
+        penetration_mm=sampler.penetration_mm,
+        opening_mm=(gripper.min_opening_mm, gripper.max_opening_mm),
+    )
+
+
+def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
+    """Read a design's output folder (``report.json``, ``finger.stl``, ``fingerpad.stl`` and the part files it names).
+
+    Raises
+    ------
+    MeshError
+        A file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    report_path = directory / "report.json"
+    if not report_path.is_file():
+        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
+    report = DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
+    parts = {
+        p.name: load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name).mesh
+        for p in report.parts
+    }
+    cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
+    fingerpad = _read_stl(directory / "fingerpad.stl")
+    finger = _read_stl(directory / "finger.stl")
+    return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
+
+
+def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
+    """Hull of a design's finger body behind its pad (pad frame, mm)."""
+    config = report.settings
+    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    return finger_body_hull(finger, pad_to_finger(flat, config.sampler), config.sampler.thickness_mm)
+
+
+def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | None = None) -> VerificationReport:
+    """Run the precision and holding tests on every scenario, designed pads and flat ones.
+
+    Parameters
+    ----------
+    design : DesignUnderTest
+    config : VerifyConfig
+    progress : callable, optional
+        ``progress("verification", done, total)`` per simulated grasp.
+
+    Returns
+    -------
+    VerificationReport
+    """
+    report_progress = progress or (lambda stage, done, total: None)
+    timings = {"decomposition": 0.0, "simulation": 0.0}
+    clock = time.perf_counter()
+    pad = convex_pieces(design.fingerpad, config.decomposition_threshold, config.cache_path())
+    timings["decomposition"] += time.perf_counter() - clock
+    total = len(design.cases) * 2 * (config.trials + 1)
+    counter = [0]
+
+    def advance() -> None:
+        counter[0] += 1
+        report_progress("verification", counter[0], total)
+
+    report_progress("verification", 0, total)
+    scenarios, warnings = [], []
+    for stream, case in enumerate(design.cases):
+        clock = time.perf_counter()
+        pieces = convex_pieces(case.part, config.decomposition_threshold, config.cache_path())
+        timings["decomposition"] += time.perf_counter() - clock
+        clock = time.perf_counter()
+        scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
+        timings["simulation"] += time.perf_counter() - clock
+        if not scenario.passed:
+            warnings.append(
+                f"{case.name}: {scenario.fcso.success_rate:.0%} of precision trials succeeded "
+                f"(flat pads: {scenario.flat.success_rate:.0%}), below pass_success_rate {config.pass_success_rate:.0%}"
+            )
+        scenarios.append(scenario)
+    return VerificationReport(
+        fcso_version=__version__,
+        mujoco_version=mujoco.__version__,
+        settings=config,
+        scenarios=scenarios,
+        passed=all(s.passed for s in scenarios),
+        warnings=warnings,
+        timings_s={k: round(v, 3) for k, v in timings.items()},
+    )
+
+
+def verify_case(
+    case: GraspCase,
+    pieces: ConvexPieces,
+    pad: ConvexPieces,
+    finger_hull_mm: np.ndarray,
+    config: VerifyConfig,
+    stream: int,
+    advance: Callable[[], None] = lambda: None,
+) -> ScenarioVerification:
+    """Both fingers' precision and holding tests on one grasp case.
+
+    Parameters
+    ----------
+    case : GraspCase
+    pieces : ConvexPieces
+        The part's collision geometry.
+    pad : ConvexPieces
+        The designed pad's collision geometry (pad frame).
+    finger_hull_mm : (n, 3) float
+    config : VerifyConfig
+    stream : int
+        Seeds this scenario's perturbations (same for both fingers).
+    advance : callable
+        Called after every simulated grasp.
+    """
+    errors = perturbations(config.trials, config, stream)
+    results, frames, penetration = {}, [], 0.0
+    for kind, pad_pieces in (("fcso", pad.pieces), ("flat", None)):
+        scene = build_scene(case, pieces.pieces, pad_pieces, finger_hull_mm, config)
+        if kind == "fcso":
+            penetration = seated_penetration_mm(scene, case)
+        nominal = run_grasp(scene, case, np.eye(4), config, record=kind == "fcso")
+        advance()
+        design_nominal = np.linalg.inv(case.tcp)
+        offset = pose_error(nominal.part_in_gripper, design_nominal, scene.part_com_mm)
+        reference = nominal.part_in_gripper if nominal.held else design_nominal
+        trials, pictured = [], None
+        for number, error in enumerate(errors):
+            run = run_grasp(scene, case, start_pose(case, error), config, record=number == 0)
+            advance()
+            moved, turned = pose_error(run.part_in_gripper, reference, scene.part_com_mm)
+            trials.append(
+                TrialResult(
+                    dx_mm=round(float(error[0]), 4),
+                    dy_mm=round(float(error[1]), 4),
+                    yaw_deg=round(float(error[2]), 4),
+                    held=run.held,
+                    error_mm=round(moved, 4),
+                    error_deg=round(turned, 4),
+                    success=bool(run.held and moved <= config.success_mm and turned <= config.success_deg),
+                )
+            )
+            if number == 0:
+                pictured = run.frames
+        if kind == "fcso":
+            frames = nominal.frames
+        results[kind] = _finger_result(kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured)
+    fidelity = Fidelity(
+        part_pieces=len(pieces.pieces),
+        part_volume_error=round(pieces.volume_error, 6),
+        part_missing_fraction=round(pieces.missing_fraction, 6),
+        pad_pieces=len(pad.pieces),
+        pad_volume_error=round(pad.volume_error, 6),
+        seated_penetration_mm=round(penetration, 4),
+        decomposition_cached=pieces.cached,
+    )
+    part_name, _, pose = case.name.rpartition(" pose ")
+    return ScenarioVerification(
+        part=part_name,
+        pose_index=int(pose) if pose.isdigit() else 0,
+        fidelity=fidelity,
+        fcso=results["fcso"],
+        flat=results["flat"],
+        passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9,
+        frames=[_snapshot(f) for f in frames],
+    )
+
+
+def _finger_result(kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None) -> FingerResult:
+    moved = np.array([t.error_mm for t in trials])
+    turned = np.array([t.error_deg for t in trials])
+    any_trials = len(trials) > 0
+    return FingerResult(
+        kind=kind,
+        nominal_held=held,
+        nominal_offset_mm=round(offset[0], 4),
+        nominal_offset_deg=round(offset[1], 4),
+        trials=trials,
+        success_rate=float(np.mean([t.success for t in trials])) if any_trials else 0.0,
+        median_error_mm=round(float(np.median(moved)), 4) if any_trials else None,
+        worst_error_mm=round(float(moved.max()), 4) if any_trials else None,
+        median_error_deg=round(float(np.median(turned)), 4) if any_trials else None,
+        worst_error_deg=round(float(turned.max()), 4) if any_trials else None,
+        holding_n=holding,
+        trial_start=_snapshot(pictured[0]) if pictured else None,
+        trial_end=_snapshot(pictured[-1]) if pictured else None,
+    )
+
+
+def _snapshot(frame: Frame) -> PoseSnapshot:
+    return PoseSnapshot(
+        time_s=round(frame.time_s, 4),
+        part_pose=np.round(frame.part, 5).tolist(),
+        gripper_pose=np.round(frame.gripper, 5).tolist(),
+        opening_mm=round(frame.q_mm, 4),
+    )
+
+
+def _read_stl(path: Path) -> trimesh.Trimesh:
+    if not path.is_file():
+        raise MeshError(path, "file not found")
+    return trimesh.load(str(path), force="mesh", process=True)
+
+
+def _part_path(file: str, directory: Path) -> Path:
+    """A part file as recorded, or beside the output folder's files when the recorded path is gone."""
+    recorded = Path(file)
+    if recorded.is_file() or recorded.is_absolute():
+        return recorded
+    beside = directory / recorded
+    return beside if beside.is_file() else recorded
