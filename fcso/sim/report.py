@@ -81,6 +81,18 @@ class ScenarioVerification(_Model):
     frames: list[PoseSnapshot] = Field(description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)")
 
 
+class RankedCandidate(_Model):
+    """A candidate verified by ``--verify-top``."""
+
+    rank_by_quality: int = Field(description="1 = best Q")
+    index: int = Field(description="Candidate index (report.json candidates)")
+    quality: float = Field(description="Q, mm²")
+    success_rates: list[float] = Field(description="Designed finger's success rate per scenario")
+    flat_success_rates: list[float] = Field(description="Flat control's success rate per scenario")
+    passed: bool
+    chosen: bool
+
+
 class VerificationReport(_Model):
     """Everything ``fcso verify`` measured (``verification.json``)."""
 
@@ -91,3 +103,6 @@ class VerificationReport(_Model):
     passed: bool = Field(description="Every scenario passed")
     warnings: list[str]
     timings_s: dict[str, float] = Field(description="Wall time per stage, s")
+    ranking: list[RankedCandidate] | None = Field(
+        None, description="--verify-top: the verified candidates in Q order and which was chosen"
+    )

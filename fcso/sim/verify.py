@@ -12,12 +12,14 @@ import numpy as np
 import trimesh
 
 from .. import __version__
+from ..design import DesignResult
 from ..errors import MeshError
 from ..finger import load_finger, pad_to_finger, parametric_finger
 from ..parts import load_part
 from ..report import DesignReport, GraspReport
 from .collision import ConvexPieces, convex_pieces, finger_body_hull
 from .config import VerifyConfig
+from .html import error_picture, holding_picture, section_html, trial_picture, write_section
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
 from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
@@ -98,6 +100,13 @@ def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
     fingerpad = _read_stl(directory / "fingerpad.stl")
     finger = _read_stl(directory / "finger.stl")
     return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
+
+
+def design_under_test(result: DesignResult) -> DesignUnderTest:
+    """The simulation's inputs from a design that was just run (no files needed)."""
+    parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
+    cases = [grasp_case(result.report, g, parts[g.part]) for g in result.report.grasps]
+    return DesignUnderTest(cases, result.fingerpad, finger_hull(result.report, result.finger))
 
 
 def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
@@ -280,3 +289,48 @@ def _part_path(file: str, directory: Path) -> Path:
         return recorded
     beside = directory / recorded
     return beside if beside.is_file() else recorded
+
+
+def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
+    """The flat control's pad: a plain pad of thickness T - D in the pad frame, mm."""
+    thickness, length, width = pad_size_mm
+    pad = trimesh.creation.box(bounds=[[penetration_mm, 0.0, 0.0], [thickness, length, width]])
+    return pad
+
+
+def verification_pictures(verification: VerificationReport, design: DesignUnderTest) -> dict[str, bytes]:
+    """The section's pictures: per scenario k, ``trial k``, ``errors k`` and ``holding k`` (PNG)."""
+    settings = verification.settings
+    images = {}
+    for k, (scenario, case) in enumerate(zip(verification.scenarios, design.cases)):
+        pads = {"fcso": design.fingerpad, "flat": flat_pad(case.pad_size_mm, case.penetration_mm)}
+        images[f"trial {k}"] = trial_picture(case.part, pads, scenario, case.pad_gap_mm, case.pad_size_mm)
+        images[f"errors {k}"] = error_picture(scenario, settings.success_mm, settings.success_deg)
+        images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
+    return images
+
+
+def write_verification(directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = "") -> list[Path]:
+    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    directory = Path(directory)
+    target = directory / "verification.json"
+    temporary = directory / ".verification.json.tmp"
+    temporary.write_text(verification.model_dump_json(indent=2) + "\n", encoding="utf-8")
+    temporary.replace(target)
+    page = directory / "report.html"
+    write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
+    return [target, page]
+
+
+def read_verification(directory: str | Path) -> VerificationReport | None:
+    """``verification.json`` of a design's folder, or None when there is none."""
+    path = Path(directory) / "verification.json"
+    if not path.is_file():
+        return None
+    return VerificationReport.model_validate_json(path.read_text(encoding="utf-8"))
