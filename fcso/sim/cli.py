@@ -81,6 +81,7 @@ def summary(verification: VerificationReport) -> str:
 
 def verify_design_outputs(result, args, progress) -> int:
     """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
+    from ..html_report import rebuild_report
     from ..output import write_outputs
     from .choose import ranking_html, verify_top
     from .verify import design_under_test, verify, write_verification
@@ -90,7 +91,9 @@ def verify_design_outputs(result, args, progress) -> int:
         if args.verify_top > 0:
             chosen, verification, design, ranking = verify_top(result, args.verify_top, config, progress)
             if chosen is not result:
+                # report.html is rebuilt from report.json: the pictures follow the newly chosen candidate
                 write_outputs(chosen, args.out)
+                rebuild_report(args.out)
             extra = ranking_html(ranking)
         else:
             design = design_under_test(result)
