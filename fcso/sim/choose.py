@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..design import DesignResult
 from ..finger import fuse
 from ..geometry import to_trimesh
@@ -31,14 +29,16 @@ def candidate_design(result: DesignResult, candidate: CandidateReport) -> tuple[
     chosen = [scenario.samples[k] for scenario, k in zip(result.scenarios, candidate.samples)]
     fingerpad = build_fingerpad([g for sample in chosen for g in sample.geometries], config.sampler, config.filter)
     grasps = []
-    for scenario, k, sample, quality in zip(result.scenarios, candidate.samples, chosen, candidate.per_scenario):
+    for scenario, reported, k, sample, quality in zip(
+        result.scenarios, result.report.scenarios, candidate.samples, chosen, candidate.per_scenario
+    ):
         pose = tcp_pose(sample.sample, quality.seat_offsets_mm[0], quality.seat_offsets_mm[1], config.sampler)
         grasps.append(
             GraspReport(
                 part=scenario.part.name,
                 pose_index=scenario.pose_index,
                 sample=k,
-                rest_transform=np.asarray(scenario.rest_transform).tolist(),
+                rest_transform=reported.rest_transform,
                 position_mm=pose["position_mm"],
                 quaternion_wxyz=pose["quaternion_wxyz"],
                 approach_direction=pose["approach_direction"],

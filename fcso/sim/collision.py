@@ -54,10 +54,22 @@ class ConvexPieces:
 
 
 def mesh_key(vertices: np.ndarray, faces: np.ndarray, threshold: float) -> str:
-    """Content hash of a mesh and the decomposition settings (hex sha256)."""
+    """Content hash of a mesh's geometry and the decomposition settings (hex sha256).
+
+    The hash is of the triangles themselves, at float32 precision (an STL's),
+    each turned to start at its smallest corner and all sorted: the same
+    surface read from a file or built in memory, with its vertices numbered
+    differently, has the same key.
+    """
+    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)].astype("<f4")
+    # start each triangle at its lexicographically smallest corner, keeping its orientation
+    keys = triangles.view([("x", "<f4"), ("y", "<f4"), ("z", "<f4")]).reshape(len(triangles), 3)
+    first = np.argmin(np.argsort(np.argsort(keys, axis=1, order=("x", "y", "z")), axis=1), axis=1)
+    turned = triangles[np.arange(len(triangles))[:, None], (first[:, None] + np.arange(3)) % 3]
+    flat = turned.reshape(len(turned), 9)
+    ordered = flat[np.lexsort(flat.T[::-1])]
     digest = hashlib.sha256(CACHE_VERSION.encode())
-    digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
-    digest.update(np.ascontiguousarray(faces, dtype="<i8").tobytes())
+    digest.update(np.ascontiguousarray(ordered).tobytes())
     digest.update(repr(float(threshold)).encode())
     return digest.hexdigest()
 
