@@ -28,7 +28,7 @@ def _v_prism(depth_mm: float, height_mm: float) -> manifold3d.Manifold:
     return manifold3d.Manifold.extrude(manifold3d.CrossSection([triangle]), height_mm)
 
 
-def featured_cube(size_mm: float = 30.0, notch_mm: float = 7.0, hole_mm: float = 8.0) -> trimesh.Trimesh:
+def featured_cube(size_mm: float = 30.0, notch_mm: float = 8.0, hole_mm: float = 8.0) -> trimesh.Trimesh:
     """A cube (corner at the origin) with a vertical 90-degree V-notch in its two x faces and a through hole along y.
 
     Parameters
@@ -68,3 +68,21 @@ def ridged_block(length_mm: float = 20.0, width_mm: float = 20.0, height_mm: flo
     plus = ridge.rotate([0.0, 0.0, 180.0]).translate([length_mm + ridge_mm, width_mm / 2.0, 0.0])
     minus = ridge.translate([-ridge_mm, width_mm / 2.0, 0.0])
     return _mesh(block + plus + minus)
+
+
+def upright_grasp_settings(mesh: trimesh.Trimesh, closing_axis_in_file=(1.0, 0.0, 0.0)) -> dict:
+    """fcso settings that design a part resting on its file-frame bottom, closing along a file-frame axis.
+
+    Returns
+    -------
+    dict
+        ``{"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [angle]}}`` for
+        :meth:`fcso.DesignConfig.updated`.
+    """
+    from fcso.poses import stable_poses
+
+    transforms, _ = stable_poses(mesh)
+    index = next(k for k, t in enumerate(transforms) if t[2, 2] > 0.999)
+    axis = transforms[index][:3, :3] @ np.asarray(closing_axis_in_file, dtype=float)
+    yaw = float(np.degrees(np.arctan2(axis[1], axis[0]))) % 180.0
+    return {"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [round(yaw, 6)]}}

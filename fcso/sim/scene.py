@@ -19,7 +19,7 @@ lets the part creep down the pads.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -64,6 +64,11 @@ class GraspCase:
         D: a flat pad's front face is at u = D.
     opening_mm : (min, max)
         Gripper opening range between the flat fingers' contact faces.
+    part_file : trimesh.Trimesh or None
+        The same part in its file frame (mm), so that one decomposition
+        serves every pose of it; None: ``part`` is decomposed as it is.
+    rest_transform : (4, 4) float
+        File frame to resting frame (with ``part_file``).
     """
 
     name: str
@@ -73,6 +78,8 @@ class GraspCase:
     pad_size_mm: tuple[float, float, float]
     penetration_mm: float
     opening_mm: tuple[float, float]
+    part_file: trimesh.Trimesh | None = None
+    rest_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     @property
     def joint_range_mm(self) -> tuple[float, float]:

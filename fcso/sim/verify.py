@@ -66,8 +66,9 @@ def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.T
         The part in its file frame, scaled to mm.
     """
     sampler, gripper = report.settings.sampler, report.settings.gripper
+    rest = np.asarray(grasp.rest_transform, dtype=float)
     mesh = part_mesh_mm.copy()
-    mesh.apply_transform(np.asarray(grasp.rest_transform, dtype=float))
+    mesh.apply_transform(rest)
     return GraspCase(
         name=f"{grasp.part} pose {grasp.pose_index}",
         part=mesh,
@@ -76,6 +77,8 @@ def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.T
         pad_size_mm=(sampler.thickness_mm, sampler.length_mm, sampler.width_mm),
         penetration_mm=sampler.penetration_mm,
         opening_mm=(gripper.min_opening_mm, gripper.max_opening_mm),
+        part_file=part_mesh_mm,
+        rest_transform=rest,
     )
 
 
@@ -146,7 +149,7 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     scenarios, warnings = [], []
     for stream, case in enumerate(design.cases):
         clock = time.perf_counter()
-        pieces = convex_pieces(case.part, config.decomposition_threshold, config.cache_path())
+        pieces = part_pieces(case, config)
         timings["decomposition"] += time.perf_counter() - clock
         clock = time.perf_counter()
         scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
@@ -166,6 +169,16 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         warnings=warnings,
         timings_s={k: round(v, 3) for k, v in timings.items()},
     )
+
+
+def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
+    """The part's convex pieces in its resting frame, decomposed in its file frame (one decomposition for all its poses)."""
+    if case.part_file is None:
+        return convex_pieces(case.part, config.decomposition_threshold, config.cache_path())
+    pieces = convex_pieces(case.part_file, config.decomposition_threshold, config.cache_path())
+    rest = np.asarray(case.rest_transform, dtype=float)
+    moved = [(np.asarray(v) @ rest[:3, :3].T + rest[:3, 3], f) for v, f in pieces.pieces]
+    return ConvexPieces(moved, pieces.volume_error, pieces.missing_fraction, pieces.cached)
 
 
 def verify_case(
