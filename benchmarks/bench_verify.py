@@ -13,8 +13,7 @@ Prints
   final errors, the holding forces; the same cube with a 7 mm notch, for
   which the method keeps the pad flat;
 - every fixture part of the demo (the batch-demo job: xyz cube and solar
-  tracker with one pair of fingers; the capsela plug) and the paper's bunny
-  experiment: per scenario the success rate, median error and holding
+  tracker with one pair of fingers) and the paper's bunny experiment: per scenario the success rate, median error and holding
   forces, designed against flat;
 - the wall time of a one-part verification (the paper cube, ``--trials``
   trials and the holding test) with a cold decomposition cache (median of
@@ -63,10 +62,6 @@ def demo_design() -> fcso.DesignResult:
     return fcso.design([fcso.load_part(DEMO / "20mm-xyz-cube.stl"), fcso.load_part(DEMO / "solar_tracker.stl")], config)
 
 
-def plug_design() -> fcso.DesignResult:
-    return fcso.design([fcso.load_part(PARTS / "capsela200_plug.stl")], fcso.DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}}))
-
-
 def paper_design() -> fcso.DesignResult:
     return fcso.design([fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)], fcso.load_config(REPO / "examples" / "paper.toml"))
 
@@ -112,7 +107,7 @@ def main() -> None:
         print_verification(f"the same cube with 7 mm notches (pad case {case!r})", verify(design_under_test(shallow), config), errors=True)
 
         if not args.quick:
-            for name, make in (("batch-demo job: xyz cube + solar tracker", demo_design), ("capsela plug", plug_design), ("paper experiment: bunny 65 mm, poses 1 and 3", paper_design)):
+            for name, make in (("batch-demo job: xyz cube + solar tracker", demo_design), ("paper experiment: bunny 65 mm, poses 1 and 3", paper_design)):
                 print_verification(name, verify(design_under_test(make()), config))
 
         cold, warm = [], []
