@@ -616,44 +616,50 @@ def _candidate_reports(choices, exact: dict, screen_data, indices: dict) -> list
 
 
 def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateReport:
-    return CandidateReport(
-        index=index,
-        samples=list(evaluation.choice),
-        evaluation="exact",
-        per_scenario=[
-            ScenarioQuality(
-                rles=_round(e.rles),
-                contact_area_mm2=_round(e.contact_area_mm2),
-                effective_area=_round(e.effective_area),
-                seat_offsets_mm=[_round(c.offset_mm) for c in e.contacts],
-            )
-            for e in evaluation.scenarios
-        ],
-        quality=_round(evaluation.quality),
-        mean_effective_area=_round(evaluation.mean_effective_area),
-        pad_case=evaluation.case,
-        block_depth_mm=None if evaluation.block_depth_mm is None else _round(evaluation.block_depth_mm),
+    return _candidate_entry(
+        evaluation.choice,
+        index,
+        "exact",
+        [(e.rles, e.contact_area_mm2, e.effective_area, [c.offset_mm for c in e.contacts]) for e in evaluation.scenarios],
+        evaluation.quality,
+        evaluation.mean_effective_area,
+        evaluation.case,
+        evaluation.block_depth_mm,
     )
 
 
 def _screened_report(choice: tuple[int, ...], screened: ScreenedCandidate, index: int) -> CandidateReport:
+    return _candidate_entry(
+        choice,
+        index,
+        "screened",
+        [(e.rles, e.contact_area_mm2, e.effective_area, list(e.seat_offsets_mm)) for e in screened.scenarios],
+        screened.quality,
+        screened.mean_effective_area,
+        screened.case,
+        None,
+    )
+
+
+def _candidate_entry(choice, index, evaluation, per_scenario, quality, mean, case, block_depth) -> CandidateReport:
+    """A report entry; ``per_scenario`` holds (RLES, A, E, seat offsets) per scenario."""
     return CandidateReport(
         index=index,
         samples=list(choice),
-        evaluation="screened",
+        evaluation=evaluation,
         per_scenario=[
             ScenarioQuality(
-                rles=_round(e.rles),
-                contact_area_mm2=_round(e.contact_area_mm2),
-                effective_area=_round(e.effective_area),
-                seat_offsets_mm=[_round(t) for t in e.seat_offsets_mm],
+                rles=_round(radius),
+                contact_area_mm2=_round(area),
+                effective_area=_round(effective),
+                seat_offsets_mm=[_round(t) for t in offsets],
             )
-            for e in screened.scenarios
+            for radius, area, effective, offsets in per_scenario
         ],
-        quality=_round(screened.quality),
-        mean_effective_area=_round(screened.mean_effective_area),
-        pad_case=screened.case,
-        block_depth_mm=None,
+        quality=_round(quality),
+        mean_effective_area=_round(mean),
+        pad_case=case,
+        block_depth_mm=None if block_depth is None else _round(block_depth),
     )
 
 

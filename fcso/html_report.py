@@ -139,16 +139,13 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
         A file is missing or unreadable (named in the message).
     """
     directory = Path(directory)
-    report_path = directory / "report.json"
-    if not report_path.is_file():
-        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
-    report = DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
+    report = read_report(directory)
     config = report.settings
-    finger = _read_stl(directory / "finger.stl")
-    fingerpad = _read_stl(directory / "fingerpad.stl")
+    finger = read_stl(directory / "finger.stl")
+    fingerpad = read_stl(directory / "fingerpad.stl")
     flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
     pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
-    parts = _reload_parts(report, directory)
+    parts = reload_parts(report, directory)
     part_number = 0
     grasps = []
     for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
@@ -180,14 +177,29 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
     return ReportInputs(report, finger, fingerpad, pad_to_finger(flat, config.sampler), grasps)
 
 
-def _read_stl(path: Path) -> trimesh.Trimesh:
+def read_stl(path: Path) -> trimesh.Trimesh:
+    """An output STL (finger or fingerpad) with merged vertices; MeshError naming it when missing."""
     if not path.is_file():
         raise MeshError(path, "file not found")
     # merged vertices: the signed distance used for seating needs a closed mesh
     return trimesh.load(str(path), force="mesh", process=True)
 
 
-def _reload_parts(report: DesignReport, directory: Path) -> list[Part]:
+def read_report(directory: str | Path) -> DesignReport:
+    """``report.json`` of a design's output folder.
+
+    Raises
+    ------
+    MeshError
+        The file is missing.
+    """
+    report_path = Path(directory) / "report.json"
+    if not report_path.is_file():
+        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
+    return DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
+
+
+def reload_parts(report: DesignReport, directory: Path) -> list[Part]:
     """The report's parts read again from their files, in the report's order, mm.
 
     A file is read once with the scale recorded for it (a 3MF in its own unit,

@@ -13,9 +13,8 @@ import trimesh
 
 from .. import __version__
 from ..design import DesignResult
-from ..errors import MeshError
 from ..finger import load_finger, pad_to_finger, parametric_finger
-from ..parts import load_part
+from ..html_report import read_report, read_stl, reload_parts
 from ..report import DesignReport, GraspReport
 from .collision import ConvexPieces, convex_pieces, finger_body_hull
 from .config import VerifyConfig
@@ -91,17 +90,11 @@ def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
         A file is missing or unreadable (named in the message).
     """
     directory = Path(directory)
-    report_path = directory / "report.json"
-    if not report_path.is_file():
-        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
-    report = DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
-    parts = {
-        p.name: load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name).mesh
-        for p in report.parts
-    }
+    report = read_report(directory)
+    parts = {entry.name: part.mesh for entry, part in zip(report.parts, reload_parts(report, directory))}
     cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
-    fingerpad = _read_stl(directory / "fingerpad.stl")
-    finger = _read_stl(directory / "finger.stl")
+    fingerpad = read_stl(directory / "fingerpad.stl")
+    finger = read_stl(directory / "finger.stl")
     return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
 
 
@@ -324,21 +317,6 @@ def _snapshot(frame: Frame) -> PoseSnapshot:
         gripper_pose=np.round(frame.gripper, 5).tolist(),
         opening_mm=round(frame.q_mm, 4),
     )
-
-
-def _read_stl(path: Path) -> trimesh.Trimesh:
-    if not path.is_file():
-        raise MeshError(path, "file not found")
-    return trimesh.load(str(path), force="mesh", process=True)
-
-
-def _part_path(file: str, directory: Path) -> Path:
-    """A part file as recorded, or beside the output folder's files when the recorded path is gone."""
-    recorded = Path(file)
-    if recorded.is_file() or recorded.is_absolute():
-        return recorded
-    beside = directory / recorded
-    return beside if beside.is_file() else recorded
 
 
 def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
