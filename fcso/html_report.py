@@ -25,6 +25,7 @@ from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .pad import surface_in_pad
+from .printfit import closing_travel_mm
 from .parts import Part, load_parts
 from .render import (
     PadPlacement,
@@ -171,7 +172,8 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
             contact_samples(*surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number)
             for side_number, frame in enumerate(frames)
         ]
-        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm)
+        travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
+        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
         placements = [PadPlacement(f, c.offset_mm, s, c.contact) for f, c, s in zip(frames, contacts, surfaces)]
         normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for f, c, s in zip(frames, contacts, surfaces)])
         radius, centre = largest_empty_cap(normals)
