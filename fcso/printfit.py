@@ -131,7 +131,7 @@ def grow(part: manifold3d.Manifold, clearance_mm: float) -> manifold3d.Manifold:
 
 
 def draft(geometry: manifold3d.Manifold, pad_box: manifold3d.Manifold, height_mm: float, lead_in_deg: float) -> manifold3d.Manifold:
-    """The pocket geometry with its walls drafted by the lead-in: ``S ∩ (I ⊕ cone)``.
+    """The pocket geometry with its walls drafted by the lead-in: ``I ⊕ cone``, clipped to a box.
 
     Every point of ``I`` at depth ``u`` widens the pocket at every shallower
     ``u' < u`` by ``(u - u') tan(angle)``: the opening at the pad face
@@ -146,7 +146,7 @@ def draft(geometry: manifold3d.Manifold, pad_box: manifold3d.Manifold, height_mm
     geometry : manifold3d.Manifold
         ``I_n`` (grown by the clearance), pad frame.
     pad_box : manifold3d.Manifold
-        ``S``.
+        The box the result is clipped to (``S`` or larger).
     height_mm : float
         Deepest ``u`` of ``geometry`` (``D + c``): the cone's height.
     lead_in_deg : float
@@ -187,15 +187,23 @@ def carve(
     Returns
     -------
     manifold3d.Manifold
-        Pad frame.
+        Pad frame; with clearance or lead-in it reaches up to 1 mm beyond
+        ``S``, which only matters inside ``S``.
     """
     pad_box = box((0.0, 0.0, 0.0), size_mm)
     local = part.transform(affine_3x4(frame))
+    if clearance_mm <= 0 and lead_in_deg <= 0:
+        return local ^ pad_box
     if clearance_mm > 0:
         margin = clearance_mm + 1e-3
-        near = local ^ box((-margin,) * 3, tuple(x + margin for x in size_mm))
-        local = grow(near, clearance_mm)
-    return draft(local ^ pad_box, pad_box, depth_mm + clearance_mm, lead_in_deg)
+        local = grow(local ^ box((-margin,) * 3, tuple(x + margin for x in size_mm)), clearance_mm)
+    # clipped to a box 1 mm larger than S: no face of the carving lies on a face of S,
+    # where subtracting it would leave zero-thickness pad sheets
+    outer = box((-1.0,) * 3, tuple(x + 1.0 for x in size_mm))
+    carved = local ^ outer
+    if lead_in_deg > 0:
+        carved = carved + draft(local ^ pad_box, outer, depth_mm + clearance_mm, lead_in_deg)
+    return carved
 
 
 def closing_travel_mm(clearance_mm: float) -> float:
@@ -221,7 +229,9 @@ def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: fl
     ``P − (∂P ⊕ B)``. The pad is opened with a slab behind its back face
     (it is fused to the finger there), then clipped back to the pad box. An
     opening never adds material, so a clearance stays a clearance. Convex
-    edges of the pad are rounded to radius ``min_wall_mm / 2``.
+    edges of the pad are rounded to radius ``min_wall_mm / 2``; a pad whose
+    thinnest wall (:func:`thinnest_wall_mm`) already meets the minimum is
+    returned unchanged.
 
     Parameters
     ----------
@@ -237,7 +247,8 @@ def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: fl
     manifold3d.Manifold
         The opened pad, only its pieces attached to the back face.
     """
-    if min_wall_mm <= 0:
+    # no wall under the minimum: the opening would only round convex edges, so skip it
+    if min_wall_mm <= 0 or thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
         return pad
     kernel = ball_points(min_wall_mm / 2.0)
     backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm)
