@@ -1,78 +1,187 @@
-"""Time fcso's stages on the paper experiment and on a four-part, two-pose batch.
+"""Speed of fcso's method core against the targets of the speed issue (METHOD §8b).
 
 Run from the repository root::
 
-    python -m benchmarks.bench_design [--runs N]
+    python -m benchmarks.bench_design [--runs N] [--baseline COMMIT] [--skip-budget]
 
-Prints the median (and min-max) wall time of each stage over N runs. The
-machine is shared and noisy: compare medians, not single runs.
+Prints, as medians over N runs (the machine is shared and noisy):
+
+- the paper experiment as a user runs it: the whole ``fcso design`` command
+  in a subprocess, imports and report.html included (target <= 3 s), and,
+  with ``--baseline``, the same command on the code of that commit in the
+  same run (the ratio);
+- screening throughput with 2 scenarios (the paper experiment) and with 16
+  (targets >= 1000 and >= 200 candidates/s, all cores);
+- the whole design of 8 fixture parts x 2 poses = 16 scenarios (target
+  <= 60 s), its peak memory (<= 2 GB) and the Q gained by 10 times the
+  search budget (< 2 %);
+- the four-part print job of the speed issue (target <= 20 s).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import resource
 import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
+from io import BytesIO
 from pathlib import Path
 
+import numpy as np
+
 import fcso
+from fcso.design import prepare, screen_choice
+from fcso.parallel import WorkerPool, resolve_jobs
 
 REPO = Path(__file__).resolve().parent.parent
 PARTS = REPO / "examples" / "parts"
 DATA = REPO / "tests" / "data"
 
+#: The 8 parts of the 16-scenario case, with the units tests/data/README.md gives
+#: (DC-DC_case.stl holds two separate solids, so it gives two of the eight parts).
+SIXTEEN_SCENARIO_PARTS = (
+    ("20mm-xyz-cube.stl", "mm", None),
+    ("solar_tracker.stl", "mm", None),
+    ("capsela200_plug.stl", "mm", None),
+    ("angle_block.STL", "inch", None),
+    ("featuretype.STL", "inch", None),
+    ("DC-DC_case.stl", "mm", None),
+    ("stanford_bunny_closed.ply", "mm", 65.0),
+)
+#: The four-part job of the speed issue.
+FOUR_PART_JOB = ("20mm-xyz-cube.stl", "solar_tracker.stl", "capsela200_plug.stl", "DC-DC_case.stl")
 
-def paper_case():
-    """The paper's bunny experiment (METHOD §10) with examples/paper.toml."""
-    parts = [fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)]
-    return parts, fcso.load_config(REPO / "examples" / "paper.toml")
 
-
-def multi_part_case():
-    """Four fixture parts, two most probable poses each, 10 x 10 mm pads and a search budget."""
-    parts = [
-        fcso.load_part(DATA / "20mm-xyz-cube.stl"),
-        fcso.load_part(DATA / "solar_tracker.stl"),
-        fcso.load_part(DATA / "DC-DC_case.stl"),
-        fcso.load_part(DATA / "angle_block.STL", units="inch"),
+def paper_command(python: str, source: Path, out: Path) -> list[str]:
+    return [
+        python, "-m", "fcso.cli", "design", str(source / "examples" / "parts" / "stanford_bunny_closed.ply"),
+        "--scale-to", "65", "--config", str(source / "examples" / "paper.toml"), "--out", str(out), "--quiet",
     ]
-    config = fcso.DesignConfig().updated(
-        {
-            "sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 8.0},
-            "poses": {"count": 2, "select": "most_probable"},
-            "search": {"max_exhaustive": 4096, "max_evaluations": 100},
-        }
-    )
-    return parts, config
 
 
-def measure(name: str, case, runs: int) -> None:
-    parts, config = case()
-    stages: dict[str, list[float]] = {}
+def timed_command(command: list[str], cwd: Path, runs: int) -> list[float]:
+    seconds = []
+    for _ in range(runs):
+        started = time.perf_counter()
+        subprocess.run(command, cwd=cwd, check=True, capture_output=True)
+        seconds.append(time.perf_counter() - started)
+    return seconds
+
+
+def baseline_tree(commit: str, into: Path) -> Path:
+    """The repository at ``commit`` (git archive), to run the old code in the same run."""
+    archive = subprocess.run(["git", "archive", commit], cwd=REPO, check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=BytesIO(archive)) as tar:
+        tar.extractall(into, filter="data")
+    return into
+
+
+def sixteen_scenarios() -> tuple[list, fcso.DesignConfig]:
+    parts = [p for name, units, scale in SIXTEEN_SCENARIO_PARTS for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)]
+    # the second and third most probable poses: every part is graspable in both
+    return parts, fcso.DesignConfig().updated({"poses": {"count": 2, "select": [1, 2]}})
+
+
+def _screen_chunk(context, choices):
+    prepared, config = context
+    return [screen_choice(prepared, c, config).quality for c in choices]
+
+
+def screening_rate(prepared, config, count: int, seed: int = 0) -> float:
+    """Screened candidates per second over every core, on random candidates."""
+    rng = np.random.default_rng(seed)
+    counts = [len(s.samples) for s in prepared.scenarios]
+    choices = [tuple(int(rng.integers(c)) for c in counts) for _ in range(count)]
+    jobs = resolve_jobs(config.search.jobs)
+    chunks = [choices[i : i + 64] for i in range(0, len(choices), 64)]
+    with WorkerPool((prepared, config), jobs) as pool:
+        started = time.perf_counter()
+        pool.map(_screen_chunk, chunks)
+        return count / (time.perf_counter() - started)
+
+
+def design_figures(parts, config, runs: int) -> tuple[list[float], fcso.DesignResult]:
+    seconds, result = [], None
     for _ in range(runs):
         started = time.perf_counter()
         result = fcso.design(parts, config)
-        for stage, seconds in result.report.timings_s.items():
-            stages.setdefault(stage, []).append(seconds)
-        stages.setdefault("total", []).append(time.perf_counter() - started)
-    report = result.report
-    evaluated = report.search.evaluated
-    print(f"\n{name}: {len(report.scenarios)} scenarios, valid samples {[s.valid_samples for s in report.scenarios]}, "
-          f"C = {report.search.candidates_total}, {report.search.kind} evaluated {evaluated}, best Q = "
-          f"{next(c.quality for c in report.candidates if c.index == report.best):.1f}")
-    print(f"  {'stage':<16}{'median s':>10}{'min s':>9}{'max s':>9}   ({runs} runs)")
-    for stage, seconds in stages.items():
-        print(f"  {stage:<16}{statistics.median(seconds):>10.3f}{min(seconds):>9.3f}{max(seconds):>9.3f}")
-    per_candidate = statistics.median(stages["search"]) / max(evaluated, 1)
-    print(f"  {'per candidate':<16}{per_candidate:>10.4f}")
+        seconds.append(time.perf_counter() - started)
+    return seconds, result
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process and of its largest finished worker, MB."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return (own + children) / 1024.0
+
+
+def summary(seconds: list[float]) -> str:
+    return f"median {statistics.median(seconds):.2f} s (min {min(seconds):.2f}, max {max(seconds):.2f}, {len(seconds)} runs)"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--baseline", metavar="COMMIT", help="also time the paper command on this commit's code")
+    parser.add_argument("--skip-budget", action="store_true", help="skip the 10x-budget run of the 16-scenario case")
     args = parser.parse_args()
-    measure("paper experiment (bunny, 65 mm, poses 1 and 3)", paper_case, args.runs)
-    measure("multi-part (cube, solar tracker, DC-DC case, angle block; 2 poses each)", multi_part_case, args.runs)
+
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        new = timed_command(paper_command(sys.executable, REPO, scratch / "new"), REPO, args.runs)
+        print(f"paper experiment, whole fcso design command: {summary(new)}  (target <= 3 s)")
+        if args.baseline:
+            old_tree = baseline_tree(args.baseline, scratch / "old")
+            old = timed_command(paper_command(sys.executable, old_tree, scratch / "old-out"), old_tree, args.runs)
+            print(f"  same command on {args.baseline}: {summary(old)}; ratio {statistics.median(old) / statistics.median(new):.1f}x")
+
+    parts, config = [fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)], fcso.load_config(REPO / "examples" / "paper.toml")
+    prepared = prepare(parts, config)
+    counts = [len(s.samples) for s in prepared.scenarios]
+    everything = list(itertools.product(*(range(c) for c in counts)))
+    rates = [screening_rate(prepared, config, 4 * len(everything), seed) for seed in range(args.runs)]
+    print(f"screening, 2 scenarios: median {statistics.median(rates):.0f} candidates/s over {resolve_jobs(0)} cores  (target >= 1000)")
+
+    parts, config = sixteen_scenarios()
+    seconds, result = design_figures(parts, config, args.runs)
+    report = result.report
+    q = next(c.quality for c in report.candidates if c.index == report.best)
+    print(
+        f"8 parts x 2 poses: {len(report.scenarios)} scenarios, samples {[s.valid_samples for s in report.scenarios]}, "
+        f"whole design {summary(seconds)}  (target <= 60 s)"
+    )
+    print(
+        f"  Q = {q:.2f} mm², upper bound {report.search.quality_upper_bound:.2f} (gap {report.search.gap:.0%}), "
+        f"screened {report.search.screened}, exact {report.search.exact}, {report.search.kind}; stages {report.timings_s}"
+    )
+    prepared = prepare(parts, config)
+    rates = [screening_rate(prepared, config, 2000, seed) for seed in range(args.runs)]
+    print(f"screening, {len(prepared.scenarios)} scenarios: median {statistics.median(rates):.0f} candidates/s  (target >= 200)")
+    print(f"  peak memory so far (this process + largest worker): {peak_memory_mb():.0f} MB  (target <= 2048)")
+    if not args.skip_budget:
+        budget = config.search.max_evaluations * 10
+        started = time.perf_counter()
+        wide = fcso.design(parts, config.updated({"search": {"max_evaluations": budget}})).report
+        wide_q = next(c.quality for c in wide.candidates if c.index == wide.best)
+        print(
+            f"  10x budget ({budget} screened): Q = {wide_q:.2f} mm², {(wide_q / q - 1) if q else 0:+.2%} "
+            f"in {time.perf_counter() - started:.1f} s  (target < +2 %)"
+        )
+
+    job = [p for name in FOUR_PART_JOB for p in fcso.load_parts(DATA / name)]
+    seconds, result = design_figures(job, fcso.DesignConfig().updated({"poses": {"count": 1}}), args.runs)
+    report = result.report
+    q = next(c.quality for c in report.candidates if c.index == report.best)
+    print(
+        f"four-part job (--poses 1): {len(report.scenarios)} scenarios, whole design {summary(seconds)}, Q = {q:.2f} mm², "
+        f"gap {report.search.gap:.0%}, ungraspable {[u.part for u in report.ungraspable]}  (target <= 20 s)"
+    )
 
 
 if __name__ == "__main__":

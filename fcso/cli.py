@@ -37,11 +37,12 @@ class ProgressLine:
         self.enabled = enabled
         self.stage = None
         self.last = (0, 0)
+        self.note = ""
         self.started = time.perf_counter()
         self.last_draw = 0.0
 
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        """``progress(stage, done, total)`` as :func:`fcso.design.design` calls it."""
+    def __call__(self, stage: str, done: int, total: int, note: str = "") -> None:
+        """``progress(stage, done, total, note)`` as :func:`fcso.design.design` calls it."""
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -52,16 +53,18 @@ class ProgressLine:
                 self.stream.write("\n")
             self.stage = stage
         elif done < total and now - self.last_draw < 0.1:
-            self.last = (done, total)
+            self.last, self.note = (done, total), note
             return
         self.last = (done, total)
+        self.note = note
         self._draw(now)
 
     def _draw(self, now: float) -> None:
         done, total = self.last
         fraction = min(done / total, 1.0) if total else 1.0
         bar = "#" * int(fraction * 30)
-        self.stream.write(f"\r{self.stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s")
+        note = f"  {self.note}" if self.note else ""
+        self.stream.write(f"\r{self.stage:<15} [{bar:<30}] {done}/{total}  {now - self.started:6.1f} s{note}\033[K")
         self.stream.flush()
         self.last_draw = now
 
@@ -89,6 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="seed of the random pose choice (poses.seed)")
     run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
+    run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
 
     report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
@@ -138,6 +142,8 @@ def _config(args) -> DesignConfig:
         overrides.setdefault("poses", {})["seed"] = args.seed
     if args.finger is not None:
         overrides.setdefault("finger", {})["mesh"] = args.finger
+    if getattr(args, "jobs", None) is not None:
+        overrides.setdefault("search", {})["jobs"] = args.jobs
     if not overrides:
         return config
     from pydantic import ValidationError

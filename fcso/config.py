@@ -107,12 +107,15 @@ class ContactConfig(_Section):
 
 
 class SearchConfig(_Section):
-    """Candidate enumeration (METHOD §8)."""
+    """Candidate search (METHOD §8, §8b): screening ranks, the best are re-evaluated exactly."""
 
-    max_exhaustive: int = Field(4096, ge=1, description="Evaluate every candidate when there are at most this many")
+    max_exhaustive: int = Field(20000, ge=1, description="Screen every candidate when there are at most this many")
     max_evaluations: int = Field(
-        4096, ge=1, description="Budget of the branch-and-bound search beyond max_exhaustive, candidates"
+        20000, ge=1, description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds"
     )
+    exact_top_k: int = Field(8, ge=8, description="Best screened candidates re-evaluated exactly (METHOD §8b: k >= 8)")
+    report_candidates: int = Field(1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)")
+    jobs: int = Field(0, ge=0, description="Worker processes; 0: every available core")
 
 
 class PartsConfig(_Section):

@@ -38,11 +38,18 @@ from .report import (
     UngraspableReport,
 )
 from .rles import rles
+from .parallel import WorkerPool, resolve_jobs
 from .sampler import SIDES, GraspSample, SamplerResult, sample_grasps
-from .search import candidate_index, search
+from .screen import NormalLattice, ScreenedCandidate, ScreenGeometry, ScreenGrid, column_heights, prepare_geometry, screen, screened_bound
+from .search import candidate_index, quality_upper_bound, search
 
-#: ``progress(stage, done, total)``: called as long work advances.
-Progress = Callable[[str, int, int], None]
+#: ``progress(stage, done, total, note)``: called as long work advances; ``note``
+#: says more in words (the best screened Q and the upper bound while searching).
+Progress = Callable[[str, int, int, str], None]
+
+#: Samples per pad-geometry task and candidates per screening task sent to a worker.
+_GEOMETRY_CHUNK = 4
+_SCREEN_CHUNK = 64
 
 
 @dataclass
@@ -54,6 +61,8 @@ class SampleGeometry:
     geometries: tuple[PadGeometry, PadGeometry]
     surfaces: tuple[SurfaceSamples, SurfaceSamples]
     effective_area_bound: float
+    screen: tuple[ScreenGeometry, ScreenGeometry]
+    screened_bound: float
 
 
 @dataclass
@@ -83,11 +92,15 @@ class ScenarioEvaluation:
 
 @dataclass
 class CandidateEvaluation:
+    """A candidate evaluated exactly (METHOD §6-7); ``fingerpad`` only when asked to keep it."""
+
     choice: tuple[int, ...]
-    fingerpad: Fingerpad
     scenarios: list[ScenarioEvaluation]
     quality: float
     mean_effective_area: float
+    case: str
+    block_depth_mm: float | None
+    fingerpad: Fingerpad | None = None
 
 
 @dataclass
@@ -121,6 +134,108 @@ class DesignResult:
     pad_to_finger: np.ndarray
 
 
+@dataclass
+class Prepared:
+    """A batch ready for the candidate search: scenarios with their samples' pad geometries.
+
+    Attributes
+    ----------
+    parts : list of Part
+    finger : FlatFinger
+    scenarios : list of Scenario
+        The graspable ones, each with its :class:`SampleGeometry` list.
+    ungraspable : list of UngraspableReport
+    lattice : NormalLattice
+        The screening's normal quantisation (its RLES cache fills as candidates are screened).
+    jobs : int
+        Worker processes.
+    warnings : list of str
+    timings_s : dict
+    """
+
+    parts: list[Part]
+    finger: FlatFinger
+    scenarios: list[Scenario]
+    ungraspable: list[UngraspableReport]
+    lattice: NormalLattice
+    jobs: int
+    warnings: list[str]
+    timings_s: dict[str, float]
+
+
+def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None = None, repair: bool = False) -> Prepared:
+    """Load, pose, sample and intersect: everything before the search (METHOD §1-5).
+
+    Parameters and errors as :func:`design`.
+
+    Returns
+    -------
+    Prepared
+    """
+    report_progress = _progress_with_note(progress)
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+    loaded = [
+        one
+        for p in parts
+        for one in ([p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies))
+    ]
+    warnings = list(dict.fromkeys(w for p in loaded for w in p.warnings))
+    finger = load_finger(config.finger, repair=repair) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    timings["load"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    scenarios = _choose_scenarios(loaded, config, warnings)
+    timings["poses"] = time.perf_counter() - clock
+
+    jobs = resolve_jobs(config.search.jobs)
+    clock = time.perf_counter()
+    plate = finger_plate(finger, config.sampler, config.gripper)
+    report_progress("sampling", 0, len(scenarios))
+    # one task per scenario and yaw angle: the yaws are independent and balance the workers
+    yaw_tasks = [(number, yaw) for number in range(len(scenarios)) for yaw in config.sampler.yaw_deg]
+    with WorkerPool((scenarios, config, plate), jobs) as pool:
+        pieces = pool.map(_sample_task, yaw_tasks)
+    for number, scenario in enumerate(scenarios):
+        scenario.sampler_result = _merge_sampler_results([r for (n, _), r in zip(yaw_tasks, pieces) if n == number])
+    report_progress("sampling", len(scenarios), len(scenarios))
+    timings["sampling"] = time.perf_counter() - clock
+    empty = [s for s in scenarios if not s.sampler_result.samples]
+    if len(empty) == len(scenarios):
+        raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
+    ungraspable = [_ungraspable_report(s, config) for s in empty]
+    for entry in ungraspable:
+        warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
+    scenarios = [s for s in scenarios if s.sampler_result.samples]
+
+    clock = time.perf_counter()
+    grid, lattice = ScreenGrid.for_config(config), NormalLattice()
+    tasks = [
+        (number, start, min(start + _GEOMETRY_CHUNK, len(s.sampler_result.samples)))
+        for number, s in enumerate(scenarios)
+        for start in range(0, len(s.sampler_result.samples), _GEOMETRY_CHUNK)
+    ]
+    total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
+    report_progress("pad geometries", 0, total_samples)
+    with WorkerPool((scenarios, config, grid, lattice), jobs) as pool:
+        for (number, _, _), made in zip(tasks, pool.map(_geometry_task, tasks)):
+            scenarios[number].samples.extend(made)
+            report_progress("pad geometries", sum(len(x.samples) for x in scenarios), total_samples)
+    timings["pad_geometries"] = time.perf_counter() - clock
+
+    return Prepared(loaded, finger, scenarios, ungraspable, lattice, jobs, warnings, timings)
+
+
+def screen_choice(prepared: Prepared, choice: Sequence[int], config: DesignConfig) -> ScreenedCandidate:
+    """Screened quality of one candidate (METHOD §8b), one sample index per scenario."""
+    return screen([prepared.scenarios[m].samples[k].screen for m, k in enumerate(choice)], config, prepared.lattice)
+
+
+def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConfig) -> CandidateEvaluation:
+    """Exact quality of one candidate (METHOD §6-7), one sample index per scenario."""
+    return _evaluate(prepared.scenarios, tuple(choice), config, keep_pad=False)
+
+
 def design(
     parts: Sequence[Part | str | Path],
     config: DesignConfig | None = None,
@@ -138,7 +253,7 @@ def design(
     config : DesignConfig, optional
         Settings; defaults reproduce the paper's set-up.
     progress : callable, optional
-        ``progress(stage, done, total)``.
+        ``progress(stage, done, total, note)``.
     repair : bool
         Repair part and finger meshes that are not closed volumes.
 
@@ -155,71 +270,52 @@ def design(
         and listed in the report's ``ungraspable`` when others can be served.
     """
     config = config or DesignConfig()
-    report_progress = progress or (lambda stage, done, total: None)
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-    loaded = [
-        one
-        for p in parts
-        for one in ([p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies))
-    ]
-    warnings = list(dict.fromkeys(w for p in loaded for w in p.warnings))
-    finger = load_finger(config.finger, repair=repair) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
-    timings["load"] = time.perf_counter() - clock
-
-    clock = time.perf_counter()
-    scenarios = _choose_scenarios(loaded, config, warnings)
-    timings["poses"] = time.perf_counter() - clock
-
-    clock = time.perf_counter()
-    plate = finger_plate(finger, config.sampler, config.gripper)
-    for done, scenario in enumerate(scenarios):
-        report_progress("sampling", done, len(scenarios))
-        scenario.sampler_result = sample_grasps(scenario.mesh, config.sampler, config.gripper, plate)
-    report_progress("sampling", len(scenarios), len(scenarios))
-    timings["sampling"] = time.perf_counter() - clock
-    empty = [s for s in scenarios if not s.sampler_result.samples]
-    if len(empty) == len(scenarios):
-        raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
-    ungraspable = [_ungraspable_report(s, config) for s in empty]
-    for entry in ungraspable:
-        warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
-    scenarios = [s for s in scenarios if s.sampler_result.samples]
-
-    clock = time.perf_counter()
-    total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
-    done = 0
-    for number, scenario in enumerate(scenarios):
-        part_manifold = to_manifold(scenario.mesh)
-        for index, sample in enumerate(scenario.sampler_result.samples):
-            report_progress("pad geometries", done, total_samples)
-            scenario.samples.append(_sample_geometry(part_manifold, scenario.mesh, sample, config, seed=(number, index)))
-            done += 1
-    report_progress("pad geometries", total_samples, total_samples)
-    timings["pad_geometries"] = time.perf_counter() - clock
+    report_progress = _progress_with_note(progress)
+    prepared = prepare(parts, config, progress=report_progress, repair=repair)
+    scenarios, lattice, jobs = prepared.scenarios, prepared.lattice, prepared.jobs
+    loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
+    warnings, timings = list(prepared.warnings), dict(prepared.timings_s)
 
     clock = time.perf_counter()
     counts = [len(s.samples) for s in scenarios]
-    evaluations: dict[tuple[int, ...], CandidateEvaluation] = {}
     total = int(np.prod(counts, dtype=object))
-    expected = min(total, config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations)
+    budget = config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations
+    expected = min(total, budget)
+    screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
+    screen_data = ([[g.screen for g in s.samples] for s in scenarios], config, lattice)
+    screened_count, best_screened = 0, 0.0
+    screened_bound = quality_upper_bound(screened_bounds)
+    with WorkerPool(screen_data, jobs) as pool:
 
-    def evaluate(choice: tuple[int, ...]) -> tuple[float, float]:
-        evaluation = _evaluate(scenarios, choice, config, keep_pad=False)
-        evaluations[choice] = evaluation
-        report_progress("candidates", len(evaluations), expected)
-        return evaluation.quality, evaluation.mean_effective_area
+        def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+            nonlocal screened_count, best_screened
+            chunks = [choices[i : i + _SCREEN_CHUNK] for i in range(0, len(choices), _SCREEN_CHUNK)]
+            scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
+            screened_count += len(choices)
+            best_screened = max([best_screened] + [q for q, _ in scored])
+            report_progress("screening", min(screened_count, expected), expected, f"best Q {best_screened:.1f} of bound {screened_bound:.1f} mm² (screened)")
+            return scored
 
-    bounds = [np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]
-    outcome = search(counts, bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
+        outcome = search(counts, screened_bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
+    report_progress("screening", expected, expected)
+    timings["screening"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
+    ranked = sorted(outcome.evaluated, key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]), reverse=True)
+    finalists = ranked[: config.search.exact_top_k]
+    report_progress("exact", 0, len(finalists))
+    with WorkerPool((scenarios, config), jobs) as pool:
+        exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
+    report_progress("exact", len(finalists), len(finalists), f"best Q {max(e.quality for e in exact.values()):.1f} mm² (exact)")
+    best_choice = max(finalists, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]))
+    upper_bound = max(quality_upper_bound([np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]), exact[best_choice].quality)
     if not outcome.proven_optimal:
         warnings.append(
-            f"search stopped after {len(outcome.evaluated)} of {outcome.total} candidates (search.max_evaluations) "
-            "without proving the best is optimal"
+            f"search screened {len(outcome.evaluated)} of {outcome.total} candidates (search.max_evaluations) "
+            f"without proving the best optimal; Q is {exact[best_choice].quality / upper_bound:.0%} of its upper bound"
         )
-    indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
-    best_choice = max(outcome.evaluated, key=lambda c: (evaluations[c].quality, evaluations[c].mean_effective_area, -indices[c]))
-    timings["search"] = time.perf_counter() - clock
+    timings["exact"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     best = _evaluate(scenarios, best_choice, config, keep_pad=True, fitted=True)
@@ -236,12 +332,18 @@ def design(
         fcso_version=__version__,
         parts=[_part_report(p) for p in loaded],
         scenarios=[_scenario_report(s) for s in scenarios],
-        candidates=[
-            _candidate_report(evaluations[c], indices[c]) for c in sorted(outcome.evaluated, key=lambda c: indices[c])
-        ],
+        candidates=_candidate_reports(ranked[: config.search.report_candidates], exact, screen_data, indices),
         best=indices[best_choice],
         search=SearchReport(
-            kind=outcome.kind, evaluated=len(outcome.evaluated), candidates_total=outcome.total, proven_optimal=outcome.proven_optimal
+            kind=outcome.kind,
+            evaluated=len(outcome.evaluated),
+            screened=len(outcome.evaluated),
+            exact=len(exact),
+            candidates_total=outcome.total,
+            proven_optimal=outcome.proven_optimal,
+            jobs=jobs,
+            quality_upper_bound=_round(upper_bound),
+            gap=_round(exact[best_choice].quality / upper_bound) if upper_bound > 0 else 1.0,
         ),
         grasps=[_grasp_report(s, k, e, config) for s, k, e in zip(scenarios, best_choice, best.scenarios)],
         ungraspable=ungraspable,
@@ -326,7 +428,51 @@ def _ungraspable_report(scenario: Scenario, config: DesignConfig) -> Ungraspable
     )
 
 
-def _sample_geometry(part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, sample: GraspSample, config: DesignConfig, seed) -> SampleGeometry:
+def _progress_with_note(progress: Progress | None) -> Progress:
+    """``progress`` with its note optional, or a no-op."""
+    if progress is None:
+        return lambda stage, done, total, note="": None
+    return lambda stage, done, total, note="": progress(stage, done, total, note)
+
+
+def _sample_task(context, task: tuple[int, float]) -> SamplerResult:
+    scenarios, config, plate = context
+    number, yaw = task
+    sampler = config.sampler.model_copy(update={"yaw_deg": [yaw]})
+    return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate)
+
+
+def _merge_sampler_results(results: list[SamplerResult]) -> SamplerResult:
+    """One scenario's sampler result from its per-yaw results, in yaw order."""
+    rejected = {reason: sum(r.rejected[reason] for r in results) for reason in results[0].rejected}
+    return SamplerResult([s for r in results for s in r.samples], rejected, sum(r.tried for r in results))
+
+
+def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
+    scenarios, config, grid, lattice = context
+    number, start, stop = task
+    scenario = scenarios[number]
+    part_manifold = to_manifold(scenario.mesh)
+    return [
+        _sample_geometry(part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice)
+        for index in range(start, stop)
+    ]
+
+
+def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+    screens, config, lattice = context
+    scored = [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice) for choice in choices]
+    return [(c.quality, c.mean_effective_area) for c in scored]
+
+
+def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
+    scenarios, config = context
+    return _evaluate(scenarios, choice, config, keep_pad=False)
+
+
+def _sample_geometry(
+    part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, sample: GraspSample, config: DesignConfig, seed, grid: ScreenGrid, lattice: NormalLattice
+) -> SampleGeometry:
     frames = tuple(sample.pad_frame(side, config.sampler) for side in SIDES)
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
@@ -338,7 +484,28 @@ def _sample_geometry(part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, 
     area = sum(len(s.points) * s.area_per_point_mm2 for s in surfaces)
     normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, frames)])
     bound = area / rles(normals) if len(normals) else 0.0
-    return SampleGeometry(sample=sample, frames=frames, geometries=geometries, surfaces=surfaces, effective_area_bound=float(bound))
+    screens = tuple(
+        prepare_geometry(
+            column_heights(g.surface_vertices, g.surface_faces, grid),
+            g.good,
+            g.depth_mm,
+            s.points,
+            s.normals @ f[:3, :3],
+            s.area_per_point_mm2,
+            grid,
+            lattice,
+        )
+        for g, s, f in zip(geometries, surfaces, frames)
+    )
+    return SampleGeometry(
+        sample=sample,
+        frames=frames,
+        geometries=geometries,
+        surfaces=surfaces,
+        effective_area_bound=float(bound),
+        screen=screens,
+        screened_bound=screened_bound(screens, lattice),
+    )
 
 
 def contact_samples(
@@ -400,10 +567,12 @@ def _evaluate(
     effective_areas = [r.effective_area for r in results]
     return CandidateEvaluation(
         choice=choice,
-        fingerpad=fingerpad if keep_pad else Fingerpad(manifold3d.Manifold(), fingerpad.case, fingerpad.block_depth_mm),
         scenarios=results,
         quality=float(min(effective_areas)),
         mean_effective_area=float(np.mean(effective_areas)),
+        case=fingerpad.case,
+        block_depth_mm=fingerpad.block_depth_mm,
+        fingerpad=fingerpad if keep_pad else None,
     )
 
 
@@ -503,10 +672,27 @@ def _scenario_report(scenario: Scenario) -> ScenarioReport:
     )
 
 
+def _candidate_reports(choices, exact: dict, screen_data, indices: dict) -> list[CandidateReport]:
+    """Report entries, by index: exact numbers for re-evaluated candidates, screened ones for the rest."""
+    screens, config, lattice = screen_data
+    entries = []
+    for choice in sorted(choices, key=lambda c: indices[c]):
+        if choice in exact:
+            entries.append(_candidate_report(exact[choice], indices[choice]))
+        else:
+            screened = screen([screens[m][k] for m, k in enumerate(choice)], config, lattice)
+            entries.append(_screened_report(choice, screened, indices[choice]))
+    for choice, evaluation in exact.items():
+        if choice not in choices:
+            entries.append(_candidate_report(evaluation, indices[choice]))
+    return sorted(entries, key=lambda e: e.index)
+
+
 def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateReport:
     return CandidateReport(
         index=index,
         samples=list(evaluation.choice),
+        evaluation="exact",
         per_scenario=[
             ScenarioQuality(
                 rles=_round(e.rles),
@@ -518,8 +704,29 @@ def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateR
         ],
         quality=_round(evaluation.quality),
         mean_effective_area=_round(evaluation.mean_effective_area),
-        pad_case=evaluation.fingerpad.case,
-        block_depth_mm=None if evaluation.fingerpad.block_depth_mm is None else _round(evaluation.fingerpad.block_depth_mm),
+        pad_case=evaluation.case,
+        block_depth_mm=None if evaluation.block_depth_mm is None else _round(evaluation.block_depth_mm),
+    )
+
+
+def _screened_report(choice: tuple[int, ...], screened: ScreenedCandidate, index: int) -> CandidateReport:
+    return CandidateReport(
+        index=index,
+        samples=list(choice),
+        evaluation="screened",
+        per_scenario=[
+            ScenarioQuality(
+                rles=_round(e.rles),
+                contact_area_mm2=_round(e.contact_area_mm2),
+                effective_area=_round(e.effective_area),
+                seat_offsets_mm=[_round(t) for t in e.seat_offsets_mm],
+            )
+            for e in screened.scenarios
+        ],
+        quality=_round(screened.quality),
+        mean_effective_area=_round(screened.mean_effective_area),
+        pad_case=screened.case,
+        block_depth_mm=None,
     )
 
 

@@ -35,23 +35,23 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
                 return vertices[:0], faces[:0]
             if not np.isfinite(bound):
                 continue
-            coordinate = vertices[faces, axis]
-            if sign > 0:
-                if coordinate.min() >= bound:
-                    continue
-                if coordinate.max() < bound:
-                    return vertices[:0], faces[:0]
-            else:
-                if coordinate.max() <= bound:
-                    continue
-                if coordinate.min() > bound:
-                    return vertices[:0], faces[:0]
+            coordinate = vertices[faces, axis] * sign
+            level = bound * sign
+            inside = coordinate.min(axis=1) >= level
+            straddling = ~inside & (coordinate.max(axis=1) >= level)
+            if not straddling.any():
+                faces = faces[inside]
+                continue
+            # only triangles crossing the plane are cut; the rest are kept or dropped whole
+            cut = faces[straddling]
+            used, remapped = np.unique(cut, return_inverse=True)
             normal = np.zeros(3)
             normal[axis] = sign
             origin = np.zeros(3)
             origin[axis] = bound
-            vertices, faces = trimesh.intersections.slice_faces_plane(vertices, faces, normal, origin)[:2]
-            faces = np.asarray(faces, dtype=np.int64)
+            cut_vertices, cut_faces = trimesh.intersections.slice_faces_plane(vertices[used], remapped.reshape(-1, 3), normal, origin)[:2]
+            faces = np.vstack([faces[inside], np.asarray(cut_faces, dtype=np.int64) + len(vertices)])
+            vertices = np.vstack([vertices, cut_vertices])
     return vertices, faces
 
 

@@ -25,6 +25,7 @@ from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .pad import surface_in_pad
+from .parallel import WorkerPool, resolve_jobs
 from .printfit import closing_travel_mm
 from .parts import Part, load_parts
 from .render import (
@@ -265,12 +266,16 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
             (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
         ]
     report_progress = progress or (lambda stage, done, total: None)
-    rendered = {}
-    for done, (name, draw) in enumerate(jobs):
-        report_progress("pictures", done, len(jobs))
-        rendered[name] = draw()
+    report_progress("pictures", 0, len(jobs))
+    # the drawings are closures: forked workers inherit them, only PNG bytes come back
+    with WorkerPool([draw for _, draw in jobs], resolve_jobs(report.settings.search.jobs)) as pool:
+        images = pool.map(_draw, list(range(len(jobs))))
     report_progress("pictures", len(jobs), len(jobs))
-    return rendered
+    return {name: image for (name, _), image in zip(jobs, images)}
+
+
+def _draw(drawings: list[Callable[[], bytes]], index: int) -> bytes:
+    return drawings[index]()
 
 
 def _scenario_titles(report: DesignReport) -> list[str]:
@@ -421,8 +426,10 @@ def _summary(report: DesignReport, chosen) -> str:
     rows = [
         ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
         ("scenarios", len(report.scenarios)),
-        ("search", f"{report.search.kind}: {report.search.evaluated} of C = {report.search.candidates_total} candidates evaluated"
-         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}"),
+        ("search", f"{report.search.kind}: {report.search.screened} of C = {report.search.candidates_total} candidates screened, "
+         f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
+         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
+         f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is {report.search.gap or 0:.0%} of it"),
         ("chosen candidate", f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad"),
         ("finger", f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
          f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}"),

@@ -48,6 +48,18 @@ class PadGeometry:
     basis: str
     dominant_normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
+    def __getstate__(self) -> dict:
+        # manifold3d solids do not pickle: worker processes send the mesh
+        state = dict(self.__dict__)
+        mesh = self.intersection.to_mesh64()
+        state["intersection"] = (np.asarray(mesh.vert_properties), np.asarray(mesh.tri_verts))
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        vertices, triangles = state["intersection"]
+        state["intersection"] = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
+        self.__dict__.update(state)
+
 
 def pad_box(sampler: SamplerConfig) -> manifold3d.Manifold:
     """The pad box ``S = [0, T] x [0, L] x [0, W]`` in its own frame."""

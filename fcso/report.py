@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from .config import DesignConfig
@@ -80,6 +82,9 @@ class CandidateReport(_Model):
 
     index: int = Field(description="Position in the lexicographic enumeration of sample choices")
     samples: list[int] = Field(description="Chosen sample per scenario (same order as scenarios)")
+    evaluation: Literal["exact", "screened"] = Field(
+        "exact", description="exact: METHOD §6-7 (re-evaluated finalists); screened: the fast ranking of METHOD §8b"
+    )
     per_scenario: list[ScenarioQuality]
     quality: float = Field(description="Q = min over scenarios of E, mm²")
     mean_effective_area: float = Field(description="Mean E over scenarios (first tie-break), mm²")
@@ -88,10 +93,17 @@ class CandidateReport(_Model):
 
 
 class SearchReport(_Model):
-    kind: str = Field(description="exhaustive or branch_and_bound")
-    evaluated: int
+    """How the candidates were searched (METHOD §8, §8b)."""
+
+    kind: str = Field(description="exhaustive, branch_and_bound or branch_and_bound+coordinate_ascent (over screened quality)")
+    evaluated: int = Field(description="Candidates evaluated (screened)")
+    screened: int = Field(0, description="Candidates screened")
+    exact: int = Field(0, description="Best screened candidates re-evaluated exactly; the design is the best of these")
     candidates_total: int = Field(description="C = product of valid samples per scenario")
-    proven_optimal: bool
+    proven_optimal: bool = Field(description="Every candidate was screened, or branch and bound proved the screened best")
+    jobs: int = Field(1, description="Worker processes used")
+    quality_upper_bound: float | None = Field(None, description="No candidate's exact Q exceeds this (per-sample bounds), mm²")
+    gap: float | None = Field(None, description="Chosen Q over quality_upper_bound (1 = provably optimal)")
 
 
 class GraspReport(_Model):

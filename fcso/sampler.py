@@ -155,7 +155,6 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
         b = np.cross([0.0, 0.0, 1.0], a)
         # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
-        solid = trimesh.Trimesh(local, faces, process=False)
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
         centres = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
         if len(centres) == 0:
@@ -170,7 +169,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                 -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
             }
             plate_slabs = {
-                side: clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)) for side, (low, high) in plate_b.items()
+                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
             }
             heights = np.arange(clearance, top, stride)
             for h in heights:
@@ -193,7 +192,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                     continue
                 closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
                 if any(
-                    _meets_box(solid, *plate_slabs[side], _plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height))
+                    plate_slabs[side].meets_box(*_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height))
                     for side in SIDES
                 ):
                     rejected["collision_finger"] += 1
@@ -202,7 +201,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                 column = _a_range(slab_v, slab_f, h, _INF)
                 open_back = {1: centre + open_half, -1: centre - open_half}
                 if (column is not None and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)) or any(
-                    _meets_box(solid, *plate_slabs[side], _plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
+                    plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
                     for side in SIDES
                 ):
                     rejected["collision_descent"] += 1
@@ -227,25 +226,59 @@ def _plate_box(back_face_a: float, side: int, plate_thickness: float, b_range, z
     return (a_low, b_range[0], z_low), (a_high, b_range[1], z_high)
 
 
-def _meets_box(solid: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray, corners) -> bool:
-    """Whether the part's solid intersects an axis-aligned box, exactly.
+class _Slab:
+    """The part surface inside a slab of the sliding axis, for exact box-intersection tests.
 
-    ``vertices, faces`` is the part surface already clipped to the box's b
-    range. The solid meets the box when its surface enters the box; with no
-    surface inside, the box is wholly inside or wholly outside the solid, and
-    one point of the box decides.
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The part surface clipped to the slab, ``(a, b, z)`` coordinates.
     """
-    lower, upper = corners
-    if len(faces) and len(clip_to_box(vertices, faces, lower, upper)[1]):
-        return True
-    if len(faces) == 0:
-        return False
-    used = vertices[faces].reshape(-1, 3)
-    span_low, span_high = used.min(axis=0), used.max(axis=0)
-    if np.any(np.asarray(upper) < span_low) or np.any(np.asarray(lower) > span_high):
-        return False
-    inside = np.clip((np.asarray(lower) + np.asarray(upper)) / 2.0, span_low, span_high)
-    return bool(solid.contains(inside[None, :])[0])
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices, self.faces = vertices, faces
+        self.triangles = vertices[faces] if len(faces) else np.zeros((0, 3, 3))
+        self.lower = self.triangles.min(axis=1) if len(faces) else np.zeros((0, 3))
+        self.upper = self.triangles.max(axis=1) if len(faces) else np.zeros((0, 3))
+
+    def meets_box(self, lower, upper) -> bool:
+        """Whether the part's solid intersects the box ``[lower, upper]`` (within the slab), exactly.
+
+        The solid meets the box when its surface enters the box; with no
+        surface inside, the box is wholly inside or wholly outside the
+        solid, and the parity of the surface crossings of one ray from a
+        point of the box decides.
+        """
+        if len(self.faces) == 0:
+            return False
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        near = np.all(self.upper >= lower, axis=1) & np.all(self.lower <= upper, axis=1)
+        if near.any() and len(clip_to_box(self.vertices, self.faces[near], lower, upper)[1]):
+            return True
+        span_low, span_high = self.lower.min(axis=0), self.upper.max(axis=0)
+        if np.any(upper < span_low) or np.any(lower > span_high):
+            return False
+        point = np.clip((lower + upper) / 2.0, span_low, span_high)
+        return _inside(self.triangles, point)
+
+
+def _inside(triangles: np.ndarray, point: np.ndarray) -> bool:
+    """Whether ``point`` lies inside the closed surface ``triangles`` (parity of crossings of a ray along +a).
+
+    Only triangles of the slab are given: a ray along ``a`` stays in the slab,
+    so it crosses exactly the surface the slab holds.
+    """
+    b, z = triangles[:, :, 1], triangles[:, :, 2]
+    det = (b[:, 1] - b[:, 0]) * (z[:, 2] - z[:, 0]) - (b[:, 2] - b[:, 0]) * (z[:, 1] - z[:, 0])
+    usable = np.abs(det) > 1e-12
+    b, z, a, det = b[usable], z[usable], triangles[usable][:, :, 0], det[usable]
+    # a tiny fixed offset keeps the ray off shared edges and vertices
+    pb, pz = point[1] + 1.234567e-7, point[2] + 2.345678e-7
+    s = ((pb - b[:, 0]) * (z[:, 2] - z[:, 0]) - (b[:, 2] - b[:, 0]) * (pz - z[:, 0])) / det
+    t = ((b[:, 1] - b[:, 0]) * (pz - z[:, 0]) - (pb - b[:, 0]) * (z[:, 1] - z[:, 0])) / det
+    hit = (s >= 0) & (t >= 0) & (s + t <= 1)
+    crossing = a[:, 0] + s * (a[:, 1] - a[:, 0]) + t * (a[:, 2] - a[:, 0])
+    return bool(np.count_nonzero(hit & (crossing > point[0])) % 2)
 
 
 def _area(vertices: np.ndarray, faces: np.ndarray) -> float:

@@ -1,4 +1,11 @@
-"""Candidate enumeration: exhaustive, or best-first branch and bound (METHOD §8)."""
+"""Candidate search: exhaustive, best-first branch and bound, then coordinate ascent from seeds (METHOD §8, §8b).
+
+The search ranks candidates by a quality function it is given (the
+screening evaluation in :func:`fcso.design.design`) and evaluates them in
+batches, so a batch can be spread over worker processes. It never decides
+the final design alone: the best candidates it returns are re-evaluated
+exactly by the caller.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +14,9 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+
+#: ``evaluate(choices) -> [(Q, mean E), ...]``, one pair per choice, in order.
+BatchEvaluate = Callable[[list[tuple[int, ...]]], list[tuple[float, float]]]
 
 
 @dataclass
@@ -18,16 +28,18 @@ class SearchOutcome:
     kind : str
         ``"exhaustive"``, ``"branch_and_bound"`` or, when the budget ran out
         before a proof, ``"branch_and_bound+coordinate_ascent"``.
-    evaluated : list of tuple of int
-        The sample choices evaluated, in evaluation order.
+    evaluated : dict
+        Every evaluated choice (one sample index per scenario) to ``(Q, mean E)``,
+        in evaluation order.
     total : int
         Number of candidates ``C = Π N_s,m``.
     proven_optimal : bool
-        True when the best evaluated candidate is the best of all ``C``.
+        True when the best evaluated candidate is the best of all ``C`` under
+        the quality the search was given.
     """
 
     kind: str
-    evaluated: list[tuple[int, ...]]
+    evaluated: dict[tuple[int, ...], tuple[float, float]]
     total: int
     proven_optimal: bool
 
@@ -40,12 +52,22 @@ def candidate_index(choice: Sequence[int], counts: Sequence[int]) -> int:
     return index
 
 
+def quality_upper_bound(upper_bounds: Sequence[np.ndarray]) -> float:
+    """An upper bound on every candidate's Q from per-sample bounds on E.
+
+    ``Q = min_m E_m`` and ``E_m`` never exceeds its sample's bound, so no
+    candidate beats ``min_m max_s bound[m][s]``.
+    """
+    return float(min(np.max(b) for b in upper_bounds)) if upper_bounds else 0.0
+
+
 def search(
     counts: Sequence[int],
     upper_bounds: Sequence[np.ndarray],
-    evaluate: Callable[[tuple[int, ...]], tuple[float, float]],
+    evaluate: BatchEvaluate,
     max_exhaustive: int,
     max_evaluations: int,
+    batch_size: int = 256,
 ) -> SearchOutcome:
     """Find the candidate with the largest quality Q.
 
@@ -55,15 +77,16 @@ def search(
         ``N_s,m``: valid samples per scenario.
     upper_bounds : sequence of (N_s,m,) float
         For every sample, a value no candidate using it can exceed in its
-        scenario's effective area E (so ``min`` over a candidate's samples
-        bounds its Q).
+        scenario's effective area E under ``evaluate``'s quality.
     evaluate : callable
-        Maps a choice (one sample index per scenario) to ``(Q, mean E)``.
+        ``evaluate(choices)`` returns ``(Q, mean E)`` for every choice.
     max_exhaustive : int
         Evaluate all candidates when there are at most this many.
     max_evaluations : int
-        Budget beyond ``max_exhaustive``: branch and bound may use half, a
-        coordinate ascent from its best candidate the rest.
+        Budget beyond ``max_exhaustive``: branch and bound may use half,
+        coordinate ascent from seeds the rest.
+    batch_size : int
+        Choices handed to ``evaluate`` at once.
 
     Returns
     -------
@@ -77,31 +100,46 @@ def search(
     are evaluated in non-increasing bound order, each exactly once, and the
     search stops as soon as the next bound falls below the best Q found:
     whatever is left cannot beat it (nor tie it, which the tie-break needs).
+
+    When the budget runs out first, coordinate ascent improves candidates
+    one scenario at a time (every sample of that scenario is tried, the
+    best move is taken) until no move helps. It starts from the best
+    candidate found, then from seeds in turn: every scenario on its
+    best-bound sample, then each scenario's best-bound samples with the
+    others on the best candidate's choices. More budget reaches more seeds,
+    so the result stops improving once the seeds' local optima are found.
     """
     total = int(np.prod([int(c) for c in counts], dtype=object)) if counts else 0
-    if total == 0:
-        return SearchOutcome("exhaustive", [], 0, True)
-    if total <= max_exhaustive:
-        evaluated = [tuple(choice) for choice in itertools.product(*(range(c) for c in counts))]
-        for choice in evaluated:
-            evaluate(choice)
-        return SearchOutcome("exhaustive", evaluated, total, True)
     results: dict[tuple[int, ...], tuple[float, float]] = {}
+    if total == 0:
+        return SearchOutcome("exhaustive", results, 0, True)
+    if total <= max_exhaustive:
+        choices = [tuple(choice) for choice in itertools.product(*(range(c) for c in counts))]
+        for start in range(0, len(choices), batch_size):
+            chunk = choices[start : start + batch_size]
+            results.update(zip(chunk, evaluate(chunk)))
+        return SearchOutcome("exhaustive", results, total, True)
 
-    def scored(choice: tuple[int, ...]) -> tuple[float, float, int]:
-        if choice not in results:
-            results[choice] = evaluate(choice)
+    def run(choices: list[tuple[int, ...]]) -> None:
+        fresh = list(dict.fromkeys(c for c in choices if c not in results))
+        for start in range(0, len(fresh), batch_size):
+            chunk = fresh[start : start + batch_size]
+            results.update(zip(chunk, evaluate(chunk)))
+
+    def key(choice: tuple[int, ...]) -> tuple[float, float, int]:
         quality, mean = results[choice]
         return quality, mean, -candidate_index(choice, counts)
 
-    proven = _branch_and_bound(counts, upper_bounds, scored, results, max(1, max_evaluations // 2))
-    if proven:
-        return SearchOutcome("branch_and_bound", list(results), total, True)
-    _coordinate_ascent(counts, scored, results, max_evaluations)
-    return SearchOutcome("branch_and_bound+coordinate_ascent", list(results), total, False)
+    if _branch_and_bound(counts, upper_bounds, run, results, max(1, max_evaluations // 2)):
+        return SearchOutcome("branch_and_bound", results, total, True)
+    for seed in _seeds(counts, upper_bounds, results, key):
+        if len(results) >= max_evaluations:
+            break
+        _coordinate_ascent(seed, counts, run, results, key, max_evaluations)
+    return SearchOutcome("branch_and_bound+coordinate_ascent", results, total, False)
 
 
-def _branch_and_bound(counts, upper_bounds, scored, results, budget: int) -> bool:
+def _branch_and_bound(counts, upper_bounds, run, results, budget: int) -> bool:
     """Best-first branch and bound; True when it proved its best optimal within ``budget``."""
     order = sorted(
         ((float(bound), scenario, sample) for scenario, bounds in enumerate(upper_bounds) for sample, bound in enumerate(bounds)),
@@ -114,29 +152,44 @@ def _branch_and_bound(counts, upper_bounds, scored, results, budget: int) -> boo
             return True
         admitted[scenario].append(sample)
         pools = [pool if m != scenario else [sample] for m, pool in enumerate(admitted)]
-        for choice in itertools.product(*pools):
-            if len(results) >= budget:
-                return False
-            best_quality = max(best_quality, scored(tuple(choice))[0])
+        size = int(np.prod([len(p) for p in pools], dtype=object))
+        if size == 0:
+            continue
+        if len(results) + size > budget:
+            return False
+        choices = [tuple(c) for c in itertools.product(*pools)]
+        run(choices)
+        best_quality = max(best_quality, max(results[c][0] for c in choices))
     return True
 
 
-def _coordinate_ascent(counts, scored, results, budget: int) -> None:
-    """Improve the best candidate one scenario at a time until no change helps or the budget is spent.
+def _seeds(counts, upper_bounds, results, key):
+    """Starting points of the ascent, best first (generated lazily: each sees the results so far)."""
+    top = tuple(int(np.argmax(b)) for b in upper_bounds)
+    if results:
+        yield max(results, key=key)
+    yield top
+    ranked = [np.argsort(-np.asarray(b), kind="stable") for b in upper_bounds]
+    for depth in range(1, max(counts)):
+        for scenario, order in enumerate(ranked):
+            if depth < len(order) and results:
+                best = max(results, key=key)
+                yield best[:scenario] + (int(order[depth]),) + best[scenario + 1 :]
 
-    Used when branch and bound cannot prove optimality within half the budget:
-    large batches have far more candidates than can be evaluated, and a grasp
-    that suits the other scenarios' carving is found by changing one choice
-    at a time.
-    """
-    current = max(results, key=scored)
+
+def _coordinate_ascent(start, counts, run, results, key, budget: int) -> None:
+    """Move one scenario's sample at a time to the best alternative until no move helps or the budget is spent."""
+    run([start])
+    current = start
     improved = True
     while improved:
         improved = False
         for scenario, count in enumerate(counts):
-            for sample in range(count):
-                choice = current[:scenario] + (sample,) + current[scenario + 1 :]
-                if choice not in results and len(results) >= budget:
-                    return
-                if scored(choice) > scored(current):
-                    current, improved = choice, True
+            moves = [current[:scenario] + (sample,) + current[scenario + 1 :] for sample in range(count)]
+            fresh = [m for m in moves if m not in results]
+            if len(results) + len(fresh) > budget:
+                return
+            run(moves)
+            best = max(moves, key=key)
+            if key(best) > key(current):
+                current, improved = best, True

@@ -39,7 +39,7 @@ class QualityColumn:
 
 def scenario_labels(report: DesignReport) -> list[str]:
     """Short ``part/p<pose>`` label of each grasp scenario."""
-    return [f"{s.part[:10]}/p{s.pose_index}" for s in report.scenarios]
+    return [f"{s.part if len(s.part) <= 10 else s.part[:6] + '~' + s.part[-3:]}/p{s.pose_index}" for s in report.scenarios]
 
 
 def quality_columns(report: DesignReport) -> list[QualityColumn]:
@@ -55,8 +55,9 @@ def quality_columns(report: DesignReport) -> list[QualityColumn]:
 
 
 def ranked_candidates(report: DesignReport, limit: int | None = None) -> list[CandidateReport]:
-    """Candidates best first (larger Q, then larger mean E, then smaller index), at most ``limit``."""
-    rows = sorted(report.candidates, key=lambda c: (-c.quality, -c.mean_effective_area, c.index))
+    """Candidates best first, at most ``limit``: the exactly evaluated ones, then the screened ones,
+    each by larger Q, then larger mean E, then smaller index."""
+    rows = sorted(report.candidates, key=lambda c: (c.evaluation != "exact", -c.quality, -c.mean_effective_area, c.index))
     return rows if limit is None else rows[:limit]
 
 
@@ -84,15 +85,23 @@ def quality_table(report: DesignReport, limit: int | None = 20) -> str:
     rows = report.candidates if limit is None else ranked_candidates(report, limit)
     width = max(12, *(len(label) + 1 for label in scenario_labels(report)))
     widths = [10 if column.scenario is None else width + 6 for column in columns]
-    header = ["    i"] + [f"{column.title:>{w}}" for column, w in zip(columns, widths)]
+    header = ["    i", "eval"] + [f"{column.title:>{w}}" for column, w in zip(columns, widths)]
     lines = [" ".join(header)]
     for row in rows:
         mark = "*" if row.index == report.best else " "
-        cells = [f"{mark}{row.index:>4}"]
+        cells = [f"{mark}{row.index:>4}", f"{row.evaluation[:5]:>4}"]
         cells += [f"{column.value(row):>{w}.{column.decimals}f}" for column, w in zip(columns, widths)]
         lines.append(" ".join(cells))
     lines.append(
-        f"{len(rows)} of {len(report.candidates)} evaluated candidates shown ({report.search.kind}, "
-        f"C = {report.search.candidates_total}); * = chosen, Q = {chosen_candidate(report).quality:.1f}"
+        f"{len(rows)} of {len(report.candidates)} listed candidates shown ({report.search.kind}: {report.search.screened} screened "
+        f"of C = {report.search.candidates_total}, the best {report.search.exact} re-evaluated exactly); * = chosen, "
+        f"Q = {chosen_candidate(report).quality:.1f} mm², {_gap(report)}"
     )
     return "\n".join(lines)
+
+
+def _gap(report: DesignReport) -> str:
+    """The chosen Q against the search's upper bound, in words."""
+    if report.search.quality_upper_bound is None:
+        return "no upper bound"
+    return f"upper bound {report.search.quality_upper_bound:.1f} mm² (Q is {report.search.gap:.0%} of it)"

@@ -270,12 +270,12 @@ def step_design(run: JobRun) -> None:
     """Run fcso's design, logging progress per stage."""
     last: dict[str, float] = {}
 
-    def progress(stage: str, done: int, total: int) -> None:
+    def progress(stage: str, done: int, total: int, note: str = "") -> None:
         now = time.monotonic()
         if stage in last and done < total and now - last[stage] < PROGRESS_INTERVAL_S:
             return
         last[stage] = now
-        run.log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
+        run.log("info", f"{stage} {done}/{total}" + (f": {note}" if note else ""), stage=stage, done=done, total=total)
 
     run.result = design(run.loaded, run.settings, progress=progress)
     # what the design warns of (parts left out as ungraspable, files split into

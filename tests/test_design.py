@@ -38,13 +38,16 @@ def test_counts_qualities_and_best_are_consistent(two_part_design):
             assert 0.0 < quality.rles <= 2.0
             assert quality.effective_area == pytest.approx(quality.contact_area_mm2 / quality.rles, rel=1e-5, abs=1e-5)
         assert candidate.quality == min(q.effective_area for q in candidate.per_scenario)
-    best = max(report.candidates, key=lambda c: (c.quality, c.mean_effective_area, -c.index))
+    # the design is the best exactly re-evaluated candidate (METHOD §8b)
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    assert len(exact) == report.search.exact == report.settings.search.exact_top_k
+    best = max(exact, key=lambda c: (c.quality, c.mean_effective_area, -c.index))
     assert report.best == best.index
     assert {c.pad_case for c in report.candidates} == {"good", "bad", "mixed"}
     for scenario in report.scenarios:
         assert set(scenario.rejected) == {"contact", "fit", "collision_finger", "collision_descent"}
         assert scenario.tried_samples == scenario.valid_samples + sum(scenario.rejected.values())
-    assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "search", "finger"}
+    assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "screening", "exact", "finger"}
     assert report.settings.sampler.length_mm == 10.0
 
 

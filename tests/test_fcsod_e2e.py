@@ -115,7 +115,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert [s["state"] for s in record.of(TOPIC_STATE)] == ["queued", "running", "done"]
     published = [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)]
     assert published == ["status", "quality", "grasps", "design", "placement", "status"]
-    assert any(b.get("stage") == "candidates" for b in record.of(TOPIC_LOG))
+    assert any(b.get("stage") == "screening" for b in record.of(TOPIC_LOG))
     scene = record.of("/scene")[0]
     assert len(scene["entities"][0]["triangles"]) == 5
 
