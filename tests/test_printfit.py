@@ -14,6 +14,8 @@ import fcso
 from fcso.config import DesignConfig, PrintConfig, load_config
 from fcso.contact import sample_surface
 from fcso.errors import ConfigError
+from fcso.html_report import rebuild_report
+from fcso.report import DesignReport
 from fcso.finger import finger_plate, parametric_finger
 from fcso.geometry import box, to_manifold
 from fcso.pad import _U_TO_Z, build_fingerpad, pad_box, pad_geometry, surface_in_pad
@@ -191,7 +193,7 @@ def test_job_manifest_accepts_print():
 
 
 @pytest.mark.parametrize("profile", ["custom", "mjf-pa12", "fdm-pla", "sla-resin"])
-def test_every_profile_gives_one_watertight_finger(profile):
+def test_every_profile_gives_one_watertight_finger(profile, tmp_path):
     config = small_config(sampler={"stride_mm": 8.0}, print={"profile": profile})
     result = fcso.design([data_path("capsela200_plug.stl"), data_path("solar_tracker.stl")], config)
     report = result.report
@@ -205,3 +207,12 @@ def test_every_profile_gives_one_watertight_finger(profile):
         assert fit.fitted.pocket_volume_mm3 > fit.exact.pocket_volume_mm3
         assert fit.thinnest_wall_mm >= fit.min_wall_mm - 0.05
         assert not any("thinner than print.min_wall_mm" in w for w in report.warnings)
+    if profile == "mjf-pa12":
+        # report.json and report.html (rebuilt from the folder, seating again) show the printed fit
+        fcso.write_outputs(result, tmp_path)
+        saved = DesignReport.model_validate_json((tmp_path / "report.json").read_text(encoding="utf-8"))
+        assert saved.print_fit == fit and saved.settings.print.profile == "mjf-pa12"
+        rebuild_report(tmp_path)
+        page = (tmp_path / "report.html").read_text(encoding="utf-8")
+        assert "<h2>Printed fit</h2>" in page and "mjf-pa12" in page and "as printed" in page
+        assert f"{fit.fitted.pocket_volume_mm3:.1f}" in page and f"{fit.exact.pocket_volume_mm3:.1f}" in page
