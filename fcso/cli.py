@@ -15,6 +15,7 @@ from .output import write_outputs
 from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
+from .sim.cli import add_design_options, add_settings_options, add_verify_command, restore_section, run_verify, verify_design_outputs
 from .table import quality_table
 
 EXIT_BAD_INPUT = 2
@@ -94,6 +95,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
     run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
+    add_design_options(run)
+    add_settings_options(run)
 
     report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
     report.add_argument(
@@ -106,6 +109,8 @@ def _parser() -> argparse.ArgumentParser:
     poses.add_argument("--units", default="mm")
     poses.add_argument("--scale-to", type=float, metavar="MM")
     poses.add_argument("--repair", action="store_true")
+
+    add_verify_command(commands)
 
     schema = commands.add_parser("schema", help="write the JSON Schemas of config and report")
     schema.add_argument("--out", required=True, type=Path)
@@ -122,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
             return _poses(args)
         if args.command == "report":
             return _report(args)
+        if args.command == "verify":
+            return run_verify(args, ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
         for path in write_schemas(args.out):
             print(path)
         return 0
@@ -179,6 +186,8 @@ def _design(args) -> int:
         for warning in result.report.warnings:
             print(f"warning: {warning}")
         print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
+    if args.verify or args.verify_top:
+        return verify_design_outputs(result, args, ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
     return 0
 
 
@@ -186,6 +195,7 @@ def _report(args) -> int:
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
         path = rebuild_report(args.directory, progress=progress)
+        restore_section(args.directory)
     finally:
         progress.close()
     if not args.quiet:

@@ -304,6 +304,7 @@ def load_config(path: str | Path) -> DesignConfig:
     """
     path = Path(path)
     data = read_toml(path)
+    data.pop("verify", None)  # the simulation's settings, read by fcso.sim.config
     finger = data.get("finger")
     if isinstance(finger, dict) and isinstance(finger.get("mesh"), str):
         # a relative finger mesh is relative to the config file, not the cwd

@@ -9,11 +9,13 @@ from pydantic import BaseModel
 
 from .config import DesignConfig
 from .report import DesignReport
+from .sim.report import VerificationReport
 
 #: fcso's documents: file name -> model.
 FCSO_SCHEMAS: dict[str, type[BaseModel]] = {
     "design-config.json": DesignConfig,
     "design-report.json": DesignReport,
+    "verification-report.json": VerificationReport,
 }
 
 

@@ -115,6 +115,14 @@ class McapConfig(_Section):
     )
 
 
+class VerifySettings(_Section):
+    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""
+
+    enabled: bool = Field(False, description="Verify every done job's design in simulation (MuJoCo), after it is published")
+    trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
+    top_k: int = Field(0, ge=0, description="Verify the K best candidates by Q and take the best that passes (0: off)")
+
+
 class DaemonConfig(_Section):
     """Every setting of ``fcsod run`` (``fcsod.toml``)."""
 
@@ -131,6 +139,7 @@ class DaemonConfig(_Section):
         default_factory=BuildConfig, description="Default build volume, spacing and finger copies of every job's build.3mf"
     )
     ros2: Ros2Config = Field(default_factory=Ros2Config, description="The daemon as a ROS 2 node over zenoh (rmw_zenoh's wire format)")
+    verify: VerifySettings = Field(default_factory=VerifySettings, description="Grasp verification of every job's design")
 
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> "DaemonConfig":
@@ -277,6 +286,7 @@ class JobManifest(_Section):
     search: SearchConfig | None = None
     print: PrintConfig | None = Field(None, description="Printer profile, clearance, lead-in and minimum wall (fcso [print])")
     build: BuildConfig | None = Field(None, description="Overrides of the daemon's [build] settings, key by key")
+    verify: VerifySettings | None = Field(None, description="The job's own [verify] settings (replace the daemon's)")
 
     @model_validator(mode="before")
     @classmethod

@@ -298,7 +298,7 @@ class SceneUpdate(_Message):
 # ------------------------------------------------------------ keys and outgoing messages
 
 #: Topics published per job.
-JOB_TOPICS = ("status", "quality", "grasps", "design", "placement")
+JOB_TOPICS = ("status", "quality", "grasps", "design", "placement", "verification")
 
 ENCODING_JSON = "application/json"
 ENCODING_STL = "model/stl"

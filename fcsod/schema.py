@@ -11,6 +11,7 @@ from .config import DaemonConfig, JobManifest
 from .messages import DesignAttachment, GraspsMessage, PlacementMessage, QualityMessage, StatusMessage
 from .placement import PlacementReport
 from .recorder import CHANNELS
+from .verification import TOPIC_VERIFICATION, VerificationMessage, VerificationReport
 
 
 def _channel_file(topic: str) -> str:
@@ -28,6 +29,8 @@ FCSOD_SCHEMAS: dict[str, type[BaseModel]] = {
     "zenoh-placement.json": PlacementMessage,
     "placement-report.json": PlacementReport,
     **{_channel_file(topic): model for topic, model in CHANNELS.items()},
+    "zenoh-verification.json": VerificationMessage,
+    _channel_file(TOPIC_VERIFICATION): VerificationReport,
 }
 
 

@@ -82,6 +82,7 @@ from .recorder import (
     Recorder,
 )
 from .placement import BuildConfig, PlacementReport, place_fingers
+from .verification import choose_by_verification, verify_done_job
 
 #: Name of the record in every job's output folder.
 RECORD_NAME = "job.mcap"
@@ -148,6 +149,7 @@ class JobRun:
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    verified: tuple | None = None
 
     def log(self, level: str, message: str, **fields) -> None:
         """Record a log line and send it to the daemon's log."""
@@ -409,7 +411,15 @@ def step_outputs(run: JobRun) -> None:
 
 
 #: The job's steps in order; each is logged and flushed to the record when it ends.
-STEPS: list[Callable[[JobRun], None]] = [step_inputs, step_load, step_design, step_record_design, step_placement, step_outputs]
+STEPS: list[Callable[[JobRun], None]] = [
+    step_inputs,
+    step_load,
+    step_design,
+    choose_by_verification,
+    step_record_design,
+    step_placement,
+    step_outputs,
+]
 
 
 # ------------------------------------------------------------------------ scene
@@ -577,6 +587,8 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     os.replace(work_dir, final_dir)
     _fsync_dir(output_root)
     emit(("finished", "done" if error is None else "failed", error, publish))
+    if error is None:
+        verify_done_job(run, final_dir)
 
 
 def _fsync_dir(path: Path) -> None:

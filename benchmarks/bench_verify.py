@@ -1,0 +1,130 @@
+"""Grasp verification in simulation (METHOD §12): the paper's precision experiment in silico, the fixtures, and the time.
+
+Run from the repository root::
+
+    python -m benchmarks.bench_verify [--trials N] [--runs N] [--quick]
+
+Prints
+
+- the paper's precision experiment: a 30 mm cube with a deep V-notch in
+  two opposite faces and a through hole, designed upright and closed
+  across its notches, ``--trials`` perturbed trials (+-2 mm, +-3 degrees)
+  with the designed fingers and with flat ones: success rates, the sorted
+  final errors, the holding forces; the same cube with a 7 mm notch, for
+  which the method keeps the pad flat;
+- every fixture part of the demo (the batch-demo job: xyz cube and solar
+  tracker with one pair of fingers) and the paper's bunny experiment: per scenario the success rate, median error and holding
+  forces, designed against flat;
+- the wall time of a one-part verification (the paper cube, ``--trials``
+  trials and the holding test) with a cold decomposition cache (median of
+  ``--runs``) and a warm one (median of ``--runs``).
+
+The machine is shared and noisy: compare medians, not single runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import fcso
+from examples.sim_parts import featured_cube, upright_grasp_settings
+from fcso.parts import Part
+from fcso.sim.config import VerifyConfig
+from fcso.sim.report import VerificationReport
+from fcso.sim.verify import design_under_test, verify
+
+REPO = Path(__file__).resolve().parent.parent
+PARTS = REPO / "examples" / "parts"
+DEMO = REPO / "examples" / "jobs" / "batch-demo"
+
+
+def cube_design(notch_mm: float) -> fcso.DesignResult:
+    """The paper cube designed upright, closing across its notches, default (paper) pad settings."""
+    mesh = featured_cube(notch_mm=notch_mm)
+    part = Part(name=f"cube30-notch{notch_mm:g}", path="featured_cube", mesh=mesh)
+    return fcso.design([part], fcso.DesignConfig().updated(upright_grasp_settings(mesh)))
+
+
+def demo_design() -> fcso.DesignResult:
+    """The batch-demo job's design: its parts and its manifest's settings."""
+    config = fcso.DesignConfig().updated(
+        {
+            "poses": {"count": 1, "select": "most_probable"},
+            "sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 10.0},
+        }
+    )
+    return fcso.design([fcso.load_part(DEMO / "20mm-xyz-cube.stl"), fcso.load_part(DEMO / "solar_tracker.stl")], config)
+
+
+def paper_design() -> fcso.DesignResult:
+    return fcso.design([fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)], fcso.load_config(REPO / "examples" / "paper.toml"))
+
+
+def _holding(values: dict) -> str:
+    return " ".join(f"{d}:{'held' if v is None else f'{v:.0f}'}" for d, v in values.items())
+
+
+def print_verification(name: str, verification: VerificationReport, errors: bool = False) -> None:
+    print(f"\n{name}  ({verification.timings_s})")
+    for s in verification.scenarios:
+        f = s.fidelity
+        print(
+            f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part {f.part_volume_error:+.2%} "
+            f"pad {f.pad_volume_error:+.2%}, seated penetration {f.seated_penetration_mm:.3f} mm"
+        )
+        for label, r in (("designed", s.fcso), ("flat", s.flat)):
+            print(
+                f"    {label:<8} success {r.success_rate:4.0%}  median {r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg  "
+                f"worst {r.worst_error_mm:.3f} mm {r.worst_error_deg:.2f} deg  held after lift {sum(t.held for t in r.trials)}/{len(r.trials)}  "
+                f"holding N {_holding(r.holding_n)}"
+            )
+            if errors:
+                print(f"             errors mm  {np.round(sorted(t.error_mm for t in r.trials), 3).tolist()}")
+                print(f"             errors deg {np.round(sorted(t.error_deg for t in r.trials), 2).tolist()}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--runs", type=int, default=3, help="timing runs per cache state")
+    parser.add_argument("--quick", action="store_true", help="the paper cube and the timing only")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as scratch:
+        cache = Path(scratch) / "warm"
+        config = VerifyConfig(trials=args.trials, cache_dir=cache)
+        print(f"MuJoCo verification, {args.trials} trials per scenario, +-2 mm +-3 deg, 60 N, friction 0.4, lift 100 mm")
+
+        cube = design_under_test(cube_design(8.0))
+        print_verification("paper precision experiment in silico: 30 mm cube, 8 mm V-notches, 8 mm hole", verify(cube, config), errors=True)
+        shallow = cube_design(7.0)
+        case = next(c for c in shallow.report.candidates if c.index == shallow.report.best).pad_case
+        print_verification(f"the same cube with 7 mm notches (pad case {case!r})", verify(design_under_test(shallow), config), errors=True)
+
+        if not args.quick:
+            for name, make in (("batch-demo job: xyz cube + solar tracker", demo_design), ("paper experiment: bunny 65 mm, poses 1 and 3", paper_design)):
+                print_verification(name, verify(design_under_test(make()), config))
+
+        cold, warm = [], []
+        for run in range(args.runs):
+            started = time.perf_counter()
+            verify(cube, config.model_copy(update={"cache_dir": Path(scratch) / f"cold{run}"}))
+            cold.append(time.perf_counter() - started)
+        for _ in range(args.runs):
+            started = time.perf_counter()
+            verify(cube, config)
+            warm.append(time.perf_counter() - started)
+        print(
+            f"\none-part verification (paper cube, {args.trials} trials x 2 fingers + holding): "
+            f"cold cache median {statistics.median(cold):.1f} s (min {min(cold):.1f}, max {max(cold):.1f}), "
+            f"warm cache median {statistics.median(warm):.1f} s (min {min(warm):.1f}, max {max(warm):.1f}); target <= 60 s"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,124 @@
+"""Command line of the verification: ``fcso verify DIR`` and ``fcso design --verify / --verify-top K``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .config import VerifyConfig, load_verify_config
+from .report import VerificationReport
+
+
+def add_verify_command(commands) -> None:
+    """The ``verify`` subcommand."""
+    run = commands.add_parser("verify", help="precision and holding tests of a finished design in simulation (MuJoCo)")
+    run.add_argument("directory", type=Path, metavar="DIR", help="output folder of fcso design")
+    run.add_argument("--config", type=Path, help="settings (TOML, its [verify] table)")
+    add_settings_options(run)
+    run.add_argument("--quiet", action="store_true", help="no progress and no summary")
+
+
+def add_settings_options(parser) -> None:
+    """Options shared by ``verify`` and ``design --verify``."""
+    parser.add_argument("--trials", type=int, metavar="N", help="precision trials per scenario (verify.trials)")
+    parser.add_argument("--verify-seed", type=int, metavar="N", help="seed of the trial perturbations (verify.seed)")
+
+
+def add_design_options(parser) -> None:
+    """``--verify`` and ``--verify-top`` of ``fcso design``."""
+    parser.add_argument("--verify", action="store_true", help="verify the design in simulation as the last stage")
+    parser.add_argument(
+        "--verify-top",
+        type=int,
+        default=0,
+        metavar="K",
+        help="verify the K best candidates by Q and choose the best that passes (0: off)",
+    )
+
+
+def settings(args) -> VerifyConfig:
+    """The ``[verify]`` settings of ``--config`` with the command line's overrides."""
+    config = load_verify_config(getattr(args, "config", None))
+    overrides = {}
+    if getattr(args, "trials", None) is not None:
+        overrides["trials"] = args.trials
+    if getattr(args, "verify_seed", None) is not None:
+        overrides["seed"] = args.verify_seed
+    return config.model_copy(update=overrides) if overrides else config
+
+
+def run_verify(args, progress) -> int:
+    """``fcso verify DIR``: write verification.json and the report section; print a summary."""
+    from .verify import load_design, verify, write_verification
+
+    config = settings(args)
+    _, design = load_design(args.directory)
+    try:
+        verification = verify(design, config, progress)
+    finally:
+        progress.close()
+    write_verification(args.directory, verification, design)
+    if not args.quiet:
+        print(summary(verification))
+        print(f"wrote {args.directory}/verification.json and the verification section of report.html")
+    return 0
+
+
+def summary(verification: VerificationReport) -> str:
+    """A few lines per scenario: success rates, median errors and holding forces, designed against flat."""
+    lines = []
+    for s in verification.scenarios:
+        lines.append(f"{s.part} pose {s.pose_index}:")
+        for name, r in (("designed", s.fcso), ("flat", s.flat)):
+            holding = " ".join(f"{d} {'held' if v is None else f'{v:.1f}'}" for d, v in r.holding_n.items())
+            median = "-" if r.median_error_mm is None else f"{r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg"
+            lines.append(
+                f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}"
+            )
+    lines.append(f"verification {'passed' if verification.passed else 'did not pass'}")
+    lines.extend(f"warning: {w}" for w in verification.warnings)
+    return "\n".join(lines)
+
+
+def verify_design_outputs(result, args, progress) -> int:
+    """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
+    from ..html_report import rebuild_report
+    from ..output import write_outputs
+    from .choose import ranking_html, verify_top
+    from .verify import design_under_test, verify, write_verification
+
+    config = settings(args)
+    try:
+        if args.verify_top > 0:
+            chosen, verification, design, ranking = verify_top(result, args.verify_top, config, progress)
+            if chosen is not result:
+                # report.html is rebuilt from report.json: the pictures follow the newly chosen candidate
+                write_outputs(chosen, args.out)
+                rebuild_report(args.out)
+            extra = ranking_html(ranking)
+        else:
+            design = design_under_test(result)
+            verification, extra = verify(design, config, progress), ""
+    finally:
+        progress.close()
+    write_verification(args.out, verification, design, extra)
+    if not args.quiet:
+        print(summary(verification))
+        if verification.ranking:
+            chosen_index = next(r.index for r in verification.ranking if r.chosen)
+            print(f"chose candidate {chosen_index} among the {len(verification.ranking)} best by Q")
+        print(f"wrote {args.out}/verification.json and the verification section of report.html")
+    return 0
+
+
+def restore_section(directory: Path) -> None:
+    """After ``fcso report`` rebuilt report.html: put the verification section back when verification.json exists."""
+    from .choose import ranking_html
+    from .html import section_html, write_section
+    from .verify import load_design, read_verification, verification_pictures
+
+    verification = read_verification(directory)
+    if verification is None:
+        return
+    _, design = load_design(directory)
+    extra = ranking_html(verification.ranking or [])
+    write_section(Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra))

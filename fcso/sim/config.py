@@ -1,0 +1,79 @@
+"""Settings of the grasp verification (METHOD §12): the ``[verify]`` table."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from ..config import format_validation_error, read_toml
+from ..errors import ConfigError
+
+
+class VerifyConfig(BaseModel):
+    """Physics, trials and thresholds of the simulated precision and holding tests."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    trials: int = Field(10, ge=0, description="Perturbed precision trials per scenario and finger")
+    seed: int = Field(0, description="Seed of the trial perturbations")
+    position_error_mm: float = Field(2.0, ge=0, description="Start position error, uniform in -x..x along each table axis, mm")
+    yaw_error_deg: float = Field(3.0, ge=0, description="Start rotation error about the vertical, uniform in -x..x, degrees")
+    closing_speed_mm_s: float = Field(20.0, gt=0, description="Finger closing speed, mm/s")
+    force_limit_n: float = Field(60.0, gt=0, description="Grip force limit per finger, N")
+    friction: float = Field(0.4, ge=0, description="Coulomb friction coefficient of every contact")
+    density_g_cm3: float = Field(1.01, gt=0, description="Part material density (PA12: 1.01), g/cm³")
+    descent_speed_mm_s: float = Field(100.0, gt=0, description="Approach speed of the gripper, mm/s")
+    lift_mm: float = Field(100.0, ge=0, description="Lift after closing, mm")
+    lift_speed_mm_s: float = Field(100.0, gt=0, description="Lift speed, mm/s")
+    hold_force_n: float = Field(30.0, gt=0, description="Largest push of the holding test, N")
+    hold_ramp_n_s: float = Field(60.0, gt=0, description="Rate of the holding push, N/s")
+    slip_mm: float = Field(1.0, gt=0, description="Holding test: the part slipped when it moved this far in the gripper, mm")
+    slip_deg: float = Field(2.0, gt=0, description="... or turned this far, degrees")
+    success_mm: float = Field(0.3, gt=0, description="Precision trial succeeds within this position error, mm")
+    success_deg: float = Field(1.0, gt=0, description="... and this rotation error, degrees")
+    pass_success_rate: float = Field(
+        1.0, ge=0, le=1, description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10)"
+    )
+    timestep_s: float = Field(0.0005, gt=0, description="Physics time step, s")
+    open_margin_mm: float = Field(
+        5.0, gt=0, description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm"
+    )
+    decomposition_threshold: float = Field(
+        0.05, gt=0, description="CoACD concavity threshold of the part's and the pad's convex decompositions (fraction of the size)"
+    )
+    max_seated_penetration_mm: float = Field(
+        0.2,
+        gt=0,
+        description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are refined, mm",
+    )
+    min_decomposition_threshold: float = Field(
+        0.01, gt=0, description="Refinement halves the pad's CoACD threshold down to this"
+    )
+    cache_dir: Path | None = Field(
+        None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
+    )
+
+    def cache_path(self) -> Path:
+        """The decomposition cache folder."""
+        if self.cache_dir is not None:
+            return Path(self.cache_dir)
+        return Path(os.environ.get("FCSO_CACHE_DIR") or Path.home() / ".cache" / "fcso")
+
+
+def load_verify_config(path: str | Path | None) -> VerifyConfig:
+    """The ``[verify]`` table of a TOML file (defaults without a file or table).
+
+    Raises
+    ------
+    ConfigError
+        Unreadable file, unknown key or bad value, naming the file and key.
+    """
+    if path is None:
+        return VerifyConfig()
+    table = read_toml(path).get("verify", {})
+    try:
+        return VerifyConfig.model_validate(table)
+    except ValidationError as exc:
+        raise ConfigError(path, format_validation_error(exc)) from None

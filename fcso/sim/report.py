@@ -1,0 +1,108 @@
+"""``verification.json``: pydantic models of the simulated grasp tests (METHOD §12)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .config import VerifyConfig
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class TrialResult(_Model):
+    """One precision trial."""
+
+    dx_mm: float = Field(description="Start error along the table's x axis, mm")
+    dy_mm: float = Field(description="Start error along the table's y axis, mm")
+    yaw_deg: float = Field(description="Start error about the vertical, degrees")
+    held: bool = Field(description="The part rose with the gripper")
+    error_mm: float = Field(description="Centre-of-mass distance from the nominal seated pose in the gripper after the lift, mm")
+    error_deg: float = Field(description="Rotation from the nominal seated pose in the gripper after the lift, degrees")
+    success: bool = Field(description="Held, and within success_mm and success_deg")
+
+
+class PoseSnapshot(_Model):
+    """Where things are at one instant of a simulated trial."""
+
+    time_s: float
+    part_pose: list[list[float]] = Field(description="4x4, part resting frame to world (table frame), mm")
+    gripper_pose: list[list[float]] = Field(description="4x4, TCP frame to world, mm")
+    opening_mm: float = Field(description="Finger joint q (0 = the design's seated pad, > 0 open), mm")
+
+
+class FingerResult(_Model):
+    """The tests of one finger (the designed one or the flat control) on one scenario."""
+
+    kind: str = Field(description="fcso (the designed pad) or flat (plain pad of thickness T - D)")
+    nominal_held: bool = Field(description="The unperturbed grasp held the part after the lift")
+    nominal_offset_mm: float = Field(
+        description="Simulated seated pose of the unperturbed grasp against the design's nominal one (centre of mass), mm"
+    )
+    nominal_offset_deg: float = Field(description="The same rotation, degrees")
+    trials: list[TrialResult]
+    success_rate: float = Field(description="Share of successful trials, 0..1")
+    median_error_mm: float | None = Field(description="Median final position error over the trials, mm")
+    worst_error_mm: float | None
+    median_error_deg: float | None
+    worst_error_deg: float | None
+    holding_n: dict[str, float | None] = Field(
+        description="Push direction in the gripper frame (+x: along the pads, +y: closing axis, +z: approach, down) -> "
+        "force at which the part slipped, N; null: held at hold_force_n; 0: not held at all"
+    )
+    trial_start: PoseSnapshot | None = Field(None, description="First perturbed trial, at the start (for the picture)")
+    trial_end: PoseSnapshot | None = Field(None, description="First perturbed trial, after the lift")
+
+
+class Fidelity(_Model):
+    """How exact the collision geometry is (METHOD §12)."""
+
+    part_pieces: int = Field(description="Convex pieces of the part")
+    part_volume_error: float = Field(description="(union of pieces - part volume) / part volume")
+    part_missing_fraction: float = Field(description="Share of the part's volume outside every piece")
+    pad_pieces: int = Field(description="Convex pieces of the fingerpad")
+    pad_volume_error: float = Field(description="(union of the pad's pieces - fingerpad volume) / fingerpad volume")
+    seated_penetration_mm: float = Field(
+        description="Deepest overlap of the part's pieces and the pads, part at its nominal seated grasp, mm"
+    )
+    decomposition_cached: bool = Field(description="The part's decomposition came from the cache")
+
+
+class ScenarioVerification(_Model):
+    """Both fingers' tests on one part in one pose."""
+
+    part: str
+    pose_index: int
+    fidelity: Fidelity
+    fcso: FingerResult
+    flat: FingerResult
+    passed: bool = Field(description="The designed finger's success rate reaches pass_success_rate")
+    frames: list[PoseSnapshot] = Field(description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)")
+
+
+class RankedCandidate(_Model):
+    """A candidate verified by ``--verify-top``."""
+
+    rank_by_quality: int = Field(description="1 = best Q")
+    index: int = Field(description="Candidate index (report.json candidates)")
+    quality: float = Field(description="Q, mm²")
+    success_rates: list[float] = Field(description="Designed finger's success rate per scenario")
+    flat_success_rates: list[float] = Field(description="Flat control's success rate per scenario")
+    passed: bool
+    chosen: bool
+
+
+class VerificationReport(_Model):
+    """Everything ``fcso verify`` measured (``verification.json``)."""
+
+    fcso_version: str
+    mujoco_version: str
+    settings: VerifyConfig
+    scenarios: list[ScenarioVerification]
+    passed: bool = Field(description="Every scenario passed")
+    warnings: list[str]
+    timings_s: dict[str, float] = Field(description="Wall time per stage, s")
+    ranking: list[RankedCandidate] | None = Field(
+        None, description="--verify-top: the verified candidates in Q order and which was chosen"
+    )

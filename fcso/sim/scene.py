@@ -1,0 +1,231 @@
+"""The MuJoCo scene: table, part and a parallel gripper with two fingers (METHOD §12).
+
+Frames. The world is the part's resting frame (table at z = 0, mm in
+Python, metres in MuJoCo). The gripper body sits at the grasp's
+tool-centre point (TCP z: approach, down; TCP y: closing axis). Each
+finger body is that side's pad frame (u across the pad towards its back,
+v along it, w up), so its slide joint runs along u: q = 0 is the seated
+pad of the design, q > 0 opens. The two joints are coupled (q+ = q-) like
+the Robotiq Hand-E's rack and pinion; each finger has a position actuator
+whose force is clipped at the force limit.
+
+The gripper's vertical motion is prescribed by its velocity (set at every
+step, with a small correction towards the planned height) on a heavy,
+gravity-compensated body with a vertical slide joint. Neither a mocap body
+nor overwriting positions works: both teleport the fingers with zero
+velocity, and friction, which MuJoCo computes from relative velocity, then
+lets the part creep down the pads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+import trimesh
+
+from .config import VerifyConfig
+
+#: mm to MuJoCo's metres.
+M = 1e-3
+#: Position gain of the finger actuators: the force limit is reached 1 mm behind the target.
+GAIN_N_PER_MM = 60.0
+#: Mass of each finger, kg (a Hand-E finger with its pad).
+FINGER_MASS_KG = 0.05
+#: Mass of the gripper body, kg: heavy, so contacts barely disturb its prescribed motion.
+GRIPPER_MASS_KG = 100.0
+#: Pad frame to TCP frame rotation of the "+" and "-" fingers (columns: u, v, w in TCP coordinates).
+PAD_AXES = {
+    1: np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T,
+    -1: np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T,
+}
+#: Soft-contact parameters: a 2 ms time constant (>= 2 time steps) and a stiff impedance.
+CONTACT_SOLREF = "0.002 1"
+CONTACT_SOLIMP = "0.95 0.99 0.0005"
+
+
+@dataclass
+class GraspCase:
+    """One grasp to simulate: a part in its resting pose and the two pads.
+
+    Attributes
+    ----------
+    name : str
+        Shown in reports.
+    part : trimesh.Trimesh
+        Closed part mesh in its resting frame, mm (table at z = 0).
+    tcp : (4, 4) float
+        TCP pose in the resting frame at the seated grasp, mm.
+    pad_gap_mm : float
+        Distance between the two pad frames' u = 0 planes at the seated grasp.
+    pad_size_mm : (T, L, W)
+    penetration_mm : float
+        D: a flat pad's front face is at u = D.
+    opening_mm : (min, max)
+        Gripper opening range between the flat fingers' contact faces.
+    part_file : trimesh.Trimesh or None
+        The same part in its file frame (mm), so that one decomposition
+        serves every pose of it; None: ``part`` is decomposed as it is.
+    rest_transform : (4, 4) float
+        File frame to resting frame (with ``part_file``).
+    """
+
+    name: str
+    part: trimesh.Trimesh
+    tcp: np.ndarray
+    pad_gap_mm: float
+    pad_size_mm: tuple[float, float, float]
+    penetration_mm: float
+    opening_mm: tuple[float, float]
+    part_file: trimesh.Trimesh | None = None
+    rest_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    @property
+    def joint_range_mm(self) -> tuple[float, float]:
+        """Finger joint range: q = (opening - (pad gap + 2 T)) / 2."""
+        closing_width = self.pad_gap_mm + 2.0 * self.pad_size_mm[0]
+        return ((self.opening_mm[0] - closing_width) / 2.0, (self.opening_mm[1] - closing_width) / 2.0)
+
+    def pad_origin(self, side: int) -> np.ndarray:
+        """Origin of a side's pad frame in the TCP frame at q = 0, mm."""
+        length, width = self.pad_size_mm[1], self.pad_size_mm[2]
+        return np.array([-side * length / 2.0, side * self.pad_gap_mm / 2.0, width / 2.0])
+
+
+@dataclass
+class Scene:
+    """A compiled scene and the indices the trials need."""
+
+    model: mujoco.MjModel
+    part_body: int
+    part_com_mm: np.ndarray
+    lift_joint: int
+    joints: tuple[int, int]
+    actuators: tuple[int, int]
+    part_geoms: np.ndarray
+    pad_geoms: np.ndarray
+
+
+def _vec(values) -> str:
+    return " ".join(f"{float(x):.9g}" for x in np.ravel(values))
+
+
+def _quat(rotation: np.ndarray) -> str:
+    quaternion = np.zeros(4)
+    mujoco.mju_mat2Quat(quaternion, np.ascontiguousarray(rotation, dtype=np.float64).ravel())
+    return _vec(quaternion)
+
+
+def build_scene(
+    case: GraspCase,
+    part_pieces: list[tuple[np.ndarray, np.ndarray]],
+    pad_pieces: list[tuple[np.ndarray, np.ndarray]] | None,
+    finger_hull_mm: np.ndarray,
+    config: VerifyConfig,
+) -> Scene:
+    """Compile the MuJoCo model of one grasp case.
+
+    Parameters
+    ----------
+    case : GraspCase
+    part_pieces : list of (vertices, faces)
+        Convex pieces of the part, resting frame, mm.
+    pad_pieces : list of (vertices, faces) or None
+        Convex pieces of the carved pad, pad frame, mm; None for the flat
+        control (a plain pad of thickness T - D, a box).
+    finger_hull_mm : (n, 3) float
+        Finger body behind the pad (pad frame, mm); may be empty.
+    config : VerifyConfig
+
+    Returns
+    -------
+    Scene
+    """
+    thickness, length, width = case.pad_size_mm
+    depth = case.penetration_mm
+    mass_kg = case.part.volume * config.density_g_cm3 * 1e-6
+    com = np.asarray(case.part.center_mass, dtype=float)
+    # trimesh's inertia is for unit density in mm^5: kg/mm^3 and mm^2 -> m^2
+    inertia = np.asarray(case.part.moment_inertia) * config.density_g_cm3 * 1e-6 * 1e-6
+    full_inertia = _vec([inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]])
+    q_min, q_max = case.joint_range_mm
+    tcp = np.asarray(case.tcp, dtype=float)
+    assets, part_geoms, finger_geoms = [], [], {1: [], -1: []}
+    for k, (vertices, _) in enumerate(part_pieces):
+        assets.append(f'<mesh name="part{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
+        part_geoms.append(f'<geom name="part{k}" type="mesh" mesh="part{k}" class="contact"/>')
+    if len(finger_hull_mm):
+        assets.append(f'<mesh name="finger_body" vertex="{_vec(np.asarray(finger_hull_mm) * M)}"/>')
+    for k, (vertices, _) in enumerate(pad_pieces or []):
+        assets.append(f'<mesh name="pad{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
+    for side, name in ((1, "plus"), (-1, "minus")):
+        geoms = finger_geoms[side]
+        if pad_pieces is not None:
+            geoms.extend(
+                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact"/>' for k in range(len(pad_pieces))
+            )
+        else:
+            geoms.append(
+                f'<geom name="pad_{name}0" type="box" class="contact" '
+                f'pos="{_vec(np.array([(thickness + depth) / 2, length / 2, width / 2]) * M)}" '
+                f'size="{_vec(np.array([(thickness - depth) / 2, length / 2, width / 2]) * M)}"/>'
+            )
+        if len(finger_hull_mm):
+            geoms.append(f'<geom name="finger_{name}" type="mesh" mesh="finger_body" class="contact"/>')
+    fingers = []
+    for side, name in ((1, "plus"), (-1, "minus")):
+        fingers.append(
+            f'<body name="finger_{name}" gravcomp="1" pos="{_vec(case.pad_origin(side) * M)}" quat="{_quat(PAD_AXES[side])}">'
+            f'<inertial pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" mass="{FINGER_MASS_KG}" diaginertia="1e-5 1e-5 1e-5"/>'
+            f'<joint name="{name}" type="slide" axis="1 0 0" range="{q_min * M:.9g} {q_max * M:.9g}" damping="100" armature="0.01"/>'
+            + "".join(finger_geoms[side])
+            + "</body>"
+        )
+    kp = GAIN_N_PER_MM / M
+    force = config.force_limit_n
+    xml = f"""<mujoco model="fcso-verify">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="{config.timestep_s}" gravity="0 0 -9.81" cone="elliptic" impratio="10" integrator="implicitfast">
+    <flag multiccd="enable"/>
+  </option>
+  <default>
+    <default class="contact">
+      <geom condim="4" friction="{config.friction} 0.002 0.0001" solref="{CONTACT_SOLREF}" solimp="{CONTACT_SOLIMP}"/>
+    </default>
+  </default>
+  <asset>{''.join(assets)}</asset>
+  <worldbody>
+    <geom name="table" type="plane" size="1 1 0.01" class="contact"/>
+    <body name="part">
+      <freejoint name="part"/>
+      <inertial pos="{_vec(com * M)}" mass="{mass_kg:.9g}" fullinertia="{full_inertia}"/>
+      {''.join(part_geoms)}
+    </body>
+    <body name="gripper" gravcomp="1" pos="{_vec(tcp[:3, 3] * M)}" quat="{_quat(tcp[:3, :3])}">
+      <inertial pos="0 0 0" mass="{GRIPPER_MASS_KG}" diaginertia="1e-3 1e-3 1e-3"/>
+      <joint name="lift" type="slide" axis="0 0 -1"/>
+      {''.join(fingers)}
+    </body>
+  </worldbody>
+  <equality>
+    <joint joint1="plus" joint2="minus" polycoef="0 1 0 0 0" solref="{CONTACT_SOLREF}"/>
+  </equality>
+  <actuator>
+    <position name="plus" joint="plus" kp="{kp:.9g}" forcelimited="true" forcerange="{-force} {force}"/>
+    <position name="minus" joint="minus" kp="{kp:.9g}" forcelimited="true" forcerange="{-force} {force}"/>
+  </actuator>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    part_body = model.body("part").id
+    pad_geoms = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("pad_")])
+    return Scene(
+        model=model,
+        part_body=part_body,
+        part_com_mm=com,
+        lift_joint=model.joint("lift").id,
+        joints=(model.joint("plus").id, model.joint("minus").id),
+        actuators=(model.actuator("plus").id, model.actuator("minus").id),
+        part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
+        pad_geoms=pad_geoms,
+    )

@@ -1,0 +1,278 @@
+"""The simulated precision (capture) and holding tests of METHOD §12."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from .config import VerifyConfig
+from .scene import M, GraspCase, Scene
+
+#: Six push directions of the holding test, gripper frame.
+HOLD_DIRECTIONS = {
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
+}
+#: Clearance between the open pads' lowest point and the part's top before the descent, mm.
+APPROACH_CLEARANCE_MM = 2.0
+#: The fingers have stalled on the part once both actuators push at this share of the force limit ...
+STALL_FORCE_SHARE = 0.98
+#: ... for this long, s.
+STALL_TIME_S = 0.05
+SETTLE_AFTER_CLOSE_S = 0.1
+SETTLE_AFTER_LIFT_S = 0.2
+HOLD_AT_MAX_S = 0.2
+#: Time constant of the gripper's height correction, s.
+HEIGHT_SERVO_S = 0.01
+#: Recorded frames per simulated second (for pictures and the MCAP scene).
+FRAME_RATE_HZ = 20.0
+
+
+@dataclass
+class Frame:
+    """A recorded instant: time (s), part pose and gripper pose (4x4, world, mm), finger opening q (mm)."""
+
+    time_s: float
+    part: np.ndarray
+    gripper: np.ndarray
+    q_mm: float
+
+
+@dataclass
+class GraspRun:
+    """One descend-close-lift run.
+
+    Attributes
+    ----------
+    part_in_gripper : (4, 4) float
+        Part pose (resting frame -> TCP frame) after the lift, mm.
+    held : bool
+        The part rose with the gripper.
+    q_mm : float
+        Finger opening q after closing.
+    data : mujoco.MjData
+        State after the lift (the holding test starts from it).
+    frames : list of Frame
+    """
+
+    part_in_gripper: np.ndarray
+    held: bool
+    q_mm: float
+    data: mujoco.MjData
+    frames: list[Frame] = field(default_factory=list)
+
+
+def perturbations(count: int, config: VerifyConfig, stream: int) -> np.ndarray:
+    """Seeded start errors: (count, 3) rows of dx mm, dy mm, yaw degrees.
+
+    Parameters
+    ----------
+    count : int
+    config : VerifyConfig
+        Ranges and seed.
+    stream : int
+        Scenario number, so every scenario has its own errors.
+    """
+    rng = np.random.default_rng([config.seed, stream])
+    limits = np.array([config.position_error_mm, config.position_error_mm, config.yaw_error_deg])
+    return rng.uniform(-1.0, 1.0, size=(count, 3)) * limits
+
+
+def start_pose(case: GraspCase, error: np.ndarray) -> np.ndarray:
+    """Part pose on the table with an error (dx, dy mm, yaw degrees about the vertical through its centre of mass)."""
+    com = np.asarray(case.part.center_mass, dtype=float)
+    yaw = np.radians(error[2])
+    turn = np.eye(4)
+    turn[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    about = np.eye(4)
+    about[:2, 3] = com[:2]
+    shift = np.eye(4)
+    shift[:2, 3] = error[:2]
+    return shift @ about @ turn @ np.linalg.inv(about)
+
+
+def run_grasp(scene: Scene, case: GraspCase, part_pose: np.ndarray, config: VerifyConfig, record: bool = False) -> GraspRun:
+    """Descend to the nominal grasp, close, lift (METHOD §12).
+
+    Parameters
+    ----------
+    scene : Scene
+    case : GraspCase
+    part_pose : (4, 4) float
+        Start pose of the part (resting frame -> world), mm.
+    config : VerifyConfig
+    record : bool
+        Keep frames at :data:`FRAME_RATE_HZ`.
+
+    Returns
+    -------
+    GraspRun
+    """
+    model = scene.model
+    data = mujoco.MjData(model)
+    dt = model.opt.timestep
+    tcp = np.asarray(case.tcp, dtype=float)
+    vertices = np.asarray(case.part.vertices) @ part_pose[:3, :3].T + part_pose[:3, 3]
+    pad_bottom = tcp[2, 3] - case.pad_size_mm[2] / 2.0
+    raise_mm = max(0.0, float(vertices[:, 2].max()) - pad_bottom) + APPROACH_CLEARANCE_MM
+    q_min, q_max = case.joint_range_mm
+    q_open = min(q_max, config.open_margin_mm)
+    _set_part(model, data, part_pose)
+    for joint in scene.joints:
+        data.qpos[model.jnt_qposadr[joint]] = q_open * M
+    target = q_open
+    data.ctrl[list(scene.actuators)] = target * M
+    frames: list[Frame] = []
+    next_frame = [0.0]
+
+    def step(raise_now: float, speed_mm_s: float = 0.0) -> None:
+        prescribed_step(scene, data, raise_now, speed_mm_s)
+        if record and data.time >= next_frame[0]:
+            frames.append(Frame(data.time, part_world(scene, data), gripper_world(tcp, raise_now), _opening(scene, data)))
+            next_frame[0] += 1.0 / FRAME_RATE_HZ
+
+    data.qpos[model.jnt_qposadr[scene.lift_joint]] = raise_mm * M
+    mujoco.mj_forward(model, data)
+    while raise_mm > 0.0:
+        raise_mm = max(0.0, raise_mm - config.descent_speed_mm_s * dt)
+        step(raise_mm, -config.descent_speed_mm_s if raise_mm > 0.0 else 0.0)
+    stalled = 0.0
+    limit = STALL_FORCE_SHARE * config.force_limit_n
+    budget = (q_open - q_min) / config.closing_speed_mm_s + 1.0
+    elapsed = 0.0
+    while stalled < STALL_TIME_S and elapsed < budget:
+        target = max(q_min - 1.0, target - config.closing_speed_mm_s * dt)
+        data.ctrl[list(scene.actuators)] = target * M
+        step(0.0)
+        elapsed += dt
+        forces = np.abs(data.actuator_force[list(scene.actuators)])
+        stalled = stalled + dt if forces.min() >= limit else 0.0
+    closed_q = _opening(scene, data)
+    for _ in range(int(SETTLE_AFTER_CLOSE_S / dt)):
+        step(0.0)
+    before = part_world(scene, data)
+    lift = 0.0
+    while lift < config.lift_mm:
+        lift = min(config.lift_mm, lift + config.lift_speed_mm_s * dt)
+        step(lift, config.lift_speed_mm_s if lift < config.lift_mm else 0.0)
+    for _ in range(int(SETTLE_AFTER_LIFT_S / dt)):
+        step(lift)
+    after = part_world(scene, data)
+    com = scene.part_com_mm
+    rise = (after[:3, :3] @ com + after[:3, 3])[2] - (before[:3, :3] @ com + before[:3, 3])[2]
+    held = bool(rise >= 0.5 * config.lift_mm) if config.lift_mm > 0 else bool(data.ncon)
+    in_gripper = np.linalg.inv(gripper_world(tcp, lift)) @ after
+    return GraspRun(part_in_gripper=in_gripper, held=held, q_mm=closed_q, data=data, frames=frames)
+
+
+def pose_error(pose: np.ndarray, reference: np.ndarray, com_mm: np.ndarray) -> tuple[float, float]:
+    """Distance between the centres of mass (mm) and rotation angle (degrees) of two part poses."""
+    com = np.asarray(com_mm, dtype=float)
+    translation = float(np.linalg.norm((pose[:3, :3] @ com + pose[:3, 3]) - (reference[:3, :3] @ com + reference[:3, 3])))
+    relative = pose[:3, :3].T @ reference[:3, :3]
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0))))
+    return translation, angle
+
+
+def hold_forces(scene: Scene, case: GraspCase, run: GraspRun, config: VerifyConfig) -> dict[str, float | None]:
+    """Holding test: a push on the part's centre of mass ramps up in six gripper directions.
+
+    Parameters
+    ----------
+    scene : Scene
+    case : GraspCase
+    run : GraspRun
+        A held grasp after its lift; every direction starts from its state.
+    config : VerifyConfig
+
+    Returns
+    -------
+    dict
+        Direction -> force (N) at which the part slipped more than
+        ``slip_mm`` or ``slip_deg`` in the gripper, or None when it held at
+        ``hold_force_n``; 0.0 for every direction when the part was not held.
+    """
+    if not run.held:
+        return {name: 0.0 for name in HOLD_DIRECTIONS}
+    model = scene.model
+    dt = model.opt.timestep
+    gripper = gripper_world(case.tcp, config.lift_mm)
+    results: dict[str, float | None] = {}
+    for name, direction in HOLD_DIRECTIONS.items():
+        data = copy.copy(run.data)
+        world_direction = gripper[:3, :3] @ np.asarray(direction)
+        start = np.linalg.inv(gripper) @ part_world(scene, data)
+        force, held_for, slipped_at = 0.0, 0.0, None
+        while held_for < HOLD_AT_MAX_S:
+            force = min(config.hold_force_n, force + config.hold_ramp_n_s * dt)
+            if force >= config.hold_force_n:
+                held_for += dt
+            data.xfrc_applied[scene.part_body, :3] = force * world_direction
+            prescribed_step(scene, data, config.lift_mm, 0.0)
+            moved, turned = pose_error(np.linalg.inv(gripper) @ part_world(scene, data), start, scene.part_com_mm)
+            if moved > config.slip_mm or turned > config.slip_deg:
+                slipped_at = force
+                break
+        results[name] = None if slipped_at is None else round(float(slipped_at), 3)
+    return results
+
+
+def seated_penetration_mm(scene: Scene, case: GraspCase) -> float:
+    """Deepest overlap between the part's collision pieces and the pads with the part at its nominal seated grasp, mm."""
+    model = scene.model
+    data = mujoco.MjData(model)
+    _set_part(model, data, np.eye(4))
+    mujoco.mj_forward(model, data)
+    deepest = 0.0
+    pads = set(scene.pad_geoms.tolist())
+    for contact in data.contact[: data.ncon]:
+        if contact.geom1 in pads or contact.geom2 in pads:
+            deepest = max(deepest, -float(contact.dist) / M)
+    return deepest
+
+
+def prescribed_step(scene: Scene, data: mujoco.MjData, raise_mm: float, speed_mm_s: float) -> None:
+    """One physics step with the gripper's vertical speed (mm/s) prescribed, steered to ``raise_mm`` above the grasp.
+
+    Only the velocity is set (plus a correction that closes the height error
+    within :data:`HEIGHT_SERVO_S`), so the fingers really move and friction
+    drags the part along.
+    """
+    model = scene.model
+    height = data.qpos[model.jnt_qposadr[scene.lift_joint]] / M
+    data.qvel[model.jnt_dofadr[scene.lift_joint]] = (speed_mm_s + (raise_mm - height) / HEIGHT_SERVO_S) * M
+    mujoco.mj_step(model, data)
+
+
+def part_world(scene: Scene, data: mujoco.MjData) -> np.ndarray:
+    """Part pose (resting frame -> world), mm."""
+    pose = np.eye(4)
+    pose[:3, :3] = data.xmat[scene.part_body].reshape(3, 3)
+    pose[:3, 3] = data.xpos[scene.part_body] / M
+    return pose
+
+
+def gripper_world(tcp: np.ndarray, raise_mm: float) -> np.ndarray:
+    """TCP pose raised by ``raise_mm``, mm."""
+    pose = np.array(tcp, dtype=float)
+    pose[2, 3] += raise_mm
+    return pose
+
+
+def _opening(scene: Scene, data: mujoco.MjData) -> float:
+    return float(data.qpos[scene.model.jnt_qposadr[scene.joints[0]]] / M)
+
+
+def _set_part(model: mujoco.MjModel, data: mujoco.MjData, pose: np.ndarray) -> None:
+    address = model.jnt_qposadr[model.joint("part").id]
+    quaternion = np.zeros(4)
+    mujoco.mju_mat2Quat(quaternion, np.ascontiguousarray(pose[:3, :3]).ravel())
+    data.qpos[address : address + 3] = pose[:3, 3] * M
+    data.qpos[address + 3 : address + 7] = quaternion

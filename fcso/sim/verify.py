@@ -1,0 +1,379 @@
+"""Verify a design in simulation: precision and holding tests, designed pads against flat ones (METHOD §12)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import mujoco
+import numpy as np
+import trimesh
+
+from .. import __version__
+from ..design import DesignResult
+from ..errors import MeshError
+from ..finger import load_finger, pad_to_finger, parametric_finger
+from ..parts import load_part
+from ..report import DesignReport, GraspReport
+from .collision import ConvexPieces, convex_pieces, finger_body_hull
+from .config import VerifyConfig
+from .html import error_picture, holding_picture, section_html, trial_picture, write_section
+from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
+from .scene import GraspCase, build_scene
+from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
+
+#: ``progress(stage, done, total)``.
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass
+class DesignUnderTest:
+    """What the simulation needs from a design.
+
+    Attributes
+    ----------
+    cases : list of GraspCase
+        One per scenario (part in a pose with its chosen grasp).
+    fingerpad : trimesh.Trimesh
+        The carved pad, pad frame, mm.
+    finger_hull_mm : (n, 3) float
+        Finger body behind the pad, pad frame, mm.
+    """
+
+    cases: list[GraspCase]
+    fingerpad: trimesh.Trimesh
+    finger_hull_mm: np.ndarray
+
+
+def tcp_matrix(grasp: GraspReport) -> np.ndarray:
+    """4x4 TCP pose (resting frame, mm) of a reported grasp."""
+    matrix = trimesh.transformations.quaternion_matrix(grasp.quaternion_wxyz)
+    matrix[:3, 3] = grasp.position_mm
+    return matrix
+
+
+def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.Trimesh) -> GraspCase:
+    """The simulation case of one reported grasp.
+
+    Parameters
+    ----------
+    report : DesignReport
+        For the pad size and the gripper.
+    grasp : GraspReport
+    part_mesh_mm : trimesh.Trimesh
+        The part in its file frame, scaled to mm.
+    """
+    sampler, gripper = report.settings.sampler, report.settings.gripper
+    rest = np.asarray(grasp.rest_transform, dtype=float)
+    mesh = part_mesh_mm.copy()
+    mesh.apply_transform(rest)
+    return GraspCase(
+        name=f"{grasp.part} pose {grasp.pose_index}",
+        part=mesh,
+        tcp=tcp_matrix(grasp),
+        pad_gap_mm=grasp.pad_gap_mm,
+        pad_size_mm=(sampler.thickness_mm, sampler.length_mm, sampler.width_mm),
+        penetration_mm=sampler.penetration_mm,
+        opening_mm=(gripper.min_opening_mm, gripper.max_opening_mm),
+        part_file=part_mesh_mm,
+        rest_transform=rest,
+    )
+
+
+def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
+    """Read a design's output folder (``report.json``, ``finger.stl``, ``fingerpad.stl`` and the part files it names).
+
+    Raises
+    ------
+    MeshError
+        A file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    report_path = directory / "report.json"
+    if not report_path.is_file():
+        raise MeshError(report_path, "file not found (run fcso design --out DIR first)")
+    report = DesignReport.model_validate_json(report_path.read_text(encoding="utf-8"))
+    parts = {
+        p.name: load_part(_part_path(p.file, directory), units=p.scale_to_mm, repair=bool(p.repairs), name=p.name).mesh
+        for p in report.parts
+    }
+    cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
+    fingerpad = _read_stl(directory / "fingerpad.stl")
+    finger = _read_stl(directory / "finger.stl")
+    return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
+
+
+def design_under_test(result: DesignResult) -> DesignUnderTest:
+    """The simulation's inputs from a design that was just run (no files needed)."""
+    parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
+    cases = [grasp_case(result.report, g, parts[g.part]) for g in result.report.grasps]
+    return DesignUnderTest(cases, result.fingerpad, finger_hull(result.report, result.finger))
+
+
+def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
+    """Hull of a design's finger body behind its pad (pad frame, mm)."""
+    config = report.settings
+    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    return finger_body_hull(finger, pad_to_finger(flat, config.sampler), config.sampler.thickness_mm)
+
+
+def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | None = None) -> VerificationReport:
+    """Run the precision and holding tests on every scenario, designed pads and flat ones.
+
+    Parameters
+    ----------
+    design : DesignUnderTest
+    config : VerifyConfig
+    progress : callable, optional
+        ``progress("verification", done, total)`` per simulated grasp.
+
+    Returns
+    -------
+    VerificationReport
+    """
+    report_progress = progress or (lambda stage, done, total: None)
+    timings = {"decomposition": 0.0, "simulation": 0.0}
+    total = len(design.cases) * 2 * (config.trials + 1)
+    counter = [0]
+
+    def advance() -> None:
+        counter[0] += 1
+        report_progress("verification", counter[0], total)
+
+    report_progress("verification", 0, total)
+    scenarios, warnings = [], []
+    for stream, case in enumerate(design.cases):
+        clock = time.perf_counter()
+        pieces, pad, refine_notes = fitted_pieces(case, design, config)
+        warnings.extend(refine_notes)
+        timings["decomposition"] += time.perf_counter() - clock
+        clock = time.perf_counter()
+        scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
+        timings["simulation"] += time.perf_counter() - clock
+        if not scenario.passed:
+            warnings.append(
+                f"{case.name}: {scenario.fcso.success_rate:.0%} of precision trials succeeded "
+                f"(flat pads: {scenario.flat.success_rate:.0%}), below pass_success_rate {config.pass_success_rate:.0%}"
+            )
+        scenarios.append(scenario)
+    return VerificationReport(
+        fcso_version=__version__,
+        mujoco_version=mujoco.__version__,
+        settings=config,
+        scenarios=scenarios,
+        passed=all(s.passed for s in scenarios),
+        warnings=warnings,
+        timings_s={k: round(v, 3) for k, v in timings.items()},
+    )
+
+
+def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
+    """The part's and the pad's convex pieces, refined until they overlap little at the nominal seated grasp.
+
+    A convex piece that bridges a pad pocket shows as overlap of the seated
+    part and pad (METHOD §12's fidelity). While it exceeds
+    ``max_seated_penetration_mm`` the pad's CoACD threshold is halved, down
+    to ``min_decomposition_threshold`` (pads decompose in seconds; refining
+    a part took minutes and hundreds of pieces for little gain, so the
+    part's threshold stays).
+
+    Returns
+    -------
+    part, pad : ConvexPieces
+    notes : list of str
+        Warnings when the overlap could not be brought under the limit.
+    """
+    pad_threshold = config.decomposition_threshold
+    part = part_pieces(case, config)
+    while True:
+        pad = convex_pieces(design.fingerpad, pad_threshold, config.cache_path())
+        penetration = seated_penetration_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config), case)
+        if penetration <= config.max_seated_penetration_mm:
+            return part, pad, []
+        if pad_threshold / 2.0 < config.min_decomposition_threshold:
+            return part, pad, [
+                f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp (pad refined to CoACD "
+                f"threshold {pad_threshold:g}); precision errors below that are not resolved"
+            ]
+        pad_threshold /= 2.0
+
+
+def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
+    """The part's convex pieces in its resting frame, decomposed in its file frame (one decomposition for all its poses)."""
+    threshold = config.decomposition_threshold
+    if case.part_file is None:
+        return convex_pieces(case.part, threshold, config.cache_path())
+    pieces = convex_pieces(case.part_file, threshold, config.cache_path())
+    rest = np.asarray(case.rest_transform, dtype=float)
+    moved = [(np.asarray(v) @ rest[:3, :3].T + rest[:3, 3], f) for v, f in pieces.pieces]
+    return ConvexPieces(moved, pieces.volume_error, pieces.missing_fraction, pieces.cached)
+
+
+def verify_case(
+    case: GraspCase,
+    pieces: ConvexPieces,
+    pad: ConvexPieces,
+    finger_hull_mm: np.ndarray,
+    config: VerifyConfig,
+    stream: int,
+    advance: Callable[[], None] = lambda: None,
+) -> ScenarioVerification:
+    """Both fingers' precision and holding tests on one grasp case.
+
+    Parameters
+    ----------
+    case : GraspCase
+    pieces : ConvexPieces
+        The part's collision geometry.
+    pad : ConvexPieces
+        The designed pad's collision geometry (pad frame).
+    finger_hull_mm : (n, 3) float
+    config : VerifyConfig
+    stream : int
+        Seeds this scenario's perturbations (same for both fingers).
+    advance : callable
+        Called after every simulated grasp.
+    """
+    errors = perturbations(config.trials, config, stream)
+    results, frames, penetration = {}, [], 0.0
+    for kind, pad_pieces in (("fcso", pad.pieces), ("flat", None)):
+        scene = build_scene(case, pieces.pieces, pad_pieces, finger_hull_mm, config)
+        if kind == "fcso":
+            penetration = seated_penetration_mm(scene, case)
+        nominal = run_grasp(scene, case, np.eye(4), config, record=kind == "fcso")
+        advance()
+        design_nominal = np.linalg.inv(case.tcp)
+        offset = pose_error(nominal.part_in_gripper, design_nominal, scene.part_com_mm)
+        reference = nominal.part_in_gripper if nominal.held else design_nominal
+        trials, pictured = [], None
+        for number, error in enumerate(errors):
+            run = run_grasp(scene, case, start_pose(case, error), config, record=number == 0)
+            advance()
+            moved, turned = pose_error(run.part_in_gripper, reference, scene.part_com_mm)
+            trials.append(
+                TrialResult(
+                    dx_mm=round(float(error[0]), 4),
+                    dy_mm=round(float(error[1]), 4),
+                    yaw_deg=round(float(error[2]), 4),
+                    held=run.held,
+                    error_mm=round(moved, 4),
+                    error_deg=round(turned, 4),
+                    success=bool(run.held and moved <= config.success_mm and turned <= config.success_deg),
+                )
+            )
+            if number == 0:
+                pictured = run.frames
+        if kind == "fcso":
+            frames = nominal.frames
+        results[kind] = _finger_result(kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured)
+    fidelity = Fidelity(
+        part_pieces=len(pieces.pieces),
+        part_volume_error=round(pieces.volume_error, 6),
+        part_missing_fraction=round(pieces.missing_fraction, 6),
+        pad_pieces=len(pad.pieces),
+        pad_volume_error=round(pad.volume_error, 6),
+        seated_penetration_mm=round(penetration, 4),
+        decomposition_cached=pieces.cached,
+    )
+    part_name, _, pose = case.name.rpartition(" pose ")
+    return ScenarioVerification(
+        part=part_name,
+        pose_index=int(pose) if pose.isdigit() else 0,
+        fidelity=fidelity,
+        fcso=results["fcso"],
+        flat=results["flat"],
+        passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9,
+        frames=[_snapshot(f) for f in frames],
+    )
+
+
+def _finger_result(kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None) -> FingerResult:
+    moved = np.array([t.error_mm for t in trials])
+    turned = np.array([t.error_deg for t in trials])
+    any_trials = len(trials) > 0
+    return FingerResult(
+        kind=kind,
+        nominal_held=held,
+        nominal_offset_mm=round(offset[0], 4),
+        nominal_offset_deg=round(offset[1], 4),
+        trials=trials,
+        success_rate=float(np.mean([t.success for t in trials])) if any_trials else 0.0,
+        median_error_mm=round(float(np.median(moved)), 4) if any_trials else None,
+        worst_error_mm=round(float(moved.max()), 4) if any_trials else None,
+        median_error_deg=round(float(np.median(turned)), 4) if any_trials else None,
+        worst_error_deg=round(float(turned.max()), 4) if any_trials else None,
+        holding_n=holding,
+        trial_start=_snapshot(pictured[0]) if pictured else None,
+        trial_end=_snapshot(pictured[-1]) if pictured else None,
+    )
+
+
+def _snapshot(frame: Frame) -> PoseSnapshot:
+    return PoseSnapshot(
+        time_s=round(frame.time_s, 4),
+        part_pose=np.round(frame.part, 5).tolist(),
+        gripper_pose=np.round(frame.gripper, 5).tolist(),
+        opening_mm=round(frame.q_mm, 4),
+    )
+
+
+def _read_stl(path: Path) -> trimesh.Trimesh:
+    if not path.is_file():
+        raise MeshError(path, "file not found")
+    return trimesh.load(str(path), force="mesh", process=True)
+
+
+def _part_path(file: str, directory: Path) -> Path:
+    """A part file as recorded, or beside the output folder's files when the recorded path is gone."""
+    recorded = Path(file)
+    if recorded.is_file() or recorded.is_absolute():
+        return recorded
+    beside = directory / recorded
+    return beside if beside.is_file() else recorded
+
+
+def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
+    """The flat control's pad: a plain pad of thickness T - D in the pad frame, mm."""
+    thickness, length, width = pad_size_mm
+    pad = trimesh.creation.box(bounds=[[penetration_mm, 0.0, 0.0], [thickness, length, width]])
+    return pad
+
+
+def verification_pictures(verification: VerificationReport, design: DesignUnderTest) -> dict[str, bytes]:
+    """The section's pictures: per scenario k, ``trial k``, ``errors k`` and ``holding k`` (PNG)."""
+    settings = verification.settings
+    images = {}
+    for k, (scenario, case) in enumerate(zip(verification.scenarios, design.cases)):
+        pads = {"fcso": design.fingerpad, "flat": flat_pad(case.pad_size_mm, case.penetration_mm)}
+        images[f"trial {k}"] = trial_picture(case.part, pads, scenario, case.pad_gap_mm, case.pad_size_mm)
+        images[f"errors {k}"] = error_picture(scenario, settings.success_mm, settings.success_deg)
+        images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
+    return images
+
+
+def write_verification(directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = "") -> list[Path]:
+    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    directory = Path(directory)
+    target = directory / "verification.json"
+    temporary = directory / ".verification.json.tmp"
+    temporary.write_text(verification.model_dump_json(indent=2) + "\n", encoding="utf-8")
+    temporary.replace(target)
+    page = directory / "report.html"
+    write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
+    return [target, page]
+
+
+def read_verification(directory: str | Path) -> VerificationReport | None:
+    """``verification.json`` of a design's folder, or None when there is none."""
+    path = Path(directory) / "verification.json"
+    if not path.is_file():
+        return None
+    return VerificationReport.model_validate_json(path.read_text(encoding="utf-8"))

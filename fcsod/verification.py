@@ -1,0 +1,204 @@
+"""Grasp verification of a job's design in simulation (fcso.sim, METHOD §12), run after the job is done.
+
+With ``[verify] enabled`` the worker, once the job is ``done`` and its
+design published, runs the precision and holding tests, adds
+``verification.json`` and the report section to the job's output folder,
+records ``verification.mcap`` (the verification and a Foxglove scene of the
+unperturbed grasp, frame by frame) and publishes a summary on
+``<prefix>/<cell>/jobs/<job_id>/verification``. A design that does not
+pass leaves the job done, with a warning in the log and the message.
+With ``top_k > 0`` the K best candidates are verified inside the design
+step and the best by Q that passes becomes the job's design.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import trimesh
+from pydantic import BaseModel, ConfigDict, Field
+
+from fcso.html_report import rebuild_report
+from fcso.render import decimate
+from fcso.sim.choose import ranking_html, verify_top
+from fcso.sim.config import VerifyConfig
+from fcso.sim.html import pad_in_world
+from fcso.sim.report import VerificationReport
+from fcso.sim.verify import DesignUnderTest, design_under_test, verify, write_verification
+
+from .config import VerifySettings
+from .messages import BusMessage, FoxgloveTime, SceneEntity, SceneUpdate
+from .recorder import TOPIC_BUS, Recorder
+
+#: The verification's own record in the job's output folder (job.mcap is closed when the job is done).
+RECORD_NAME = "verification.mcap"
+TOPIC_VERIFICATION = "/verification"
+TOPIC_VERIFICATION_SCENE = "/verification/scene"
+#: Most part triangles drawn per scene frame.
+SCENE_FACES = 1500
+
+
+class ScenarioOutcome(BaseModel):
+    """One scenario of the verification message."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    part: str
+    pose_index: int
+    success_rate: float = Field(description="Designed finger's precision trials within the success limits, 0..1")
+    flat_success_rate: float = Field(description="The same with flat pads")
+    median_error_mm: float | None
+    flat_median_error_mm: float | None
+    holding_n: dict[str, float | None] = Field(description="Slip force per push direction, N; null: held at the limit")
+    flat_holding_n: dict[str, float | None]
+
+
+class VerificationMessage(BaseModel):
+    """``<prefix>/<cell>/jobs/<job_id>/verification``: the design's simulated precision and holding."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    job_id: str
+    passed: bool = Field(description="Every scenario reached the success threshold")
+    file: str = Field(description="The full result in the job's output folder")
+    scenarios: list[ScenarioOutcome]
+    chosen_candidate: int | None = Field(None, description="top_k: the candidate verification chose")
+    warnings: list[str]
+
+
+def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> VerifySettings:
+    """The job's ``[verify]``: its manifest's when it has one, else the daemon's."""
+    return manifest if manifest is not None else daemon
+
+
+def choose_by_verification(run) -> None:
+    """Design step: with ``top_k > 0``, verify the K best candidates and make the best that passes the job's design."""
+    settings = _settings(run)
+    if settings.top_k <= 0:
+        return
+    chosen, verification, design, ranking = verify_top(run.result, settings.top_k, VerifyConfig(trials=settings.trials), _progress(run.log))
+    run.result = chosen
+    run.verified = (verification, design, ranking_html(ranking))
+    run.log("info", f"verification chose candidate {chosen.report.best} among the {len(ranking)} best by Q")
+
+
+def verify_done_job(run, final_dir: Path) -> None:
+    """After the job is done: verify (unless ``choose_by_verification`` did), write, record and publish.
+
+    Never raises: a failure is a warning, the job stays done.
+    """
+    settings = _settings(run)
+    if not (settings.enabled or settings.top_k > 0):
+        return
+
+    def log(level: str, message: str, **fields) -> None:
+        # job.mcap is closed: these lines go to the daemon's log only
+        run.emit(("log", level, message, fields))
+
+    try:
+        started = time.perf_counter()
+        if run.verified is not None:
+            verification, design, extra = run.verified
+            # the report's pictures follow the candidate verification chose (rebuilt from report.json)
+            rebuild_report(final_dir)
+        else:
+            log("info", "verification: started")
+            design = design_under_test(run.result)
+            verification, extra = verify(design, VerifyConfig(trials=settings.trials), _progress(log)), ""
+        write_verification(final_dir, verification, design, extra)
+        bus = run.task.config.bus
+        message = BusMessage.json_body(bus.prefix, bus.cell, "verification", _message(run.task.job_id, verification))
+        _record(final_dir / RECORD_NAME, verification, design, message, run.task.config.mcap)
+        run.emit(("publish", message))
+        level = "info" if verification.passed else "warning"
+        log(level, f"verification: design {'passed' if verification.passed else 'did not pass'} in {time.perf_counter() - started:.1f} s")
+        for warning in verification.warnings:
+            log("warning", f"verification: {warning}")
+    except Exception as exc:  # the design is delivered; verification is extra
+        log("warning", f"verification failed: {type(exc).__name__}: {exc}")
+
+
+def _settings(run) -> VerifySettings:
+    manifest = run.manifest.verify if run.manifest is not None else None
+    return job_settings(run.task.config.verify, manifest)
+
+
+def _progress(log: Callable) -> Callable[[str, int, int], None]:
+    last = [0.0]
+
+    def progress(stage: str, done: int, total: int) -> None:
+        now = time.monotonic()
+        if done < total and now - last[0] < 2.0:
+            return
+        last[0] = now
+        log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
+
+    return progress
+
+
+def _message(job_id: str, verification: VerificationReport) -> VerificationMessage:
+    chosen = next((r.index for r in verification.ranking or [] if r.chosen), None)
+    return VerificationMessage(
+        job_id=job_id,
+        passed=verification.passed,
+        file="verification.json",
+        scenarios=[
+            ScenarioOutcome(
+                part=s.part,
+                pose_index=s.pose_index,
+                success_rate=s.fcso.success_rate,
+                flat_success_rate=s.flat.success_rate,
+                median_error_mm=s.fcso.median_error_mm,
+                flat_median_error_mm=s.flat.median_error_mm,
+                holding_n=s.fcso.holding_n,
+                flat_holding_n=s.flat.holding_n,
+            )
+            for s in verification.scenarios
+        ],
+        chosen_candidate=chosen,
+        warnings=verification.warnings,
+    )
+
+
+def _record(path: Path, verification: VerificationReport, design: DesignUnderTest, message: BusMessage, mcap) -> None:
+    """``verification.mcap``: the verification, a Foxglove scene per frame of the first scenario's unperturbed grasp, the bus message."""
+    recorder = Recorder(path, mcap.compression, mcap.chunk_size_bytes)
+    try:
+        start = time.time_ns()
+        recorder.write(TOPIC_VERIFICATION, verification, start)
+        for update, at in scene_updates(verification, design, start):
+            recorder.write(TOPIC_VERIFICATION_SCENE, update, at)
+        recorder.write(TOPIC_BUS, message.record(), start)
+    finally:
+        recorder.finish()
+
+
+def scene_updates(verification: VerificationReport, design: DesignUnderTest, start_ns: int):
+    """Foxglove SceneUpdates (metres) of the first scenario's unperturbed grasp with the designed pads; yields (update, log time ns)."""
+    from .worker import _triangles  # the daemon's scene helper; imported here, the worker imports this module
+
+    if not verification.scenarios:
+        return
+    scenario, case = verification.scenarios[0], design.cases[0]
+    vertices, faces = decimate(np.asarray(case.part.vertices), np.asarray(case.part.faces), SCENE_FACES)
+    part = trimesh.Trimesh(vertices, faces, process=False)
+    for snapshot in scenario.frames:
+        at = start_ns + int(snapshot.time_s * 1e9)
+        stamp = FoxgloveTime(sec=at // 1_000_000_000, nsec=at % 1_000_000_000)
+        triangles = [_triangles(part, np.asarray(snapshot.part_pose), (0.6, 0.6, 0.65, 1.0))]
+        for side in (1, -1):
+            triangles.append(_triangles(design.fingerpad, pad_in_world(snapshot, side, case.pad_gap_mm, case.pad_size_mm), (0.9, 0.45, 0.1, 1.0)))
+        entity = SceneEntity(
+            timestamp=stamp,
+            frame_id="fcso_verify",
+            id="trial",
+            lifetime=FoxgloveTime(sec=0, nsec=0),
+            frame_locked=False,
+            metadata=[{"key": "part", "value": scenario.part}, {"key": "time_s", "value": f"{snapshot.time_s:.3f}"}],
+            triangles=triangles,
+        )
+        yield SceneUpdate(entities=[entity]), at
+
