@@ -124,6 +124,11 @@ def seat(
     list of PadContact
         One per entry of ``samples``.
     """
+    # zero-area triangles (slivers of Booleans) have no normal and would corrupt the
+    # angle-weighted pseudonormals that give the distance its sign; the surface is the same
+    corners = pad_vertices[pad_faces]
+    doubled_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    pad_faces = pad_faces[doubled_area > 1e-12]
     counts = [len(s.points) for s in samples]
     everything = np.vstack([s.points for s in samples]) if sum(counts) else np.zeros((0, 3))
     # one distance query for all geometries at t = 0: most never move

@@ -16,7 +16,7 @@ from fcso.contact import sample_surface
 from fcso.errors import ConfigError
 from fcso.html_report import rebuild_report
 from fcso.report import DesignReport
-from fcso.finger import finger_plate, parametric_finger
+from fcso.finger import finger_plate, fuse, parametric_finger
 from fcso.geometry import box, to_manifold
 from fcso.pad import _U_TO_Z, build_fingerpad, pad_box, pad_geometry, surface_in_pad
 from fcso.poses import stable_poses
@@ -83,6 +83,23 @@ def test_clearance_keeps_the_pad_at_least_c_from_the_part(name):
         # and without clearance the same pocket touches the part (the test can fail)
         exact_pad = build_fingerpad([exact], sampler, config.filter).pad
         assert _signed_distance(points, trimesh.Trimesh(*_arrays(exact_pad), process=False)).min() < 0.02
+
+
+@pytest.mark.parametrize("profile", ["mjf-pa12", "fdm-pla", "sla-resin"])
+def test_every_profile_carves_one_watertight_finger_for_each_fixture_part(profile):
+    # solar_tracker and capsela200_plug go through the whole design in the test below
+    config = small_config(print={"profile": profile})
+    fit = config.print.resolved()
+    sampler = config.sampler
+    finger = parametric_finger(sampler, config.gripper)
+    for name in ("angle_block.STL", "DC-DC_case.stl"):
+        for mesh, manifold, frame in _good_geometries(name, config, limit=2):
+            exact = pad_geometry(manifold, mesh.vertices, mesh.faces, frame, sampler, config.filter)
+            carved = carve(manifold, frame, SIZE, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
+            pad = build_fingerpad([dataclasses.replace(exact, intersection=carved)], sampler, config.filter).pad
+            pad = open_thin_walls(pad, *SIZE, fit["min_wall_mm"])
+            fused = fuse(finger, pad, sampler, config.finger.overlap_mm)
+            assert fused.bodies == 1 and fused.mesh.is_watertight and fused.volume_mm3 > 0, (profile, name)
 
 
 def _arrays(manifold: manifold3d.Manifold):
