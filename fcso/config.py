@@ -111,7 +111,7 @@ class SearchConfig(_Section):
 
     max_exhaustive: int = Field(20000, ge=1, description="Screen every candidate when there are at most this many")
     max_evaluations: int = Field(
-        20000, ge=1, description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds"
+        4000, ge=1, description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds"
     )
     exact_top_k: int = Field(8, ge=8, description="Best screened candidates re-evaluated exactly (METHOD §8b: k >= 8)")
     report_candidates: int = Field(1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)")

@@ -99,7 +99,10 @@ def seat(
     at depth ``δ`` needs at least ``δ - eps`` of travel before it can be
     shallow enough, so stepping ``t`` by the largest such amount never passes
     the smallest feasible ``t``; a floor of ``eps / 8`` per step bounds the
-    iterations and the overshoot.
+    iterations and the overshoot. Where a wall nearly parallel to ``u`` makes
+    such steps crawl, the measured rate of progress is extrapolated and the
+    first feasible offset found that way is bisected back to within ``eps / 8``
+    of the last infeasible one.
 
     Then, as the gripper closes, the pad travels on toward the part until
     contact, by at most ``travel_mm`` (:func:`fcso.printfit.closing_travel_mm`:
@@ -139,14 +142,40 @@ def seat(
 def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm=0.0) -> PadContact:
     if len(samples.points) == 0:
         return PadContact(0.0, 0.0, np.zeros(0, dtype=bool))
-    offset = 0.0
     step_floor = eps_mm / 8.0
+
+    def depths_at(offset: float) -> np.ndarray:
+        return _signed_distance(samples.points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
+
+    # safe steps: a sample at depth d needs at least d - eps more travel, so
+    # the steps never pass the smallest feasible offset
+    offset, infeasible = 0.0, None
+    previous = None
     for _ in range(max_iterations):
         deepest = float(-distances.min())
         if deepest <= eps_mm:
             break
-        offset += max(deepest - eps_mm, step_floor)
-        distances = _signed_distance(samples.points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
+        infeasible = offset
+        step = max(deepest - eps_mm, step_floor)
+        if previous is not None:
+            # a wall nearly parallel to u gives way slowly: extrapolate the
+            # measured rate, and bisect back below if that overshoots
+            rate = (previous[0] - deepest) / previous[1]
+            if 0 < rate < 0.5:
+                step = max(step, (deepest - eps_mm) / rate)
+        previous = (deepest, step)
+        offset += step
+        distances = depths_at(offset)
+    if infeasible is not None and offset - infeasible > step_floor:
+        low, high, feasible = infeasible, offset, distances
+        while high - low > step_floor:
+            middle = (low + high) / 2.0
+            trial = depths_at(middle)
+            if -trial.min() <= eps_mm:
+                high, feasible = middle, trial
+            else:
+                low = middle
+        offset, distances = high, feasible
     if travel_mm > 0:
         offset, distances = _close_gap(samples.points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations)
     contact = np.abs(distances) <= eps_mm
