@@ -1,13 +1,20 @@
 """Demo of the fcsod daemon: ``python -m examples.demo_daemon`` from the repository root.
 
-Starts ``fcsod run`` on a fresh watch folder under ``demo-out/daemon/``,
-connects ``fcsod subscribe`` (the cell controller's view), drops the bundled
-batch ``examples/jobs/batch-demo`` into the watch folder file by file, shows
-what the subscriber receives, audits the job's MCAP record and stops the
-daemon. ``[ros2]`` is enabled: a zenoh session of the demo, standing in for a
-ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions and liveliness
-tokens the daemon published and decodes the grasps' PoseArrays. The outputs
-stay in ``demo-out/daemon/out/<job_id>/``.
+Makes the secure set-up with ``fcsod pki init`` in ``demo-out/daemon/pki``
+(a local CA, the daemon's and the cell controller's certificates, zenoh
+configs with mTLS and access control, the message-signing key), starts
+``fcsod run`` on a fresh watch folder under ``demo-out/daemon/``, connects
+``fcsod subscribe`` with the controller's certificate (the cell controller's
+view, every message's signature checked), drops the bundled batch
+``examples/jobs/batch-demo`` into the watch folder file by file, shows what
+the subscriber receives, shows that a client without a certificate is
+refused, audits the job's MCAP record and stops the daemon. ``[ros2]`` is
+enabled: a zenoh session of the demo with the controller's certificate,
+standing in for a ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions
+and liveliness tokens the daemon published (unsigned: rmw_zenoh's format has
+no room for a signature; mTLS and the access control cover them) and
+decodes the grasps' PoseArrays. The outputs stay in
+``demo-out/daemon/out/<job_id>/``.
 """
 
 from __future__ import annotations
@@ -58,6 +65,9 @@ def _show(line: str) -> None:
     if "daemon" in message:
         print(f"  daemon liveliness: {message['daemon']}")
         return
+    if "rejected" in message:
+        print(f"  REJECTED {message['key']}: {message['rejected']}")
+        return
     topic, body = message["topic"], message.get("body") or {}
     if topic == "status":
         extra = body.get("error") or ", ".join(body.get("outputs", []))
@@ -74,16 +84,33 @@ def _show(line: str) -> None:
               f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}")
     elif topic == "design":
         print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
+    if "signature_ok" in message and message["topic"] == "status" and (message.get("body") or {}).get("state") == "queued":
+        print(f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the daemon's public key, signing.pub)")
+
+
+def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
+    """A client with the CA but no certificate of its own tries to listen in: the daemon refuses the TLS link."""
+    intruder = BASE / "no-certificate.json5"
+    settings = {
+        "mode": "client",
+        "connect": {"endpoints": [f"tls/127.0.0.1:{port}"]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {"tls": {"root_ca_certificate": str(controller / "ca.pem")}}},
+    }
+    intruder.write_text(json.dumps(settings), encoding="utf-8")
+    attempt = subprocess.run(
+        [sys.executable, "-m", "fcsod", "subscribe", "--config", str(config), "--zenoh-config", str(intruder),
+         "--verify-key", str(controller / "signing.pub"), "--timeout", "3"],
+        cwd=REPO, capture_output=True, text=True,
+    )
+    print(f"a client without a certificate: exit code {attempt.returncode}, {attempt.stderr.strip().splitlines()[-1][:140]}")
 
 
 class Ros2Cell:
     """What a ROS 2 cell on rmw_zenoh sees of the daemon: data on ``<domain>/**`` and liveliness tokens under ``@ros2_lv/<domain>/**``."""
 
-    def __init__(self, port: int):
-        config = zenoh.Config()
-        config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        self.session = zenoh.open(config)
+    def __init__(self, zenoh_config: Path):
+        self.session = zenoh.open(zenoh.Config.from_file(str(zenoh_config)))
         self.samples: list[tuple[str, bytes]] = []
         self.tokens: list[str] = []
         self._subscriber = self.session.declare_subscriber(f"{ROS_DOMAIN_ID}/**", lambda s: self.samples.append((str(s.key_expr), s.payload.to_bytes())))
@@ -93,7 +120,9 @@ class Ros2Cell:
 
     def show(self) -> None:
         typestore = get_typestore(Stores.ROS2_JAZZY)
-        print("ROS 2 (rmw_zenoh wire format) liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
+        print("ROS 2 (rmw_zenoh wire format, read over TLS with the controller's certificate through the access control;"
+              " unsigned: rmw_zenoh's attachment has no room for a signature)")
+        print("liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
         for token in dict.fromkeys(self.tokens):
             print(f"  {token}")
         print("ROS 2 key expressions published (CDR payloads):")
@@ -115,6 +144,14 @@ def main() -> int:
     shutil.rmtree(BASE, ignore_errors=True)
     (BASE / "watch").mkdir(parents=True)
     port = _free_port()
+    pki = BASE / "pki"
+    print(f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port {port} --ros2-domain-id {ROS_DOMAIN_ID}")
+    subprocess.run(
+        [sys.executable, "-m", "fcsod", "pki", "init", str(pki), "--cell", "demo", "--client", "demo-controller", "--host", "127.0.0.1", "--port", str(port),
+         "--ros2-domain-id", str(ROS_DOMAIN_ID)],
+        cwd=REPO, check=True,
+    )
+    controller = pki / "clients" / "demo-controller"
     config = BASE / "fcsod.toml"
     config.write_text(
         f"""[watch]
@@ -130,9 +167,11 @@ dir = "state"
 [bus]
 prefix = "fcso"
 cell = "demo"
+signing_key = "pki/daemon/signing.key"
 
 [zenoh]
-listen = ["tcp/127.0.0.1:{port}"]
+config_file = "pki/daemon/zenoh.json5"
+listen = ["tls/127.0.0.1:{port}"]
 multicast_scouting = false
 
 [ros2]
@@ -142,7 +181,7 @@ namespace = "/demo"
 """,
         encoding="utf-8",
     )
-    print(f"starting fcsod (config {config}, zenoh tcp/127.0.0.1:{port}, log {BASE / 'daemon.log'})")
+    print(f"\nstarting fcsod (config {config}, zenoh tls/127.0.0.1:{port}, log {BASE / 'daemon.log'})")
     with open(BASE / "daemon.log", "w") as log:
         daemon = _fcsod("run", "--config", str(config), stdout=log, stderr=subprocess.STDOUT)
         try:
@@ -150,11 +189,12 @@ namespace = "/demo"
                 _wait_for_line(reader, '"fcsod started"', 120)
             subscriber = _fcsod(
                 "subscribe", "--config", str(config), "--save", str(BASE / "received"), "--exit-after", "1", "--timeout", "600",
+                "--zenoh-config", str(controller / "zenoh.json5"), "--verify-key", str(controller / "signing.pub"),
                 stdout=subprocess.PIPE,
             )
             _wait_for_line(subscriber.stdout, '"alive"', 120)
-            ros2_cell = Ros2Cell(port)
-            print("subscriber connected; dropping the batch file by file")
+            ros2_cell = Ros2Cell(controller / "zenoh.json5")
+            print("cell controller connected with its certificate; dropping the batch file by file")
             job = BASE / "watch" / BATCH.name
             job.mkdir()
             for path in sorted(BATCH.iterdir()):
@@ -168,6 +208,7 @@ namespace = "/demo"
             time.sleep(0.5)
             ros2_cell.show()
             ros2_cell.close()
+            _try_without_certificate(config, controller, port)
         finally:
             daemon.send_signal(signal.SIGTERM)
             daemon.wait(timeout=60)

@@ -148,12 +148,14 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
         return _signed_distance(samples.points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
 
     # safe steps: a sample at depth d needs at least d - eps more travel, so
-    # the steps never pass the smallest feasible offset
+    # the steps never pass the smallest feasible offset; past ``limit`` every
+    # sample lies below the pad, so no offset beyond it is ever needed
+    limit = float(samples.points[:, 0].max() - pad_vertices[:, 0].min()) + eps_mm
     offset, infeasible = 0.0, None
     previous = None
     for _ in range(max_iterations):
         deepest = float(-distances.min())
-        if deepest <= eps_mm:
+        if deepest <= eps_mm or offset >= limit:
             break
         infeasible = offset
         step = max(deepest - eps_mm, step_floor)
@@ -164,14 +166,14 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
             if 0 < rate < 0.5:
                 step = max(step, (deepest - eps_mm) / rate)
         previous = (deepest, step)
-        offset += step
+        offset = min(offset + step, limit)
         distances = depths_at(offset)
     if infeasible is not None and offset - infeasible > step_floor:
         low, high, feasible = infeasible, offset, distances
         while high - low > step_floor:
             middle = (low + high) / 2.0
             trial = depths_at(middle)
-            if -trial.min() <= eps_mm:
+            if -trial.min() <= eps_mm or middle >= limit:
                 high, feasible = middle, trial
             else:
                 low = middle

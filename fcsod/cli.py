@@ -1,7 +1,8 @@
-"""Command line: ``fcsod run | audit | replay | subscribe | schema``.
+"""Command line: ``fcsod run | audit | replay | subscribe | pki | journal | schema``.
 
-Exit codes: 0 success, 1 a check failed (audit) or nothing arrived in time
-(subscribe), 2 bad input (config file, arguments, unreadable record).
+Exit codes: 0 success, 1 a check failed (audit, journal check) or nothing
+arrived in time (subscribe), 2 bad input (config file, arguments, unreadable
+record, corrupt journal, a zenoh session that cannot open).
 """
 
 from __future__ import annotations
@@ -49,9 +50,35 @@ def _parser() -> argparse.ArgumentParser:
     subscribe.add_argument("--config", required=True, type=Path, help="daemon settings (prefix, cell, zenoh)")
     subscribe.add_argument("--connect", action="append", metavar="ENDPOINT", help="daemon endpoint (default: the config's connect, else its listen endpoints)")
     subscribe.add_argument("--save", type=Path, metavar="DIR", help="save each received design as DIR/<job_id>.stl")
-    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results published before this start")
+    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results it published earlier (asked at start and whenever the daemon reappears)")
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
+    subscribe.add_argument("--zenoh-config", type=Path, metavar="FILE", help="the client's zenoh config (from fcsod pki init) instead of the daemon's")
+    subscribe.add_argument("--verify-key", type=Path, metavar="FILE", help="the daemon's public key, signing.pub (default: [bus] verify_key, else signing.pub next to the signing key)")
+
+    pki = commands.add_parser("pki", help="certificates, keys and zenoh configs for the secure set-up")
+    pki_commands = pki.add_subparsers(dest="pki_command", required=True)
+    init = pki_commands.add_parser("init", help="create a local CA, the daemon's and each cell controller's certificates and configs")
+    init.add_argument("directory", type=Path, metavar="DIR")
+    init.add_argument("--cell", required=True, help="the [bus] cell")
+    init.add_argument("--client", action="append", required=True, metavar="NAME", help="a cell controller (repeat for each)")
+    init.add_argument("--prefix", default="fcso", help="the [bus] prefix (default fcso)")
+    init.add_argument("--host", action="append", metavar="NAME", help="name or address clients reach the daemon at (repeat; default this machine's)")
+    init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
+    init.add_argument("--ros2-domain-id", type=int, metavar="N", help="the [ros2] domain_id when [ros2] is enabled: let its ROS 2 key expressions through")
+    init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
+    add = pki_commands.add_parser("add-client", help="issue one more certificate from the CA (a controller or a zenoh router); not added to the access control")
+    add.add_argument("directory", type=Path, metavar="DIR")
+    add.add_argument("name", metavar="NAME", help="the certificate's common name")
+    add.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the daemon's endpoint as this client reaches it, e.g. tls/printserver:7447")
+    add.add_argument("--host", action="append", metavar="NAME", help="name or address this subject is reached at (a router; repeat)")
+
+    journal = commands.add_parser("journal", help="check the job journal, or rebuild it from the job records")
+    journal_commands = journal.add_subparsers(dest="journal_command", required=True)
+    for name, text in (("check", "exit 0 when the journal is sound, 1 with the defect when not"),
+                       ("rebuild", "move the journal aside and rebuild it from <output>/<job_id>/job.mcap (the daemon must be stopped)")):
+        command = journal_commands.add_parser(name, help=text)
+        command.add_argument("--config", required=True, type=Path, help="daemon settings (state and output folders)")
 
     schema = commands.add_parser("schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels")
     schema.add_argument("--out", required=True, type=Path)
@@ -70,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
             return _replay(args)
         if args.command == "subscribe":
             return _subscribe(args)
+        if args.command == "pki":
+            return _pki(args)
+        if args.command == "journal":
+            return _journal(args)
         return _schema(args)
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
@@ -79,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     import zenoh
 
+    from .journal import JournalCorrupt
     from .logs import setup_logging
     from .service import Daemon, StateDirBusy
 
@@ -86,7 +118,7 @@ def _run(args: argparse.Namespace) -> int:
     setup_logging(logging.getLevelName(args.log_level.upper()))
     try:
         return Daemon(config).run()
-    except StateDirBusy as exc:
+    except (StateDirBusy, JournalCorrupt) as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except zenoh.ZError as exc:
@@ -115,8 +147,10 @@ def _replay(args: argparse.Namespace) -> int:
     from .bus import open_session, put
     from .messages import BusMessage, BusRecord, jobs_key
     from .recorder import TOPIC_BUS, read_record
+    from .signing import Signer, signing_key_path
 
     config = load_daemon_config(args.config)
+    signer = Signer.from_file(signing_key_path(config))
     if not args.record.is_file():
         print(f"fcsod: {args.record}: file not found", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -134,7 +168,7 @@ def _replay(args: argparse.Namespace) -> int:
         matched = probe.matching_status.matching
         probe.undeclare()
         for message in messages:
-            put(session, message)
+            put(session, signer.sign(message))
             print(f"replayed {message.key_expr} ({message.encoding}, {len(message.payload)} bytes)")
         # let the reliable link deliver before the session closes
         time.sleep(0.5)
@@ -159,12 +193,26 @@ def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
     from .bus import open_session
+    from .config import ZenohConfig
     from .messages import ENCODING_JSON, daemon_key, jobs_key
+    from .signing import SignatureError, load_verify_key, verify_key_path, verify_message
 
     config = load_daemon_config(args.config)
     prefix, cell = config.bus.prefix, config.bus.cell
-    # the subscriber must not bind the daemon's listen endpoints
-    session = open_session(config.zenoh, listen=[], connect=_subscriber_endpoints(config, args.connect))
+    verify_key = load_verify_key(args.verify_key or verify_key_path(config))
+    if args.zenoh_config is not None:
+        if not args.zenoh_config.is_file():
+            raise ConfigError(args.zenoh_config, "file not found")
+        settings = ZenohConfig(config_file=args.zenoh_config, multicast_scouting=config.zenoh.multicast_scouting)
+        connect = args.connect
+    else:
+        settings, connect = config.zenoh, _subscriber_endpoints(config, args.connect)
+    try:
+        # the subscriber must not bind the daemon's listen endpoints
+        session = open_session(settings, listen=[], connect=connect)
+    except zenoh.ZError as exc:
+        print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     finished: set[str] = set()
     lock = threading.Lock()
     all_done = threading.Event()
@@ -172,6 +220,14 @@ def _subscribe(args: argparse.Namespace) -> int:
     def show(sample, source: str) -> None:
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
+        attachment_bytes = sample.attachment.to_bytes() if sample.attachment is not None else None
+        try:
+            attachment = verify_message(key, payload, attachment_bytes, verify_key)
+        except SignatureError as exc:
+            # a forged or altered message: shown as refused, never as a result
+            with lock:
+                print(json.dumps({"source": source, "key": key, "rejected": str(exc)}), flush=True)
+            return
         line: dict = {"source": source, "key": key, "topic": key.rsplit("/", 1)[-1], "encoding": str(sample.encoding), "bytes": len(payload)}
         parts = key.split("/")
         line["job_id"] = parts[-2] if len(parts) >= 2 else None
@@ -179,11 +235,10 @@ def _subscribe(args: argparse.Namespace) -> int:
             line["body"] = json.loads(payload)
         else:
             line["sha256"] = hashlib.sha256(payload).hexdigest()
-        if sample.attachment is not None:
-            attachment = json.loads(sample.attachment.to_bytes())
-            line["attachment"] = attachment
-            if "sha256" in attachment:
-                line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
+        line["attachment"] = attachment
+        line["signature_ok"] = True
+        if "sha256" in attachment:
+            line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
         if args.save is not None and line["topic"] == "design":
             args.save.mkdir(parents=True, exist_ok=True)
             target = args.save / f"{line['job_id']}.stl"
@@ -197,19 +252,27 @@ def _subscribe(args: argparse.Namespace) -> int:
                 if args.exit_after is not None and len(finished) >= args.exit_after:
                     all_done.set()
 
+    # every time the daemon appears (at start, or after it or the network was down) ask it for what was missed
+    ask = threading.Event()
+
     def liveliness(sample) -> None:
         state = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
         with lock:
             print(json.dumps({"source": "liveliness", "key": str(sample.key_expr), "daemon": state}), flush=True)
+        if state == "alive" and not args.no_query:
+            ask.set()
 
+    deadline = time.monotonic() + args.timeout if args.timeout is not None else None
     try:
         subscriber = session.declare_subscriber(jobs_key(prefix, cell), lambda s: show(s, "live"))
         watcher = session.liveliness().declare_subscriber(daemon_key(prefix, cell), liveliness, history=True)
-        if not args.no_query:
-            for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
-                if reply.ok is not None:
-                    show(reply.ok, "query")
-        all_done.wait(timeout=args.timeout)
+        while not all_done.is_set() and (deadline is None or time.monotonic() < deadline):
+            if ask.is_set():
+                ask.clear()
+                for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
+                    if reply.ok is not None:
+                        show(reply.ok, "query")
+            all_done.wait(timeout=0.2)
         subscriber.undeclare()
         watcher.undeclare()
     except KeyboardInterrupt:
@@ -226,4 +289,56 @@ def _schema(args: argparse.Namespace) -> int:
 
     for path in write_fcsod_schemas(args.out):
         print(path)
+    return EXIT_OK
+
+
+def _pki(args: argparse.Namespace) -> int:
+    from .pki import add_client, config_lines, init_pki
+
+    if args.pki_command == "add-client":
+        folder = add_client(args.directory, args.name, args.connect, args.host)
+        print(f"{folder}: certificate, key and zenoh.json5 of {args.name!r}; allow it in by adding {args.name!r} to the "
+              f"cert_common_names of {Path(args.directory) / 'daemon' / 'zenoh.json5'}")
+        return EXIT_OK
+    files = init_pki(
+        args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir,
+        ros2_domain_id=args.ros2_domain_id,
+    )
+    for line in config_lines(files):
+        print(line)
+    return EXIT_OK
+
+
+def _journal(args: argparse.Namespace) -> int:
+    from .journal import journal_problem
+    from .journal_repair import rebuild_journal
+    from .service import StateDirBusy, lock_state_dir
+    from .signing import daemon_signer
+
+    config = load_daemon_config(args.config)
+    path = config.state.dir / "journal.sqlite3"
+    if args.journal_command == "check":
+        problem = journal_problem(path)
+        if problem is not None:
+            print(f"{path}: corrupt: {problem}")
+            return EXIT_FAILED
+        print(f"{path}: sound" if path.exists() else f"{path}: no journal yet")
+        return EXIT_OK
+    config.state.dir.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = lock_state_dir(config.state.dir)
+    except StateDirBusy as exc:
+        print(f"fcsod: {exc}: stop the daemon first", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        signer, _ = daemon_signer(config)
+        result = rebuild_journal(path, config.output.root, signer)
+    finally:
+        lock.close()
+    if result.moved_aside is not None:
+        print(f"old journal moved to {result.moved_aside}")
+    states = sorted(result.jobs.values())
+    print(f"rebuilt {path} from {len(result.jobs)} job records: " + ", ".join(f"{states.count(s)} {s}" for s in sorted(set(states))))
+    for job_id, why in result.skipped.items():
+        print(f"skipped {job_id}: {why}")
     return EXIT_OK

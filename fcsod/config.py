@@ -94,6 +94,13 @@ class BusConfig(_Section):
 
     prefix: str = Field("fcso", pattern=r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$", description="Key prefix")
     cell: str = Field("cell1", pattern=r"^[A-Za-z0-9_\-]+$", description="Cell id, one key chunk")
+    signing_key: Path | None = Field(
+        None,
+        description="The daemon's Ed25519 private key (PEM) that signs every message; default <state.dir>/signing.key, created at first start",
+    )
+    verify_key: Path | None = Field(
+        None, description="The daemon's public key (PEM) fcsod subscribe checks messages with; default signing.pub next to signing_key"
+    )
 
 
 class ZenohConfig(_Section):
@@ -164,6 +171,8 @@ def _resolve_paths(data: dict, base: Path) -> None:
     fix("output", "root")
     fix("state", "dir")
     fix("zenoh", "config_file")
+    fix("bus", "signing_key")
+    fix("bus", "verify_key")
     design = data.get("design")
     if isinstance(design, dict):
         fix_finger = design.get("finger")

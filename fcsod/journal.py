@@ -12,7 +12,7 @@ import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
-from .messages import JobState
+from .messages import BusMessage, JobState
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -63,6 +63,47 @@ class StoredMessage:
     payload: bytes | None
     attachment: str | None
     file: str | None
+
+
+def stored_message(message: BusMessage, output_root: Path) -> StoredMessage:
+    """How the journal keeps a published message: a design by the path of its ``finger.stl``, anything else whole."""
+    design_file = str(output_root / message.job_id / "finger.stl") if message.topic == "design" else None
+    return StoredMessage(
+        message.job_id,
+        message.topic,
+        message.key_expr,
+        message.encoding,
+        None if design_file else message.payload,
+        message.attachment.decode() if message.attachment is not None else None,
+        design_file,
+    )
+
+
+class JournalCorrupt(Exception):
+    """The journal file cannot be trusted; the message names the file and the defect."""
+
+
+def journal_problem(path: str | Path) -> str | None:
+    """What is wrong with a journal file (SQLite's own check and fcsod's tables), None when it is sound or absent."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        db = sqlite3.connect(path, timeout=30.0)
+        try:
+            found = [row[0] for row in db.execute("PRAGMA quick_check").fetchall()]
+            tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            if found == ["ok"] and {"jobs", "messages"} <= tables:
+                db.execute("SELECT job_id, folder, state, attempt, queued_at, started_at, finished_at, error FROM jobs").fetchall()
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as exc:
+        return f"SQLite: {exc}"
+    if found != ["ok"]:
+        return "SQLite integrity check: " + "; ".join(found[:3])
+    if not {"jobs", "messages"} <= tables:
+        return "not an fcsod journal (no jobs and messages tables)"
+    return None
 
 
 class Journal:
@@ -120,6 +161,14 @@ class Journal:
                 "UPDATE jobs SET state = ?, finished_at = ?, error = ? WHERE job_id = ?", (state, finished_at, error, job_id)
             )
         return self.get(job_id)
+
+    def restore(self, row: JobRow) -> None:
+        """Put a job back as it was (rebuilding the journal from the job records)."""
+        with self._db:
+            self._db.execute(
+                "INSERT OR REPLACE INTO jobs VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (row.job_id, row.folder, row.state, row.attempt, row.queued_at, row.started_at, row.finished_at, row.error),
+            )
 
     def requeue_running(self) -> list[str]:
         """Put jobs left ``running`` by a stop or a crash back into the queue; their ids."""

@@ -83,6 +83,21 @@ class GraspsMessage(_Message):
     grasps: list[GraspReport]
 
 
+class MessageSignature(_Message):
+    """Ed25519 signature of one zenoh message (see :mod:`fcsod.signing` for the signed bytes)."""
+
+    algorithm: Literal["ed25519"] = "ed25519"
+    key_id: str = Field(pattern=r"^[0-9a-f]{16}$", description="First 16 hex digits of the SHA-256 of the raw public key")
+    signature_base64: str = Field(description="The 64-byte signature, base64")
+
+
+class SignedAttachment(_Message):
+    """Attachment of every ``<prefix>/<cell>/jobs/<job_id>/<topic>`` message but the design's."""
+
+    job_id: str
+    signature: MessageSignature
+
+
 class DesignAttachment(_Message):
     """Attachment of ``<prefix>/<cell>/jobs/<job_id>/design`` (payload: binary STL of the finger)."""
 
@@ -90,6 +105,7 @@ class DesignAttachment(_Message):
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the STL payload, hex")
     file: str = Field("finger.stl", description="Name of the file in the job's output folder")
     size_bytes: int
+    signature: MessageSignature | None = Field(None, description="Added by the daemon when it publishes or replies")
 
 
 class PlacementMessage(_Message):

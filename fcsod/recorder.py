@@ -160,9 +160,12 @@ class Recorder:
         self.finished = True
 
     def close_unfinished(self) -> None:
-        """Close the file without a summary (after a failure of the writer itself)."""
-        if not self._stream.closed:
+        """Close the file without a summary (after a failure of the writer itself); never raises."""
+        try:
             self._stream.close()
+        except OSError:
+            # closing flushes what the failed write left buffered: on a full disk that fails again, and the file is abandoned anyway
+            pass
 
 
 @dataclass

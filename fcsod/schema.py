@@ -8,7 +8,7 @@ from fcso.schema import write_schemas
 from pydantic import BaseModel
 
 from .config import DaemonConfig, JobManifest
-from .messages import DesignAttachment, GraspsMessage, PlacementMessage, QualityMessage, StatusMessage
+from .messages import DesignAttachment, GraspsMessage, PlacementMessage, QualityMessage, SignedAttachment, StatusMessage
 from .placement import PlacementReport
 from .recorder import CHANNELS
 from .verification import TOPIC_VERIFICATION, VerificationMessage, VerificationReport
@@ -26,6 +26,7 @@ FCSOD_SCHEMAS: dict[str, type[BaseModel]] = {
     "zenoh-quality.json": QualityMessage,
     "zenoh-grasps.json": GraspsMessage,
     "zenoh-design-attachment.json": DesignAttachment,
+    "zenoh-attachment.json": SignedAttachment,
     "zenoh-placement.json": PlacementMessage,
     "placement-report.json": PlacementReport,
     **{_channel_file(topic): model for topic, model in CHANNELS.items()},

@@ -20,13 +20,15 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from . import __version__
-from .bus import Bus
-from .ros2 import Ros2Node, node_fqn, record_ros2
+from .bus import Bus, session_config
 from .config import DaemonConfig
 from .jobs import hash_inputs, job_id, job_inputs
-from .journal import JobRow, Journal, StoredMessage
+from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
 from .messages import BusMessage, BusRecord, LogRecord, StateChangeRecord, StatusMessage, utc_now
+from .pki import link_weaknesses
 from .recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record, salvage
+from .ros2 import Ros2Node, node_fqn, record_ros2
+from .signing import daemon_signer, signing_key_path
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
 from .worker import RECORD_NAME, JobTask, worker_main
@@ -39,6 +41,23 @@ TICK_S = 0.2
 
 class StateDirBusy(Exception):
     """Another daemon holds the state folder's lock."""
+
+
+def lock_state_dir(state_dir: Path):
+    """Take the state folder's lock (held while the returned file stays open).
+
+    Raises
+    ------
+    StateDirBusy
+        Another fcsod (daemon or journal repair) holds it.
+    """
+    lock_file = open(state_dir / "fcsod.lock", "w")
+    try:
+        fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock_file.close()
+        raise StateDirBusy(f"{state_dir}: another fcsod is running with this state folder") from None
+    return lock_file
 
 
 @dataclass
@@ -82,13 +101,25 @@ class Daemon:
         """Run until SIGTERM or SIGINT; returns the process exit code."""
         self.state_dir.mkdir(parents=True, exist_ok=True)
         self.output_root.mkdir(parents=True, exist_ok=True)
-        self._lock_state_dir()
+        self._lock_file = lock_state_dir(self.state_dir)
+        problem = journal_problem(self.journal_path)
+        if problem is not None:
+            raise JournalCorrupt(
+                f"{self.journal_path}: the journal is corrupt ({problem}); fcsod does not start on it. "
+                "Run `fcsod journal rebuild --config FILE` to rebuild it from the job records (job.mcap) in the output folder"
+            )
         self.journal = Journal(self.journal_path)
         self._clean_work_dirs()
         for job in self.journal.requeue_running():
             log.info("re-queued job left running by the previous run", extra={"job_id": job})
         signal.signal(signal.SIGTERM, self._on_stop_signal)
         signal.signal(signal.SIGINT, self._on_stop_signal)
+        signer, created = daemon_signer(self.config)
+        if created:
+            log.info("created the message-signing key: give signing.pub to the cell controllers", extra={"path": str(signing_key_path(self.config))})
+        for weakness in link_weaknesses(session_config(self.config.zenoh)):
+            log.warning(f"insecure bus: {weakness}")
+        self.signer = signer
         self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
         self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
         if self.ros2 is not None:
@@ -107,6 +138,7 @@ class Daemon:
                 "output": str(self.output_root),
                 "observer": "polling" if watch.polling else "inotify",
                 "key_prefix": f"{self.config.bus.prefix}/{self.config.bus.cell}",
+                "signing_key_id": signer.key_id,
             },
         )
         notify("READY=1")
@@ -118,13 +150,6 @@ class Daemon:
 
     def _on_stop_signal(self, signum, frame) -> None:
         self.stopping = True
-
-    def _lock_state_dir(self) -> None:
-        self._lock_file = open(self.state_dir / "fcsod.lock", "w")
-        try:
-            fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise StateDirBusy(f"{self.state_dir}: another fcsod is running with this state folder") from None
 
     def _clean_work_dirs(self) -> None:
         """Remove work folders of runs cut off by a crash: a partial result is never left behind."""
@@ -310,23 +335,28 @@ class Daemon:
             self._adopt(row)
             return
         work_dir = self.output_root / f".tmp-{row.job_id}"
-        work_dir.mkdir(parents=True, exist_ok=True)
-        mcap = self.config.mcap
-        salvaged = work_dir / f"salvaged-{RECORD_NAME}"
-        recorder = salvage(work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
         status = self._status(row)
-        recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
-        recorder.write(TOPIC_BUS, status.record())
-        record_ros2(recorder, status, self.config.ros2)
-        recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
-        recorder.finish()
-        for path in work_dir.iterdir():
-            if path != salvaged:
-                shutil.rmtree(path) if path.is_dir() else path.unlink()
-        os.replace(salvaged, work_dir / RECORD_NAME)
-        os.replace(work_dir, final_dir)
+        try:
+            work_dir.mkdir(parents=True, exist_ok=True)
+            for path in work_dir.iterdir():
+                if path.name != RECORD_NAME:
+                    shutil.rmtree(path) if path.is_dir() else path.unlink()
+            mcap = self.config.mcap
+            salvaged = work_dir / f"salvaged-{RECORD_NAME}"
+            recorder = salvage(work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
+            recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
+            recorder.write(TOPIC_BUS, status.record())
+            record_ros2(recorder, status, self.config.ros2)
+            recorder.write(TOPIC_STATE, StateChangeRecord(job_id=row.job_id, state="failed", at=finished_at, error=error))
+            recorder.finish()
+            os.replace(salvaged, work_dir / RECORD_NAME)
+            os.replace(work_dir, final_dir)
+        except OSError as exc:
+            # e.g. the output disk is full: the journal and the bus still say why the job failed
+            shutil.rmtree(work_dir, ignore_errors=True)
+            log.error(f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)})
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
         self._publish(status)
 
@@ -359,19 +389,9 @@ class Daemon:
         return BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", body)
 
     def _publish(self, message: BusMessage) -> None:
-        """Keep the message for the queryable, then publish it."""
-        design_file = str(self.output_root / message.job_id / "finger.stl") if message.topic == "design" else None
-        self.journal.store_message(
-            StoredMessage(
-                message.job_id,
-                message.topic,
-                message.key_expr,
-                message.encoding,
-                None if design_file else message.payload,
-                message.attachment.decode() if message.attachment is not None else None,
-                design_file,
-            )
-        )
+        """Sign the message, keep it for the queryable, then publish it."""
+        message = self.signer.sign(message)
+        self.journal.store_message(stored_message(message, self.output_root))
         self.bus.publish(message)
         if self.ros2 is not None:
             self.ros2.publish(message)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import base64
 import ctypes
+import errno
 import hashlib
 import os
 import shutil
@@ -80,6 +81,7 @@ from .recorder import (
     TOPIC_SPEC,
     TOPIC_STATE,
     Recorder,
+    salvage,
 )
 from .placement import BuildConfig, PlacementReport, place_fingers
 from .verification import choose_by_verification, verify_done_job
@@ -95,6 +97,13 @@ BUILD_NAME = "build.3mf"
 
 #: Number of the job's finger set in ``build.3mf`` (one design per job for now).
 FINGER_SET = 1
+
+
+class JobFolderDeleted(Exception):
+    """The job folder disappeared while its job ran: the print job was withdrawn."""
+
+    def __init__(self, folder: Path):
+        super().__init__(f"{folder}: the job folder was deleted while its job ran: the job is withdrawn, nothing of it is published")
 
 
 class TimeLimitExceeded(BaseException):
@@ -168,25 +177,38 @@ class JobRun:
         error: str | None = None,
         outputs: list[str] | None = None,
         warnings: list[str] | None = None,
+        record: bool = True,
     ) -> BusMessage:
-        """The job's status message, recorded on the bus channel."""
-        body = StatusMessage(
-            job_id=self.task.job_id,
-            state=state,
-            folder=self.task.folder,
-            attempt=self.task.attempt,
-            queued_at=self.task.queued_at,
-            started_at=self.task.started_at,
-            finished_at=finished_at,
-            error=error,
-            outputs=outputs or [],
-            warnings=warnings or [],
-        )
-        bus = self.task.config.bus
-        message = BusMessage.json_body(bus.prefix, bus.cell, "status", body)
-        self.record_published(message)
-        self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
+        """The job's status message, recorded on the bus and ROS 2 channels and as a state change (unless ``record`` is false)."""
+        message = status_message(self.task, state, finished_at, error, outputs, warnings)
+        if record:
+            self.record_published(message)
+            self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
         return message
+
+
+def status_message(
+    task: JobTask,
+    state: str,
+    finished_at: str | None = None,
+    error: str | None = None,
+    outputs: list[str] | None = None,
+    warnings: list[str] | None = None,
+) -> BusMessage:
+    """The status message of ``task`` in ``state`` (times UTC ISO 8601)."""
+    body = StatusMessage(
+        job_id=task.job_id,
+        state=state,
+        folder=task.folder,
+        attempt=task.attempt,
+        queued_at=task.queued_at,
+        started_at=task.started_at,
+        finished_at=finished_at,
+        error=error,
+        outputs=outputs or [],
+        warnings=warnings or [],
+    )
+    return BusMessage.json_body(task.config.bus.prefix, task.config.bus.cell, "status", body)
 
 
 # ------------------------------------------------------------------------ steps
@@ -363,7 +385,12 @@ def step_outputs(run: JobRun) -> None:
     """
     run.files = {**output_files(run.result), **run.files}
     for name, data in run.files.items():
-        (run.work_dir / name).write_bytes(data)
+        path = run.work_dir / name
+        try:
+            path.write_bytes(data)
+        except OSError as exc:
+            # a failed write() does not say which file it was writing
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
     run.recorder.write(
         TOPIC_OUTPUTS,
         OutputFilesRecord(
@@ -410,6 +437,12 @@ def step_outputs(run: JobRun) -> None:
         run.record_published(message)
 
 
+def step_folder_kept(run: JobRun) -> None:
+    """Fail the job when its folder was deleted while it ran: a withdrawn print job gets no fingers."""
+    if not run.folder.is_dir():
+        raise JobFolderDeleted(run.folder)
+
+
 #: The job's steps in order; each is logged and flushed to the record when it ends.
 STEPS: list[Callable[[JobRun], None]] = [
     step_inputs,
@@ -419,6 +452,7 @@ STEPS: list[Callable[[JobRun], None]] = [
     step_record_design,
     step_placement,
     step_outputs,
+    step_folder_kept,
 ]
 
 
@@ -548,47 +582,127 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     work_dir = output_root / f".tmp-{task.job_id}"
     final_dir = output_root / task.job_id
     shutil.rmtree(work_dir, ignore_errors=True)
-    work_dir.mkdir(parents=True)
-    recorder = Recorder(work_dir / RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    try:
+        work_dir.mkdir(parents=True)
+        recorder = Recorder(work_dir / RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    except OSError as exc:
+        # not even the record can start (a full disk): the journal and the bus still say why
+        error = io_failure(exc, Path(task.folder), output_root) or f"internal error: {type(exc).__name__}: {exc}"
+        shutil.rmtree(work_dir, ignore_errors=True)
+        emit(("log", "error", error, {}))
+        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)]))
+        return
     run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
     recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
     emit(("publish", run.status("running")))
-    recorder.flush()
     error = None
     try:
+        recorder.flush()
         for step in STEPS:
             started = time.perf_counter()
             step(run)
             run.log("info", f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s", stage=step.__name__.removeprefix("step_"))
             recorder.flush()
     except FcsoError as exc:
-        error = str(exc)
+        # a part that vanished is the symptom; a deleted folder is the cause
+        error = str(exc) if run.folder.is_dir() else str(JobFolderDeleted(run.folder))
     except TimeLimitExceeded:
         error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({config.jobs.time_limit_seconds:g} s)"
+    except JobFolderDeleted as exc:
+        error = str(exc)
+    except OSError as exc:
+        error = io_failure(exc, run.folder, output_root)
+        if error is None:
+            error = f"internal error: {type(exc).__name__}: {exc}"
+            run.log("error", traceback.format_exc())
     except Exception as exc:  # a bug or an unexpected library error: the job fails, the daemon goes on
         error = f"internal error: {type(exc).__name__}: {exc}"
         run.log("error", traceback.format_exc())
     if error is None:
-        outputs = sorted([*run.files, RECORD_NAME])
-        final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
-        publish = [*run.outgoing, final]
-    else:
-        run.log("error", error)
-        final = run.status("failed", finished_at=utc_now(), error=error)
+        try:
+            outputs = sorted([*run.files, RECORD_NAME])
+            final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
+            recorder.finish()
+            _fsync_files(work_dir)
+            publish = [*run.outgoing, final]
+        except OSError as exc:
+            # the disk filled up at the very end: the job fails like any other write failure
+            error = io_failure(exc, run.folder, output_root) or f"internal error: {type(exc).__name__}: {exc}"
+    if error is not None:
+        final = _finish_failed(run, error)
         publish = [final]
-        # a failed job leaves its record and nothing else
-        for path in work_dir.iterdir():
-            if path.name != RECORD_NAME:
-                path.unlink()
-    recorder.finish()
-    for path in work_dir.iterdir():
-        with open(path, "rb") as stream:
-            os.fsync(stream.fileno())
-    os.replace(work_dir, final_dir)
-    _fsync_dir(output_root)
+    if work_dir.is_dir():
+        os.replace(work_dir, final_dir)
+        _fsync_dir(output_root)
     emit(("finished", "done" if error is None else "failed", error, publish))
     if error is None:
         verify_done_job(run, final_dir)
+
+
+def io_failure(exc: OSError, folder: Path, output_root: Path) -> str | None:
+    """The job's error for an OS error it cannot go on after, naming the folder at fault; None for any other OS error.
+
+    Parameters
+    ----------
+    exc : OSError
+    folder : Path
+        The job folder (its inputs).
+    output_root : Path
+        Where the job writes.
+    """
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        written = f" ({exc.filename})" if exc.filename else ""
+        return (
+            f"{output_root}: no space left on device while writing the job's output{written}: "
+            "the partial output was removed; free space, then change or rename the job folder to run it again"
+        )
+    if not folder.is_dir():
+        return str(JobFolderDeleted(folder))
+    return None
+
+
+def _finish_failed(run: JobRun, error: str) -> BusMessage:
+    """End a failed job: remove its outputs, record the failure and finish the record; the ``failed`` status.
+
+    The outputs go first, so on a full disk their space is free for the
+    record's end. When even that cannot be written, the cut-off record is
+    salvaged into a new one; when that fails too, nothing of the job stays
+    on disk and only the journal and the bus carry the failure.
+    """
+    for path in run.work_dir.iterdir():
+        if path.name != RECORD_NAME:
+            path.unlink()
+    try:
+        run.log("error", error)
+        final = run.status("failed", finished_at=utc_now(), error=error)
+        run.recorder.finish()
+        _fsync_files(run.work_dir)
+        return final
+    except Exception:  # the record's writer may be broken by the write that failed: salvage what it holds
+        run.recorder.close_unfinished()
+    final = run.status("failed", finished_at=utc_now(), error=error, record=False)
+    mcap = run.task.config.mcap
+    salvaged = run.work_dir / f"salvaged-{RECORD_NAME}"
+    try:
+        recorder = salvage(run.work_dir / RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
+        recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
+        recorder.write(TOPIC_BUS, final.record())
+        record_ros2(recorder, final, run.task.config.ros2)
+        recorder.write(TOPIC_STATE, StateChangeRecord(job_id=run.task.job_id, state="failed", at=utc_now(), error=error))
+        recorder.finish()
+        os.replace(salvaged, run.work_dir / RECORD_NAME)
+        _fsync_files(run.work_dir)
+    except OSError:
+        shutil.rmtree(run.work_dir, ignore_errors=True)
+        run.emit(("log", "error", "no space even for the job's record: nothing of the job is kept on disk", {"path": str(run.work_dir)}))
+    return final
+
+
+def _fsync_files(folder: Path) -> None:
+    """Push every file of ``folder`` to disk."""
+    for path in folder.iterdir():
+        with open(path, "rb") as stream:
+            os.fsync(stream.fileno())
 
 
 def _fsync_dir(path: Path) -> None:

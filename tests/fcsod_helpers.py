@@ -39,8 +39,12 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def write_config(base: Path, port: int, settle_seconds: float = 0.7, extra: str = "") -> Path:
-    """Write an fcsod.toml for a daemon listening on ``tcp/127.0.0.1:<port>`` with folders below ``base``.
+def write_config(
+    base: Path, port: int, settle_seconds: float = 0.7, extra: str = "", scheme: str = "tcp", zenoh_extra: str = "", bus_extra: str = ""
+) -> Path:
+    """Write an fcsod.toml for a daemon listening on ``<scheme>/127.0.0.1:<port>`` with folders below ``base``.
+
+    ``zenoh_extra`` and ``bus_extra`` are lines added to the ``[zenoh]`` and ``[bus]`` sections.
 
     Returns
     -------
@@ -65,10 +69,12 @@ dir = "state"
 [bus]
 prefix = "fcso"
 cell = "test"
+{bus_extra}
 
 [zenoh]
-listen = ["tcp/127.0.0.1:{port}"]
+listen = ["{scheme}/127.0.0.1:{port}"]
 multicast_scouting = false
+{zenoh_extra}
 
 [mcap]
 chunk_size_bytes = 4096

@@ -8,7 +8,9 @@ attachment in hex). With ``--late KEY`` it instead declares an
 AdvancedSubscriber with history on KEY, the way rmw_zenoh subscribes with
 transient-local durability, and prints what the history brings.
 
-``python -m tests.ros2_cell --connect tcp/127.0.0.1:PORT --domain 7 [--late KEY]``
+``python -m tests.ros2_cell --connect tcp/127.0.0.1:PORT --domain 7 [--late KEY]``;
+``--zenoh-config FILE`` instead of ``--connect`` opens the session with a
+client config of ``fcsod pki init`` (TLS with that client's certificate).
 """
 
 from __future__ import annotations
@@ -35,19 +37,24 @@ def _sample(sample: zenoh.Sample, source: str) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--connect", required=True)
+    endpoint = parser.add_mutually_exclusive_group(required=True)
+    endpoint.add_argument("--connect")
+    endpoint.add_argument("--zenoh-config")
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--late", help="key expression to subscribe to with history (transient local)")
     args = parser.parse_args()
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("peer"))
-    config.insert_json5("connect/endpoints", json.dumps([args.connect]))
-    config.insert_json5("scouting/multicast/enabled", "false")
+    if args.zenoh_config:
+        config = zenoh.Config.from_file(args.zenoh_config)
+    else:
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps("peer"))
+        config.insert_json5("connect/endpoints", json.dumps([args.connect]))
+        config.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(config)
     deadline = time.monotonic() + 30
-    while not list(session.info.peers_zid()) and time.monotonic() < deadline:
+    while not list(session.info.peers_zid()) and not list(session.info.routers_zid()) and time.monotonic() < deadline:
         time.sleep(0.05)
-    _emit(event="peer", zids=[str(zid) for zid in session.info.peers_zid()])
+    _emit(event="peer", zids=[str(zid) for zid in [*session.info.peers_zid(), *session.info.routers_zid()]])
     keep = []
     if args.late:
         history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=10)

@@ -175,9 +175,9 @@ def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig
     A convex piece that bridges a pad pocket shows as overlap of the seated
     part and pad (METHOD §12's fidelity). While it exceeds
     ``max_seated_penetration_mm`` the pad's CoACD threshold is halved, down
-    to ``min_decomposition_threshold`` (pads decompose in seconds; refining
-    a part took minutes and hundreds of pieces for little gain, so the
-    part's threshold stays).
+    to ``min_decomposition_threshold``, as long as that reduces the overlap
+    (pads decompose in seconds; refining a part took minutes and hundreds
+    of pieces for little gain, so the part's threshold stays).
 
     Returns
     -------
@@ -187,17 +187,24 @@ def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig
     """
     pad_threshold = config.decomposition_threshold
     part = part_pieces(case, config)
+    best = None
     while True:
         pad = convex_pieces(design.fingerpad, pad_threshold, config.cache_path())
         penetration = seated_penetration_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config), case)
         if penetration <= config.max_seated_penetration_mm:
             return part, pad, []
+        # a finer pad that does not reduce the overlap means the part's pieces cause it: stop refining
+        if best is not None and penetration > 0.9 * best[0]:
+            pad = best[1]
+            break
+        best = (penetration, pad)
         if pad_threshold / 2.0 < config.min_decomposition_threshold:
-            return part, pad, [
-                f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp (pad refined to CoACD "
-                f"threshold {pad_threshold:g}); precision errors below that are not resolved"
-            ]
+            break
         pad_threshold /= 2.0
+    return part, pad, [
+        f"{case.name}: part and pad pieces overlap {best[0]:.2f} mm at the seated grasp (pad {len(pad.pieces)} pieces); "
+        "precision errors below that are not resolved"
+    ]
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
