@@ -157,6 +157,77 @@ class FingerConfig(_Section):
         return self
 
 
+#: Printer profiles of ``[print]``: the defaults each profile gives the keys left unset.
+#: Sources (design guides read 2026-11; values per side of a fit, mm):
+PRINT_PROFILES: dict[str, dict[str, float]] = {
+    "mjf-pa12": {
+        # HP Multi Jet Fusion design guidelines, "Connecting parts": a gap of at least
+        # 0.4 mm between interface areas (+-0.2 mm of tolerance for each part)
+        "clearance_mm": 0.4,
+        # design value, the same for every profile (see README "Printed fit"): at D = 4 mm
+        # a 15 degree draft opens the pocket by D tan 15 = 1.07 mm per side at the pad face
+        "lead_in_deg": 15.0,
+        # HP MJF design guidelines, "Wall thickness": 0.5 mm for short walls along Z
+        # (0.3 mm in the XY plane); the larger, orientation-free value
+        "min_wall_mm": 0.5,
+        # HP 3D High Reusability PA 12 data sheet, density of parts 1.01 g/cm3 (METHOD §12)
+        "density_g_cm3": 1.01,
+    },
+    "fdm-pla": {
+        # Original Prusa i3 MK3S user manual §10.3.5 "Tolerances": 0.10 very tight,
+        # 0.15 tight, 0.20 mm loose; loose, so the part slides in without force
+        "clearance_mm": 0.2,
+        "lead_in_deg": 15.0,
+        # two perimeters at PrusaSlicer's default 0.45 mm extrusion width for a 0.4 mm nozzle
+        "min_wall_mm": 0.9,
+        # Stratasys PLA spec sheet, specific gravity 1.264 (ASTM D792); PLA is 1.24-1.26
+        "density_g_cm3": 1.25,
+    },
+    "sla-resin": {
+        # stereolithography fits: tight 0.15 mm, loose 0.3 mm; Formlabs-style tolerance
+        # +-0.15 mm; tight, since resin parts shrink on post-cure (0.05-0.1 mm)
+        "clearance_mm": 0.15,
+        "lead_in_deg": 15.0,
+        # Formlabs SLA design rules: supported walls 0.4 mm, unsupported walls 0.6 mm
+        "min_wall_mm": 0.6,
+        # typical cured methacrylate photopolymer, 1.1-1.2 g/cm3: not from a data sheet
+        # of a named resin; set density_g_cm3 for yours
+        "density_g_cm3": 1.15,
+    },
+    # the exact pocket of METHOD §4: no clearance, no lead-in, no thin-wall removal
+    "custom": {"clearance_mm": 0.0, "lead_in_deg": 0.0, "min_wall_mm": 0.0, "density_g_cm3": 1.01},
+}
+
+
+class PrintConfig(_Section):
+    """How the finger is printed: clearance, lead-in and minimum wall of the pocket (``[print]``).
+
+    ``profile`` gives every key a default (:data:`PRINT_PROFILES`); a key set
+    explicitly overrides the profile. ``custom`` (the default) is the exact
+    pocket of METHOD §4. Read the effective values with :meth:`resolved`.
+    """
+
+    profile: Literal["mjf-pa12", "fdm-pla", "sla-resin", "custom"] = Field(
+        "custom", description="Printer profile giving the defaults; custom: zero clearance, lead-in and minimum wall"
+    )
+    clearance_mm: float | None = Field(
+        None, ge=0, description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm"
+    )
+    lead_in_deg: float | None = Field(
+        None, ge=0, lt=60, description="Draft of the pocket walls, wider at the pad face and exact at depth, degrees; 0 disables"
+    )
+    min_wall_mm: float | None = Field(
+        None, ge=0, description="Thinnest pad wall kept: thinner walls and slivers are removed after carving, mm; 0 disables"
+    )
+    density_g_cm3: float | None = Field(None, gt=0, description="Density of the printed part material, for the simulation's mass, g/cm³")
+
+    def resolved(self) -> dict[str, float]:
+        """The effective ``clearance_mm``, ``lead_in_deg``, ``min_wall_mm`` and ``density_g_cm3``: explicit keys over the profile's."""
+        values = dict(PRINT_PROFILES[self.profile])
+        values.update({k: v for k in values if (v := getattr(self, k)) is not None})
+        return values
+
+
 class DesignConfig(_Section):
     """Every setting of ``fcso design``."""
 
@@ -168,6 +239,7 @@ class DesignConfig(_Section):
     contact: ContactConfig = Field(default_factory=ContactConfig)
     search: SearchConfig = Field(default_factory=SearchConfig)
     finger: FingerConfig = Field(default_factory=FingerConfig)
+    print: PrintConfig = Field(default_factory=PrintConfig)
 
     def updated(self, overrides: dict) -> "DesignConfig":
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""
@@ -218,7 +290,7 @@ def load_config(path: str | Path) -> DesignConfig:
     ----------
     path : str or Path
         TOML file with sections ``[parts] [sampler] [gripper] [filter] [poses]
-        [contact] [search] [finger]``.
+        [contact] [search] [finger] [print]``.
 
     Returns
     -------

@@ -70,7 +70,8 @@ class PadContact:
     Attributes
     ----------
     offset_mm : float
-        Seating offset ``t`` along ``-u``.
+        Seating offset ``t`` along ``-u``; negative when the pad advanced
+        past the METHOD §6 seat to close a clearance.
     contact_area_mm2 : float
         Part surface within ``eps`` of the pad at the seated position.
     contact : (n,) bool
@@ -83,7 +84,12 @@ class PadContact:
 
 
 def seat(
-    samples: list[SurfaceSamples], pad_vertices: np.ndarray, pad_faces: np.ndarray, eps_mm: float, max_iterations: int = 400
+    samples: list[SurfaceSamples],
+    pad_vertices: np.ndarray,
+    pad_faces: np.ndarray,
+    eps_mm: float,
+    max_iterations: int = 400,
+    travel_mm: float = 0.0,
 ) -> list[PadContact]:
     """Seat parts against one pad and find their contact (METHOD §6).
 
@@ -98,6 +104,13 @@ def seat(
     first feasible offset found that way is bisected back to within ``eps / 8``
     of the last infeasible one.
 
+    Then, as the gripper closes, the pad travels on toward the part until
+    contact, by at most ``travel_mm`` (:func:`fcso.printfit.closing_travel_mm`:
+    a pocket carved with a clearance leaves a gap to close). Each step
+    advances by the smallest sample distance, which no sample can cross,
+    until a sample is within ``eps / 8`` of the pad. ``travel_mm = 0``
+    (no clearance) is METHOD §6 exactly.
+
     Parameters
     ----------
     samples : list of SurfaceSamples
@@ -106,20 +119,27 @@ def seat(
         The fingerpad ``P`` (pad frame, closed mesh).
     eps_mm : float
         Contact tolerance.
+    travel_mm : float
+        Farthest advance of the pad past the METHOD §6 seat, mm.
 
     Returns
     -------
     list of PadContact
         One per entry of ``samples``.
     """
+    # zero-area triangles (slivers of Booleans) have no normal and would corrupt the
+    # angle-weighted pseudonormals that give the distance its sign; the surface is the same
+    corners = pad_vertices[pad_faces]
+    doubled_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    pad_faces = pad_faces[doubled_area > 1e-12]
     counts = [len(s.points) for s in samples]
     everything = np.vstack([s.points for s in samples]) if sum(counts) else np.zeros((0, 3))
     # one distance query for all geometries at t = 0: most never move
     initial = np.split(_signed_distance(everything, pad_vertices, pad_faces), np.cumsum(counts)[:-1])
-    return [_seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations) for s, d in zip(samples, initial)]
+    return [_seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm) for s, d in zip(samples, initial)]
 
 
-def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations) -> PadContact:
+def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm=0.0) -> PadContact:
     if len(samples.points) == 0:
         return PadContact(0.0, 0.0, np.zeros(0, dtype=bool))
     step_floor = eps_mm / 8.0
@@ -158,8 +178,22 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
             else:
                 low = middle
         offset, distances = high, feasible
+    if travel_mm > 0:
+        offset, distances = _close_gap(samples.points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations)
     contact = np.abs(distances) <= eps_mm
     return PadContact(offset, float(contact.sum()) * samples.area_per_point_mm2, contact)
+
+
+def _close_gap(points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations):
+    """Advance the pad toward the part (``t`` decreasing) until contact or ``travel_mm``; returns the offset and distances."""
+    limit = offset - travel_mm
+    for _ in range(max_iterations):
+        gap = float(distances.min())
+        if gap <= eps_mm / 8.0 or offset <= limit:
+            break
+        offset = max(offset - gap, limit)
+        distances = _signed_distance(points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
+    return offset, distances
 
 
 def _signed_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

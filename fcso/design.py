@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,12 +22,15 @@ from .grasps import tcp_pose
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
+from .printfit import carve, closing_travel_mm, open_thin_walls, thinnest_wall_mm
 from .report import (
     CandidateReport,
     DesignReport,
     FingerReport,
     GraspReport,
     PartReport,
+    PrintFitEffect,
+    PrintFitReport,
     SampleReport,
     ScenarioQuality,
     ScenarioReport,
@@ -314,12 +318,14 @@ def design(
     timings["exact"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    best = _evaluate(scenarios, best_choice, config, keep_pad=True)
+    best = _evaluate(scenarios, best_choice, config, keep_pad=True, fitted=True)
     transform = pad_to_finger(finger, config.sampler)
     fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
-    floor = config.sampler.thickness_mm - config.sampler.penetration_mm
+    # a clearance deepens the pocket by c: the carving demands that much less
+    floor = config.sampler.thickness_mm - config.sampler.penetration_mm - config.print.resolved()["clearance_mm"]
     if fused.min_pad_thickness_mm < floor - 1e-3:
-        warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D = {floor:.3f} mm")
+        warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D - clearance = {floor:.3f} mm")
+    print_fit = _print_fit_report(scenarios, best_choice, best, config, warnings)
     timings["finger"] = time.perf_counter() - clock
 
     report = DesignReport(
@@ -352,6 +358,7 @@ def design(
         timings_s={k: round(v, 3) for k, v in timings.items()},
         warnings=warnings,
         settings=config,
+        print_fit=print_fit,
     )
     return DesignResult(
         report=report,
@@ -522,14 +529,31 @@ def contact_samples(
     return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
 
 
-def _evaluate(scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool) -> CandidateEvaluation:
+def _evaluate(
+    scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool, fitted: bool = False
+) -> CandidateEvaluation:
+    """Carve, seat and score one candidate (METHOD §4-7).
+
+    ``fitted`` (the chosen candidate) carves with the clearance and lead-in
+    of ``[print]``, removes thin walls and lets the pads close the clearance
+    (:mod:`fcso.printfit`); the search ranks candidates on exact pockets.
+    """
     chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
     geometries = [g for sample in chosen for g in sample.geometries]
+    fit = config.print.resolved()
+    if fitted:
+        geometries = _fitted_geometries(scenarios, chosen, config)
     fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
+    if fitted:
+        sampler = config.sampler
+        opened = open_thin_walls(fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, fit["min_wall_mm"])
+        fingerpad = Fingerpad(opened, fingerpad.case, fingerpad.block_depth_mm)
     pad_mesh = fingerpad.pad.to_mesh()
     vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
     faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
-    seated = iter(seat([surface for sample in chosen for surface in sample.surfaces], vertices, faces, config.contact.eps_mm))
+    travel = closing_travel_mm(fit["clearance_mm"]) if fitted else 0.0
+    surfaces = [surface for sample in chosen for surface in sample.surfaces]
+    seated = iter(seat(surfaces, vertices, faces, config.contact.eps_mm, travel_mm=travel))
     results = []
     for sample in chosen:
         contacts = (next(seated), next(seated))
@@ -552,8 +576,57 @@ def _evaluate(scenarios: list[Scenario], choice: tuple[int, ...], config: Design
     )
 
 
+def _fitted_geometries(scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig) -> list[PadGeometry]:
+    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving."""
+    fit = config.print.resolved()
+    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+        return [g for sample in chosen for g in sample.geometries]
+    sampler = config.sampler
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    fitted = []
+    for scenario, sample in zip(scenarios, chosen):
+        part = to_manifold(scenario.mesh)
+        for geometry, frame in zip(sample.geometries, sample.frames):
+            if geometry.good:
+                carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
+                geometry = dataclasses.replace(geometry, intersection=carved)
+            fitted.append(geometry)
+    return fitted
+
+
 def _round(value: float) -> float:
     return round(float(value), 6)
+
+
+def _print_fit_report(
+    scenarios: list[Scenario], choice: tuple[int, ...], best: CandidateEvaluation, config: DesignConfig, warnings: list[str]
+) -> PrintFitReport:
+    """``[print]`` as used, the chosen pad's thinnest wall, and the chosen candidate exact (METHOD §4-6) and as printed."""
+    fit = config.print.resolved()
+    sampler = config.sampler
+    exact = _evaluate(scenarios, choice, config, keep_pad=True) if any(v > 0 for k, v in fit.items() if k != "density_g_cm3") else best
+    thinnest = thinnest_wall_mm(best.fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    # the opening's ball is a polyhedron and the wall is measured by rays: 0.05 mm of slack
+    if fit["min_wall_mm"] > 0 and thinnest < fit["min_wall_mm"] - 0.05:
+        warnings.append(f"the pad keeps a wall of {thinnest:.3f} mm, thinner than print.min_wall_mm = {fit['min_wall_mm']:.3f} mm")
+    box_volume = sampler.thickness_mm * sampler.length_mm * sampler.width_mm
+
+    def effect(evaluation: CandidateEvaluation) -> PrintFitEffect:
+        return PrintFitEffect(
+            pocket_volume_mm3=_round(box_volume - evaluation.fingerpad.pad.volume()),
+            contact_area_mm2=[_round(e.contact_area_mm2) for e in evaluation.scenarios],
+            effective_area=[_round(e.effective_area) for e in evaluation.scenarios],
+            seat_offsets_mm=[[_round(c.offset_mm) for c in e.contacts] for e in evaluation.scenarios],
+            quality=_round(evaluation.quality),
+        )
+
+    return PrintFitReport(
+        profile=config.print.profile,
+        **{k: _round(v) for k, v in fit.items()},
+        thinnest_wall_mm=_round(thinnest) if np.isfinite(thinnest) else None,
+        exact=effect(exact),
+        fitted=effect(best),
+    )
 
 
 def _part_report(part: Part) -> PartReport:

@@ -26,6 +26,7 @@ from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
 from .pad import surface_in_pad
 from .parallel import WorkerPool, resolve_jobs
+from .printfit import closing_travel_mm
 from .parts import Part, load_parts
 from .render import (
     PadPlacement,
@@ -169,7 +170,8 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
             contact_samples(*surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number)
             for side_number, frame in enumerate(frames)
         ]
-        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm)
+        travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
+        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
         placements = [PadPlacement(f, c.offset_mm, s, c.contact) for f, c, s in zip(frames, contacts, surfaces)]
         normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for f, c, s in zip(frames, contacts, surfaces)])
         radius, centre = largest_empty_cap(normals)
@@ -335,6 +337,8 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
             if len(report.candidates) > FOLDED_ROWS
             else table,
         ]
+    if report.print_fit is not None:
+        body += _print_fit_section(report)
     if report.placement is not None:
         body += _placement_section(report.placement)
     body += [
@@ -390,6 +394,38 @@ def _placement_section(placement: dict) -> list[str]:
         "<h2>Build placement</h2>",
         _key_value_table(summary),
         f"<table><tr>{header}</tr>{''.join(rows)}</table>",
+    ]
+
+
+def _print_fit_section(report: DesignReport) -> list[str]:
+    """[print] as used and the chosen candidate carved exactly (METHOD §4-6) and as printed."""
+    fit = report.print_fit
+    settings = [
+        ("profile", fit.profile),
+        ("clearance", f"{fit.clearance_mm:g} mm"),
+        ("lead-in", f"{fit.lead_in_deg:g}°"),
+        ("minimum wall", f"{fit.min_wall_mm:g} mm"),
+        ("material density", f"{fit.density_g_cm3:g} g/cm³"),
+        ("thinnest pad wall", "none" if fit.thinnest_wall_mm is None else f"{fit.thinnest_wall_mm:.2f} mm"),
+    ]
+    titles = _scenario_titles(report)
+    header = "<tr><th class=\"text\">chosen candidate</th><th>pocket volume (mm³)</th><th>Q (mm²)</th>" + "".join(
+        f"<th>A {_text(t)} (mm²)</th><th>seat offsets {_text(t)} (mm)</th>" for t in titles
+    ) + "</tr>"
+    rows = []
+    for label, effect in (("exact pocket (METHOD §4-6)", fit.exact), ("as printed (clearance, lead-in, walls)", fit.fitted)):
+        cells = "".join(
+            f"<td>{a:.1f}</td><td>{', '.join(f'{t:+.3f}' for t in offsets)}</td>"
+            for a, offsets in zip(effect.contact_area_mm2, effect.seat_offsets_mm)
+        )
+        rows.append(f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td><td>{effect.quality:.1f}</td>{cells}</tr>')
+    return [
+        "<h2>Printed fit</h2>",
+        "<p>The finger is carved with the clearance and lead-in of <code>[print]</code>, and pad walls thinner than the "
+        "minimum are removed; as the gripper closes, the pads travel on toward the part until contact (negative seat "
+        "offsets), so a clearance costs quality only where it changes how the part seats.</p>",
+        _key_value_table(settings),
+        f"<table>{header}{''.join(rows)}</table>",
     ]
 
 

@@ -130,6 +130,29 @@ class FingerReport(_Model):
     min_pad_thickness_mm: float
 
 
+class PrintFitEffect(_Model):
+    """The chosen candidate carved one way (exact or with clearance and lead-in), both after thin-wall removal."""
+
+    pocket_volume_mm3: float = Field(description="Pad box volume minus pad volume, mm³")
+    contact_area_mm2: list[float] = Field(description="A per scenario (same order as scenarios), mm²")
+    effective_area: list[float] = Field(description="E per scenario, mm²")
+    seat_offsets_mm: list[list[float]] = Field(description="Seating offset t of the + and - pads per scenario (negative: the pad closed a clearance), mm")
+    quality: float = Field(description="Q = min E, mm²")
+
+
+class PrintFitReport(_Model):
+    """``[print]`` as used and what clearance and lead-in changed on the chosen candidate."""
+
+    profile: str
+    clearance_mm: float = Field(description="Effective clearance (profile or explicit), mm")
+    lead_in_deg: float = Field(description="Effective lead-in draft, degrees")
+    min_wall_mm: float = Field(description="Effective minimum wall, mm")
+    density_g_cm3: float = Field(description="Effective part material density, g/cm³")
+    thinnest_wall_mm: float | None = Field(description="Thinnest wall of the chosen pad (fused side excluded), mm; null for an empty pad")
+    exact: PrintFitEffect = Field(description="The chosen candidate with the exact pocket of METHOD §4 (no clearance, no lead-in)")
+    fitted: PrintFitEffect = Field(description="The chosen candidate as designed, with clearance and lead-in")
+
+
 class DesignReport(_Model):
     """Everything ``fcso design`` decided and why (``report.json``)."""
 
@@ -147,6 +170,7 @@ class DesignReport(_Model):
     timings_s: dict[str, float] = Field(description="Wall time per stage, s (the only field that varies between identical runs)")
     warnings: list[str]
     settings: DesignConfig
+    print_fit: PrintFitReport | None = Field(None, description="[print] as used and what clearance and lead-in changed")
     placement: dict | None = Field(
         None, description="Where the finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
     )

@@ -17,6 +17,7 @@ from fcso.config import (
     FilterConfig,
     GripperConfig,
     PosesConfig,
+    PrintConfig,
     SamplerConfig,
     SearchConfig,
     format_validation_error,
@@ -268,6 +269,7 @@ OVERRIDE_SECTIONS: dict[str, type[BaseModel]] = {
     "poses": PosesConfig,
     "contact": ContactConfig,
     "search": SearchConfig,
+    "print": PrintConfig,
 }
 
 
@@ -291,6 +293,7 @@ class JobManifest(_Section):
     poses: PosesConfig | None = None
     contact: ContactConfig | None = None
     search: SearchConfig | None = None
+    print: PrintConfig | None = Field(None, description="Printer profile, clearance, lead-in and minimum wall (fcso [print])")
     build: BuildConfig | None = Field(None, description="Overrides of the daemon's [build] settings, key by key")
     verify: VerifySettings | None = Field(None, description="The job's own [verify] settings (replace the daemon's)")
 

@@ -1,0 +1,302 @@
+"""Fingers that fit after printing: clearance, lead-ins and thin walls of the pocket.
+
+METHOD §4 carves the exact negative of the part. A printed part and a
+printed finger both deviate from their meshes, so this module carves the
+pocket from the part grown by a clearance ``c`` (an offset surface,
+``I_n = S ∩ (G_n ⊕ ball(c))``), drafts its walls by a lead-in angle so that
+a displaced part is guided in as the fingers close, and removes pad walls
+thinner than the printer can make (a morphological opening).
+
+Seating rule with a clearance (used by :func:`fcso.contact.seat`): as the
+gripper closes, both pads travel toward the part until contact. A pad may
+advance past the METHOD §6 seat by at most :func:`closing_travel_mm`
+(``2 c``: enough to close the clearance on every pocket wall within 60
+degrees of facing the pad), so with ``c = 0`` seating is METHOD §6 exactly.
+A clearance therefore changes the quality only through where the part
+seats: walls that face the pad get back into contact after the advance;
+walls parallel to the closing axis keep their gap ``c`` and drop out of
+contact, as they do in a real clearance fit.
+
+All Minkowski sums are with convex kernels and done exactly as unions of
+convex hulls, one per triangle (``X ⊕ K = X ∪ ⋃_t hull(t ⊕ K)`` for a solid
+``X`` and convex ``K``), with manifold3d. Round kernels are polyhedra that
+contain the round shape, so grown pockets are never smaller than asked.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import manifold3d
+import numpy as np
+import trimesh
+
+from .geometry import affine_3x4, box, to_trimesh
+
+#: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
+BALL_SEGMENTS = 12
+#: Facets of the lead-in cone's base circle (circumscribed: the draft is never under the angle).
+CONE_SEGMENTS = 32
+
+
+@lru_cache(maxsize=8)
+def _unit_ball_points(segments: int) -> np.ndarray:
+    """Vertices of manifold3d's sphere scaled so that its facets contain the unit ball."""
+    mesh = manifold3d.Manifold.sphere(1.0, segments).to_mesh()
+    vertices = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
+    triangles = vertices[np.asarray(mesh.tri_verts)]
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    inradius = float(np.abs(np.einsum("ij,ij->i", normals, triangles[:, 0])).min())
+    return vertices / inradius
+
+
+def ball_points(radius_mm: float, segments: int = BALL_SEGMENTS) -> np.ndarray:
+    """Vertices of a convex polyhedron that contains the ball of ``radius_mm`` (centre at the origin).
+
+    Returns
+    -------
+    (k, 3) float
+        mm.
+    """
+    return _unit_ball_points(segments) * radius_mm
+
+
+def cone_points(height_mm: float, angle_deg: float, segments: int = CONE_SEGMENTS) -> np.ndarray:
+    """Vertices of the lead-in cone: apex at the origin, axis along ``-u``, half-angle ``angle_deg``.
+
+    The base polygon at ``u = -height_mm`` circumscribes the circle of radius
+    ``height_mm · tan(angle)``, so the draft is at least the angle in every
+    direction and at most ``1 / cos(π / segments) - 1`` (0.5 %) wider.
+
+    Returns
+    -------
+    (segments + 1, 3) float
+        mm, pad frame (u, v, w).
+    """
+    radius = height_mm * np.tan(np.radians(angle_deg)) / np.cos(np.pi / segments)
+    angles = 2.0 * np.pi * np.arange(segments) / segments
+    base = np.column_stack([np.full(segments, -height_mm), radius * np.cos(angles), radius * np.sin(angles)])
+    return np.vstack([np.zeros((1, 3)), base])
+
+
+def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
+    """Minkowski sum of a solid with the convex hull of ``kernel`` points.
+
+    ``X ⊕ K = X ∪ (∂X ⊕ K)`` (exact for any solid ``X`` and convex ``K``
+    containing the origin; :func:`surface_sweep`).
+
+    Parameters
+    ----------
+    solid : manifold3d.Manifold
+    kernel : (k, 3) float
+        Points whose convex hull is the kernel; it must contain the origin.
+
+    Returns
+    -------
+    manifold3d.Manifold
+    """
+    if solid.is_empty():
+        return solid
+    return solid + surface_sweep(solid, kernel)
+
+
+def surface_sweep(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
+    """``∂X ⊕ K``: the solid's surface swept by a convex kernel, ``⋃_t hull(t ⊕ K)`` over its triangles ``t``.
+
+    A point ``x + k`` outside ``X`` lies in ``b + K`` for the last point ``b``
+    where the segment from ``x`` to ``x + k`` leaves ``X``, and the outward
+    normal ``n`` there has ``n · k >= 0``: triangles with ``n · k < 0`` for
+    every kernel point add nothing and are skipped.
+    """
+    mesh = solid.to_mesh()
+    vertices = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
+    triangles = vertices[np.asarray(mesh.tri_verts)]
+    kernel = np.asarray(kernel, dtype=np.float64)
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    triangles = triangles[(normals @ kernel.T).max(axis=1) >= 0]
+    hulls = [manifold3d.Manifold.hull_points((t[:, None, :] + kernel[None]).reshape(-1, 3)) for t in triangles]
+    return manifold3d.Manifold.batch_boolean(hulls, manifold3d.OpType.Add) if hulls else manifold3d.Manifold()
+
+
+def grow(part: manifold3d.Manifold, clearance_mm: float) -> manifold3d.Manifold:
+    """The part grown by the clearance: ``G ⊕ ball(c)`` (the part itself when ``c = 0``).
+
+    An offset surface, not a scale: every point of the grown surface is at
+    least ``c`` from the part (the ball kernel contains the ball).
+    """
+    if clearance_mm <= 0:
+        return part
+    return minkowski_convex(part, ball_points(clearance_mm))
+
+
+def draft(geometry: manifold3d.Manifold, pad_box: manifold3d.Manifold, height_mm: float, lead_in_deg: float) -> manifold3d.Manifold:
+    """The pocket geometry with its walls drafted by the lead-in: ``I ⊕ cone``, clipped to a box.
+
+    Every point of ``I`` at depth ``u`` widens the pocket at every shallower
+    ``u' < u`` by ``(u - u') tan(angle)``: the opening at the pad face
+    (``u = 0``) is wider than the pocket at depth ``d`` by ``d tan(angle)``
+    per side, faces of the part that face the pad (the deepest points) stay
+    exact, and undercuts are filled toward the pad face, so the part can
+    enter along the closing axis. A Minkowski sum with a cone keeps the angle
+    for any pocket shape, where scaling an extrusion would not.
+
+    Parameters
+    ----------
+    geometry : manifold3d.Manifold
+        ``I_n`` (grown by the clearance), pad frame.
+    pad_box : manifold3d.Manifold
+        The box the result is clipped to (``S`` or larger).
+    height_mm : float
+        Deepest ``u`` of ``geometry`` (``D + c``): the cone's height.
+    lead_in_deg : float
+        0 returns ``geometry`` unchanged.
+    """
+    if lead_in_deg <= 0 or geometry.is_empty():
+        return geometry
+    return minkowski_convex(geometry, cone_points(height_mm, lead_in_deg)) ^ pad_box
+
+
+def carve(
+    part: manifold3d.Manifold,
+    frame: np.ndarray,
+    size_mm: tuple[float, float, float],
+    depth_mm: float,
+    clearance_mm: float,
+    lead_in_deg: float,
+) -> manifold3d.Manifold:
+    """What one good pad geometry removes from the pad when printed fit is on.
+
+    ``S ∩ (G_n ⊕ ball(c))`` drafted by the lead-in. Only the part within
+    ``c`` of the pad box can reach into it, so the part is clipped to the box
+    grown by ``c`` before it is grown (the same set, far fewer triangles).
+
+    Parameters
+    ----------
+    part : manifold3d.Manifold
+        The part in its resting frame (mm).
+    frame : (4, 4) float
+        Resting frame to pad frame.
+    size_mm : (T, L, W)
+        The pad box.
+    depth_mm : float
+        Penetration D.
+    clearance_mm, lead_in_deg : float
+        0 and 0 give the exact ``I_n = S ∩ G_n`` of METHOD §4.
+
+    Returns
+    -------
+    manifold3d.Manifold
+        Pad frame; with clearance or lead-in it reaches up to 1 mm beyond
+        ``S``, which only matters inside ``S``.
+    """
+    pad_box = box((0.0, 0.0, 0.0), size_mm)
+    local = part.transform(affine_3x4(frame))
+    if clearance_mm <= 0 and lead_in_deg <= 0:
+        return local ^ pad_box
+    if clearance_mm > 0:
+        margin = clearance_mm + 1e-3
+        local = grow(local ^ box((-margin,) * 3, tuple(x + margin for x in size_mm)), clearance_mm)
+    # clipped to a box 1 mm larger than S: no face of the carving lies on a face of S,
+    # where subtracting it would leave zero-thickness pad sheets
+    outer = box((-1.0,) * 3, tuple(x + 1.0 for x in size_mm))
+    carved = local ^ outer
+    if lead_in_deg > 0:
+        carved = carved + draft(local ^ pad_box, outer, depth_mm + clearance_mm, lead_in_deg)
+    return carved
+
+
+def closing_travel_mm(clearance_mm: float) -> float:
+    """How far past the METHOD §6 seat a pad may advance toward the part as the gripper closes.
+
+    ``2 c`` closes the clearance on every wall whose normal is within 60
+    degrees of the closing axis (``c / cos 60°``); 0 without clearance, so
+    seating is METHOD §6 exactly.
+    """
+    return 2.0 * clearance_mm
+
+
+def _backed(pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, backing_mm: float) -> manifold3d.Manifold:
+    """The pad with a slab behind its back face (``u`` in ``[T, T + backing]``): material fused to the finger is never a thin wall."""
+    return pad + box((thickness_mm - 1e-3, 0.0, 0.0), (thickness_mm + backing_mm, length_mm, width_mm))
+
+
+def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, min_wall_mm: float) -> manifold3d.Manifold:
+    """Remove pad walls and slivers thinner than ``min_wall_mm``: a morphological opening.
+
+    ``P ∘ B = (P ⊖ B) ⊕ B`` with ``B`` a ball of diameter ``min_wall_mm``:
+    what no such ball inside the pad can reach goes. The erosion is
+    ``P − (∂P ⊕ B)``. The pad is opened with a slab behind its back face
+    (it is fused to the finger there), then clipped back to the pad box. An
+    opening never adds material, so a clearance stays a clearance. Convex
+    edges of the pad are rounded to radius ``min_wall_mm / 2``; a pad whose
+    thinnest wall (:func:`thinnest_wall_mm`) already meets the minimum is
+    returned unchanged.
+
+    Parameters
+    ----------
+    pad : manifold3d.Manifold
+        ``P``, pad frame (mm).
+    thickness_mm, length_mm, width_mm : float
+        T, L and W of the pad box.
+    min_wall_mm : float
+        0 returns ``pad`` unchanged.
+
+    Returns
+    -------
+    manifold3d.Manifold
+        The opened pad, only its pieces attached to the back face.
+    """
+    # no wall under the minimum: the opening would only round convex edges, so skip it
+    if min_wall_mm <= 0 or thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
+        return pad
+    kernel = ball_points(min_wall_mm / 2.0)
+    backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm)
+    eroded = backed - surface_sweep(backed, kernel)
+    opened = minkowski_convex(eroded, kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm))
+    pieces = [p for p in opened.decompose() if p.bounding_box()[3] >= thickness_mm - 1e-4]
+    return manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add) if len(pieces) > 1 else (pieces[0] if pieces else opened)
+
+
+def thinnest_wall_mm(
+    pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, density_per_mm2: float = 2.0, seed: int = 0
+) -> float:
+    """The pad's thinnest wall: the shortest run of material behind its surface, mm.
+
+    Points spread by area over the pad's surface in front of its back face
+    (``u < T``); from each, a ray goes into the material along the inward
+    normal, and the wall there is the distance to where it leaves. The pad
+    is measured with a slab behind its back face, as it is fused to the
+    finger, so the section to the back face is not a wall.
+
+    Returns
+    -------
+    float
+        mm; ``inf`` for an empty pad.
+    """
+    backing = 2.0 * thickness_mm
+    mesh = to_trimesh(_backed(pad, thickness_mm, length_mm, width_mm, backing))
+    if len(mesh.faces) == 0:
+        return float("inf")
+    count = max(int(np.ceil(mesh.area * density_per_mm2)), 1)
+    points, faces = trimesh.sample.sample_surface(mesh, count, seed=seed)
+    front = points[:, 0] < thickness_mm - 1e-6
+    points, normals = points[front], mesh.face_normals[faces[front]]
+    if len(points) == 0:
+        return float("inf")
+    # start just outside the surface: the first hit is the entry, the second the exit
+    lift = 1e-3
+    origins = points + lift * normals
+    with np.errstate(divide="ignore", invalid="ignore"):  # trimesh's barycentrics of sliver triangles
+        locations, rays, _ = mesh.ray.intersects_location(origins, -normals, multiple_hits=True)
+    distances = np.einsum("ij,ij->i", locations - origins[rays], -normals[rays])
+    order = np.lexsort((distances, rays))
+    rays, distances = rays[order], distances[order]
+    # a ray through a shared edge or vertex reports one crossing several times
+    distinct = np.r_[True, (rays[1:] != rays[:-1]) | (np.diff(distances) > 1e-5)]
+    rays, distances = rays[distinct], distances[distinct]
+    first = np.r_[True, rays[1:] != rays[:-1]]
+    second = np.r_[False, first[:-1]] & ~first
+    if not second.any():
+        return float("inf")
+    return float((distances[second] - distances[np.flatnonzero(second) - 1]).min())
