@@ -186,27 +186,14 @@ def daemon_zenoh_config(listen: list[str], key_dir: Path, acl: dict | None) -> d
 
     ``key_dir`` is where the daemon reads ``ca.pem``, ``cert.pem`` and ``key.pem`` at run time.
     """
-    config: dict = {
-        "mode": "peer",
-        "listen": {"endpoints": listen},
-        "connect": {"endpoints": []},
-        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        "transport": {
-            "link": {
-                "protocols": ["tls"],
-                "tls": {
-                    "root_ca_certificate": str(key_dir / "ca.pem"),
-                    "listen_certificate": str(key_dir / "cert.pem"),
-                    "listen_private_key": str(key_dir / "key.pem"),
-                    "connect_certificate": str(key_dir / "cert.pem"),
-                    "connect_private_key": str(key_dir / "key.pem"),
-                    "enable_mtls": True,
-                    "verify_name_on_connect": True,
-                    "close_link_on_expiration": True,
-                },
-            }
-        },
+    tls = {
+        "root_ca_certificate": str(key_dir / "ca.pem"),
+        "listen_certificate": str(key_dir / "cert.pem"),
+        "listen_private_key": str(key_dir / "key.pem"),
+        **_tls_connect(key_dir),
+        "close_link_on_expiration": True,
     }
+    config: dict = _tls_session("peer", listen=listen, connect=[], tls=tls)
     if acl is not None:
         config["access_control"] = acl
     return config
@@ -214,23 +201,27 @@ def daemon_zenoh_config(listen: list[str], key_dir: Path, acl: dict | None) -> d
 
 def client_zenoh_config(connect: list[str], key_dir: Path) -> dict:
     """A cell controller's zenoh session: client mode, connecting over TLS with its certificate."""
+    return _tls_session("client", listen=[], connect=connect, tls={"root_ca_certificate": str(key_dir / "ca.pem"), **_tls_connect(key_dir)})
+
+
+def _tls_connect(key_dir: Path) -> dict:
+    """The certificate a session presents when it connects, with mutual TLS and the peer's name checked."""
     return {
-        "mode": "client",
+        "connect_certificate": str(key_dir / "cert.pem"),
+        "connect_private_key": str(key_dir / "key.pem"),
+        "enable_mtls": True,
+        "verify_name_on_connect": True,
+    }
+
+
+def _tls_session(mode: str, listen: list[str], connect: list[str], tls: dict) -> dict:
+    """A zenoh session config on TLS links only, scouting off."""
+    return {
+        "mode": mode,
+        "listen": {"endpoints": listen},
         "connect": {"endpoints": connect},
-        "listen": {"endpoints": []},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        "transport": {
-            "link": {
-                "protocols": ["tls"],
-                "tls": {
-                    "root_ca_certificate": str(key_dir / "ca.pem"),
-                    "connect_certificate": str(key_dir / "cert.pem"),
-                    "connect_private_key": str(key_dir / "key.pem"),
-                    "enable_mtls": True,
-                    "verify_name_on_connect": True,
-                },
-            }
-        },
+        "transport": {"link": {"protocols": ["tls"], "tls": tls}},
     }
 
 
