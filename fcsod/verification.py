@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from fcso.html_report import rebuild_report
 from fcso.render import decimate
 from fcso.sim.choose import ranking_html, verify_top
-from fcso.sim.config import VerifyConfig
+from fcso.sim.config import VerifyConfig, with_print_density
 from fcso.sim.html import pad_in_world
 from fcso.sim.report import VerificationReport
 from fcso.sim.verify import DesignUnderTest, design_under_test, verify, write_verification
@@ -79,7 +79,7 @@ def choose_by_verification(run) -> None:
     settings = _settings(run)
     if settings.top_k <= 0:
         return
-    chosen, verification, design, ranking = verify_top(run.result, settings.top_k, VerifyConfig(trials=settings.trials), _progress(run.log))
+    chosen, verification, design, ranking = verify_top(run.result, settings.top_k, with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings), _progress(run.log))
     run.result = chosen
     run.verified = (verification, design, ranking_html(ranking))
     run.log("info", f"verification chose candidate {chosen.report.best} among the {len(ranking)} best by Q")
@@ -107,7 +107,7 @@ def verify_done_job(run, final_dir: Path) -> None:
         else:
             log("info", "verification: started")
             design = design_under_test(run.result)
-            verification, extra = verify(design, VerifyConfig(trials=settings.trials), _progress(log)), ""
+            verification, extra = verify(design, with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings), _progress(log)), ""
         write_verification(final_dir, verification, design, extra)
         bus = run.task.config.bus
         message = BusMessage.json_body(bus.prefix, bus.cell, "verification", _message(run.task.job_id, verification))

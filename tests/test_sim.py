@@ -110,3 +110,15 @@ def test_collision_pieces_hug_the_part_and_the_pad(ridged):
             outside = igl.signed_distance(surface, np.asarray(target.vertices, dtype=float), np.asarray(target.faces, dtype=np.int64))[0]
             # CoACD's pieces stand out up to ~0.12 mm here; its voxel preprocessing made it 0.3-0.8 mm
             assert outside.max() <= 0.15
+
+
+def test_verification_takes_the_part_density_from_the_print_profile():
+    from fcso.config import DesignConfig
+    from fcso.sim.config import VerifyConfig, with_print_density
+
+    fdm = DesignConfig().updated({"print": {"profile": "fdm-pla"}})
+    # PLA, 1.24-1.25 g/cm³ (the profile's cited sheet), unless [verify] sets a density itself
+    assert with_print_density(VerifyConfig(trials=3), fdm).density_g_cm3 == pytest.approx(1.25)
+    assert with_print_density(VerifyConfig(trials=3, density_g_cm3=1.1), fdm).density_g_cm3 == pytest.approx(1.1)
+    explicit = DesignConfig().updated({"print": {"profile": "fdm-pla", "density_g_cm3": 1.3}})
+    assert with_print_density(VerifyConfig(), explicit).density_g_cm3 == pytest.approx(1.3)

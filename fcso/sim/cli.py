@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .config import VerifyConfig, load_verify_config
+from .config import VerifyConfig, load_verify_config, with_print_density
 from .report import VerificationReport
 
 
@@ -50,8 +50,8 @@ def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
     from .verify import load_design, verify, write_verification
 
-    config = settings(args)
-    _, design = load_design(args.directory)
+    report, design = load_design(args.directory)
+    config = with_print_density(settings(args), report.settings)
     try:
         verification = verify(design, config, progress)
     finally:
@@ -86,7 +86,7 @@ def verify_design_outputs(result, args, progress) -> int:
     from .choose import ranking_html, verify_top
     from .verify import design_under_test, verify, write_verification
 
-    config = settings(args)
+    config = with_print_density(settings(args), result.report.settings)
     try:
         if args.verify_top > 0:
             chosen, verification, design, ranking = verify_top(result, args.verify_top, config, progress)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from ..config import format_validation_error, read_toml
+from ..config import DesignConfig, format_validation_error, read_toml
 from ..errors import ConfigError
 
 
@@ -77,3 +77,17 @@ def load_verify_config(path: str | Path | None) -> VerifyConfig:
         return VerifyConfig.model_validate(table)
     except ValidationError as exc:
         raise ConfigError(path, format_validation_error(exc)) from None
+
+
+def with_print_density(config: VerifyConfig, design: DesignConfig) -> VerifyConfig:
+    """``config`` with the part density of the design's ``[print]`` profile, unless ``[verify]`` set its own.
+
+    Parameters
+    ----------
+    config : VerifyConfig
+    design : DesignConfig
+        The settings the design was made with (its ``report.json`` keeps them).
+    """
+    if "density_g_cm3" in config.model_fields_set:
+        return config
+    return config.model_copy(update={"density_g_cm3": design.print.resolved()["density_g_cm3"]})
