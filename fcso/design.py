@@ -40,7 +40,7 @@ from .report import (
 from .rles import rles
 from .parallel import WorkerPool, resolve_jobs
 from .sampler import SIDES, GraspSample, SamplerResult, sample_grasps
-from .screen import NormalLattice, ScreenedCandidate, ScreenGeometry, ScreenGrid, column_heights, prepare_geometry, screen, screened_bound
+from .screen import NormalLattice, ScreenedCandidate, ScreenGeometry, ScreenGrid, carve_heights, column_heights, prepare_geometry, screen, screened_bound
 from .search import candidate_index, quality_upper_bound, search
 
 #: ``progress(stage, done, total, note)``: called as long work advances; ``note``
@@ -461,7 +461,11 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
     screens, config, lattice = context
-    scored = [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice) for choice in choices]
+    # a batch of coordinate moves shares every scenario but one: carve those once
+    first = choices[0]
+    shared = [m for m in range(len(first)) if all(choice[m] == first[m] for choice in choices)]
+    carved = carve_heights([screens[m][k] for m, k in enumerate(first)], shared) if len(choices) > 1 and len(shared) > 1 else None
+    scored = [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
     return [(c.quality, c.mean_effective_area) for c in scored]
 
 

@@ -25,34 +25,71 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
     -------
     vertices, faces : ndarray
         The part of the surface inside the box (triangles cut exactly at
-        the box planes). ``faces`` is empty when nothing is inside.
+        the box planes). ``faces`` is empty when nothing is inside. Cut
+        triangles get vertices of their own: the result is a soup, not a
+        connected mesh.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     for axis in range(3):
         for bound, sign in ((lower[axis], 1.0), (upper[axis], -1.0)):
             if len(faces) == 0:
-                return vertices[:0], faces[:0]
-            if not np.isfinite(bound):
-                continue
-            coordinate = vertices[faces, axis] * sign
-            level = bound * sign
-            inside = coordinate.min(axis=1) >= level
-            straddling = ~inside & (coordinate.max(axis=1) >= level)
-            if not straddling.any():
-                faces = faces[inside]
-                continue
-            # only triangles crossing the plane are cut; the rest are kept or dropped whole
-            cut = faces[straddling]
-            used, remapped = np.unique(cut, return_inverse=True)
-            normal = np.zeros(3)
-            normal[axis] = sign
-            origin = np.zeros(3)
-            origin[axis] = bound
-            cut_vertices, cut_faces = trimesh.intersections.slice_faces_plane(vertices[used], remapped.reshape(-1, 3), normal, origin)[:2]
-            faces = np.vstack([faces[inside], np.asarray(cut_faces, dtype=np.int64) + len(vertices)])
-            vertices = np.vstack([vertices, cut_vertices])
+                return vertices, faces[:0]
+            if np.isfinite(bound):
+                vertices, faces = _clip_half_space(vertices, faces, axis, sign, bound * sign)
     return vertices, faces
+
+
+#: Vertices this close to a clipping plane count as on it (mm): parts and
+#: sample positions are built from round numbers and float32 files, so
+#: faces meant to lie in a box face otherwise fall out by one rounding step.
+PLANE_TOLERANCE_MM = 1e-7
+
+
+def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the surface where ``sign * x[axis] >= level`` (within :data:`PLANE_TOLERANCE_MM`).
+
+    Only triangles crossing the plane are cut (one vertex inside gives one
+    triangle, two give two); the rest are kept or dropped whole, so most
+    calls cost a comparison per triangle. A triangle lying in the plane is
+    kept when its normal points out of the kept side, that is when the solid
+    it bounds lies on the kept side (trimesh's rule), so a box's faces take
+    the part's faces that lie on them exactly once.
+    """
+    distance = vertices[:, axis][faces] * sign - level
+    is_inside = distance >= -PLANE_TOLERANCE_MM
+    is_on = np.abs(distance) <= PLANE_TOLERANCE_MM
+    inside_count = is_inside.sum(axis=1)
+    whole = inside_count == 3
+    on_plane = is_on.all(axis=1)
+    if on_plane.any():
+        corners = vertices[faces[on_plane]]
+        normal_along_axis = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, axis] * sign
+        whole[on_plane] = normal_along_axis < 0.0
+    kept = faces[whole]
+    crossing = (inside_count == 1) | (inside_count == 2)
+    if not crossing.any():
+        return vertices, kept
+    cut, cut_distance, cut_count = faces[crossing], distance[crossing], inside_count[crossing]
+    # roll each triangle so its odd vertex (the lone inside or lone outside one) comes first
+    cut_inside = cut_distance >= -PLANE_TOLERANCE_MM
+    odd = np.where(cut_count == 1, np.argmax(cut_inside, axis=1), np.argmax(~cut_inside, axis=1))
+    order = (odd[:, None] + np.arange(3)) % 3
+    cut = np.take_along_axis(cut, order, axis=1)
+    cut_distance = np.take_along_axis(cut_distance, order, axis=1)
+    first = vertices[cut[:, 0]]
+    # points where the edges from the odd vertex cross the plane
+    crossings = [first + (vertices[cut[:, k]] - first) * (cut_distance[:, 0] / (cut_distance[:, 0] - cut_distance[:, k]))[:, None] for k in (1, 2)]
+    count = len(cut)
+    start = len(vertices)
+    near_1, near_2 = start + np.arange(count), start + count + np.arange(count)
+    lone_inside = cut_count == 1
+    triangles = [
+        np.column_stack([cut[lone_inside, 0], near_1[lone_inside], near_2[lone_inside]]),
+        np.column_stack([near_1[~lone_inside], cut[~lone_inside, 1], cut[~lone_inside, 2]]),
+        np.column_stack([near_1[~lone_inside], cut[~lone_inside, 2], near_2[~lone_inside]]),
+    ]
+    return np.vstack([vertices, *crossings]), np.vstack([kept, *triangles])
 
 
 def triangle_areas_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -172,13 +172,13 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                 side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
             }
             heights = np.arange(clearance, top, stride)
+            bands = _Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
             for h in heights:
-                prism_v, prism_f = clip_to_box(slab_v, slab_f, (-_INF, -_INF, h), (_INF, _INF, h + width))
+                prism_v, prism_f, extent = bands.between(h, h + width)
                 if len(prism_f) == 0:
                     continue
                 tried += 1
-                a_used = prism_v[prism_f, 0]
-                a_max, a_min = float(a_used.max()), float(a_used.min())
+                a_min, a_max = extent
                 area_plus = _area(*clip_to_box(prism_v, prism_f, (a_max - depth, -_INF, -_INF), (_INF, _INF, _INF)))
                 area_minus = _area(*clip_to_box(prism_v, prism_f, (-_INF, -_INF, -_INF), (a_min + depth, _INF, _INF)))
                 if min(area_plus, area_minus) < sampler.min_contact_area:
@@ -198,7 +198,7 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
                     rejected["collision_finger"] += 1
                     continue
                 centre = (a_max + a_min) / 2.0
-                column = _a_range(slab_v, slab_f, h, _INF)
+                column = bands.above(h)
                 open_back = {1: centre + open_half, -1: centre - open_half}
                 if (column is not None and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)) or any(
                     plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
@@ -287,15 +287,55 @@ def _area(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(triangle_areas_normals(vertices, faces)[0].sum())
 
 
-def _a_range(vertices: np.ndarray, faces: np.ndarray, z_low: float, z_high: float) -> tuple[float, float] | None:
-    """Extent along ``a`` of the surface between two heights, or None if there is none.
+class _Bands:
+    """A slab's surface cut once into height bands, so every window of heights is a union of bands.
 
-    Within a b-slab the solid's extent along ``a`` equals its surface's, so
-    clipping the surface is an exact intersection test for the finger body
-    and the descent column.
+    The sampler's windows ``[h, h + W]`` and columns ``z >= h`` all start and
+    end on the given levels; cutting the slab at each level once replaces two
+    cuts per window, and the extents along ``a`` of the bands give the
+    window's and the column's extents without cutting at all. Within a
+    b-slab the solid's extent along ``a`` equals its surface's, so these
+    extents are exact intersection tests for the finger body and the descent
+    column.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The part surface clipped to a slab, ``(a, b, z)`` coordinates.
+    levels : (k,) float
+        Heights at which windows start or end, mm.
     """
-    clipped_v, clipped_f = clip_to_box(vertices, faces, (-_INF, -_INF, z_low), (_INF, _INF, z_high))
-    if len(clipped_f) == 0:
-        return None
-    used = clipped_v[clipped_f, 0]
-    return float(used.min()), float(used.max())
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, levels: np.ndarray):
+        self.levels = np.unique(levels)
+        self.bands: list[np.ndarray] = []
+        remaining = faces
+        for level in self.levels:
+            # each cut appends its new vertices, so earlier bands' indices stay valid
+            vertices, below = clip_to_box(vertices, remaining, (-_INF, -_INF, -_INF), (_INF, _INF, level))
+            vertices, remaining = clip_to_box(vertices, remaining, (-_INF, -_INF, level), (_INF, _INF, _INF))
+            self.bands.append(below)
+        self.bands.append(remaining)
+        self.vertices = vertices
+        extent = np.array([(vertices[band, 0].min(), vertices[band, 0].max()) if len(band) else (_INF, -_INF) for band in self.bands])
+        self.extent = extent
+        # everything above each band's bottom, for the descent column
+        self.above_min = np.minimum.accumulate(extent[::-1, 0])[::-1]
+        self.above_max = np.maximum.accumulate(extent[::-1, 1])[::-1]
+
+    def _first_band_above(self, level: float) -> int:
+        """Index of the band whose bottom is ``level`` (one of the levels given)."""
+        return int(np.searchsorted(self.levels, level)) + 1
+
+    def between(self, z_low: float, z_high: float) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+        """Surface between two levels, and its extent ``(a_min, a_max)`` along ``a``."""
+        first, last = self._first_band_above(z_low), self._first_band_above(z_high)
+        extent = self.extent[first:last]
+        return self.vertices, np.vstack(self.bands[first:last]), (float(extent[:, 0].min()), float(extent[:, 1].max()))
+
+    def above(self, z_low: float) -> tuple[float, float] | None:
+        """Extent along ``a`` of the surface above ``z_low``, or None if there is none."""
+        first = self._first_band_above(z_low)
+        if first >= len(self.bands) or self.above_min[first] > self.above_max[first]:
+            return None
+        return float(self.above_min[first]), float(self.above_max[first])

@@ -101,36 +101,58 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
     -------
     (count_v * count_w,) float32
         Largest ``u`` hit on each ray, mm; 0 where no triangle covers the cell centre.
+
+    Each triangle is scanned row by row of cell centres: the row's line
+    crosses the triangle's projection in one interval of ``w``, and every
+    centre in it takes the height of the triangle's plane there, so only
+    covered cells are visited.
     """
     heights = np.zeros(grid.count_v * grid.count_w, dtype=np.float64)
     if len(faces) == 0:
         return heights.astype(np.float32)
     triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    v, w = triangles[:, :, 1], triangles[:, :, 2]
-    # cell-centre index ranges covered by each triangle's (v, w) bounding box
-    j0 = np.clip(np.ceil(v.min(1) / grid.cell_mm - 0.5), 0, grid.count_v).astype(np.int64)
-    j1 = np.clip(np.floor(v.max(1) / grid.cell_mm - 0.5), -1, grid.count_v - 1).astype(np.int64)
-    k0 = np.clip(np.ceil(w.min(1) / grid.cell_mm - 0.5), 0, grid.count_w).astype(np.int64)
-    k1 = np.clip(np.floor(w.max(1) / grid.cell_mm - 0.5), -1, grid.count_w - 1).astype(np.int64)
-    span_j, span_k = np.maximum(j1 - j0 + 1, 0), np.maximum(k1 - k0 + 1, 0)
-    counts = span_j * span_k
-    # the projection's signed area; vertical triangles cover no cell centre of their own
+    u, v, w = triangles[:, :, 0], triangles[:, :, 1], triangles[:, :, 2]
     det = (v[:, 1] - v[:, 0]) * (w[:, 2] - w[:, 0]) - (v[:, 2] - v[:, 0]) * (w[:, 1] - w[:, 0])
-    counts[np.abs(det) < 1e-12] = 0
-    owner = np.repeat(np.arange(len(triangles)), counts)
-    if len(owner) == 0:
+    # vertical triangles (in projection) cover no cell centre of their own
+    keep = np.abs(det) >= 1e-12
+    u, v, w, det = u[keep], v[keep], w[keep], det[keep]
+    cell = grid.cell_mm
+    row_first = np.clip(np.ceil(v.min(1) / cell - 0.5), 0, grid.count_v).astype(np.int64)
+    row_last = np.clip(np.floor(v.max(1) / cell - 0.5), -1, grid.count_v - 1).astype(np.int64)
+    rows = np.maximum(row_last - row_first + 1, 0)
+    if rows.sum() == 0:
         return heights.astype(np.float32)
-    offset = np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
-    j = j0[owner] + offset // span_k[owner]
-    k = k0[owner] + offset % span_k[owner]
-    pv, pw = (j + 0.5) * grid.cell_mm, (k + 0.5) * grid.cell_mm
-    tv, tw, tu = v[owner], w[owner], triangles[owner][:, :, 0]
-    d = det[owner]
-    b1 = ((pv - tv[:, 0]) * (tw[:, 2] - tw[:, 0]) - (tv[:, 2] - tv[:, 0]) * (pw - tw[:, 0])) / d
-    b2 = ((tv[:, 1] - tv[:, 0]) * (pw - tw[:, 0]) - (pv - tv[:, 0]) * (tw[:, 1] - tw[:, 0])) / d
-    inside = (b1 >= -1e-9) & (b2 >= -1e-9) & (b1 + b2 <= 1.0 + 1e-9)
-    u = tu[:, 0] + b1 * (tu[:, 1] - tu[:, 0]) + b2 * (tu[:, 2] - tu[:, 0])
-    np.maximum.at(heights, (j * grid.count_w + k)[inside], u[inside])
+    # the triangle's plane u = alpha + beta v + gamma w
+    du1, du2 = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
+    dv1, dv2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    dw1, dw2 = w[:, 1] - w[:, 0], w[:, 2] - w[:, 0]
+    beta = (du1 * dw2 - du2 * dw1) / det
+    gamma = (dv1 * du2 - dv2 * du1) / det
+    alpha = u[:, 0] - beta * v[:, 0] - gamma * w[:, 0]
+    # one entry per (triangle, row of cell centres it spans): the row's w-interval inside the triangle
+    owner = np.repeat(np.arange(len(u)), rows)
+    row = row_first[owner] + (np.arange(len(owner)) - np.repeat(np.cumsum(rows) - rows, rows))
+    pv = (row + 0.5) * cell
+    ev, ew = v[owner], w[owner]
+    low, high = np.full(len(owner), np.inf), np.full(len(owner), -np.inf)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        va, vb, wa, wb = ev[:, a], ev[:, b], ew[:, a], ew[:, b]
+        span = vb - va
+        crosses = (np.minimum(va, vb) <= pv) & (pv <= np.maximum(va, vb)) & (span != 0.0)
+        t = np.where(crosses, (pv - va) / np.where(span != 0.0, span, 1.0), 0.0)
+        crossing_w = wa + t * (wb - wa)
+        low = np.where(crosses, np.minimum(low, crossing_w), low)
+        high = np.where(crosses, np.maximum(high, crossing_w), high)
+    first = np.clip(np.ceil((low - 1e-9) / cell - 0.5), 0, grid.count_w).astype(np.int64)
+    last = np.clip(np.floor((high + 1e-9) / cell - 0.5), -1, grid.count_w - 1).astype(np.int64)
+    cells = np.maximum(last - first + 1, 0)
+    entry = np.repeat(np.arange(len(owner)), cells)
+    if len(entry) == 0:
+        return heights.astype(np.float32)
+    column = first[entry] + (np.arange(len(entry)) - np.repeat(np.cumsum(cells) - cells, cells))
+    triangle = owner[entry]
+    top = alpha[triangle] + beta[triangle] * pv[entry] + gamma[triangle] * ((column + 0.5) * cell)
+    np.maximum.at(heights, row[entry] * grid.count_w + column, top)
     return heights.astype(np.float32)
 
 
@@ -281,7 +303,74 @@ class ScreenedCandidate:
     case: str
 
 
-def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignConfig, lattice: NormalLattice) -> ScreenedCandidate:
+@dataclass
+class Carving:
+    """The carved geometries of part of a candidate, as column heights (before the block's floor).
+
+    Attributes
+    ----------
+    top_mm : (cells,) float32
+        Largest eroded height of the carved geometries; ``-inf`` where none.
+    owner : (cells,) int32
+        Which geometry gives ``top_mm`` (its position in the candidate,
+        ``2 * scenario + side``); -1 where none.
+    second_mm : (cells,) float32
+        Largest eroded height of the others: a geometry's own carving does
+        not bury its own samples.
+    top_high_mm : (cells,) float32
+        Largest dilated height.
+    pairs : frozenset of int
+        Scenarios whose geometries are carved in.
+    """
+
+    top_mm: np.ndarray
+    owner: np.ndarray
+    second_mm: np.ndarray
+    top_high_mm: np.ndarray
+    pairs: frozenset
+
+
+def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, base: Carving | None = None) -> Carving:
+    """Carve the good geometries of some scenarios of a candidate into ``base`` (a new Carving).
+
+    A coordinate move changes one scenario, so the search carves the other
+    scenarios once and each move adds two geometries: the screening of a
+    move costs a few height maps instead of all of them.
+
+    Parameters
+    ----------
+    chosen : list of (ScreenGeometry, ScreenGeometry)
+        The candidate's geometries, one pair per scenario.
+    pairs : iterable of int
+        Scenarios to carve in (not already in ``base``).
+    base : Carving, optional
+        Carving to extend; an empty pad when None.
+    """
+    pairs = list(pairs)
+    if base is None:
+        cells = len(chosen[0][0].heights_mm)
+        top = np.full(cells, -np.inf, dtype=np.float32)
+        owner = np.full(cells, -1, dtype=np.int32)
+        second = np.full(cells, -np.inf, dtype=np.float32)
+        top_high = np.full(cells, -np.inf, dtype=np.float32)
+        done = frozenset()
+    else:
+        top, owner, second, top_high = base.top_mm.copy(), base.owner.copy(), base.second_mm.copy(), base.top_high_mm.copy()
+        done = base.pairs
+    for pair in pairs:
+        for side, g in enumerate(chosen[pair]):
+            if not g.good:
+                continue
+            higher = g.heights_low_mm > top
+            # ties keep the earlier owner: equal heights bury the same samples either way
+            np.copyto(second, np.where(higher, top, np.maximum(second, g.heights_low_mm)))
+            np.copyto(owner, np.where(higher, 2 * pair + side, owner))
+            np.maximum(top, g.heights_low_mm, out=top)
+            np.maximum(top_high, g.heights_high_mm, out=top_high)
+    return Carving(top, owner, second, top_high, done | frozenset(pairs))
+
+
+def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignConfig, lattice: NormalLattice, carved: Carving | None = None) -> ScreenedCandidate:
     """Screen one candidate: one sample's two geometries per scenario.
 
     Parameters
@@ -292,6 +381,9 @@ def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignCo
         Penetration D, block factor K, eps.
     lattice : NormalLattice
         Normal quantisation and RLES cache.
+    carved : Carving, optional
+        :func:`carve_heights` of some of these scenarios' geometries, shared by
+        candidates that agree on them; the rest are carved here.
 
     Returns
     -------
@@ -299,44 +391,34 @@ def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignCo
     """
     depth, eps = config.sampler.penetration_mm, config.contact.eps_mm
     geometries = [g for pair in chosen for g in pair]
-    good = [i for i, g in enumerate(geometries) if g.good]
+    good = [g for g in geometries if g.good]
     if not good:
         case, floor = "bad", depth
     elif len(good) == len(geometries):
         case, floor = "good", 0.0
     else:
-        block_depth = min(geometries[i].depth_mm for i in good) * config.filter.block_factor
+        block_depth = min(g.depth_mm for g in good) * config.filter.block_factor
         case, floor = "mixed", max(depth - block_depth, 0.0)
-    cells = len(geometries[0].heights_mm)
-    if good:
-        low = np.stack([geometries[i].heights_low_mm for i in good])
-        top_low = np.maximum(low.max(axis=0), floor)
-        top_high = np.maximum(np.stack([geometries[i].heights_high_mm for i in good]).max(axis=0), floor)
-        if len(good) > 1:
-            first = low.argmax(axis=0)
-            every = np.arange(cells)
-            low[first, every] = -np.inf
-            second = np.maximum(low.max(axis=0), floor)
-        else:
-            first, second = np.zeros(cells, dtype=np.int64), np.full(cells, floor, dtype=np.float32)
-        position = {index: rank for rank, index in enumerate(good)}
-    else:
-        top_low = top_high = np.full(cells, floor, dtype=np.float32)
+    done = carved.pairs if carved is not None else frozenset()
+    carving = carve_heights(chosen, [p for p in range(len(chosen)) if p not in done], carved)
+    floor = np.float32(floor)
+    top_low, top_high = np.maximum(carving.top_mm, floor), np.maximum(carving.top_high_mm, floor)
+    second = np.maximum(carving.second_mm, floor)
     results = []
     for pair_number in range(len(chosen)):
         areas, bins, offsets = 0.0, [], []
         for index in (2 * pair_number, 2 * pair_number + 1):
             g = geometries[index]
+            cell = g.point_cell
             if g.good:
-                rank = position[index]
-                others = np.where(first[g.point_cell] == rank, second[g.point_cell], top_low[g.point_cell])
+                others = np.where(carving.owner[cell] == index, second[cell], top_low[cell])
                 contact = g.point_u_mm >= others - eps
                 offset = 0.0
             else:
-                above = g.point_u_mm - top_high[g.point_cell]
+                above = g.point_u_mm - top_high[cell]
                 offset = max(float(above.max()) - eps, 0.0) if len(above) else 0.0
                 seated = g.point_u_mm - offset
-                contact = (seated >= top_low[g.point_cell] - eps) & (seated <= top_high[g.point_cell] + eps)
+                contact = (seated >= top_low[cell] - eps) & (seated <= top_high[cell] + eps)
             areas += float(contact.sum()) * g.area_per_point_mm2
             bins.append(g.point_bin[contact])
             offsets.append(offset)

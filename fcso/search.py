@@ -120,19 +120,25 @@ def search(
             results.update(zip(chunk, evaluate(chunk)))
         return SearchOutcome("exhaustive", results, total, True)
 
+    def key(choice: tuple[int, ...]) -> tuple[float, float, int]:
+        quality, mean = results[choice]
+        return quality, mean, -candidate_index(choice, counts)
+
+    # the best so far, kept as results arrive: seeds ask for it often
+    leader: list[tuple[int, ...]] = []
+
     def run(choices: list[tuple[int, ...]]) -> None:
         fresh = list(dict.fromkeys(c for c in choices if c not in results))
         for start in range(0, len(fresh), batch_size):
             chunk = fresh[start : start + batch_size]
             results.update(zip(chunk, evaluate(chunk)))
-
-    def key(choice: tuple[int, ...]) -> tuple[float, float, int]:
-        quality, mean = results[choice]
-        return quality, mean, -candidate_index(choice, counts)
+            best = max(chunk, key=key)
+            if not leader or key(best) > key(leader[0]):
+                leader[:] = [best]
 
     if _branch_and_bound(counts, upper_bounds, run, results, max(1, max_evaluations // 2)):
         return SearchOutcome("branch_and_bound", results, total, True)
-    for seed in _seeds(counts, upper_bounds, results, key):
+    for seed in _seeds(counts, upper_bounds, lambda: leader[0] if leader else None):
         if len(results) >= max_evaluations:
             break
         _coordinate_ascent(seed, counts, run, results, key, max_evaluations)
@@ -163,17 +169,17 @@ def _branch_and_bound(counts, upper_bounds, run, results, budget: int) -> bool:
     return True
 
 
-def _seeds(counts, upper_bounds, results, key):
-    """Starting points of the ascent, best first (generated lazily: each sees the results so far)."""
+def _seeds(counts, upper_bounds, leader):
+    """Starting points of the ascent, best first (generated lazily: each sees the best found so far, ``leader()``)."""
     top = tuple(int(np.argmax(b)) for b in upper_bounds)
-    if results:
-        yield max(results, key=key)
+    if leader() is not None:
+        yield leader()
     yield top
     ranked = [np.argsort(-np.asarray(b), kind="stable") for b in upper_bounds]
     for depth in range(1, max(counts)):
         for scenario, order in enumerate(ranked):
-            if depth < len(order) and results:
-                best = max(results, key=key)
+            best = leader()
+            if depth < len(order) and best is not None:
                 yield best[:scenario] + (int(order[depth]),) + best[scenario + 1 :]
 
 
