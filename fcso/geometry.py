@@ -9,6 +9,12 @@ import trimesh
 from .errors import GeometryError
 
 
+#: Vertices this close to a clipping plane count as on it (mm): parts and
+#: sample positions are built from round numbers and float32 files, so
+#: faces meant to lie in a box face otherwise fall out by one rounding step.
+PLANE_TOLERANCE_MM = 1e-7
+
+
 def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[np.ndarray, np.ndarray]:
     """Clip a triangle soup to an axis-aligned box.
 
@@ -38,12 +44,6 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
             if np.isfinite(bound):
                 vertices, faces = _clip_half_space(vertices, faces, axis, sign, bound * sign)
     return vertices, faces
-
-
-#: Vertices this close to a clipping plane count as on it (mm): parts and
-#: sample positions are built from round numbers and float32 files, so
-#: faces meant to lie in a box face otherwise fall out by one rounding step.
-PLANE_TOLERANCE_MM = 1e-7
 
 
 def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float) -> tuple[np.ndarray, np.ndarray]:

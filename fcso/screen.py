@@ -210,7 +210,11 @@ class NormalLattice:
             self._tree = cKDTree(self.directions)
         if len(normals) == 0:
             return np.zeros(0, dtype=np.int32)
-        return self._tree.query(np.asarray(normals, dtype=np.float64))[1].astype(np.int32)
+        # samples repeat their triangle's normal: query each distinct normal once
+        rows = np.ascontiguousarray(normals, dtype=np.float64)
+        distinct, inverse = np.unique(rows.view(np.dtype((np.void, rows.itemsize * 3))).ravel(), return_inverse=True)
+        nearest = self._tree.query(distinct.view(np.float64).reshape(-1, 3))[1].astype(np.int32)
+        return nearest[inverse.ravel()]
 
     def rles(self, occupied: np.ndarray) -> float:
         """RLES of the lattice directions ``occupied`` (sorted unique bin indices), cached."""
