@@ -75,8 +75,8 @@ def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: f
     cut_inside = cut_distance >= -PLANE_TOLERANCE_MM
     odd = np.where(cut_count == 1, np.argmax(cut_inside, axis=1), np.argmax(~cut_inside, axis=1))
     order = (odd[:, None] + np.arange(3)) % 3
-    cut = np.take_along_axis(cut, order, axis=1)
-    cut_distance = np.take_along_axis(cut_distance, order, axis=1)
+    rows = np.arange(len(cut))[:, None]
+    cut, cut_distance = cut[rows, order], cut_distance[rows, order]
     first = vertices[cut[:, 0]]
     # points where the edges from the odd vertex cross the plane
     crossings = [first + (vertices[cut[:, k]] - first) * (cut_distance[:, 0] / (cut_distance[:, 0] - cut_distance[:, k]))[:, None] for k in (1, 2)]
@@ -95,8 +95,16 @@ def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: f
 def triangle_areas_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Area (mm²) and unit normal of each triangle; zero-area triangles get a zero normal."""
     triangles = vertices[faces]
-    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    doubled = np.linalg.norm(cross, axis=1)
+    first, second = triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    # written out: np.cross costs more than the arithmetic on arrays this small
+    cross = np.column_stack(
+        [
+            first[:, 1] * second[:, 2] - first[:, 2] * second[:, 1],
+            first[:, 2] * second[:, 0] - first[:, 0] * second[:, 2],
+            first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0],
+        ]
+    )
+    doubled = np.sqrt(np.einsum("ij,ij->i", cross, cross))
     normals = np.zeros_like(cross)
     nonzero = doubled > 0
     normals[nonzero] = cross[nonzero] / doubled[nonzero, None]
