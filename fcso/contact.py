@@ -173,7 +173,7 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
         while high - low > step_floor:
             middle = (low + high) / 2.0
             trial = depths_at(middle)
-            if -trial.min() <= eps_mm or middle >= limit:
+            if -trial.min() <= eps_mm:
                 high, feasible = middle, trial
             else:
                 low = middle
