@@ -174,3 +174,12 @@ class DesignReport(_Model):
     placement: dict | None = Field(
         None, description="Where the finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
     )
+    finger_sets: "FingerSetsReport | None" = Field(
+        None, description="The job's finger sets and pick plan when it ran with [finger_sets] max > 1 and one set serves it (METHOD §11)"
+    )
+
+
+# the finger-set models build on the ones above
+from .sets_report import FingerSetsReport  # noqa: E402
+
+DesignReport.model_rebuild()
