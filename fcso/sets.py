@@ -17,7 +17,6 @@ effective area E in mm²; retained qualities are ratios (0..1).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import itertools
 import time
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from . import __version__
 from .config import DesignConfig
@@ -51,41 +51,47 @@ from .sets_report import (
 #: ``progress(stage, done, total, note)`` as for :func:`fcso.design.design`.
 Progress = Callable[[str, int, int, str], None]
 
-#: Rounding of vertex coordinates when telling identical parts, mm.
-GEOMETRY_DECIMALS = 4
+#: Largest distance between matching vertices of identical parts, mm (STL stores float32: ~1e-5 mm at 100 mm).
+SAME_GEOMETRY_TOLERANCE_MM = 1e-3
 
 
-def geometry_key(mesh: trimesh.Trimesh) -> str:
-    """A key equal for meshes of the same geometry up to a translation and the order of vertices.
+def same_geometry(a: trimesh.Trimesh, b: trimesh.Trimesh, tolerance_mm: float = SAME_GEOMETRY_TOLERANCE_MM) -> bool:
+    """Whether two parts have the same geometry up to a translation.
 
     Parameters
     ----------
-    mesh : trimesh.Trimesh
-        A part in mm, after units and shell union (:func:`fcso.load_parts`).
+    a, b : trimesh.Trimesh
+        Parts in mm, after units and shell union (:func:`fcso.load_parts`).
+    tolerance_mm : float
+        Every vertex of each, moved so the bounding boxes' minimum corners
+        meet, lies within this distance of a vertex of the other.
 
     Returns
     -------
-    str
-        sha256 of the vertices (moved so their minimum is the origin, rounded
-        to 10⁻⁴ mm and sorted), the face count and the volume (0.001 mm³).
-        Rotated copies get different keys: they rest differently and are
+    bool
+        Equal face counts, volumes within 10⁻⁶ relative and matching vertices.
+        Rotated copies are not the same: they rest differently and are
         designed as parts of their own.
     """
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    # + 0.0 turns -0.0 into 0.0, so equal coordinates give equal bytes
-    shifted = np.round(vertices - vertices.min(axis=0), GEOMETRY_DECIMALS) + 0.0
-    ordered = shifted[np.lexsort(shifted.T[::-1])]
-    digest = hashlib.sha256(np.ascontiguousarray(ordered).tobytes())
-    digest.update(f"{len(mesh.faces)}:{float(mesh.volume):.3f}".encode())
-    return digest.hexdigest()
+    if len(a.faces) != len(b.faces) or len(a.vertices) != len(b.vertices):
+        return False
+    if not np.isclose(a.volume, b.volume, rtol=1e-6, atol=1e-6):
+        return False
+    va = np.asarray(a.vertices) - np.asarray(a.vertices).min(axis=0)
+    vb = np.asarray(b.vertices) - np.asarray(b.vertices).min(axis=0)
+    return bool(cKDTree(vb).query(va)[0].max() <= tolerance_mm and cKDTree(va).query(vb)[0].max() <= tolerance_mm)
 
 
 def identical_groups(meshes: Sequence[trimesh.Trimesh]) -> list[list[int]]:
-    """Indices of the meshes grouped by :func:`geometry_key`, groups and members in input order."""
-    groups: dict[str, list[int]] = {}
+    """Indices of the meshes grouped by :func:`same_geometry`, groups and members in input order."""
+    groups: list[list[int]] = []
     for index, mesh in enumerate(meshes):
-        groups.setdefault(geometry_key(mesh), []).append(index)
-    return list(groups.values())
+        group = next((g for g in groups if same_geometry(meshes[g[0]], mesh)), None)
+        if group is None:
+            groups.append([index])
+        else:
+            group.append(index)
+    return groups
 
 
 @dataclass
