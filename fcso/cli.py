@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
 from .sets import SetsResult, design_sets
-from .sets_output import pick_plan_text, write_set_outputs
+from .sets_output import is_job_folder, pick_plan_text, rebuild_job_report, write_set_outputs
 from .errors import FcsoError, GeometryError
 from .html_report import rebuild_report
 from .parts import load_part, load_parts
@@ -226,12 +226,16 @@ def _report_sets(job: SetsResult, args) -> int:
 def _report(args) -> int:
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
-        path = rebuild_report(args.directory, progress=progress)
-        restore_section(args.directory)
+        if is_job_folder(args.directory):
+            paths = rebuild_job_report(args.directory, progress=progress)
+        else:
+            paths = [rebuild_report(args.directory, progress=progress)]
+            restore_section(args.directory)
     finally:
         progress.close()
     if not args.quiet:
-        print(f"wrote {path}")
+        for path in paths:
+            print(f"wrote {path}")
     return 0
 
 

@@ -21,12 +21,16 @@ import json
 import os
 from pathlib import Path
 
+import trimesh
+
 from .design import Progress
-from .html_report import _STYLE, _image
+from .errors import MeshError
+from .finger import load_finger, pad_to_finger, parametric_finger
+from .html_report import _STYLE, _image, read_stl, rebuild_report
 from .output import output_files
 from .render import finger_picture
 from .sets import SetsResult
-from .sets_report import FingerSetsReport
+from .sets_report import FingerSetsReport, JobReport
 
 
 def sets_output_files(result: SetsResult, progress: Progress | None = None) -> dict[str, bytes]:
@@ -37,7 +41,7 @@ def sets_output_files(result: SetsResult, progress: Progress | None = None) -> d
         f"set-{k}/{name}": data for k, design in enumerate(result.designs, start=1) for name, data in output_files(design, progress).items()
     }
     files["report.json"] = (result.job_report.model_dump_json(indent=2) + "\n").encode("utf-8")
-    files["report.html"] = job_html(result).encode("utf-8")
+    files["report.html"] = job_html(result.job_report, [d.finger for d in result.designs]).encode("utf-8")
     return files
 
 
@@ -55,27 +59,31 @@ def write_set_outputs(result: SetsResult, out_dir: str | Path, progress: Progres
     return written
 
 
-def job_html(result: SetsResult) -> str:
-    """``report.html`` of a job with several finger sets: the sets with their fingers, the scenarios and the pick plan."""
-    report = result.job_report
+def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
+    """``report.html`` of a job with several finger sets: the sets with their fingers, the scenarios and the pick plan.
+
+    Parameters
+    ----------
+    report : JobReport
+    fingers : list of trimesh.Trimesh
+        Every set's finger (mm), set order.
+    """
     sets = report.finger_sets
-    sampler = report.settings.sampler
-    pad_size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    config = report.settings
+    pad_size = (config.sampler.thickness_mm, config.sampler.length_mm, config.sampler.width_mm)
+    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    transform = pad_to_finger(flat, config.sampler)
     body = ["<h1>FCSO job report: finger sets</h1>", *finger_sets_section(sets), "<h2>The fingers</h2>"]
-    for entry, design in zip(sets.sets, result.designs):
+    for entry, finger in zip(sets.sets, fingers):
         body += [
             f'<h3>Set {entry.set}: {_text(", ".join(entry.parts))} (<a href="{entry.folder}/report.html">design report</a>)</h3>',
-            _image(
-                finger_picture(design.finger, design.pad_to_finger, pad_size, f"set {entry.set}: finger with its fingerpad (orange)"),
-                "finger",
-                f"finger of set {entry.set}",
-            ),
+            _image(finger_picture(finger, transform, pad_size, f"set {entry.set}: finger with its fingerpad (orange)"), "finger", f"finger of set {entry.set}"),
         ]
     body += [
         "<h2>Warnings</h2>",
         "<ul>" + "".join(f"<li>{_text(w)}</li>" for w in report.warnings) + "</ul>" if report.warnings else "<p>None.</p>",
         "<h2>Settings and timings</h2>",
-        f"<details><summary>settings</summary><pre>{_text(report.settings.model_dump_json(indent=2))}</pre></details>",
+        f"<details><summary>settings</summary><pre>{_text(config.model_dump_json(indent=2))}</pre></details>",
         f"<pre>{_text(json.dumps(report.timings_s, indent=2))}</pre>",
     ]
     return (
@@ -83,6 +91,44 @@ def job_html(result: SetsResult) -> str:
         f"<title>FCSO job: {len(sets.sets)} finger sets</title>\n<style>{_STYLE}</style>\n</head>\n"
         "<body>\n" + "\n".join(body) + "\n</body>\n</html>\n"
     )
+
+
+def is_job_folder(directory: str | Path) -> bool:
+    """Whether ``directory`` holds the output of a job with several finger sets (its ``report.json`` is a JobReport)."""
+    path = Path(directory) / "report.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and "finger_sets" in data and "best" not in data
+
+
+def rebuild_job_report(directory: str | Path, progress: Progress | None = None) -> list[Path]:
+    """Rebuild every set's ``report.html`` and the job's from the files of a job folder.
+
+    Returns
+    -------
+    list of Path
+        The pages written, the job's last.
+
+    Raises
+    ------
+    MeshError
+        A report or finger file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    path = directory / "report.json"
+    try:
+        report = JobReport.model_validate_json(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise MeshError(path, f"not a job report: {str(exc).splitlines()[0]}") from None
+    written = [rebuild_report(directory / entry.folder, progress) for entry in report.finger_sets.sets]
+    fingers = [read_stl(directory / entry.folder / "finger.stl") for entry in report.finger_sets.sets]
+    target = directory / "report.html"
+    temporary = directory / ".report.html.tmp"
+    temporary.write_text(job_html(report, fingers), encoding="utf-8")
+    os.replace(temporary, target)
+    return written + [target]
 
 
 def finger_sets_section(sets: FingerSetsReport) -> list[str]:

@@ -159,6 +159,11 @@ def test_cli_identical_parts_once_ungraspable_listed_and_one_folder_per_set(tmp_
     assert not (out / "finger.stl").exists()
     page = (out / "report.html").read_text()
     assert "Pick plan" in page and page.count('data-kind="finger"') == 2
+    (out / "report.html").unlink()
+    rebuilt = subprocess.run([sys.executable, "-m", "fcso.cli", "report", out], capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert rebuilt.stdout.split() == ["wrote", str(out / "set-1" / "report.html"), "wrote", str(out / "set-2" / "report.html"), "wrote", str(out / "report.html")]
+    assert (out / "report.html").read_text().count('data-kind="finger"') == 2
 
 
 def test_one_finger_set_is_the_single_design_of_the_paper_experiment(tmp_path):
