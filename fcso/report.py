@@ -119,6 +119,7 @@ class GraspReport(_Model):
     closing_axis: list[float]
     pad_gap_mm: float = Field(description="Distance between the two pad faces at contact, mm")
     closing_width_mm: float = Field(description="Distance between the flat fingers' contact faces at contact, mm")
+    finger_set: int | None = Field(None, description="Finger set making this grasp (METHOD §11), 1 = first; null with [finger_sets] max = 1")
 
 
 class FingerReport(_Model):

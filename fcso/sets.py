@@ -630,7 +630,10 @@ def design_sets(
         chosen = [graspable[p] for p, a in enumerate(outcome.assignment) if a == label]
         numbers = sorted(m for u in chosen for m in part_scenarios[u])
         report_progress("finger sets", label, labels, f"set {label + 1} of {labels}")
-        designs.append(design_prepared(subset(prepared, numbers), config, progress))
+        made = design_prepared(subset(prepared, numbers), config, progress)
+        # every grasp says which finger set makes it
+        made.report = made.report.model_copy(update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]})
+        designs.append(made)
         members.append((chosen, numbers))
     report_progress("finger sets", labels, labels, "")
     timings["finger_sets"] = time.perf_counter() - clock
