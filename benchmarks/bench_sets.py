@@ -124,6 +124,10 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
         f"(target <= {target_s:.0f} s: {'met' if sets_median <= target_s else 'NOT met'}); timings of the last run: {result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
     )
     print(f"  {len(report.sets)} sets, worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, partition: {report.search.method}")
+    print(
+        f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: {', '.join(report.search.conflict_clique)}), "
+        f"{len(report.search.blocking_pairs)} conflicting pairs, {report.search.set_screenings} sets screened, sets tried {report.search.sets_tried}"
+    )
     for entry in report.sets:
         print(f"    set {entry.set}: {len(entry.parts)} parts, Q {entry.quality:.1f} mm², worst retained {entry.worst_retained:.3f}: {', '.join(entry.parts)}")
     print(
