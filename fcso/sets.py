@@ -600,7 +600,8 @@ def design_sets(
 
     clock = time.perf_counter()
     report_progress("solo quality", 0, len(prepared.scenarios), "")
-    with WorkerPool((prepared, config), prepared.jobs) as pool:
+    # no more workers than tasks: forking costs more than one small task
+    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios))) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
@@ -618,7 +619,8 @@ def design_sets(
 
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
-    with WorkerPool((prepared, pools, config), prepared.jobs) as pool:
+    # one part has one partition: nothing to screen in parallel
+    with WorkerPool((prepared, pools, config), prepared.jobs if len(graspable) > 1 else 1) as pool:
         screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, config, pool)
         outcome = search_partition(screener, len(graspable), config, lambda stage, done, total, note="": report_progress(stage, done, total, note))
     timings["partition"] = time.perf_counter() - clock
