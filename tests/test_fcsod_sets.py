@@ -47,9 +47,21 @@ def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, cap
         assert done["body"]["state"] == "done", done["body"]["error"]
         job_id = done["job_id"]
         lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
+        # a cell that connects later gets the plan and every set's finger from the daemon's queryable
+        late = start_subscriber(config, save=tmp_path / "late", extra=["--timeout", "8"])
+        try:
+            def replies() -> dict:
+                return {v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id}
+
+            late.wait_for(lambda v: {"plan", "design/1", "design/2"} <= set(replies()), 30)
+            got = replies()
+        finally:
+            late.stop()
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
+    assert got["design/1"]["sha256_ok"] is True and got["design/2"]["sha256_ok"] is True
+    assert got["plan"]["body"] == next(v for v in lines if v["topic"] == "plan")["body"]
     topics = [v["topic"] for v in lines]
     assert topics == ["status", "status", "grasps", "design/1", "design/2", "plan", "placement", "status"]
     out = tmp_path / "out" / job_id
