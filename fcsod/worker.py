@@ -1,6 +1,6 @@
 """One job, run in a worker process started with the spawn method.
 
-The worker checks the job's inputs, runs :func:`fcso.design`, writes the
+The worker checks the job's inputs, runs :func:`fcso.design_sets`, writes the
 results into ``<output_root>/.tmp-<job_id>/`` and records ``job.mcap`` as it
 goes (flushed after every stage), then renames the folder to
 ``<output_root>/<job_id>/``. A failed job's folder holds ``job.mcap`` only.
