@@ -7,7 +7,8 @@ configs with mTLS and access control, the message-signing key), starts
 ``fcsod subscribe`` with the controller's certificate (the cell controller's
 view, every message's signature checked), drops the bundled batch
 ``examples/jobs/batch-demo`` into the watch folder file by file, shows what
-the subscriber receives, shows that a client without a certificate is
+the subscriber receives (the job needs two finger sets: each set's finger on
+``.../design/<set>`` and the pick plan on ``.../plan``, as the cell gets them), shows that a client without a certificate is
 refused, audits the job's MCAP record and stops the daemon. ``[ros2]`` is
 enabled: a zenoh session of the demo with the controller's certificate,
 standing in for a ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions
@@ -77,13 +78,24 @@ def _show(line: str) -> None:
     elif topic == "grasps":
         for grasp in body["grasps"]:
             position = ", ".join(f"{x:.1f}" for x in grasp["position_mm"])
-            print(f"  {message['key']}: {grasp['part']} pose {grasp['pose_index']}: TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
+            print(f"  {message['key']}: {grasp['part']} pose {grasp['pose_index']} (finger set {grasp['finger_set']}): TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
     elif topic == "placement":
         fit = "fingers placed" if body["fingers_fit"] else "FINGERS DO NOT FIT"
         print(f"  {message['key']}: {fit} ({body['finger_copies_placed']}/{body['finger_copies_requested']}), "
               f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}")
-    elif topic == "design":
+    elif topic == "design" or topic.startswith("design/"):
         print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
+    elif topic == "plan":
+        reached = "reached" if body["min_retained_reached"] else "NOT reached"
+        print(f"  {message['key']}: pick plan, {len(body['sets'])} finger set(s), min_retained {body['min_retained']:g} {reached}")
+        for entry in body["sets"]:
+            print(f"    mount set {entry['set']}: {entry['finger_key']} (sha256 {entry['finger_sha256'][:16]}…, {entry['finger_copies']} copies in build.3mf, Q = {entry['quality_mm2']:.1f} mm²)")
+            for part in entry["parts"]:
+                for grasp in part["grasps"]:
+                    position = ", ".join(f"{x:.1f}" for x in grasp["position_mm"])
+                    print(f"      pick {part['quantity']} x {part['part']} lying in pose {grasp['pose_index']}: TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
+        if body["ungraspable_parts"]:
+            print(f"    not picked (no finger can grasp them): {', '.join(body['ungraspable_parts'])}")
     if "signature_ok" in message and message["topic"] == "status" and (message.get("body") or {}).get("state") == "queued":
         print(f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the daemon's public key, signing.pub)")
 
@@ -217,8 +229,8 @@ namespace = "/demo"
         print(f"\naudit of {result / 'job.mcap'}:")
         subprocess.run([sys.executable, "-m", "fcsod", "audit", str(result / "job.mcap"), "--verify", str(result)], cwd=REPO)
         print(f"\noutputs to open: {result}")
-        for path in sorted(result.iterdir()):
-            print(f"  {path.name}  ({path.stat().st_size} bytes)")
+        for path in sorted(p for p in result.rglob("*") if p.is_file()):
+            print(f"  {path.relative_to(result)}  ({path.stat().st_size} bytes)")
     print("job.mcap opens in any MCAP viewer (Foxglove, Lichtblick): the /scene channel shows part, pads and fingers")
     return 0 if results else 1
 

@@ -15,6 +15,8 @@ from .output import output_files, write_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
 from .rles import rles  # noqa: E402
+from .sets import SetsResult, design_sets  # noqa: E402
+from .sets_output import write_set_outputs  # noqa: E402
 
 __all__ = [
     "ConfigError",
@@ -27,6 +29,9 @@ __all__ = [
     "MeshItem",
     "Part",
     "design",
+    "design_sets",
+    "SetsResult",
+    "write_set_outputs",
     "load_config",
     "load_part",
     "load_parts",

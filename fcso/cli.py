@@ -8,10 +8,10 @@ import time
 from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
-from .design import design
+from .sets import SetsResult, design_sets
+from .sets_output import is_job_folder, pick_plan_text, rebuild_job_report, write_set_outputs
 from .errors import FcsoError, GeometryError
 from .html_report import rebuild_report
-from .output import write_outputs
 from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
@@ -94,6 +94,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
     run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
+    run.add_argument("--finger-sets", type=int, metavar="N", help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part")
+    run.add_argument("--min-retained", type=float, metavar="R", help="least E / E* every scenario should keep in its set (finger_sets.min_retained, default 0.5)")
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
     add_design_options(run)
     add_settings_options(run)
@@ -151,6 +153,10 @@ def _config(args) -> DesignConfig:
         overrides.setdefault("finger", {})["mesh"] = args.finger
     if getattr(args, "jobs", None) is not None:
         overrides.setdefault("search", {})["jobs"] = args.jobs
+    if getattr(args, "finger_sets", None) is not None:
+        overrides.setdefault("finger_sets", {})["max"] = args.finger_sets
+    if getattr(args, "min_retained", None) is not None:
+        overrides.setdefault("finger_sets", {})["min_retained"] = args.min_retained
     if not overrides:
         return config
     from pydantic import ValidationError
@@ -172,10 +178,13 @@ def _design(args) -> int:
     ]
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
-        result = design(parts, config, progress=progress, repair=args.repair)
-        write_outputs(result, args.out, progress=progress)
+        job = design_sets(parts, config, progress=progress, repair=args.repair)
+        write_set_outputs(job, args.out, progress=progress)
     finally:
         progress.close()
+    if job.job_report is not None:
+        return _report_sets(job, args)
+    result = job.designs[0]
     if not args.quiet:
         for entry in result.report.parts:
             handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
@@ -183,6 +192,8 @@ def _design(args) -> int:
         for entry in result.report.ungraspable:
             print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
         print(quality_table(result.report))
+        if result.report.finger_sets is not None:
+            print(pick_plan_text(result.report.finger_sets))
         for warning in result.report.warnings:
             print(f"warning: {warning}")
         print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
@@ -191,15 +202,40 @@ def _design(args) -> int:
     return 0
 
 
+def _report_sets(job: SetsResult, args) -> int:
+    """Print a job of several finger sets (and verify each set's finger when asked)."""
+    sets = job.report
+    if not args.quiet:
+        for entry in job.job_report.parts:
+            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
+            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
+        for entry in sets.ungraspable:
+            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
+        print(pick_plan_text(sets))
+        for warning in job.job_report.warnings:
+            print(f"warning: {warning}")
+        print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
+    if args.verify or args.verify_top:
+        for entry, result in zip(sets.sets, job.designs):
+            code = verify_design_outputs(result, argparse.Namespace(**{**vars(args), "out": args.out / entry.folder}), ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
+            if code:
+                return code
+    return 0
+
+
 def _report(args) -> int:
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
-        path = rebuild_report(args.directory, progress=progress)
-        restore_section(args.directory)
+        if is_job_folder(args.directory):
+            paths = rebuild_job_report(args.directory, progress=progress)
+        else:
+            paths = [rebuild_report(args.directory, progress=progress)]
+            restore_section(args.directory)
     finally:
         progress.close()
     if not args.quiet:
-        print(f"wrote {path}")
+        for path in paths:
+            print(f"wrote {path}")
     return 0
 
 

@@ -228,6 +228,24 @@ class PrintConfig(_Section):
         return values
 
 
+class FingerSetsConfig(_Section):
+    """How many finger sets a job may use and what each part must keep (METHOD §11, ``[finger_sets]``)."""
+
+    max: int = Field(4, ge=1, description="Most finger sets (fingers the cell changes between) for one job; 1: one finger for every part, the paper's method")
+    min_retained: float = Field(
+        0.5, ge=0, le=1, description="Least retained quality E / E* every graspable scenario should keep in its set (E*: its solo best E)"
+    )
+    screen_samples: int = Field(
+        10, ge=1, description="Best samples per scenario (by solo screened E) that the partition search screens sets with"
+    )
+    screen_evaluations: int = Field(
+        1000, ge=1, description="Screened candidates per set while the partition is searched (final sets use [search])"
+    )
+    exhaustive_parts: int = Field(
+        5, ge=1, le=8, description="Jobs with at most this many distinct graspable parts try every partition (proof under screening)"
+    )
+
+
 class DesignConfig(_Section):
     """Every setting of ``fcso design``."""
 
@@ -240,6 +258,7 @@ class DesignConfig(_Section):
     search: SearchConfig = Field(default_factory=SearchConfig)
     finger: FingerConfig = Field(default_factory=FingerConfig)
     print: PrintConfig = Field(default_factory=PrintConfig)
+    finger_sets: FingerSetsConfig = Field(default_factory=FingerSetsConfig)
 
     def updated(self, overrides: dict) -> "DesignConfig":
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""
@@ -290,7 +309,7 @@ def load_config(path: str | Path) -> DesignConfig:
     ----------
     path : str or Path
         TOML file with sections ``[parts] [sampler] [gripper] [filter] [poses]
-        [contact] [search] [finger] [print]``.
+        [contact] [search] [finger] [print] [finger_sets]``.
 
     Returns
     -------

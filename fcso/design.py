@@ -270,8 +270,58 @@ def design(
         and listed in the report's ``ungraspable`` when others can be served.
     """
     config = config or DesignConfig()
+    prepared = prepare(parts, config, progress=progress, repair=repair)
+    return design_prepared(prepared, config, progress)
+
+
+def subset(prepared: Prepared, scenario_numbers: Sequence[int]) -> Prepared:
+    """The prepared batch reduced to some of its scenarios, for designing a finger for them alone (METHOD §11).
+
+    Samples, pad geometries and their contact-sample seeds stay those of the
+    whole batch, so a scenario is evaluated the same in every subset.
+
+    Parameters
+    ----------
+    prepared : Prepared
+    scenario_numbers : sequence of int
+        Positions in ``prepared.scenarios``, in increasing order.
+
+    Returns
+    -------
+    Prepared
+        Its parts are the parts of those scenarios, its ungraspable entries
+        theirs; warnings and timings are left to the whole batch.
+    """
+    scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+    indices = sorted({s.part_index for s in scenarios})
+    names = {prepared.parts[i].name for i in indices}
+    return dataclasses.replace(
+        prepared,
+        parts=[prepared.parts[i] for i in indices],
+        scenarios=scenarios,
+        ungraspable=[u for u in prepared.ungraspable if u.part in names],
+        warnings=[],
+        timings_s={},
+    )
+
+
+def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress | None = None) -> DesignResult:
+    """Search, re-evaluate and fuse: :func:`design` after :func:`prepare` (METHOD §6-9).
+
+    Parameters
+    ----------
+    prepared : Prepared
+        From :func:`prepare`, or a :func:`subset` of it.
+    config : DesignConfig
+        The settings ``prepared`` was made with.
+    progress : callable, optional
+        ``progress(stage, done, total, note)``.
+
+    Returns
+    -------
+    DesignResult
+    """
     report_progress = _progress_with_note(progress)
-    prepared = prepare(parts, config, progress=report_progress, repair=repair)
     scenarios, lattice, jobs = prepared.scenarios, prepared.lattice, prepared.jobs
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(prepared.warnings), dict(prepared.timings_s)

@@ -341,6 +341,10 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
         body += _print_fit_section(report)
     if report.placement is not None:
         body += _placement_section(report.placement)
+    if report.finger_sets is not None:
+        from .sets_output import finger_sets_section  # it builds on this module
+
+        body += finger_sets_section(report.finger_sets)
     body += [
         "<h2>Grasp sampler</h2>",
         _sampler_table(report),

@@ -119,6 +119,7 @@ class GraspReport(_Model):
     closing_axis: list[float]
     pad_gap_mm: float = Field(description="Distance between the two pad faces at contact, mm")
     closing_width_mm: float = Field(description="Distance between the flat fingers' contact faces at contact, mm")
+    finger_set: int | None = Field(None, description="Finger set making this grasp (METHOD §11), 1 = first; null with [finger_sets] max = 1")
 
 
 class FingerReport(_Model):
@@ -174,3 +175,12 @@ class DesignReport(_Model):
     placement: dict | None = Field(
         None, description="Where the finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
     )
+    finger_sets: "FingerSetsReport | None" = Field(
+        None, description="The job's finger sets and pick plan when it ran with [finger_sets] max > 1 and one set serves it (METHOD §11)"
+    )
+
+
+# the finger-set models build on the ones above
+from .sets_report import FingerSetsReport  # noqa: E402
+
+DesignReport.model_rebuild()

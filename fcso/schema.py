@@ -9,12 +9,14 @@ from pydantic import BaseModel
 
 from .config import DesignConfig
 from .report import DesignReport
+from .sets_report import JobReport
 from .sim.report import VerificationReport
 
 #: fcso's documents: file name -> model.
 FCSO_SCHEMAS: dict[str, type[BaseModel]] = {
     "design-config.json": DesignConfig,
     "design-report.json": DesignReport,
+    "design-job-report.json": JobReport,
     "verification-report.json": VerificationReport,
 }
 

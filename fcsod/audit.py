@@ -9,6 +9,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .finger_sets import plan_lines
 from .jobs import file_sha256
 from .recorder import (
     TOPIC_BUS,
@@ -96,7 +97,7 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
     for design in content.of(TOPIC_DESIGN):
         data = base64.b64decode(design["finger_stl_base64"])
         actual = hashlib.sha256(data).hexdigest()
-        say(f"design: finger {len(data)} bytes sha256 {design['finger_sha256']}, volume {design['finger_volume_mm3']:.1f} mm³")
+        say(f"design: finger set {design.get('finger_set', 1)}: {len(data)} bytes sha256 {design['finger_sha256']}, volume {design['finger_volume_mm3']:.1f} mm³")
         if actual != design["finger_sha256"]:
             result.problems.append(f"{TOPIC_DESIGN}: recorded finger bytes hash to {actual}, record says {design['finger_sha256']}")
     for placement in content.of(TOPIC_PLACEMENT):
@@ -117,6 +118,9 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
             status = json.loads(body["payload_text"])
             line += f": {status['state']}" + "".join(f" (warning: {w})" for w in status.get("warnings", []))
         say(line)
+        if body["payload_text"] is not None and body["key_expr"].endswith("/plan"):
+            for text in plan_lines(json.loads(body["payload_text"])):
+                say(text)
         if body["attachment"] and body["payload_base64"] is not None:
             announced = json.loads(body["attachment"]).get("sha256")
             actual = hashlib.sha256(base64.b64decode(body["payload_base64"])).hexdigest()

@@ -59,6 +59,8 @@ class BuildItem:
     part_number : str or None
         Part number of the item's object in ``build.3mf``: the part file's
         stem; ``None``: the name (finger objects are ``fcso-finger-<set>``).
+    finger_set : int or None
+        A finger copy's set when the job has several; ``None``: the export's ``finger_set``.
     """
 
     name: str
@@ -66,6 +68,7 @@ class BuildItem:
     transform: np.ndarray | None = None
     kind: Literal["part", "finger"] = "part"
     part_number: str | None = None
+    finger_set: int | None = None
 
     def placed_mesh(self) -> trimesh.Trimesh:
         """The mesh moved by its transform (a copy); the item must be placed."""
@@ -248,7 +251,7 @@ def export_build_3mf(
     creation_date : str
         ``CreationDate`` metadata, ISO 8601 (UTC date and time).
     finger_set : int
-        Number of the finger set (the ``<set>`` of the finger part numbers).
+        Number of the finger set (the ``<set>`` of the finger part numbers) of finger items without their own.
 
     Returns
     -------
@@ -269,7 +272,7 @@ def export_build_3mf(
         key = id(item.mesh)
         if key not in object_ids:
             object_ids[key] = len(object_ids) + 1
-            object_part_number = f"fcso-finger-{finger_set}" if item.kind == "finger" else item.part_number or item.name
+            object_part_number = f"fcso-finger-{item.finger_set or finger_set}" if item.kind == "finger" else item.part_number or item.name
             _add_mesh_object(resources, object_ids[key], object_part_number, item.mesh, _uuid(job_id, f"object/{object_ids[key]}"))
         element = etree.SubElement(
             build,
@@ -283,7 +286,7 @@ def export_build_3mf(
         )
         if item.kind == "finger":
             group = etree.SubElement(element, f"{{{_CORE_NS}}}metadatagroup")
-            for name, value in (("fcso:job_id", job_id), ("fcso:finger_set", str(finger_set))):
+            for name, value in (("fcso:job_id", job_id), ("fcso:finger_set", str(item.finger_set or finger_set))):
                 etree.SubElement(group, f"{{{_CORE_NS}}}metadata", name=name, preserve="1").text = value
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:

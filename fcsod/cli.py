@@ -213,6 +213,7 @@ def _subscribe(args: argparse.Namespace) -> int:
     except zenoh.ZError as exc:
         print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    jobs_prefix = f"{prefix}/{cell}/jobs/"
     finished: set[str] = set()
     lock = threading.Lock()
     all_done = threading.Event()
@@ -228,9 +229,10 @@ def _subscribe(args: argparse.Namespace) -> int:
             with lock:
                 print(json.dumps({"source": source, "key": key, "rejected": str(exc)}), flush=True)
             return
-        line: dict = {"source": source, "key": key, "topic": key.rsplit("/", 1)[-1], "encoding": str(sample.encoding), "bytes": len(payload)}
-        parts = key.split("/")
-        line["job_id"] = parts[-2] if len(parts) >= 2 else None
+        # <prefix>/<cell>/jobs/<job_id>/<topic>, where a finger set's design is the topic design/<set>
+        job_id, _, topic = key.removeprefix(jobs_prefix).partition("/") if key.startswith(jobs_prefix) else (None, "", key.rsplit("/", 1)[-1])
+        line: dict = {"source": source, "key": key, "topic": topic, "encoding": str(sample.encoding), "bytes": len(payload)}
+        line["job_id"] = job_id
         if str(sample.encoding).startswith(ENCODING_JSON):
             line["body"] = json.loads(payload)
         else:
@@ -239,9 +241,9 @@ def _subscribe(args: argparse.Namespace) -> int:
         line["signature_ok"] = True
         if "sha256" in attachment:
             line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
-        if args.save is not None and line["topic"] == "design":
+        if args.save is not None and topic.partition("/")[0] == "design":
             args.save.mkdir(parents=True, exist_ok=True)
-            target = args.save / f"{line['job_id']}.stl"
+            target = args.save / (f"{job_id}.stl" if topic == "design" else f"{job_id}-set-{topic.partition('/')[2]}.stl")
             target.write_bytes(payload)
             line["saved"] = str(target)
         with lock:

@@ -15,6 +15,7 @@ from fcso.config import (
     ContactConfig,
     DesignConfig,
     FilterConfig,
+    FingerSetsConfig,
     GripperConfig,
     PosesConfig,
     PrintConfig,
@@ -270,6 +271,7 @@ OVERRIDE_SECTIONS: dict[str, type[BaseModel]] = {
     "contact": ContactConfig,
     "search": SearchConfig,
     "print": PrintConfig,
+    "finger_sets": FingerSetsConfig,
 }
 
 
@@ -294,6 +296,7 @@ class JobManifest(_Section):
     contact: ContactConfig | None = None
     search: SearchConfig | None = None
     print: PrintConfig | None = Field(None, description="Printer profile, clearance, lead-in and minimum wall (fcso [print])")
+    finger_sets: FingerSetsConfig | None = Field(None, description="How many finger sets the job may use and what every part keeps (fcso [finger_sets])")
     build: BuildConfig | None = Field(None, description="Overrides of the daemon's [build] settings, key by key")
     verify: VerifySettings | None = Field(None, description="The job's own [verify] settings (replace the daemon's)")
 

@@ -13,6 +13,7 @@ from datetime import datetime, timezone
 from typing import Literal
 
 from fcso.report import CandidateReport, GraspReport, ScenarioQuality
+from fcso.sets_report import PickPart
 from pydantic import BaseModel, ConfigDict, Field
 
 #: States of a job in the journal and on the bus.
@@ -105,7 +106,33 @@ class DesignAttachment(_Message):
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the STL payload, hex")
     file: str = Field("finger.stl", description="Name of the file in the job's output folder")
     size_bytes: int
+    finger_set: int | None = Field(None, description="Finger set of this finger when the job has several (key .../design/<set>)")
     signature: MessageSignature | None = Field(None, description="Added by the daemon when it publishes or replies")
+
+
+class PlanSet(_Message):
+    """One finger set of a pick plan: the finger to mount and the parts to pick with it."""
+
+    set: int = Field(description="Finger set, 1 = first; mount the sets in the plan's order")
+    finger_key: str = Field(description="zenoh key of the set's finger STL (<prefix>/<cell>/jobs/<job_id>/design[/<set>])")
+    finger_file: str = Field(description="The finger STL in the job's output folder")
+    finger_sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the finger STL, hex")
+    finger_copies: int = Field(description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested)")
+    quality_mm2: float = Field(description="Q of the set's finger (min E over its scenarios), mm²")
+    worst_retained: float = Field(description="Least E / E* over the set's scenarios")
+    parts: list[PickPart] = Field(description="Parts to pick with this finger, with quantities and grasps")
+
+
+class PlanMessage(_Message):
+    """``<prefix>/<cell>/jobs/<job_id>/plan``: the pick plan, which finger set to mount and which parts to pick with it (METHOD §11)."""
+
+    job_id: str
+    sets: list[PlanSet] = Field(description="In the order to mount them")
+    min_retained: float = Field(description="[finger_sets] min_retained of the job")
+    min_retained_reached: bool = Field(description="Every graspable scenario keeps at least min_retained of its solo quality")
+    worst_retained: float | None = Field(description="Least E / E* over the job's graspable scenarios")
+    ungraspable_parts: list[str] = Field(description="Parts no set can grasp: not in the plan")
+    partition: str = Field(description="How the sets were found and what bounds them")
 
 
 class PlacementMessage(_Message):
@@ -212,6 +239,7 @@ class DesignRecord(_Message):
     fingerpad_sha256: str
     finger_volume_mm3: float
     finger_watertight: bool
+    finger_set: int = Field(1, description="Finger set of this design (METHOD §11), 1 = first")
 
 
 class OutputFilesRecord(_Message):

@@ -8,7 +8,7 @@ from fcso.schema import write_schemas
 from pydantic import BaseModel
 
 from .config import DaemonConfig, JobManifest
-from .messages import DesignAttachment, GraspsMessage, PlacementMessage, QualityMessage, SignedAttachment, StatusMessage
+from .messages import DesignAttachment, GraspsMessage, PlacementMessage, PlanMessage, QualityMessage, SignedAttachment, StatusMessage
 from .placement import PlacementReport
 from .recorder import CHANNELS
 from .verification import TOPIC_VERIFICATION, VerificationMessage, VerificationReport
@@ -28,6 +28,7 @@ FCSOD_SCHEMAS: dict[str, type[BaseModel]] = {
     "zenoh-design-attachment.json": DesignAttachment,
     "zenoh-attachment.json": SignedAttachment,
     "zenoh-placement.json": PlacementMessage,
+    "zenoh-plan.json": PlanMessage,
     "placement-report.json": PlacementReport,
     **{_channel_file(topic): model for topic, model in CHANNELS.items()},
     "zenoh-verification.json": VerificationMessage,

@@ -57,8 +57,10 @@ def key_id(public_key: Ed25519PublicKey) -> str:
 
 
 def job_id_of(key_expr: str) -> str | None:
-    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>``, None for other keys."""
+    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>`` (a finger set's design: topic ``design/<set>``), None for other keys."""
     parts = key_expr.split("/")
+    if len(parts) >= 5 and parts[-4] == "jobs" and parts[-2] == "design":
+        return parts[-3]
     return parts[-2] if len(parts) >= 4 and parts[-3] == "jobs" else None
 
 

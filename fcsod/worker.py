@@ -1,6 +1,6 @@
 """One job, run in a worker process started with the spawn method.
 
-The worker checks the job's inputs, runs :func:`fcso.design`, writes the
+The worker checks the job's inputs, runs :func:`fcso.design_sets`, writes the
 results into ``<output_root>/.tmp-<job_id>/`` and records ``job.mcap`` as it
 goes (flushed after every stage), then renames the folder to
 ``<output_root>/<job_id>/``. A failed job's folder holds ``job.mcap`` only.
@@ -32,12 +32,15 @@ from typing import Callable
 import fcso
 import numpy as np
 import trimesh
-from fcso import DesignConfig, DesignResult, FcsoError, MeshError, design, load_parts
+from fcso import DesignConfig, DesignResult, FcsoError, MeshError, load_parts
 from fcso.output import output_files
+from fcso.sets import SetsResult, design_sets
+from fcso.sets_output import sets_output_files
 
 from . import __version__
 from .build3mf import Build, BuildItem, export_build_3mf
 from .config import DaemonConfig, JobManifest
+from .finger_sets import design_messages, finger_file, place_sets, plan_message, several
 from .jobs import PartInput, check_parts, hash_inputs, job_inputs, read_manifest
 from .messages import (
     BusMessage,
@@ -84,7 +87,7 @@ from .recorder import (
     salvage,
 )
 from .placement import BuildConfig, PlacementReport, place_fingers
-from .verification import choose_by_verification, verify_done_job
+from .verification import choose_by_verification, job_settings, verify_done_job
 
 #: Name of the record in every job's output folder.
 RECORD_NAME = "job.mcap"
@@ -95,7 +98,7 @@ PROGRESS_INTERVAL_S = 1.0
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
 
-#: Number of the job's finger set in ``build.3mf`` (one design per job for now).
+#: Number of the finger set of a job served by one finger, in ``build.3mf``.
 FINGER_SET = 1
 
 
@@ -155,6 +158,7 @@ class JobRun:
     loaded: list[fcso.Part] = field(default_factory=list)
     build: Build = field(default_factory=Build)
     result: DesignResult | None = None
+    sets: SetsResult | None = None
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -268,6 +272,8 @@ def step_load(run: JobRun) -> None:
             else:
                 transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
                 items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity))
+                # the pieces to pick (fcso counts a part's build items)
+                one.instances = [transform] * part.entry.quantity
             run.loaded.append(one)
             shells = f", {one.shell_note}" if one.shell_note else ""
             run.log("info", f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm{shells}")
@@ -301,18 +307,42 @@ def step_design(run: JobRun) -> None:
         last[stage] = now
         run.log("info", f"{stage} {done}/{total}" + (f": {note}" if note else ""), stage=stage, done=done, total=total)
 
-    run.result = design(run.loaded, run.settings, progress=progress)
+    run.sets = design_sets(run.loaded, run.settings, progress=progress)
+    run.result = run.sets.designs[0]
+    job = run.sets.job_report or run.result.report
     # what the design warns of (parts left out as ungraspable, files split into
     # several solids) travels with the job's done status
-    run.warnings.extend(run.result.report.warnings)
-    for entry in run.result.report.ungraspable:
+    run.warnings.extend(job.warnings)
+    for entry in run.sets.report.ungraspable if run.sets.report else run.result.report.ungraspable:
         run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
+    if run.sets.report is not None:
+        for line in run.sets.report.search.description, *(f"set {s.set}: {', '.join(s.parts)} (Q = {s.quality:.1f} mm², worst retained {s.worst_retained:.3f})" for s in run.sets.report.sets):
+            run.log("info", f"finger sets: {line}")
+
+
+def step_choose_by_verification(run: JobRun) -> None:
+    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (not verified yet)."""
+    if several(run.sets):
+        settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
+        if settings.top_k > 0 or settings.enabled:
+            run.log("warning", "verification skipped: the job has several finger sets, verification handles one finger")
+        return
+    choose_by_verification(run)
 
 
 def step_record_design(run: JobRun) -> None:
     """Record poses, samples with rejections, every candidate row, the design, the grasps and the 3D scene."""
-    result, recorder = run.result, run.recorder
-    report = result.report
+    recorder = run.recorder
+    designs = run.sets.designs if several(run.sets) else [run.result]
+    run.files = {}
+    for number, result in enumerate(designs, start=1):
+        _record_one_design(run, result, number)
+    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=[g for d in designs for g in d.report.grasps]))
+
+
+def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
+    """Record one finger set's poses, samples, candidates, design and scene; keep its meshes for the outputs."""
+    recorder, report = run.recorder, result.report
     for scenario in report.scenarios:
         recorder.write(
             TOPIC_POSES,
@@ -332,20 +362,21 @@ def step_record_design(run: JobRun) -> None:
     for candidate in report.candidates:
         recorder.write(TOPIC_CANDIDATES, CandidateRecord(candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario))
     # report.json and report.html wait for the placement section (step_outputs)
-    run.files = {"finger.stl": result.finger.export(file_type="stl"), "fingerpad.stl": result.fingerpad.export(file_type="stl")}
-    finger = run.files["finger.stl"]
+    folder = finger_file(run.sets, number).removesuffix("finger.stl")
+    finger = run.files[f"{folder}finger.stl"] = result.finger.export(file_type="stl")
+    pad = run.files[f"{folder}fingerpad.stl"] = result.fingerpad.export(file_type="stl")
     recorder.write(
         TOPIC_DESIGN,
         DesignRecord(
             finger_stl_base64=_base64(finger),
             finger_sha256=hashlib.sha256(finger).hexdigest(),
-            fingerpad_sha256=hashlib.sha256(run.files["fingerpad.stl"]).hexdigest(),
+            fingerpad_sha256=hashlib.sha256(pad).hexdigest(),
             finger_volume_mm3=report.finger.volume_mm3,
             finger_watertight=report.finger.watertight,
+            finger_set=number,
         ),
     )
-    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=report.grasps))
-    recorder.write(TOPIC_SCENE, scene_update(result))
+    recorder.write(TOPIC_SCENE, scene_update(result, prefix=f"set-{number}-" if several(run.sets) else ""))
 
 
 def step_placement(run: JobRun) -> None:
@@ -354,6 +385,9 @@ def step_placement(run: JobRun) -> None:
     Fingers that do not fit leave the job done with its design, a warning
     and the free build height that was missing.
     """
+    if several(run.sets):
+        step_placement_sets(run)
+        return
     result = run.result
     placed = place_fingers(run.build, result.finger, run.build_settings, pad_normal=result.flat_finger.contact_normal, finger_name=f"fcso-finger-{FINGER_SET}")
     report = placed.report
@@ -377,16 +411,44 @@ def step_placement(run: JobRun) -> None:
     run.outgoing.append(BusMessage.json_body(bus.prefix, bus.cell, "placement", body))
 
 
+def step_placement_sets(run: JobRun) -> None:
+    """Place every finger set's copies into the build (:func:`fcsod.finger_sets.place_sets`): ``build.3mf``, the job report's placement, record, scene, bus message."""
+    placements = place_sets(run.build, run.sets, run.build_settings)
+    report = placements[-1].report
+    for placed in placements:
+        run.recorder.write(TOPIC_PLACEMENT, placed.report)
+    run.files[BUILD_NAME] = export_build_3mf(placements[-1].items, job_id=run.task.job_id, application=f"fcsod {__version__}", creation_date=utc_now())
+    per_set = [
+        {"set": k, "finger_copies_placed": p.report.finger_copies_placed, "fingers_fit": p.report.fingers_fit, "message": p.report.message}
+        for k, p in enumerate(placements, start=1)
+    ]
+    job = run.sets.job_report
+    update: dict = {"placement": {**report.model_dump(mode="json"), "finger_sets": per_set}}
+    for entry in per_set:
+        run.log("info" if entry["fingers_fit"] else "warning", f"placement of set {entry['set']}: {entry['message']}")
+        if not entry["fingers_fit"]:
+            run.warnings.append(f"set {entry['set']}: {entry['message']}")
+            update["warnings"] = [*update.get("warnings", job.warnings), f"set {entry['set']}: {entry['message']}"]
+    run.sets.job_report = job.model_copy(update=update)
+    run.recorder.write(TOPIC_SCENE, build_scene_update(placements[-1].items, report, run.build_settings))
+    bus = run.task.config.bus
+    summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
+    summary.update(fingers_fit=all(e["fingers_fit"] for e in per_set), finger_copies_placed=sum(e["finger_copies_placed"] for e in per_set))
+    summary["finger_copies_requested"] = sum(p.report.finger_copies_requested for p in placements)
+    run.outgoing.append(BusMessage.json_body(bus.prefix, bus.cell, "placement", PlacementMessage(job_id=run.task.job_id, file=BUILD_NAME, **summary)))
+
+
 def step_outputs(run: JobRun) -> None:
     """Write every output file into the work folder and record their hashes; record the bus messages.
 
     ``report.json`` and ``report.html`` are made here, after every step that
     adds to the report; the meshes are those the design record holds.
     """
-    run.files = {**output_files(run.result), **run.files}
+    run.files = {**(sets_output_files(run.sets) if several(run.sets) else output_files(run.result)), **run.files}
     for name, data in run.files.items():
         path = run.work_dir / name
         try:
+            path.parent.mkdir(exist_ok=True)
             path.write_bytes(data)
         except OSError as exc:
             # a failed write() does not say which file it was writing
@@ -399,6 +461,22 @@ def step_outputs(run: JobRun) -> None:
         ),
     )
     bus, report = run.task.config.bus, run.result.report
+    if run.sets is not None and run.sets.report is not None:
+        copies = [int(p.get("finger_copies_placed", 0)) for p in (run.sets.job_report or report).placement.get("finger_sets", [])] or [
+            report.placement["finger_copies_placed"]
+        ]
+        plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files, copies)
+    if several(run.sets):
+        grasps = [g for d in run.sets.designs for g in d.report.grasps]
+        run.outgoing = [
+            BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=grasps)),
+            *design_messages(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files),
+            plan,
+            *run.outgoing,
+        ]
+        for message in run.outgoing:
+            run.record_published(message)
+        return
     best = next(c for c in report.candidates if c.index == report.best)
     quality = QualityMessage(
         job_id=run.task.job_id,
@@ -431,6 +509,7 @@ def step_outputs(run: JobRun) -> None:
             finger,
             attachment.model_dump_json().encode(),
         ),
+        *([plan] if run.sets is not None and run.sets.report is not None else []),
         *run.outgoing,
     ]
     for message in run.outgoing:
@@ -448,7 +527,7 @@ STEPS: list[Callable[[JobRun], None]] = [
     step_inputs,
     step_load,
     step_design,
-    choose_by_verification,
+    step_choose_by_verification,
     step_record_design,
     step_placement,
     step_outputs,
@@ -475,10 +554,11 @@ def _triangles(mesh: trimesh.Trimesh, transform: np.ndarray, color: tuple[float,
     )
 
 
-def scene_update(result: DesignResult) -> SceneUpdate:
+def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
     """Foxglove SceneUpdate: per scenario the rested part, both seated pads and both fingers, in metres.
 
-    Scenarios are laid side by side along x so they do not overlap.
+    Scenarios are laid side by side along x so they do not overlap; entity ids
+    are ``<prefix>scenario-<n>`` (the prefix names a finger set).
     """
     now = time.time_ns()
     stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
@@ -501,7 +581,7 @@ def scene_update(result: DesignResult) -> SceneUpdate:
             SceneEntity(
                 timestamp=stamp,
                 frame_id="fcso_rest",
-                id=f"scenario-{number}",
+                id=f"{prefix}scenario-{number}",
                 lifetime=FoxgloveTime(sec=0, nsec=0),
                 frame_locked=False,
                 metadata=[
@@ -635,7 +715,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         os.replace(work_dir, final_dir)
         _fsync_dir(output_root)
     emit(("finished", "done" if error is None else "failed", error, publish))
-    if error is None:
+    if error is None and not several(run.sets):
         verify_done_job(run, final_dir)
 
 
@@ -670,7 +750,9 @@ def _finish_failed(run: JobRun, error: str) -> BusMessage:
     on disk and only the journal and the bus carry the failure.
     """
     for path in run.work_dir.iterdir():
-        if path.name != RECORD_NAME:
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.name != RECORD_NAME:
             path.unlink()
     try:
         run.log("error", error)
@@ -699,8 +781,10 @@ def _finish_failed(run: JobRun, error: str) -> BusMessage:
 
 
 def _fsync_files(folder: Path) -> None:
-    """Push every file of ``folder`` to disk."""
-    for path in folder.iterdir():
+    """Push every file of ``folder`` and its set folders to disk."""
+    for path in folder.rglob("*"):
+        if path.is_dir():
+            continue
         with open(path, "rb") as stream:
             os.fsync(stream.fileno())
 

@@ -114,7 +114,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert not record.truncated
     assert [s["state"] for s in record.of(TOPIC_STATE)] == ["queued", "running", "done"]
     published = [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)]
-    assert published == ["status", "quality", "grasps", "design", "placement", "status"]
+    assert published == ["status", "quality", "grasps", "design", "plan", "placement", "status"]
     assert any(b.get("stage") == "screening" for b in record.of(TOPIC_LOG))
     scene = record.of("/scene")[0]
     assert len(scene["entities"][0]["triangles"]) == 5
@@ -194,7 +194,7 @@ def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):
             return {v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id}
 
         # the replies need not arrive in the journal's order (zenoh consolidates them): wait for all five
-        late.wait_for(lambda v: set(replies()) == {"status", "quality", "grasps", "design", "placement"}, 30)
+        late.wait_for(lambda v: set(replies()) == {"status", "quality", "grasps", "design", "plan", "placement"}, 30)
         got = replies()
         assert got["design"]["sha256_ok"] is True
         assert got["status"]["body"]["state"] == "done"
@@ -214,7 +214,7 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
         assert done["job_id"] == job_id
         assert replay.popen.wait(timeout=30) == 0
         topics = [v["topic"] for v in listener.json_lines() if v.get("job_id") == job_id]
-        assert topics == ["status", "quality", "grasps", "design", "placement", "status"]
+        assert topics == ["status", "quality", "grasps", "design", "plan", "placement", "status"]
     finally:
         listener.stop()
         replay.stop()

@@ -25,7 +25,7 @@ from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_po
 
 CUBE = DATA / "20mm-xyz-cube.stl"
 SOLAR = DATA / "solar_tracker.stl"
-TOPICS = {"status", "quality", "grasps", "design", "placement"}
+TOPICS = {"status", "quality", "grasps", "design", "plan", "placement"}
 
 
 def _daemon_says(daemon: Process, message: str, timeout: float = 90, **fields) -> dict:

@@ -29,7 +29,7 @@ from fcsod.signing import generate_signing_key
 from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
-TOPICS = {"status", "quality", "grasps", "design", "placement"}
+TOPICS = {"status", "quality", "grasps", "design", "plan", "placement"}
 FORGED = '{"job_id": "forged", "grasps": [{"closing_width_mm": 0.0}]}'
 ROS2_DOMAIN = 7
 ROS2 = f'[ros2]\nenabled = true\ndomain_id = {ROS2_DOMAIN}\nnamespace = "/cell1"\n'

@@ -1,0 +1,156 @@
+"""Finger sets (METHOD §11) on print jobs of 12 and 30 different parts, against one finger for all.
+
+Run from the repository root::
+
+    python -m benchmarks.bench_sets [--runs N] [--only 12|30]
+
+Each job is the fixture parts in their right units (tests/data/README.md)
+plus parametric parts made here with manifold3d (boxes, cylinders, hexagonal
+prisms, L brackets and plates with a tapered knob, of several sizes), one
+stable pose each (the most probable), the default pad (L = W = 20, T = 5,
+D = 4). Prints, medians over N runs (the machine is shared and noisy):
+
+- the whole design with ``[finger_sets] max = 4`` (targets: 12 parts
+  <= 60 s, 30 parts <= 180 s), the number of sets, the worst and median
+  retained quality ``E / E*`` and how the partition was found;
+- the same job with one finger (``max = 1``, the paper's method): its time
+  and the worst and median ``E / E*`` (``E*`` from the sets run);
+- the checks of the issue: the sets' worst retained is at least the single
+  finger's, and reaches ``min_retained`` or the report says which pair blocks it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import manifold3d
+import numpy as np
+
+import fcso
+from fcso.geometry import to_trimesh
+from fcso.sets import design_sets
+
+REPO = Path(__file__).resolve().parent.parent
+DATA = REPO / "tests" / "data"
+
+#: Fixture parts with the units tests/data/README.md gives (DC-DC_case.stl holds two solids: two parts).
+FIXTURE_PARTS = (
+    ("20mm-xyz-cube.stl", "mm", None),
+    ("solar_tracker.stl", "mm", None),
+    ("capsela200_plug.stl", "mm", None),
+    ("DC-DC_case.stl", "mm", None),
+    ("angle_block.STL", "inch", None),
+    ("featuretype.STL", "inch", None),
+    ("stanford_bunny_closed.ply", "mm", 65.0),
+)
+
+
+def box(x: float, y: float, z: float) -> manifold3d.Manifold:
+    return manifold3d.Manifold.cube([x, y, z])
+
+
+def cylinder(diameter: float, height: float) -> manifold3d.Manifold:
+    return manifold3d.Manifold.cylinder(height, diameter / 2.0, circular_segments=64)
+
+
+def hex_prism(across_flats: float, height: float) -> manifold3d.Manifold:
+    return manifold3d.Manifold.cylinder(height, across_flats / np.sqrt(3.0), circular_segments=6)
+
+
+def l_bracket(size: float, thickness: float, depth: float) -> manifold3d.Manifold:
+    return box(size, depth, thickness) + box(thickness, depth, size)
+
+
+def knob(base: float, top_scale: float) -> manifold3d.Manifold:
+    """A 60 mm plate, too wide for the gripper, with a 16 mm knob tapering by ``top_scale``."""
+    plate = box(60.0, 60.0, 6.0).translate([-30.0, -30.0, 0.0])
+    square = manifold3d.CrossSection.square([base, base], center=True)
+    return plate + manifold3d.Manifold.extrude(square, 16.0, scale_top=[top_scale, top_scale]).translate([0.0, 0.0, 5.99])
+
+
+def parametric_parts(count: int) -> list[fcso.Part]:
+    """``count`` parametric parts, kinds in turn, each kind growing in size."""
+    kinds = [
+        ("box", lambda k: box(16.0 + 4 * k, 22.0 + 3 * k, 28.0 + 2 * k)),
+        ("cylinder", lambda k: cylinder(18.0 + 4 * k, 24.0 + 3 * k)),
+        ("knob-narrowing", lambda k: knob(14.0 + 2 * k, 0.7)),
+        ("knob-widening", lambda k: knob(9.8 + 1.4 * k, 1 / 0.7)),
+        ("hex", lambda k: hex_prism(16.0 + 4 * k, 20.0 + 4 * k)),
+        ("bracket", lambda k: l_bracket(24.0 + 4 * k, 5.0, 18.0 + 2 * k)),
+    ]
+    parts = []
+    for number in range(count):
+        name, make = kinds[number % len(kinds)]
+        size = number // len(kinds)
+        parts.append(fcso.Part(name=f"{name}-{size + 1}", path=f"{name}-{size + 1}.stl", mesh=to_trimesh(make(size))))
+    return parts
+
+
+def job(parts: int) -> list[fcso.Part]:
+    """The fixture parts plus parametric ones, ``parts`` in all."""
+    fixtures = [p for name, units, scale in FIXTURE_PARTS for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)]
+    return fixtures + parametric_parts(parts - len(fixtures))
+
+
+def retained_of_single(single: fcso.DesignResult, stars: dict[tuple[str, int], float]) -> np.ndarray:
+    """E / E* of every graspable scenario with one finger for all (E* from the sets run)."""
+    exact = single.report.print_fit.exact.effective_area
+    values = [e / stars[(s.part, s.pose_index)] for s, e in zip(single.report.scenarios, exact) if stars.get((s.part, s.pose_index), 0) > 0]
+    return np.array(values)
+
+
+def run_case(parts: int, runs: int, target_s: float) -> None:
+    config = fcso.DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}})
+    single_config = config.updated({"finger_sets": {"max": 1}})
+    loaded = job(parts)
+    sets_seconds, single_seconds = [], []
+    for _ in range(runs):
+        started = time.perf_counter()
+        result = design_sets(loaded, config)
+        sets_seconds.append(time.perf_counter() - started)
+        started = time.perf_counter()
+        single = design_sets(loaded, single_config).designs[0]
+        single_seconds.append(time.perf_counter() - started)
+    report = result.report
+    stars = {(s.part, s.pose_index): s.solo_effective_area for s in report.scenarios}
+    single_retained = retained_of_single(single, stars)
+    sets_median = statistics.median(sets_seconds)
+    print(f"{parts}-part job ({len(report.scenarios)} scenarios, {len(report.ungraspable_parts)} ungraspable parts: {', '.join(report.ungraspable_parts) or 'none'})")
+    print(
+        f"  finger sets (max {report.max_sets}, min_retained {report.min_retained:g}): {sets_median:.1f} s median of {runs} "
+        f"(target <= {target_s:.0f} s: {'met' if sets_median <= target_s else 'NOT met'}); timings of the last run: {result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
+    )
+    print(f"  {len(report.sets)} sets, worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, partition: {report.search.method}")
+    print(
+        f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: {', '.join(report.search.conflict_clique)}), "
+        f"{len(report.search.blocking_pairs)} conflicting pairs, {report.search.set_screenings} sets screened, sets tried {report.search.sets_tried}"
+    )
+    for entry in report.sets:
+        print(f"    set {entry.set}: {len(entry.parts)} parts, Q {entry.quality:.1f} mm², worst retained {entry.worst_retained:.3f}: {', '.join(entry.parts)}")
+    print(
+        f"  one finger (--finger-sets 1): {statistics.median(single_seconds):.1f} s median of {runs}, Q {single.best.quality:.1f} mm², "
+        f"worst retained {single_retained.min():.3f}, median {np.median(single_retained):.3f}"
+    )
+    better = report.worst_retained >= single_retained.min() - 1e-9
+    print(f"  sets' worst retained >= one finger's: {'yes' if better else 'NO'}")
+    if report.min_retained_reached:
+        print(f"  min_retained {report.min_retained:g} reached by every graspable scenario")
+    else:
+        print(f"  min_retained {report.min_retained:g} NOT reached; the report says: {report.search.explanation}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=3, help="runs per figure (medians)")
+    parser.add_argument("--only", type=int, choices=(12, 30), help="one job only")
+    args = parser.parse_args(argv)
+    for parts, target in ((12, 60.0), (30, 180.0)):
+        if args.only in (None, parts):
+            run_case(parts, args.runs, target)
+
+
+if __name__ == "__main__":
+    main()
