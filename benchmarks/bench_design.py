@@ -117,12 +117,15 @@ def design_figures(parts, config, runs: int) -> tuple[list[float], fcso.DesignRe
 def peak_memory_mb() -> float:
     """Peak resident memory of this process and of its largest finished worker, MB.
 
-    Forked workers share the parent's pages until they write them, so the
-    sum over-counts: it is an upper bound.
+    The process's own peak is VmHWM, which exec resets (``ru_maxrss`` keeps
+    the peak of the process that started it). Forked workers share the
+    parent's pages until they write them, so the sum over-counts: it is an
+    upper bound.
     """
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return (own + children) / 1024.0
+    status = Path("/proc/self/status").read_text()
+    own_kb = int(next(line.split()[1] for line in status.splitlines() if line.startswith("VmHWM:")))
+    children_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return (own_kb + children_kb) / 1024.0
 
 
 def sixteen_scenario_memory_mb() -> float:
