@@ -358,6 +358,15 @@ def job_key(prefix: str, cell: str, job_id: str, topic: str) -> str:
     return f"{prefix}/{cell}/jobs/{job_id}/{topic}"
 
 
+def split_job_key(key_expr: str) -> tuple[str, str] | None:
+    """``(job_id, topic)`` of a job's key, where a finger set's topics are ``design/<set>`` and ``verification/<set>``; None for other keys."""
+    parts = key_expr.split("/")
+    for width in (1, 2):
+        if len(parts) >= 3 + width and parts[-2 - width] == "jobs":
+            return parts[-1 - width], "/".join(parts[-width:])
+    return None
+
+
 def daemon_key(prefix: str, cell: str) -> str:
     """Key of the daemon's liveliness token."""
     return f"{prefix}/{cell}/daemon"
@@ -407,7 +416,7 @@ class BusMessage:
     @classmethod
     def from_record(cls, record: BusRecord) -> "BusMessage":
         """The message a :class:`BusRecord` keeps (for replay)."""
-        parts = record.key_expr.split("/")
+        job_id, topic = split_job_key(record.key_expr) or ("", record.key_expr.rsplit("/", 1)[-1])
         payload = record.payload_text.encode() if record.payload_text is not None else base64.b64decode(record.payload_base64 or "")
         attachment = record.attachment.encode() if record.attachment is not None else None
-        return cls(parts[-2], parts[-1], record.key_expr, record.encoding, payload, attachment)
+        return cls(job_id, topic, record.key_expr, record.encoding, payload, attachment)

@@ -31,7 +31,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from fcso.errors import ConfigError
 
 from .config import DaemonConfig
-from .messages import BusMessage, MessageSignature
+from .messages import BusMessage, MessageSignature, split_job_key
 
 #: Domain separation: a signature made for anything else never verifies here.
 SIGNATURE_CONTEXT = b"fcsod-signature-v1"
@@ -57,11 +57,9 @@ def key_id(public_key: Ed25519PublicKey) -> str:
 
 
 def job_id_of(key_expr: str) -> str | None:
-    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>`` (a finger set's design: topic ``design/<set>``), None for other keys."""
-    parts = key_expr.split("/")
-    if len(parts) >= 5 and parts[-4] == "jobs" and parts[-2] == "design":
-        return parts[-3]
-    return parts[-2] if len(parts) >= 4 and parts[-3] == "jobs" else None
+    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>`` (:func:`fcsod.messages.split_job_key`), None for other keys."""
+    split = split_job_key(key_expr)
+    return split[0] if split is not None else None
 
 
 class Signer:

@@ -8,7 +8,9 @@ unperturbed grasp, frame by frame) and publishes a summary on
 ``<prefix>/<cell>/jobs/<job_id>/verification``. A design that does not
 pass leaves the job done, with a warning in the log and the message.
 With ``top_k > 0`` the K best candidates are verified inside the design
-step and the best by Q that passes becomes the job's design.
+step and the best by Q that passes becomes the job's design. A job of
+several finger sets verifies every set's finger, each on
+``.../verification/<set>`` (choosing among candidates is for one finger).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from fcso.sim.report import VerificationReport
 from fcso.sim.verify import DesignUnderTest, design_under_test, verify, write_verification
 
 from .config import VerifySettings
+from .finger_sets import several
 from .messages import BusMessage, FoxgloveTime, SceneEntity, SceneUpdate
 from .recorder import TOPIC_BUS, Recorder
 
@@ -63,7 +66,8 @@ class VerificationMessage(BaseModel):
 
     job_id: str
     passed: bool = Field(description="Every scenario reached the success threshold")
-    file: str = Field(description="The full result in the job's output folder")
+    file: str = Field(description="The full result, relative to the job's output folder")
+    finger_set: int | None = Field(None, description="The finger set verified when the job has several (key .../verification/<set>)")
     scenarios: list[ScenarioOutcome]
     chosen_candidate: int | None = Field(None, description="top_k: the candidate verification chose")
     warnings: list[str]
@@ -88,7 +92,9 @@ def choose_by_verification(run) -> None:
 def verify_done_job(run, final_dir: Path) -> None:
     """After the job is done: verify (unless ``choose_by_verification`` did), write, record and publish.
 
-    Never raises: a failure is a warning, the job stays done.
+    A job of several finger sets verifies every set's finger: its results go
+    into the set's folder and on ``.../verification/<set>``. Never raises: a
+    failure is a warning, the job stays done.
     """
     settings = _settings(run)
     if not (settings.enabled or settings.top_k > 0):
@@ -98,27 +104,40 @@ def verify_done_job(run, final_dir: Path) -> None:
         # job.mcap is closed: these lines go to the daemon's log only
         run.emit(("log", level, message, fields))
 
+    if several(run.sets):
+        for number, result in enumerate(run.sets.designs, start=1):
+            _verify_one(run, result, final_dir, f"set-{number}", number, settings, log)
+    else:
+        _verify_one(run, run.result, final_dir, "", None, settings, log)
+
+
+def _verify_one(run, result, final_dir: Path, folder: str, finger_set: int | None, settings: VerifySettings, log: Callable) -> None:
+    """Verify one finger's design, write into ``final_dir / folder``, record and publish; a failure is a warning."""
+    name = f"verification of finger set {finger_set}" if finger_set is not None else "verification"
+    out = final_dir / folder if folder else final_dir
     try:
         started = time.perf_counter()
-        if run.verified is not None:
+        if run.verified is not None and finger_set is None:
             verification, design, extra = run.verified
             # the report's pictures follow the candidate verification chose (rebuilt from report.json)
-            rebuild_report(final_dir)
+            rebuild_report(out)
         else:
-            log("info", "verification: started")
-            design = design_under_test(run.result)
-            verification, extra = verify(design, with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings), _progress(log)), ""
-        write_verification(final_dir, verification, design, extra)
+            log("info", f"{name}: started")
+            design = design_under_test(result)
+            verification, extra = verify(design, with_print_density(VerifyConfig(trials=settings.trials), result.report.settings), _progress(log)), ""
+        write_verification(out, verification, design, extra)
         bus = run.task.config.bus
-        message = BusMessage.json_body(bus.prefix, bus.cell, "verification", _message(run.task.job_id, verification))
-        _record(final_dir / RECORD_NAME, verification, design, message, run.task.config.mcap)
+        topic = "verification" if finger_set is None else f"verification/{finger_set}"
+        file = f"{folder}/verification.json" if folder else "verification.json"
+        message = BusMessage.json_body(bus.prefix, bus.cell, topic, _message(run.task.job_id, verification, file, finger_set))
+        _record(out / RECORD_NAME, verification, design, message, run.task.config.mcap)
         run.emit(("publish", message))
         level = "info" if verification.passed else "warning"
-        log(level, f"verification: design {'passed' if verification.passed else 'did not pass'} in {time.perf_counter() - started:.1f} s")
+        log(level, f"{name}: design {'passed' if verification.passed else 'did not pass'} in {time.perf_counter() - started:.1f} s")
         for warning in verification.warnings:
-            log("warning", f"verification: {warning}")
+            log("warning", f"{name}: {warning}")
     except Exception as exc:  # the design is delivered; verification is extra
-        log("warning", f"verification failed: {type(exc).__name__}: {exc}")
+        log("warning", f"{name} failed: {type(exc).__name__}: {exc}")
 
 
 def _settings(run) -> VerifySettings:
@@ -139,12 +158,13 @@ def _progress(log: Callable) -> Callable[[str, int, int], None]:
     return progress
 
 
-def _message(job_id: str, verification: VerificationReport) -> VerificationMessage:
+def _message(job_id: str, verification: VerificationReport, file: str, finger_set: int | None) -> VerificationMessage:
     chosen = next((r.index for r in verification.ranking or [] if r.chosen), None)
     return VerificationMessage(
         job_id=job_id,
         passed=verification.passed,
-        file="verification.json",
+        file=file,
+        finger_set=finger_set,
         scenarios=[
             ScenarioOutcome(
                 part=s.part,

@@ -321,11 +321,11 @@ def step_design(run: JobRun) -> None:
 
 
 def step_choose_by_verification(run: JobRun) -> None:
-    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (not verified yet)."""
+    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is verified when done)."""
     if several(run.sets):
         settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
-        if settings.top_k > 0 or settings.enabled:
-            run.log("warning", "verification skipped: the job has several finger sets, verification handles one finger")
+        if settings.top_k > 0:
+            run.log("warning", "verify top_k chooses among one finger's candidates: with several finger sets each set's design is verified as it is")
         return
     choose_by_verification(run)
 
@@ -715,7 +715,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         os.replace(work_dir, final_dir)
         _fsync_dir(output_root)
     emit(("finished", "done" if error is None else "failed", error, publish))
-    if error is None and not several(run.sets):
+    if error is None:
         verify_done_job(run, final_dir)
 
 

@@ -56,3 +56,56 @@ def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
+
+
+SETS_MANIFEST = """
+[[parts]]
+file = "narrowing.stl"
+
+[[parts]]
+file = "widening.stl"
+
+[finger_sets]
+min_retained = 0.7
+
+[verify]
+enabled = true
+trials = 2
+"""
+
+
+def test_every_finger_set_of_a_job_is_verified_into_its_folder_and_on_its_key(tmp_path):
+    # the conflicting knob parts of tests/test_sets.py need two fingers at min_retained 0.7
+    from tests.test_sets import NARROWING, WIDENING
+
+    port = free_port()
+    config = write_config(tmp_path, port)
+    files = {}
+    for part in (NARROWING, WIDENING):
+        files[f"{part.name}.stl"] = tmp_path / f"{part.name}.stl"
+        part.mesh.export(files[f"{part.name}.stl"])
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config)
+    try:
+        drop_job(tmp_path / "watch" / "knobs", {"job.toml": SETS_MANIFEST, **files})
+        done = finished(subscriber, "knobs", timeout=180)
+        assert done["body"]["state"] == "done", done
+        job_id = done["job_id"]
+        subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("topic") == "verification/2" and v["job_id"] == job_id and v.get("signature_ok"), 240
+        )
+        messages = {v["topic"]: v for v in subscriber.json_lines() if v.get("job_id") == job_id}
+    finally:
+        subscriber.stop()
+        assert daemon.stop() == 0
+    out = tmp_path / "out" / job_id
+    for number, part in ((1, "narrowing"), (2, "widening")):
+        body = messages[f"verification/{number}"]["body"]
+        assert body["finger_set"] == number and body["file"] == f"set-{number}/verification.json"
+        assert [s["part"] for s in body["scenarios"]] == [part]
+        folder = out / f"set-{number}"
+        written = json.loads((folder / "verification.json").read_text())
+        assert written["scenarios"][0]["fcso"]["success_rate"] == body["scenarios"][0]["success_rate"]
+        assert "<!-- fcso verify -->" in (folder / "report.html").read_text()
+        assert any(b["key_expr"].endswith(f"/verification/{number}") for b in read_record(folder / RECORD_NAME).of(TOPIC_BUS))
+    assert "verification" not in messages
