@@ -43,13 +43,16 @@ class VerifyConfig(BaseModel):
     decomposition_threshold: float = Field(
         0.05, gt=0, description="CoACD concavity threshold of the part's and the pad's convex decompositions (fraction of the size)"
     )
+    coarse_decomposition_threshold: float = Field(
+        0.1, gt=0, description="CoACD concavity threshold of the part away from the pads (see pad_reach_boxes; fraction of the size)"
+    )
     max_seated_penetration_mm: float = Field(
         0.2,
         gt=0,
         description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are refined, mm",
     )
     min_decomposition_threshold: float = Field(
-        0.01, gt=0, description="Refinement halves the pad's CoACD threshold down to this"
+        0.01, gt=0, description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this"
     )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
