@@ -34,7 +34,9 @@ import trimesh
 from ..geometry import box, to_manifold, to_trimesh
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
-CACHE_VERSION = "coacd-3"
+CACHE_VERSION = "coacd-4"
+#: Largest deviation of the simplified surface CoACD decomposes, mm (see :func:`_decompose`).
+SIMPLIFY_TOLERANCE_MM = 0.005
 
 
 @dataclass
@@ -198,10 +200,20 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
 
 
 def _decompose(mesh: trimesh.Trimesh, threshold: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """CoACD pieces of a closed mesh, or its hull when it is convex.
+
+    The mesh is first simplified within :data:`SIMPLIFY_TOLERANCE_MM`
+    (manifold3d): a pad carved with a print clearance and lead-in has ~35k
+    triangles of offset surface, on which CoACD took 14 s (190 s at a
+    quarter of the threshold); simplified to ~400 triangles, 1.3 s for the
+    same pieces. The fidelity is measured against the unsimplified mesh.
+    """
     hull = mesh.convex_hull
     if hull.volume <= mesh.volume * 1.001:
         return [(np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int64))]
     import coacd
+
+    mesh = to_trimesh(to_manifold(mesh).simplify(SIMPLIFY_TOLERANCE_MM))
 
     coacd.set_log_level("error")
     # no preprocessing: our meshes are already closed manifolds, and CoACD's

@@ -190,14 +190,17 @@ def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig
     penetration, part, pad = attempt(thresholds["pad"], thresholds["part"])
     while penetration > config.max_seated_penetration_mm:
         refined = None
-        for which in ("pad", "part"):
-            finer = dict(thresholds)
-            # one halving can split a bridging piece badly and overlap more: keep halving
-            while refined is None and finer[which] / 2.0 >= config.min_decomposition_threshold:
-                finer[which] /= 2.0
-                tried = attempt(finer["pad"], finer["part"])
-                if tried[0] < 0.9 * penetration:
-                    refined, thresholds = tried, finer
+        # one halving can split a bridging piece badly and overlap more, so finer ones are tried too;
+        # coarse before fine (CoACD's time grows fast as the threshold shrinks), the pad before the part
+        halvings = int(np.floor(np.log2(max(thresholds.values()) / config.min_decomposition_threshold)))
+        for times, which in ((t, w) for t in range(1, halvings + 1) for w in ("pad", "part")):
+            finer = dict(thresholds, **{which: thresholds[which] / 2.0**times})
+            if finer[which] < config.min_decomposition_threshold:
+                continue
+            tried = attempt(finer["pad"], finer["part"])
+            if tried[0] < 0.9 * penetration:
+                refined, thresholds = tried, finer
+                break
         if refined is not None:
             penetration, part, pad = refined
         else:
