@@ -4,9 +4,9 @@ Run from the repository root::
 
     python -m benchmarks.bench_verify [--trials N] [--runs N] [--quick]
 
-The full run takes about 20 min on this machine (the bunny's cold
-decomposition alone about 7 min); ``--quick`` (the paper cube and the
-timing) about 6 min.
+The full run takes about 11 min on this machine (the bunny's cold
+verification alone about 8 min); ``--quick`` (the paper cube and the
+timing) about 2 min.
 
 Prints
 
