@@ -70,6 +70,39 @@ def ridged_block(length_mm: float = 20.0, width_mm: float = 20.0, height_mm: flo
     return _mesh(block + plus + minus)
 
 
+def two_ridge_block(
+    length_mm: float = 20.0, width_mm: float = 20.0, low_mm: float = 20.0, gap_mm: float = 4.0, high_mm: float = 20.0, ridge_mm: float = 4.0
+) -> trimesh.Trimesh:
+    """A block whose two x ends carry, low, a vertical 90-degree ridge and, high, two horizontal ones.
+
+    The vertical ridge centres the part along the pads (y); the horizontal
+    ridges have the same normals and twice the contact area, so a pad on
+    them has the higher Q, but nothing stops the part sliding along them:
+    the best candidate by Q does not capture a displaced part and a lower
+    one does (what ``--verify-top`` is for).
+
+    Parameters
+    ----------
+    length_mm, width_mm : float
+        The block without its ridges (x, y).
+    low_mm, gap_mm, high_mm : float
+        Height of the vertical ridge, of the plain band above it, and of the band with the two horizontal ridges.
+    ridge_mm : float
+        How far each ridge stands out (its base is 2 x ridge_mm wide).
+    """
+    solid = manifold3d.Manifold.cube([length_mm, width_mm, low_mm + gap_mm + high_mm])
+    vertical = _v_prism(ridge_mm, low_mm).translate([-ridge_mm, width_mm / 2.0, 0.0])
+    # the prism turned to run along y
+    horizontal = _v_prism(ridge_mm, width_mm).rotate([-90.0, 0.0, 0.0])
+    pitch = high_mm / 2.0
+    end = manifold3d.Manifold.batch_boolean(
+        [vertical] + [horizontal.translate([-ridge_mm, 0.0, low_mm + gap_mm + pitch * (k + 0.5)]) for k in range(2)],
+        manifold3d.OpType.Add,
+    )
+    other_end = end.rotate([0.0, 0.0, 180.0]).translate([length_mm, width_mm, 0.0])
+    return _mesh(manifold3d.Manifold.batch_boolean([solid, end, other_end], manifold3d.OpType.Add))
+
+
 def upright_grasp_settings(mesh: trimesh.Trimesh, closing_axis_in_file=(1.0, 0.0, 0.0)) -> dict:
     """fcso settings that design a part resting on its file-frame bottom, closing along a file-frame axis.
 

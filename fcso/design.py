@@ -236,6 +236,21 @@ def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConf
     return _evaluate(prepared.scenarios, tuple(choice), config, keep_pad=False)
 
 
+def finish_candidate(
+    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig
+) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
+    """One candidate built as :func:`design` builds its choice: carved with ``[print]``'s fit, its pad kept.
+
+    Returns the fitted evaluation, its grasps and print-fit report as
+    ``report.json`` lists them, and the print-fit warnings.
+    """
+    choice = tuple(choice)
+    fitted = _evaluate(scenarios, choice, config, keep_pad=True, fitted=True)
+    warnings: list[str] = []
+    print_fit = _print_fit_report(scenarios, choice, fitted, config, warnings)
+    return fitted, [_grasp_report(s, k, e, config) for s, k, e in zip(scenarios, choice, fitted.scenarios)], print_fit, warnings
+
+
 def design(
     parts: Sequence[Part | str | Path],
     config: DesignConfig | None = None,

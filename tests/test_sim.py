@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from examples.sim_parts import ridged_block
+from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.parts import Part
-from fcso.sim.collision import convex_pieces
+from fcso.sim.collision import convex_pieces, zoned_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
-from fcso.sim.verify import finger_hull, grasp_case
+from fcso.sim.verify import finger_hull, grasp_case, part_pieces
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -44,7 +44,7 @@ def ridged(tmp_path_factory):
     assert result.report.candidates[0].pad_case != "bad"
     cache = tmp_path_factory.mktemp("cache")
     case = grasp_case(result.report, result.report.grasps[0], mesh)
-    pieces = convex_pieces(case.part, VerifyConfig().decomposition_threshold, cache).pieces
+    pieces = part_pieces(case, VerifyConfig(cache_dir=cache)).pieces
     pad = convex_pieces(result.fingerpad, VerifyConfig().decomposition_threshold, cache).pieces
     return case, pieces, pad, finger_hull(result.report, result.finger), result.fingerpad
 
@@ -99,17 +99,38 @@ def test_flat_pad_holding_force_rises_with_friction(tmp_path):
     assert slips[0.2] > 1.6 * slips[0.1]
 
 
-def test_collision_pieces_hug_the_part_and_the_pad(ridged):
-    """No convex piece may stand out of its mesh: a bulge fills the pad's pockets and stalls the fingers early."""
+def _stands_out_mm(vertices: np.ndarray, target: trimesh.Trimesh) -> float:
+    """How far a convex piece's surface stands out of a mesh, mm."""
     import igl
 
+    surface = trimesh.convex.convex_hull(vertices).sample(2000, seed=0)
+    return float(igl.signed_distance(surface, np.asarray(target.vertices, dtype=float), np.asarray(target.faces, dtype=np.int64))[0].max())
+
+
+def test_collision_pieces_hug_the_part_and_the_pad(ridged):
+    """No convex piece may stand out of its mesh: a bulge fills the pad's pockets and stalls the fingers early."""
     case, pieces, pad, _, fingerpad = ridged
     for meshes, target in ((pieces, case.part), (pad, fingerpad)):
         for vertices, _ in meshes:
-            surface = trimesh.convex.convex_hull(vertices).sample(2000, seed=0)
-            outside = igl.signed_distance(surface, np.asarray(target.vertices, dtype=float), np.asarray(target.faces, dtype=np.int64))[0]
             # CoACD's pieces stand out up to ~0.12 mm here; its voxel preprocessing made it 0.3-0.8 mm
-            assert outside.max() <= 0.15
+            assert _stands_out_mm(vertices, target) <= 0.15
+
+
+def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
+    """The part is decomposed finely where the pads act and coarsely elsewhere; no coarse piece may reach into the fine zone."""
+    cube = featured_cube()
+    # the zone of the notch in the face x = 0 (the cube spans 0..30 mm)
+    zone = np.array([[[-1.0, -1.0, -1.0], [8.0, 31.0, 31.0]]])
+    zoned = zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path)
+    inside = [v for v, _ in zoned.pieces if v[:, 0].max() <= 8.0 + 1e-4]
+    outside = [v for v, _ in zoned.pieces if v[:, 0].min() >= 8.0 - 1e-4]
+    assert len(inside) + len(outside) == len(zoned.pieces) and inside and outside
+    # fine in the zone: the notch stays open (its hull would fill it by 8 mm)
+    assert max(_stands_out_mm(v, cube) for v in inside) <= 0.15
+    # coarse outside: the far notch and the hole are bridged, which a fine decomposition would not do
+    assert max(_stands_out_mm(v, cube) for v in outside) > 1.0
+    assert -0.001 < zoned.volume_error and zoned.missing_fraction < 0.001
+    assert zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path).cached
 
 
 def test_verification_takes_the_part_density_from_the_print_profile():

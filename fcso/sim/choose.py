@@ -2,55 +2,42 @@
 
 from __future__ import annotations
 
-from ..design import DesignResult
+from ..design import CandidateEvaluation, DesignResult, finish_candidate
 from ..finger import fuse
 from ..geometry import to_trimesh
-from ..grasps import tcp_pose
-from ..pad import build_fingerpad
-from ..report import CandidateReport, DesignReport, FingerReport, GraspReport
+from ..report import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport
 from ..table import ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
-from .verify import DesignUnderTest, Progress, finger_hull, grasp_case, verify
+from .verify import DesignUnderTest, Progress, design_under_test, finger_hull, grasp_case, verify
 
 
-def candidate_design(result: DesignResult, candidate: CandidateReport) -> tuple[DesignUnderTest, list[GraspReport], object]:
-    """The simulation's inputs for any evaluated candidate of a design.
+def candidate_design(
+    result: DesignResult, candidate: CandidateReport
+) -> tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
+    """The simulation's inputs for any evaluated candidate of a design, built as the design builds its choice.
+
+    The pad is carved with the design's ``[print]`` clearance and lead-in
+    (:func:`fcso.design.finish_candidate`), so the verified pad is the one
+    that would be printed.
 
     Returns
     -------
     design : DesignUnderTest
+    evaluation : CandidateEvaluation
+        The candidate as printed, with its pad and contacts.
     grasps : list of GraspReport
-        The candidate's grasps, as ``report.json`` would list them.
-    fingerpad : fcso.pad.Fingerpad
-        The carved pad (manifold) of the candidate.
+        Its grasps, as ``report.json`` would list them.
+    print_fit : PrintFitReport
+    warnings : list of str
+        The print fit's warnings.
     """
-    config = result.report.settings
-    chosen = [scenario.samples[k] for scenario, k in zip(result.scenarios, candidate.samples)]
-    fingerpad = build_fingerpad([g for sample in chosen for g in sample.geometries], config.sampler, config.filter)
-    grasps = []
-    for scenario, reported, k, sample, quality in zip(
-        result.scenarios, result.report.scenarios, candidate.samples, chosen, candidate.per_scenario
-    ):
-        pose = tcp_pose(sample.sample, quality.seat_offsets_mm[0], quality.seat_offsets_mm[1], config.sampler)
-        grasps.append(
-            GraspReport(
-                part=scenario.part.name,
-                pose_index=scenario.pose_index,
-                sample=k,
-                rest_transform=reported.rest_transform,
-                position_mm=pose["position_mm"],
-                quaternion_wxyz=pose["quaternion_wxyz"],
-                approach_direction=pose["approach_direction"],
-                closing_axis=pose["closing_axis"],
-                pad_gap_mm=pose["pad_gap_mm"],
-                closing_width_mm=pose["closing_width_mm"],
-            )
-        )
+    evaluation, grasps, print_fit, warnings = finish_candidate(result.scenarios, candidate.samples, result.report.settings)
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
     report = result.report.model_copy(update={"grasps": grasps})
     cases = [grasp_case(report, g, parts[g.part]) for g in grasps]
-    return DesignUnderTest(cases, to_trimesh(fingerpad.pad), finger_hull(result.report, result.finger)), grasps, fingerpad
+    design = DesignUnderTest(cases, to_trimesh(evaluation.fingerpad.pad), finger_hull(result.report, result.finger))
+    return design, evaluation, grasps, print_fit, warnings
 
 
 def verify_top(
@@ -74,10 +61,15 @@ def verify_top(
     ranked = ranked_candidates(result.report, top)
     outcomes = []
     for rank, candidate in enumerate(ranked):
-        design, grasps, fingerpad = candidate_design(result, candidate)
-        verification = verify(design, config, progress)
-        outcomes.append((rank, candidate, design, grasps, fingerpad, verification))
-    passing = [o for o in outcomes if o[5].passed]
+        # the design's own choice is already built as printed
+        built = (
+            (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
+            if candidate.index == result.report.best
+            else candidate_design(result, candidate)
+        )
+        verification = verify(built[0], config, progress)
+        outcomes.append((rank, candidate, built, verification))
+    passing = [o for o in outcomes if o[3].passed]
     chosen = passing[0] if passing else outcomes[0]
     ranking = [
         RankedCandidate(
@@ -89,29 +81,33 @@ def verify_top(
             passed=verification.passed,
             chosen=candidate.index == chosen[1].index,
         )
-        for rank, candidate, _, _, _, verification in outcomes
+        for rank, candidate, _, verification in outcomes
     ]
-    rank, candidate, design, grasps, fingerpad, verification = chosen
+    rank, candidate, built, verification = chosen
+    design = built[0]
     if candidate.index != result.report.best:
         why = (
             f"verification chose candidate {candidate.index} (rank {rank + 1} by Q, Q = {candidate.quality:.1f}) over "
             f"candidate {result.report.best}: it is the best by Q whose every scenario reached the success threshold"
         )
-        result = _with_candidate(result, candidate, grasps, fingerpad, why)
+        result = _with_candidate(result, candidate, *built[1:], why)
     elif not passing:
         verification.warnings.append(f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q")
     verification = verification.model_copy(update={"ranking": ranking})
     return result, verification, design, ranking
 
 
-def _with_candidate(result: DesignResult, candidate: CandidateReport, grasps, fingerpad, why: str) -> DesignResult:
-    """The design result with another candidate chosen: its pad fused onto the finger, its grasps in the report."""
+def _with_candidate(
+    result: DesignResult, candidate: CandidateReport, evaluation: CandidateEvaluation, grasps, print_fit, fit_warnings, why: str
+) -> DesignResult:
+    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit in the report."""
     config = result.report.settings
-    fused = fuse(result.flat_finger, fingerpad.pad, config.sampler, config.finger.overlap_mm)
+    fused = fuse(result.flat_finger, evaluation.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     report: DesignReport = result.report.model_copy(
         update={
             "best": candidate.index,
             "grasps": grasps,
+            "print_fit": print_fit,
             "finger": FingerReport(
                 source=result.report.finger.source,
                 repairs=result.report.finger.repairs,
@@ -120,15 +116,15 @@ def _with_candidate(result: DesignResult, candidate: CandidateReport, grasps, fi
                 watertight=bool(fused.mesh.is_watertight),
                 min_pad_thickness_mm=round(float(fused.min_pad_thickness_mm), 6),
             ),
-            "warnings": result.report.warnings + [why],
+            "warnings": result.report.warnings + fit_warnings + [why],
         }
     )
     return DesignResult(
         report=report,
         finger=fused.mesh,
-        fingerpad=to_trimesh(fingerpad.pad),
+        fingerpad=to_trimesh(evaluation.fingerpad.pad),
         scenarios=result.scenarios,
-        best=result.best,
+        best=evaluation,
         flat_finger=result.flat_finger,
         pad_to_finger=result.pad_to_finger,
     )

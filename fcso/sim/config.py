@@ -41,7 +41,10 @@ class VerifyConfig(BaseModel):
         5.0, gt=0, description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm"
     )
     decomposition_threshold: float = Field(
-        0.05, gt=0, description="CoACD concavity threshold of the part's and the pad's convex decompositions (fraction of the size)"
+        0.05, gt=0, description="CoACD concavity threshold of the pad and of the part near the pads (fraction of each decomposed cell's size)"
+    )
+    coarse_decomposition_threshold: float = Field(
+        0.1, gt=0, description="CoACD concavity threshold of the part away from the pads (see pad_reach_boxes; fraction of each cell's size)"
     )
     max_seated_penetration_mm: float = Field(
         0.2,
@@ -49,7 +52,7 @@ class VerifyConfig(BaseModel):
         description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are refined, mm",
     )
     min_decomposition_threshold: float = Field(
-        0.01, gt=0, description="Refinement halves the pad's CoACD threshold down to this"
+        0.01, gt=0, description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this"
     )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
