@@ -348,15 +348,27 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
     body += [
         "<h2>Grasp sampler</h2>",
         _sampler_table(report),
-        "<h2>Warnings</h2>",
-        "<ul>" + "".join(f"<li>{_text(w)}</li>" for w in report.warnings) + "</ul>" if report.warnings else "<p>None.</p>",
-        "<h2>Settings and timings</h2>",
-        f"<details><summary>settings</summary><pre>{_text(report.settings.model_dump_json(indent=2))}</pre></details>",
-        f"<pre>{_text(json.dumps(report.timings_s, indent=2))}</pre>",
+        *closing_sections(report.warnings, report.settings.model_dump_json(indent=2), report.timings_s),
     ]
+    return html_page(f"FCSO report: {', '.join(p.name for p in report.parts)}", body)
+
+
+def closing_sections(warnings: list[str], settings_json: str, timings_s: dict) -> list[str]:
+    """The warnings, settings and timings that end every report page (HTML fragments)."""
+    return [
+        "<h2>Warnings</h2>",
+        "<ul>" + "".join(f"<li>{_text(w)}</li>" for w in warnings) + "</ul>" if warnings else "<p>None.</p>",
+        "<h2>Settings and timings</h2>",
+        f"<details><summary>settings</summary><pre>{_text(settings_json)}</pre></details>",
+        f"<pre>{_text(json.dumps(timings_s, indent=2))}</pre>",
+    ]
+
+
+def html_page(title: str, body: list[str]) -> str:
+    """A whole report page: ``title`` (plain text) and the ``body`` fragments, with the reports' style."""
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-        f"<title>FCSO report: {_text(', '.join(p.name for p in report.parts))}</title>\n<style>{_STYLE}</style>\n</head>\n"
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        f"<title>{_text(title)}</title>\n<style>{_STYLE}</style>\n</head>\n"
         "<body>\n" + "\n".join(body) + "\n</body>\n</html>\n"
     )
 

@@ -16,7 +16,6 @@ With two or more::
 
 from __future__ import annotations
 
-import html
 import json
 import os
 from pathlib import Path
@@ -26,7 +25,7 @@ import trimesh
 from .design import Progress
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
-from .html_report import _STYLE, _image, read_stl, rebuild_report
+from .html_report import _image, _text, closing_sections, html_page, read_stl, rebuild_report
 from .output import output_files
 from .render import finger_picture
 from .sets import SetsResult
@@ -79,18 +78,8 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
             f'<h3>Set {entry.set}: {_text(", ".join(entry.parts))} (<a href="{entry.folder}/report.html">design report</a>)</h3>',
             _image(finger_picture(finger, transform, pad_size, f"set {entry.set}: finger with its fingerpad (orange)"), "finger", f"finger of set {entry.set}"),
         ]
-    body += [
-        "<h2>Warnings</h2>",
-        "<ul>" + "".join(f"<li>{_text(w)}</li>" for w in report.warnings) + "</ul>" if report.warnings else "<p>None.</p>",
-        "<h2>Settings and timings</h2>",
-        f"<details><summary>settings</summary><pre>{_text(config.model_dump_json(indent=2))}</pre></details>",
-        f"<pre>{_text(json.dumps(report.timings_s, indent=2))}</pre>",
-    ]
-    return (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        f"<title>FCSO job: {len(sets.sets)} finger sets</title>\n<style>{_STYLE}</style>\n</head>\n"
-        "<body>\n" + "\n".join(body) + "\n</body>\n</html>\n"
-    )
+    body += closing_sections(report.warnings, config.model_dump_json(indent=2), report.timings_s)
+    return html_page(f"FCSO job: {len(sets.sets)} finger sets", body)
 
 
 def is_job_folder(directory: str | Path) -> bool:
@@ -198,10 +187,6 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             + "</ul>"
         )
     return section
-
-
-def _text(value) -> str:
-    return html.escape(str(value))
 
 
 def _number(value: float | None) -> str:
