@@ -31,9 +31,10 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
     -------
     vertices, faces : ndarray
         The part of the surface inside the box (triangles cut exactly at
-        the box planes). ``faces`` is empty when nothing is inside. Cut
-        triangles get vertices of their own: the result is a soup, not a
-        connected mesh.
+        the box planes). ``faces`` is empty when nothing is inside. The
+        input's vertices come first, unchanged, and cut points are appended
+        (a soup: cut triangles do not share them), so indices into the input
+        stay valid.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
