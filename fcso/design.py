@@ -362,13 +362,17 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             return scored
 
         outcome = search(counts, screened_bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
+        indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
+        ranked = sorted(outcome.evaluated, key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]), reverse=True)
+        finalists = ranked[: config.search.exact_top_k]
+        # the report lists each screened candidate's per-scenario values: screen them again, on every core
+        listed = ranked[config.search.exact_top_k : config.search.report_candidates]
+        chunks = [listed[i : i + _SCREEN_CHUNK] for i in range(0, len(listed), _SCREEN_CHUNK)]
+        listed_screens = dict(zip(listed, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
     report_progress("screening", expected, expected)
     timings["screening"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
-    ranked = sorted(outcome.evaluated, key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]), reverse=True)
-    finalists = ranked[: config.search.exact_top_k]
     report_progress("exact", 0, len(finalists))
     with WorkerPool((scenarios, config), jobs) as pool:
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
@@ -397,7 +401,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         fcso_version=__version__,
         parts=[_part_report(p) for p in loaded],
         scenarios=[_scenario_report(s) for s in scenarios],
-        candidates=_candidate_reports(ranked[: config.search.report_candidates], exact, screen_data, indices),
+        candidates=_candidate_reports(ranked[: config.search.report_candidates], exact, listed_screens, indices),
         best=indices[best_choice],
         search=SearchReport(
             kind=outcome.kind,
@@ -524,14 +528,17 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
     ]
 
 
-def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
     screens, config, lattice = context
     # a batch of coordinate moves shares every scenario but one: carve those once
     first = choices[0]
     shared = [m for m in range(len(first)) if all(choice[m] == first[m] for choice in choices)]
     carved = carve_heights([screens[m][k] for m, k in enumerate(first)], shared) if len(choices) > 1 and len(shared) > 1 else None
-    scored = [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
-    return [(c.quality, c.mean_effective_area) for c in scored]
+    return [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
+
+
+def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+    return [(c.quality, c.mean_effective_area) for c in _screen_batch(context, choices)]
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
@@ -741,16 +748,14 @@ def _scenario_report(scenario: Scenario) -> ScenarioReport:
     )
 
 
-def _candidate_reports(choices, exact: dict, screen_data, indices: dict) -> list[CandidateReport]:
-    """Report entries, by index: exact numbers for re-evaluated candidates, screened ones for the rest."""
-    screens, config, lattice = screen_data
+def _candidate_reports(choices, exact: dict, screened: dict, indices: dict) -> list[CandidateReport]:
+    """Report entries, by index: exact numbers for re-evaluated candidates, screened ones (``screened[choice]``) for the rest."""
     entries = []
     for choice in sorted(choices, key=lambda c: indices[c]):
         if choice in exact:
             entries.append(_candidate_report(exact[choice], indices[choice]))
         else:
-            screened = screen([screens[m][k] for m, k in enumerate(choice)], config, lattice)
-            entries.append(_screened_report(choice, screened, indices[choice]))
+            entries.append(_screened_report(choice, screened[choice], indices[choice]))
     for choice, evaluation in exact.items():
         if choice not in choices:
             entries.append(_candidate_report(evaluation, indices[choice]))
