@@ -387,14 +387,14 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     timings["exact"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    best = _evaluate(scenarios, best_choice, config, keep_pad=True, fitted=True)
+    best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config)
     transform = pad_to_finger(finger, config.sampler)
     fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     # a clearance deepens the pocket by c: the carving demands that much less
     floor = config.sampler.thickness_mm - config.sampler.penetration_mm - config.print.resolved()["clearance_mm"]
     if fused.min_pad_thickness_mm < floor - 1e-3:
         warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D - clearance = {floor:.3f} mm")
-    print_fit = _print_fit_report(scenarios, best_choice, best, config, warnings)
+    warnings.extend(fit_warnings)
     timings["finger"] = time.perf_counter() - clock
 
     report = DesignReport(
@@ -414,7 +414,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             quality_upper_bound=_round(upper_bound),
             gap=_round(exact[best_choice].quality / upper_bound) if upper_bound > 0 else 1.0,
         ),
-        grasps=[_grasp_report(s, k, e, config) for s, k, e in zip(scenarios, best_choice, best.scenarios)],
+        grasps=grasps,
         ungraspable=ungraspable,
         finger=FingerReport(
             source=finger.source,
