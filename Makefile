@@ -12,7 +12,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+# An editable install leaves fcso and fcsod uncompiled, and where
+# PYTHONDONTWRITEBYTECODE is set every command would compile them again.
 setup: $(STAMP)
+	@$(PY) -m compileall -q fcso fcsod >/dev/null
 
 # pytest exits 5 when it collected no tests: that is a failure here.
 test: setup

@@ -83,6 +83,28 @@ class PadContact:
     contact: np.ndarray
 
 
+@dataclass
+class PadPlacement:
+    """One pad of a grasp, seated against the part (METHOD §4, §6).
+
+    Attributes
+    ----------
+    frame : (4, 4) float
+        Resting frame to pad frame.
+    offset_mm : float
+        Seating offset ``t``: the pad sits ``t`` further out along ``u``.
+    samples : SurfaceSamples
+        Part surface samples inside the pad box (pad frame, before seating).
+    contact : (n,) bool
+        Which samples touch the pad.
+    """
+
+    frame: np.ndarray
+    offset_mm: float
+    samples: SurfaceSamples
+    contact: np.ndarray
+
+
 def seat(
     samples: list[SurfaceSamples],
     pad_vertices: np.ndarray,

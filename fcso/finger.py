@@ -10,7 +10,7 @@ import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
 from .errors import ConfigError, GeometryError
-from .geometry import affine_3x4, box, clip_to_box, to_manifold, to_trimesh, transform_points
+from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points
 from .parts import read_mesh, unit_factor, validate_mesh
 from .sampler import FingerPlate
 
@@ -222,10 +222,10 @@ def pad_thickness(pad: manifold3d.Manifold, sampler: SamplerConfig, samples_per_
     grid_v, grid_w = np.meshgrid(v, w)
     origins = np.column_stack([np.full(grid_v.size, -1.0), grid_v.ravel(), grid_w.ravel()])
     directions = np.tile([1.0, 0.0, 0.0], (len(origins), 1))
-    locations, rays, _ = mesh.ray.intersects_location(origins, directions, multiple_hits=True)
+    rays, distances = ray_hits(mesh.vertices, mesh.faces, origins, directions)
     if len(rays) == 0:
         return 0.0
     first_hit = np.full(len(origins), np.inf)
-    np.minimum.at(first_hit, rays, locations[:, 0])
+    np.minimum.at(first_hit, rays, origins[rays, 0] + distances)
     hit = np.isfinite(first_hit)
     return float(sampler.thickness_mm - first_hit[hit].max())

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import trimesh
 
-from .contact import seat
+from .contact import PadPlacement, seat
 from .design import SIDES, DesignResult, contact_samples
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
@@ -28,15 +28,6 @@ from .pad import surface_in_pad
 from .parallel import WorkerPool, resolve_jobs
 from .printfit import closing_travel_mm
 from .parts import Part, load_parts
-from .render import (
-    PadPlacement,
-    finger_picture,
-    fingerpad_picture,
-    grasp_picture,
-    gripper_picture,
-    normals_picture,
-    pose_picture,
-)
 from .report import DesignReport
 from .rles import largest_empty_cap
 from .sampler import REJECTION_REASONS, GraspSample
@@ -44,6 +35,8 @@ from .table import SCENARIO_GROUPS, chosen_candidate, quality_columns, ranked_ca
 
 #: ``progress(stage, done, total)``, as for :func:`fcso.design.design`.
 Progress = Callable[[str, int, int], None]
+#: ``draw(inputs, progress)``: a page's pictures, name -> PNG bytes (:func:`pictures`).
+DrawPictures = Callable[["ReportInputs", "Progress | None"], dict[str, bytes]]
 
 #: Headers of the quality table's column groups (keys: :data:`fcso.table.SCENARIO_GROUPS`).
 GROUP_TITLES = {"RLES": "RLES", "A mm2": "contact area A (mm²)", "E": "effective area E (mm²)"}
@@ -250,6 +243,10 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
         ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``, ``"pose <m>"``
         for each scenario ``m``: PNG bytes.
     """
+    # matplotlib loads only where pictures are drawn (0.4 s): a command that
+    # has them drawn by a picture process (fcso.picture_process) never loads it
+    from .render import finger_picture, fingerpad_picture, grasp_picture, gripper_picture, normals_picture, pose_picture
+
     report = inputs.report
     settings = report.settings.sampler
     pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
@@ -294,10 +291,10 @@ def _scenario_titles(report: DesignReport) -> list[str]:
     return [f"{s.part} / pose {s.pose_index} (p = {s.pose_probability:.3f})" for s in report.scenarios]
 
 
-def render_html(inputs: ReportInputs, progress: Progress | None = None) -> str:
-    """The whole page, images embedded as base64 PNG."""
+def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: DrawPictures | None = None) -> str:
+    """The whole page, images embedded as base64 PNG; ``draw`` draws them (:func:`pictures` when None)."""
     report = inputs.report
-    images = pictures(inputs, progress)
+    images = (draw or pictures)(inputs, progress)
     chosen = chosen_candidate(report)
     titles = _scenario_titles(report)
     body = [
@@ -545,9 +542,9 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
     return "\n".join(lines)
 
 
-def report_html(result: DesignResult, progress: Progress | None = None) -> bytes:
-    """``report.html`` of a design that was just run, UTF-8."""
-    return render_html(report_inputs(result), progress).encode("utf-8")
+def report_html(result: DesignResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> bytes:
+    """``report.html`` of a design that was just run, UTF-8 (``draw`` as for :func:`render_html`)."""
+    return render_html(report_inputs(result), progress, draw).encode("utf-8")
 
 
 def rebuild_report(directory: str | Path, progress: Progress | None = None) -> Path:

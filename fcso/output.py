@@ -6,10 +6,10 @@ import os
 from pathlib import Path
 
 from .design import DesignResult, Progress
-from .html_report import report_html
+from .html_report import DrawPictures, report_html
 
 
-def output_files(result: DesignResult, progress: Progress | None = None) -> dict[str, bytes]:
+def output_files(result: DesignResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> dict[str, bytes]:
     """The files of a design.
 
     Parameters
@@ -17,6 +17,8 @@ def output_files(result: DesignResult, progress: Progress | None = None) -> dict
     result : DesignResult
     progress : callable, optional
         ``progress(stage, done, total)`` while the pictures of ``report.html`` render.
+    draw : callable, optional
+        Draws the page's pictures (:func:`fcso.html_report.pictures` when None).
 
     Returns
     -------
@@ -28,7 +30,7 @@ def output_files(result: DesignResult, progress: Progress | None = None) -> dict
         "finger.stl": result.finger.export(file_type="stl"),
         "fingerpad.stl": result.fingerpad.export(file_type="stl"),
         "report.json": (result.report.model_dump_json(indent=2) + "\n").encode("utf-8"),
-        "report.html": report_html(result, progress),
+        "report.html": report_html(result, progress, draw),
     }
 
 

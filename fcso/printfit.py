@@ -31,7 +31,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .geometry import affine_3x4, box, to_trimesh
+from .geometry import affine_3x4, box, ray_hits, to_trimesh
 
 #: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
 BALL_SEGMENTS = 12
@@ -286,13 +286,8 @@ def thinnest_wall_mm(
         return float("inf")
     # start just outside the surface: the first hit is the entry, the second the exit
     lift = 1e-3
-    origins = points + lift * normals
-    with np.errstate(divide="ignore", invalid="ignore"):  # trimesh's barycentrics of sliver triangles
-        locations, rays, _ = mesh.ray.intersects_location(origins, -normals, multiple_hits=True)
-    distances = np.einsum("ij,ij->i", locations - origins[rays], -normals[rays])
-    order = np.lexsort((distances, rays))
-    rays, distances = rays[order], distances[order]
-    # a ray through a shared edge or vertex reports one crossing several times
+    rays, distances = ray_hits(mesh.vertices, mesh.faces, points + lift * normals, -normals)
+    # a ray grazing a shared edge may still meet both of its triangles
     distinct = np.r_[True, (rays[1:] != rays[:-1]) | (np.diff(distances) > 1e-5)]
     rays, distances = rays[distinct], distances[distinct]
     first = np.r_[True, rays[1:] != rays[:-1]]

@@ -25,30 +25,36 @@ import trimesh
 from .design import Progress
 from .errors import MeshError
 from .finger import load_finger, pad_to_finger, parametric_finger
-from .html_report import _image, _text, closing_sections, html_page, read_stl, rebuild_report
+from .html_report import DrawPictures, _image, _text, closing_sections, html_page, read_stl, rebuild_report
 from .output import output_files
-from .render import finger_picture
 from .sets import SetsResult
 from .sets_report import FingerSetsReport, JobReport
 
 
-def sets_output_files(result: SetsResult, progress: Progress | None = None) -> dict[str, bytes]:
-    """The files of a job's finger sets: relative path -> bytes (see the module's layout)."""
+def sets_output_files(result: SetsResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> dict[str, bytes]:
+    """The files of a job's finger sets: relative path -> bytes (see the module's layout).
+
+    ``draw`` draws each design page's pictures (:func:`fcso.html_report.pictures` when None).
+    """
     if result.job_report is None:
-        return output_files(result.designs[0], progress)
+        return output_files(result.designs[0], progress, draw)
     files = {
-        f"set-{k}/{name}": data for k, design in enumerate(result.designs, start=1) for name, data in output_files(design, progress).items()
+        f"set-{k}/{name}": data
+        for k, design in enumerate(result.designs, start=1)
+        for name, data in output_files(design, progress, draw).items()
     }
     files["report.json"] = (result.job_report.model_dump_json(indent=2) + "\n").encode("utf-8")
     files["report.html"] = job_html(result.job_report, [d.finger for d in result.designs]).encode("utf-8")
     return files
 
 
-def write_set_outputs(result: SetsResult, out_dir: str | Path, progress: Progress | None = None) -> list[Path]:
+def write_set_outputs(
+    result: SetsResult, out_dir: str | Path, progress: Progress | None = None, draw: DrawPictures | None = None
+) -> list[Path]:
     """Write :func:`sets_output_files` into ``out_dir``, each under a temporary name renamed into place; return the paths."""
     out_dir = Path(out_dir)
     written = []
-    for name, data in sets_output_files(result, progress).items():
+    for name, data in sets_output_files(result, progress, draw).items():
         target = out_dir / name
         target.parent.mkdir(parents=True, exist_ok=True)
         temporary = target.parent / f".{target.name}.tmp"
@@ -67,6 +73,8 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
     fingers : list of trimesh.Trimesh
         Every set's finger (mm), set order.
     """
+    from .render import finger_picture  # matplotlib loads only where pictures are drawn
+
     sets = report.finger_sets
     config = report.settings
     pad_size = (config.sampler.thickness_mm, config.sampler.length_mm, config.sampler.width_mm)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +11,7 @@ import trimesh
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, View, decimate, draw_layers
+from ..render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, View, decimate, draw_layers, png_bytes
 from ..geometry import transform_points
 from .report import PoseSnapshot, ScenarioVerification, VerificationReport
 from .scene import PAD_AXES
@@ -20,12 +19,6 @@ from .scene import PAD_AXES
 #: Markers around the section, so verifying again replaces it.
 BEGIN, END = "<!-- fcso verify -->", "<!-- /fcso verify -->"
 FCSO_COLOUR, FLAT_COLOUR = "#e8731a", "#4a6fa5"
-
-
-def _png(figure: Figure) -> bytes:
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
-    return buffer.getvalue()
 
 
 def _figure(width_px: int, height_px: int) -> Figure:
@@ -89,7 +82,7 @@ def trial_picture(
         )
         figure.text(k * width + width / 2.0, 0.86, caption, ha="center", fontsize=7)
     figure.suptitle(f"{scenario.part}, pose {scenario.pose_index}: first perturbed trial, seen from above", fontsize=10)
-    return _png(figure)
+    return png_bytes(figure)
 
 
 def error_picture(scenario: ScenarioVerification, success_mm: float, success_deg: float) -> bytes:
@@ -108,7 +101,7 @@ def error_picture(scenario: ScenarioVerification, success_mm: float, success_deg
         axes.set_xlabel(f"final error, {unit} (log; dashed: success limit {limit:g})", fontsize=8)
         axes.tick_params(labelsize=8)
     figure.suptitle(f"{scenario.part}, pose {scenario.pose_index}: precision trials", fontsize=10)
-    return _png(figure)
+    return png_bytes(figure)
 
 
 def holding_picture(scenario: ScenarioVerification, hold_force_n: float) -> bytes:
@@ -130,7 +123,7 @@ def holding_picture(scenario: ScenarioVerification, hold_force_n: float) -> byte
     axes.legend(fontsize=8, loc="lower right")
     axes.tick_params(labelsize=8)
     figure.suptitle(f"{scenario.part}, pose {scenario.pose_index}: holding test (hatched: held at {hold_force_n:g} N)", fontsize=10)
-    return _png(figure)
+    return png_bytes(figure)
 
 
 def _image(png: bytes, alt: str) -> str:
