@@ -48,15 +48,17 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
     return vertices, faces
 
 
-def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the surface where ``sign * x[axis] >= level`` (within :data:`PLANE_TOLERANCE_MM`).
+def _half_space_sides(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float):
+    """Which triangles lie wholly in ``sign * x[axis] >= level`` and which cross it (see :func:`_clip_half_space`).
 
-    Only triangles crossing the plane are cut (one vertex inside gives one
-    triangle, two give two); the rest are kept or dropped whole, so most
-    calls cost a comparison per triangle. A triangle lying in the plane is
-    kept when its normal points out of the kept side, that is when the solid
-    it bounds lies on the kept side (trimesh's rule), so a box's faces take
-    the part's faces that lie on them exactly once.
+    Returns
+    -------
+    distance : (m, 3) float
+        Signed distance of each corner past the plane, mm.
+    inside_count : (m,) int
+        Corners on the kept side (within :data:`PLANE_TOLERANCE_MM`).
+    whole, crossing : (m,) bool
+        Triangles kept whole (an in-plane one by its normal) and triangles cut.
     """
     distance = vertices[:, axis][faces] * sign - level
     is_inside = distance >= -PLANE_TOLERANCE_MM
@@ -68,15 +70,60 @@ def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: f
         corners = vertices[faces[on_plane]]
         normal_along_axis = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, axis] * sign
         whole[on_plane] = normal_along_axis < 0.0
+    return distance, inside_count, whole, (inside_count == 1) | (inside_count == 2)
+
+
+def half_space_area(vertices: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, axis: int, sign: float, level: float) -> float:
+    """Area of the surface where ``sign * x[axis] >= level``, mm²: the area :func:`clip_to_box` keeps, without cutting.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The surface (mm).
+    face_areas : (m,) float
+        Area of each triangle, mm².
+    axis : int
+    sign : float
+        +1 keeps ``x >= level``, -1 keeps ``x <= -level``.
+    level : float
+
+    A cut triangle keeps the fraction ``t1 * t2`` of its area when one
+    corner is inside (``t`` the edge fractions from that corner to the
+    plane), and ``1 - t1 * t2`` of the lone outside corner's when two are.
+    """
+    if len(faces) == 0:
+        return 0.0
+    distance, inside_count, whole, crossing = _half_space_sides(vertices, faces, axis, sign, level)
+    cut_count = inside_count[crossing]
+    rolled = np.take_along_axis(distance[crossing], _odd_corner_first(distance[crossing], cut_count), axis=1)
+    corner_fraction = rolled[:, 0] / (rolled[:, 0] - rolled[:, 1]) * (rolled[:, 0] / (rolled[:, 0] - rolled[:, 2]))
+    kept_fraction = np.where(cut_count == 1, corner_fraction, 1.0 - corner_fraction)
+    return float(face_areas[whole].sum() + (face_areas[crossing] * kept_fraction).sum())
+
+
+def _odd_corner_first(cut_distance: np.ndarray, cut_count: np.ndarray) -> np.ndarray:
+    """Corner order of each cut triangle that puts its odd corner (the lone inside or lone outside one) first, (m, 3)."""
+    cut_inside = cut_distance >= -PLANE_TOLERANCE_MM
+    odd = np.where(cut_count == 1, np.argmax(cut_inside, axis=1), np.argmax(~cut_inside, axis=1))
+    return (odd[:, None] + np.arange(3)) % 3
+
+
+def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the surface where ``sign * x[axis] >= level`` (within :data:`PLANE_TOLERANCE_MM`).
+
+    Only triangles crossing the plane are cut (one vertex inside gives one
+    triangle, two give two); the rest are kept or dropped whole, so most
+    calls cost a comparison per triangle. A triangle lying in the plane is
+    kept when its normal points out of the kept side, that is when the solid
+    it bounds lies on the kept side (trimesh's rule), so a box's faces take
+    the part's faces that lie on them exactly once.
+    """
+    distance, inside_count, whole, crossing = _half_space_sides(vertices, faces, axis, sign, level)
     kept = faces[whole]
-    crossing = (inside_count == 1) | (inside_count == 2)
     if not crossing.any():
         return vertices, kept
     cut, cut_distance, cut_count = faces[crossing], distance[crossing], inside_count[crossing]
-    # roll each triangle so its odd vertex (the lone inside or lone outside one) comes first
-    cut_inside = cut_distance >= -PLANE_TOLERANCE_MM
-    odd = np.where(cut_count == 1, np.argmax(cut_inside, axis=1), np.argmax(~cut_inside, axis=1))
-    order = (odd[:, None] + np.arange(3)) % 3
+    order = _odd_corner_first(cut_distance, cut_count)
     rows = np.arange(len(cut))[:, None]
     cut, cut_distance = cut[rows, order], cut_distance[rows, order]
     first = vertices[cut[:, 0]]

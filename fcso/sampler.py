@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 
 from .config import GripperConfig, SamplerConfig
-from .geometry import clip_to_box, triangle_areas_normals
+from .geometry import PLANE_TOLERANCE_MM, clip_to_box, half_space_area, triangle_areas_normals
 
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
@@ -174,13 +174,13 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
             heights = np.arange(clearance, top, stride)
             bands = _Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
             for h in heights:
-                prism_v, prism_f, extent = bands.between(h, h + width)
+                prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
                 if len(prism_f) == 0:
                     continue
                 tried += 1
                 a_min, a_max = extent
-                area_plus = _area(*clip_to_box(prism_v, prism_f, (a_max - depth, -_INF, -_INF), (_INF, _INF, _INF)))
-                area_minus = _area(*clip_to_box(prism_v, prism_f, (-_INF, -_INF, -_INF), (a_min + depth, _INF, _INF)))
+                area_plus = half_space_area(prism_v, prism_f, prism_areas, 0, 1.0, a_max - depth)
+                area_minus = half_space_area(prism_v, prism_f, prism_areas, 0, -1.0, -(a_min + depth))
                 if min(area_plus, area_minus) < sampler.min_contact_area:
                     rejected["contact"] += 1
                     continue
@@ -281,12 +281,6 @@ def _inside(triangles: np.ndarray, point: np.ndarray) -> bool:
     return bool(np.count_nonzero(hit & (crossing > point[0])) % 2)
 
 
-def _area(vertices: np.ndarray, faces: np.ndarray) -> float:
-    if len(faces) == 0:
-        return 0.0
-    return float(triangle_areas_normals(vertices, faces)[0].sum())
-
-
 class _Bands:
     """A slab's surface cut once into height bands, so every window of heights is a union of bands.
 
@@ -308,15 +302,24 @@ class _Bands:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, levels: np.ndarray):
         self.levels = np.unique(levels)
-        self.bands: list[np.ndarray] = []
-        remaining = faces
+        # a triangle farther than the clipping tolerance from every level lies
+        # whole in one band, as the cuts below would keep it: only the rest are cut
+        heights = vertices[faces][:, :, 2]
+        margin = 2.0 * PLANE_TOLERANCE_MM
+        band_of_bottom = np.searchsorted(self.levels, heights.min(axis=1) - margin, side="left")
+        band_of_top = np.searchsorted(self.levels, heights.max(axis=1) + margin, side="right")
+        whole = band_of_bottom == band_of_top
+        remaining = faces[~whole]
+        cut_bands: list[np.ndarray] = []
         for level in self.levels:
             # each cut appends its new vertices, so earlier bands' indices stay valid
             vertices, below = clip_to_box(vertices, remaining, (-_INF, -_INF, -_INF), (_INF, _INF, level))
             vertices, remaining = clip_to_box(vertices, remaining, (-_INF, -_INF, level), (_INF, _INF, _INF))
-            self.bands.append(below)
-        self.bands.append(remaining)
+            cut_bands.append(below)
+        cut_bands.append(remaining)
         self.vertices = vertices
+        self.bands = [np.vstack([faces[whole & (band_of_bottom == k)], cut]) for k, cut in enumerate(cut_bands)]
+        self.band_areas = [triangle_areas_normals(vertices, band)[0] for band in self.bands]
         extent = np.array([(vertices[band, 0].min(), vertices[band, 0].max()) if len(band) else (_INF, -_INF) for band in self.bands])
         self.extent = extent
         # everything above each band's bottom, for the descent column
@@ -327,11 +330,13 @@ class _Bands:
         """Index of the band whose bottom is ``level`` (one of the levels given)."""
         return int(np.searchsorted(self.levels, level)) + 1
 
-    def between(self, z_low: float, z_high: float) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
-        """Surface between two levels, and its extent ``(a_min, a_max)`` along ``a``."""
+    def between(self, z_low: float, z_high: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float]]:
+        """Surface between two levels: vertices, faces, face areas (mm²) and its extent ``(a_min, a_max)`` along ``a``."""
         first, last = self._first_band_above(z_low), self._first_band_above(z_high)
         extent = self.extent[first:last]
-        return self.vertices, np.vstack(self.bands[first:last]), (float(extent[:, 0].min()), float(extent[:, 1].max()))
+        faces = np.vstack(self.bands[first:last])
+        areas = np.concatenate(self.band_areas[first:last])
+        return self.vertices, faces, areas, (float(extent[:, 0].min()), float(extent[:, 1].max()))
 
     def above(self, z_low: float) -> tuple[float, float] | None:
         """Extent along ``a`` of the surface above ``z_low``, or None if there is none."""
