@@ -350,12 +350,21 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     screen_data = ([[g.screen for g in s.samples] for s in scenarios], config, lattice)
     screened_count, best_screened = 0, 0.0
     screened_bound = quality_upper_bound(screened_bounds)
+    # when every candidate the search screens is listed in the report, keep
+    # their per-scenario values as they are screened instead of screening again
+    keep_screens = expected <= config.search.report_candidates
+    kept_screens: dict[tuple[int, ...], ScreenedCandidate] = {}
     with WorkerPool(screen_data, jobs) as pool:
 
         def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
             nonlocal screened_count, best_screened
             chunks = [choices[i : i + _SCREEN_CHUNK] for i in range(0, len(choices), _SCREEN_CHUNK)]
-            scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
+            if keep_screens:
+                screened = [c for chunk in pool.map(_screen_batch, chunks) for c in chunk]
+                kept_screens.update(zip(choices, screened))
+                scored = [(c.quality, c.mean_effective_area) for c in screened]
+            else:
+                scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
             screened_count += len(choices)
             best_screened = max([best_screened] + [q for q, _ in scored])
             report_progress("screening", min(screened_count, expected), expected, f"best Q {best_screened:.1f} of bound {screened_bound:.1f} mm² (screened)")
@@ -365,10 +374,12 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
         ranked = sorted(outcome.evaluated, key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]), reverse=True)
         finalists = ranked[: config.search.exact_top_k]
-        # the report lists each screened candidate's per-scenario values: screen them again, on every core
+        # the report lists each screened candidate's per-scenario values: screen those not kept again, on every core
         listed = ranked[config.search.exact_top_k : config.search.report_candidates]
-        chunks = [listed[i : i + _SCREEN_CHUNK] for i in range(0, len(listed), _SCREEN_CHUNK)]
-        listed_screens = dict(zip(listed, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
+        missing = [c for c in listed if c not in kept_screens]
+        chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
+        kept_screens.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
+        listed_screens = {c: kept_screens[c] for c in listed}
     report_progress("screening", expected, expected)
     timings["screening"] = time.perf_counter() - clock
 
