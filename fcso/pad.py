@@ -51,14 +51,21 @@ class PadGeometry:
     def __getstate__(self) -> dict:
         # manifold3d solids do not pickle: worker processes send the mesh
         state = dict(self.__dict__)
-        mesh = self.intersection.to_mesh64()
-        state["intersection"] = (np.asarray(mesh.vert_properties), np.asarray(mesh.tri_verts))
+        state["intersection"] = _mesh_arrays(self.intersection)
         return state
 
     def __setstate__(self, state: dict) -> None:
-        vertices, triangles = state["intersection"]
-        state["intersection"] = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
+        state["intersection"] = _from_mesh_arrays(*state["intersection"])
         self.__dict__.update(state)
+
+
+def _mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    mesh = solid.to_mesh64()
+    return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
+
+
+def _from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manifold3d.Manifold:
+    return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
 
 
 def pad_box(sampler: SamplerConfig) -> manifold3d.Manifold:
@@ -111,7 +118,10 @@ def pad_geometry(
         flat = abs(dominant[0]) >= np.cos(np.radians(filter_config.cluster_angle_deg))
         good, basis = not flat, "normals"
     return PadGeometry(
-        intersection=intersection,
+        # rebuilt from its mesh, as a worker's result arrives (PadGeometry.__setstate__):
+        # manifold3d's later Booleans triangulate a solid's history differently
+        # from its mesh, and a design must not depend on where its geometries were made
+        intersection=_from_mesh_arrays(*_mesh_arrays(intersection)),
         surface_vertices=surface_vertices,
         surface_faces=surface_faces,
         volume_mm3=volume,

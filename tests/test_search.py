@@ -137,8 +137,11 @@ def test_screening_ranks_like_exact_evaluation():
 def test_same_design_for_one_and_two_workers():
     config = small_config(sampler={"stride_mm": 8.0}, poses={"select": [0, 1]}, search={"max_exhaustive": 1, "max_evaluations": 200})
     parts = [data_path("20mm-xyz-cube.stl"), data_path("solar_tracker.stl")]
-    one = fcso.design(parts, config.updated({"search": {"jobs": 1}})).report
-    two = fcso.design(parts, config.updated({"search": {"jobs": 2}})).report
+    designs = [fcso.design(parts, config.updated({"search": {"jobs": jobs}})) for jobs in (1, 2)]
+    one, two = (d.report for d in designs)
     assert one.search.jobs == 1 and two.search.jobs == 2
     strip = lambda r: r.model_dump(exclude={"timings_s": True, "settings": {"search": {"jobs"}}, "search": {"jobs"}})  # noqa: E731
     assert strip(one) == strip(two)
+    # the files too, byte for byte: the pad is carved from geometries made in workers or here
+    for mesh in ("finger", "fingerpad"):
+        assert getattr(designs[0], mesh).export(file_type="stl") == getattr(designs[1], mesh).export(file_type="stl")
