@@ -50,6 +50,8 @@ Progress = Callable[[str, int, int, str], None]
 #: Samples per pad-geometry task and candidates per screening task sent to a worker.
 _GEOMETRY_CHUNK = 4
 _SCREEN_CHUNK = 64
+#: Sampling tasks per worker to aim for when scenarios and yaws are few.
+_SAMPLE_TASKS_PER_WORKER = 4
 
 
 @dataclass
@@ -192,12 +194,16 @@ def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: 
     clock = time.perf_counter()
     plate = finger_plate(finger, config.sampler, config.gripper)
     report_progress("sampling", 0, len(scenarios))
-    # one task per scenario and yaw angle: the yaws are independent and balance the workers
-    yaw_tasks = [(number, yaw) for number in range(len(scenarios)) for yaw in config.sampler.yaw_deg]
+    # tasks of one scenario, yaw angle and every n-th pad position: with
+    # few scenarios, interleaved positions still give each worker several
+    # tasks of about equal size
+    yaws = config.sampler.yaw_deg
+    subsets = max(1, -(-_SAMPLE_TASKS_PER_WORKER * jobs // (len(scenarios) * len(yaws))))
+    sample_tasks = [(number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)]
     with WorkerPool((scenarios, config, plate), jobs) as pool:
-        pieces = pool.map(_sample_task, yaw_tasks)
+        pieces = pool.map(_sample_task, sample_tasks)
     for number, scenario in enumerate(scenarios):
-        scenario.sampler_result = _merge_sampler_results([r for (n, _), r in zip(yaw_tasks, pieces) if n == number])
+        scenario.sampler_result = _merge_sampler_results([(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number])
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
     empty = [s for s in scenarios if not s.sampler_result.samples]
@@ -515,17 +521,22 @@ def _progress_with_note(progress: Progress | None) -> Progress:
     return lambda stage, done, total, note="": progress(stage, done, total, note)
 
 
-def _sample_task(context, task: tuple[int, float]) -> SamplerResult:
+def _sample_task(context, task: tuple[int, float, tuple[int, int]]) -> SamplerResult:
     scenarios, config, plate = context
-    number, yaw = task
+    number, yaw, centres = task
     sampler = config.sampler.model_copy(update={"yaw_deg": [yaw]})
-    return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate)
+    return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
 
 
-def _merge_sampler_results(results: list[SamplerResult]) -> SamplerResult:
-    """One scenario's sampler result from its per-yaw results, in yaw order."""
-    rejected = {reason: sum(r.rejected[reason] for r in results) for reason in results[0].rejected}
-    return SamplerResult([s for r in results for s in r.samples], rejected, sum(r.tried for r in results))
+def _merge_sampler_results(results: list[tuple[float, SamplerResult]]) -> SamplerResult:
+    """One scenario's sampler result from its results per yaw angle and subset of pad positions, in (yaw, s, h) order."""
+    rejected = {reason: sum(r.rejected[reason] for _, r in results) for reason in results[0][1].rejected}
+    yaws = list(dict.fromkeys(yaw for yaw, _ in results))
+    # each position lies in one subset, its samples in h order: a stable sort by s restores (s, h)
+    samples = [
+        sample for yaw in yaws for sample in sorted((x for y, r in results if y == yaw for x in r.samples), key=lambda x: x.s_mm)
+    ]
+    return SamplerResult(samples, rejected, sum(r.tried for _, r in results))
 
 
 def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:

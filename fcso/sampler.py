@@ -117,7 +117,9 @@ class SamplerResult:
     tried: int
 
 
-def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: GripperConfig, plate: FingerPlate) -> SamplerResult:
+def sample_grasps(
+    mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: GripperConfig, plate: FingerPlate, centres: tuple[int, int] = (0, 1)
+) -> SamplerResult:
     """Slide a pair of pad boxes over a part resting on the table.
 
     Parameters
@@ -131,6 +133,9 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
         Opening range and finger height.
     plate : FingerPlate
         The flat finger's plate behind each pad (:func:`fcso.finger.finger_plate`).
+    centres : (k, n)
+        Try every n-th pad position along the sliding axis from the k-th
+        (``(0, 1)``: all), so one scenario can be spread over workers.
 
     Returns
     -------
@@ -156,10 +161,10 @@ def sample_grasps(mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: Grippe
         # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
-        centres = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
-        if len(centres) == 0:
-            centres = np.array([(b_min + b_max) / 2.0])
-        for s in centres:
+        positions = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
+        if len(positions) == 0:
+            positions = np.array([(b_min + b_max) / 2.0])
+        for s in positions[centres[0] :: centres[1]]:
             slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
             if len(slab_f) == 0:
                 continue

@@ -202,3 +202,19 @@ def test_paper_bunny_has_base_level_grasps():
     mesh.apply_transform(transforms[1])
     result = sample_grasps(mesh, config.sampler, config.gripper, built_in_plate(config.sampler, config.gripper))
     assert any(s.h_mm <= 10.0 for s in result.samples)
+
+
+def test_every_nth_pad_position_together_make_the_whole_sampling():
+    config = DesignConfig()
+    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
+    transforms, _ = stable_poses(part.mesh)
+    mesh = part.mesh.copy()
+    mesh.apply_transform(transforms[1])
+    plate = built_in_plate(config.sampler, config.gripper)
+    whole = sample_grasps(mesh, config.sampler, config.gripper, plate)
+    subsets = [sample_grasps(mesh, config.sampler, config.gripper, plate, (k, 3)) for k in range(3)]
+    assert sum(r.tried for r in subsets) == whole.tried
+    assert {reason: sum(r.rejected[reason] for r in subsets) for reason in REJECTION_REASONS} == whole.rejected
+    assert {(s.yaw_deg, s.s_mm, s.h_mm) for r in subsets for s in r.samples} == {(s.yaw_deg, s.s_mm, s.h_mm) for s in whole.samples}
+    positions = [{(s.yaw_deg, s.s_mm) for s in r.samples} for r in subsets]
+    assert all(not (p & q) for p in positions for q in positions if p is not q)
