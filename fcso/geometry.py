@@ -44,7 +44,7 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
             if len(faces) == 0:
                 return vertices, faces[:0]
             if np.isfinite(bound):
-                vertices, faces = _clip_half_space(vertices, faces, axis, sign, bound * sign)
+                vertices, faces, _ = _clip_half_space(vertices, faces, axis, sign, bound * sign)
     return vertices, faces
 
 
@@ -108,7 +108,9 @@ def _odd_corner_first(cut_distance: np.ndarray, cut_count: np.ndarray) -> np.nda
     return (odd[:, None] + np.arange(3)) % 3
 
 
-def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float) -> tuple[np.ndarray, np.ndarray]:
+def _clip_half_space(
+    vertices: np.ndarray, faces: np.ndarray, axis: int, sign: float, level: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Keep the surface where ``sign * x[axis] >= level`` (within :data:`PLANE_TOLERANCE_MM`).
 
     Only triangles crossing the plane are cut (one vertex inside gives one
@@ -116,12 +118,16 @@ def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: f
     calls cost a comparison per triangle. A triangle lying in the plane is
     kept when its normal points out of the kept side, that is when the solid
     it bounds lies on the kept side (trimesh's rule), so a box's faces take
-    the part's faces that lie on them exactly once.
+    the part's faces that lie on them exactly once. ``level`` may be an
+    ``(m, 1)`` array, one plane per triangle.
+
+    Returns the vertices (cut points appended), the kept triangles and, for
+    each, the index of the input triangle it comes from.
     """
     distance, inside_count, whole, crossing = _half_space_sides(vertices, faces, axis, sign, level)
     kept = faces[whole]
     if not crossing.any():
-        return vertices, kept
+        return vertices, kept, np.flatnonzero(whole)
     cut, cut_distance, cut_count = faces[crossing], distance[crossing], inside_count[crossing]
     order = _odd_corner_first(cut_distance, cut_count)
     rows = np.arange(len(cut))[:, None]
@@ -138,7 +144,64 @@ def _clip_half_space(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: f
         np.column_stack([near_1[~lone_inside], cut[~lone_inside, 1], cut[~lone_inside, 2]]),
         np.column_stack([near_1[~lone_inside], cut[~lone_inside, 2], near_2[~lone_inside]]),
     ]
-    return np.vstack([vertices, *crossings]), np.vstack([kept, *triangles])
+    cut_sources = np.flatnonzero(crossing)
+    sources = [np.flatnonzero(whole), cut_sources[lone_inside], cut_sources[~lone_inside], cut_sources[~lone_inside]]
+    return np.vstack([vertices, *crossings]), np.vstack([kept, *triangles]), np.concatenate(sources)
+
+
+def cut_at_levels(vertices: np.ndarray, faces: np.ndarray, axis: int, levels: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A surface cut at every level along an axis, as :func:`clip_to_box` would cut it between each two.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        mm.
+    faces : (m, 3) int
+    axis : int
+    levels : (k,) float
+        Ascending and distinct, mm.
+
+    Returns
+    -------
+    vertices : ndarray
+        The input's vertices first, unchanged, then the cut points.
+    bands : list of k + 1 (j, 3) int arrays
+        The triangles below ``levels[0]``, between each two levels, and
+        above ``levels[-1]``.
+
+    A triangle farther than the clipping tolerance from every level lies
+    whole in one band. The others are cut in rounds, every one at the lowest
+    level it still meets, so a round costs two cuts whatever the number of
+    levels.
+    """
+    levels = np.asarray(levels, dtype=np.float64)
+    # a triangle meets the levels from `lowest` up to (not including) `highest`
+    margin = 2.0 * PLANE_TOLERANCE_MM
+
+    def met_levels(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        heights = vertices[:, axis][triangles]
+        lowest = np.searchsorted(levels, heights.min(axis=1) - margin, side="left")
+        return lowest, np.searchsorted(levels, heights.max(axis=1) + margin, side="right")
+
+    lowest, highest = met_levels(faces)
+    clear = lowest == highest
+    placed, numbers = [faces[clear]], [lowest[clear]]
+    pending, current = faces[~clear], lowest[~clear]
+    while len(pending):
+        level = levels[current][:, None]
+        vertices, below, source = _clip_half_space(vertices, pending, axis, -1.0, -level)
+        placed.append(below)
+        numbers.append(current[source])
+        vertices, above, source = _clip_half_space(vertices, pending, axis, 1.0, level)
+        lowest, highest = met_levels(above)
+        lowest = np.maximum(lowest, current[source] + 1)
+        clear = lowest >= highest
+        placed.append(above[clear])
+        numbers.append(lowest[clear])
+        pending, current = above[~clear], lowest[~clear]
+    placed, numbers = np.vstack(placed), np.concatenate(numbers)
+    order = np.argsort(numbers, kind="stable")
+    return vertices, np.split(placed[order], np.cumsum(np.bincount(numbers, minlength=len(levels) + 1))[:-1])
 
 
 def triangle_areas_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

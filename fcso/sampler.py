@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 
 from .config import GripperConfig, SamplerConfig
-from .geometry import PLANE_TOLERANCE_MM, clip_to_box, half_space_area, triangle_areas_normals
+from .geometry import clip_to_box, cut_at_levels, half_space_area, triangle_areas_normals
 
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
@@ -307,23 +307,8 @@ class _Bands:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, levels: np.ndarray):
         self.levels = np.unique(levels)
-        # a triangle farther than the clipping tolerance from every level lies
-        # whole in one band, as the cuts below would keep it: only the rest are cut
-        heights = vertices[faces][:, :, 2]
-        margin = 2.0 * PLANE_TOLERANCE_MM
-        band_of_bottom = np.searchsorted(self.levels, heights.min(axis=1) - margin, side="left")
-        band_of_top = np.searchsorted(self.levels, heights.max(axis=1) + margin, side="right")
-        whole = band_of_bottom == band_of_top
-        remaining = faces[~whole]
-        cut_bands: list[np.ndarray] = []
-        for level in self.levels:
-            # each cut appends its new vertices, so earlier bands' indices stay valid
-            vertices, below = clip_to_box(vertices, remaining, (-_INF, -_INF, -_INF), (_INF, _INF, level))
-            vertices, remaining = clip_to_box(vertices, remaining, (-_INF, -_INF, level), (_INF, _INF, _INF))
-            cut_bands.append(below)
-        cut_bands.append(remaining)
+        vertices, self.bands = cut_at_levels(vertices, faces, 2, self.levels)
         self.vertices = vertices
-        self.bands = [np.vstack([faces[whole & (band_of_bottom == k)], cut]) for k, cut in enumerate(cut_bands)]
         self.band_areas = [triangle_areas_normals(vertices, band)[0] for band in self.bands]
         extent = np.array([(vertices[band, 0].min(), vertices[band, 0].max()) if len(band) else (_INF, -_INF) for band in self.bands])
         self.extent = extent

@@ -56,9 +56,17 @@ def test_area_beyond_a_plane_of_a_block_by_hand():
     assert half_space_area(vertices, faces, areas, 0, -1.0, -12.0) == pytest.approx(300.0 + 2 * 12.0 * 15.0 + 2 * 12.0 * 20.0)
 
 
-@pytest.mark.parametrize("levels", [np.arange(1.0, 60.0, 4.0), np.array([0.0, 7.3, 7.3 + 1e-5, 30.0, 64.0])])
-def test_height_bands_hold_the_surface_a_cut_between_their_levels_holds(levels):
-    vertices, faces = bunny_surface()
+@pytest.mark.parametrize(
+    "surface, levels",
+    [
+        (bunny_surface, np.arange(1.0, 60.0, 4.0)),
+        (bunny_surface, np.array([0.0, 7.3, 7.3 + 1e-5, 30.0, 64.0])),
+        # the block's side triangles span every level, its top and bottom lie in one
+        (block_surface, np.array([0.0, 1.5, 3.0, 4.5, 7.5, 9.0, 15.0])),
+    ],
+)
+def test_height_bands_hold_the_surface_a_cut_between_their_levels_holds(surface, levels):
+    vertices, faces = surface()
     bands = _Bands(vertices, faces, levels)
     ordered = np.unique(levels)
     for low, high in zip(ordered[:-1], ordered[1:]):
