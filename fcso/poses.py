@@ -55,11 +55,107 @@ def stable_poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     probabilities : (k,) float
         Probability of landing in each pose; they sum to 1.
     """
-    transforms, probabilities = trimesh.poses.compute_stable_poses(mesh)
+    transforms, probabilities = toppling_poses(mesh)
     order = np.argsort(-np.asarray(probabilities), kind="stable")
     rested = np.array([rest_transform(mesh, transforms[i]) for i in order])
     probabilities = np.asarray(probabilities, dtype=float)[order]
     return rested, probabilities / probabilities.sum()
+
+
+def toppling_poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """Quasi-static stable poses: :func:`trimesh.poses.compute_stable_poses` at its defaults, without networkx.
+
+    The same algorithm step for step (Goldberg et al.'s toppling graph on
+    the convex hull, the centre of mass of a uniform solid): every hull face
+    gets the probability of landing on it first, an unstable face topples
+    over the first neighbour (in ``face_adjacency`` order) whose edge the
+    centre of mass projects across, else the last, and the probabilities
+    flow along the toppling edges in trimesh's breadth-first waves. Faces
+    whose normals agree to 3 decimals are one pose. The graph library's
+    per-face Python made this 0.2 s of a 3 s command.
+
+    Returns
+    -------
+    transforms : (k, 4, 4) float
+        Rotation onto the table (new z up) with the hull just touching it.
+    probabilities : (k,) float
+        Most probable first, as trimesh orders them.
+    """
+    hull = mesh.convex_hull
+    com = mesh.center_mass
+    triangles, normals, count = hull.triangles, hull.face_normals, len(hull.faces)
+    # probability of landing on each face first: its solid angle from the centre of mass (L'Huilier)
+    rays = triangles - com
+    rays = rays / np.sqrt((rays**2).sum(axis=2))[:, :, None]
+    side = [np.arccos(np.clip((rays[:, i] * rays[:, (i + 1) % 3]).sum(axis=1), -1.0, 1.0)) for i in range(3)]
+    half = (side[0] + side[1] + side[2]) / 2.0
+    with np.errstate(invalid="ignore"):
+        probability = np.arctan(np.sqrt(np.tan(half / 2) * np.tan((half - side[0]) / 2) * np.tan((half - side[1]) / 2) * np.tan((half - side[2]) / 2))) / np.pi
+    # a face is unstable when the centre of mass projects outside it
+    distances = trimesh.util.diagonal_dot(normals, com - triangles[:, 0])
+    projected = com - distances[:, None] * normals
+    unstable = np.flatnonzero(np.any(trimesh.triangles.points_to_barycentric(triangles, projected) < 0, axis=1))
+    # every hull face has three neighbours, in the order face_adjacency lists them
+    pairs, edges = hull.face_adjacency, hull.face_adjacency_edges
+    owners = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    rows = np.concatenate([np.arange(len(pairs)), np.arange(len(pairs))])
+    by_face = np.lexsort((rows, owners))
+    neighbour = np.concatenate([pairs[:, 1], pairs[:, 0]])[by_face].reshape(count, 3)
+    edge = np.concatenate([edges, edges])[by_face].reshape(count, 3, 2)
+    v1, v2 = hull.vertices[edge[:, :, 0]], hull.vertices[edge[:, :, 1]]
+    centre, normal, point = hull.triangles_center[:, None, :], normals[:, None, :], projected[:, None, :]
+    flip = (np.cross(v1 - centre, v2 - centre) * normal).sum(axis=2) < 0
+    v1, v2 = np.where(flip[:, :, None], v2, v1), np.where(flip[:, :, None], v1, v2)
+    crosses = (_orientation(centre, v1, v1 + normal, point) >= 0) & (_orientation(centre, v2 + normal, v2, point) >= 0)
+    # the first neighbour whose edge the centre of mass projects across, else the last
+    target = np.where(crosses.any(axis=1), np.argmax(crosses, axis=1), 2)
+    successor = np.full(count, -1)
+    successor[unstable] = neighbour[unstable, target[unstable]]
+    probability = probability.tolist()
+    incoming = np.bincount(successor[successor >= 0], minlength=count)
+    wave = [face for face in range(count) if incoming[face] == 0]
+    waves = 0
+    while wave and waves <= len(mesh.faces):
+        following = []
+        for face in wave:
+            if successor[face] < 0:
+                continue
+            probability[successor[face]] += probability[face]
+            probability[face] = 0.0
+            following.append(successor[face])
+        wave = following
+        waves += 1
+    poses: dict[tuple, list] = {}
+    for face in range(count):
+        if probability[face] > 0.0:
+            key = tuple(np.around(normals[face], decimals=3))
+            if key in poses:
+                poses[key][0] += probability[face]
+            else:
+                poses[key] = [probability[face], normals[face]]
+    transforms, probabilities = [], []
+    for total, normal in poses.values():
+        z = -normal
+        x = np.array([-z[1], z[0], 0.0])
+        x = np.array([1.0, 0.0, 0.0]) if np.linalg.norm(x) == 0.0 else x / np.linalg.norm(x)
+        y = np.cross(z, x)
+        transform = np.eye(4)
+        transform[:3, :3] = [x, y / np.linalg.norm(y), z]
+        transform[2, 3] = -trimesh.transform_points(hull.vertices, transform)[:, 2].min()
+        transforms.append(transform)
+        probabilities.append(total)
+    order = np.argsort(-np.array(probabilities))
+    return np.array(transforms)[order], np.array(probabilities)[order]
+
+
+def _orientation(a: np.ndarray, b: np.ndarray, c: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Positive where ``point`` lies above the plane through ``a, b, c`` (trimesh's orient3dfast; last axis xyz)."""
+    ad, bd, cd = a - point, b - point, c - point
+    return (
+        ad[..., 0] * (bd[..., 1] * cd[..., 2] - bd[..., 2] * cd[..., 1])
+        + bd[..., 0] * (cd[..., 1] * ad[..., 2] - cd[..., 2] * ad[..., 1])
+        + cd[..., 0] * (ad[..., 1] * bd[..., 2] - ad[..., 2] * bd[..., 1])
+    )
 
 
 def select_poses(probabilities: np.ndarray, config: PosesConfig, part_index: int, part_name: str) -> tuple[list[int], list[str]]:

@@ -6,7 +6,7 @@ from scipy.spatial import Delaunay
 
 from fcso import ConfigError, load_config, load_part, stable_poses
 from fcso.config import DesignConfig, PosesConfig
-from fcso.poses import select_poses
+from fcso.poses import select_poses, toppling_poses
 
 from .conftest import REPO, data_path
 
@@ -15,6 +15,21 @@ from .conftest import REPO, data_path
 def bunny_poses():
     part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
     return part, *stable_poses(part.mesh)
+
+
+@pytest.mark.parametrize(
+    "name, units, scale",
+    [("stanford_bunny_closed.ply", "mm", 65.0), ("20mm-xyz-cube.stl", "mm", None), ("busted.STL", "inch", None), ("featuretype.STL", "inch", None)],
+)
+def test_toppling_poses_are_trimesh_stable_poses(name, units, scale):
+    import trimesh
+
+    mesh = load_part(data_path(name), units=units, scale_to_mm=scale).mesh
+    expected_transforms, expected_probabilities = trimesh.poses.compute_stable_poses(mesh.copy())
+    transforms, probabilities = toppling_poses(mesh)
+    assert len(probabilities) == len(expected_probabilities) > 1
+    assert np.array_equal(transforms, expected_transforms)
+    assert probabilities == pytest.approx(expected_probabilities, abs=1e-15)
 
 
 def test_poses_rest_on_the_table_centred(bunny_poses):
