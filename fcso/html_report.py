@@ -13,7 +13,7 @@ import base64
 import html
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -285,6 +285,15 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
         images = pool.map(_draw, list(range(len(jobs))))
     report_progress("pictures", len(jobs), len(jobs))
     return {name: image for (name, _), image in zip(jobs, images)}
+
+
+def picture_inputs(inputs: ReportInputs) -> ReportInputs:
+    """``inputs`` cut to what :func:`pictures` reads: the report keeps only its chosen candidate.
+
+    A report lists up to ``report_candidates`` candidates as pydantic models;
+    sending them to a picture process cost more than a picture.
+    """
+    return replace(inputs, report=inputs.report.model_copy(update={"candidates": [chosen_candidate(inputs.report)]}))
 
 
 def _draw(drawings: list[Callable[[], bytes]], index: int) -> bytes:

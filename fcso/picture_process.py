@@ -15,7 +15,7 @@ import multiprocessing
 from multiprocessing.connection import Connection
 
 from .errors import FcsoError
-from .html_report import Progress, ReportInputs
+from .html_report import Progress, ReportInputs, picture_inputs
 
 
 class PictureProcessError(FcsoError):
@@ -45,7 +45,7 @@ class PictureProcess:
     def __call__(self, inputs: ReportInputs, progress: Progress | None = None) -> dict[str, bytes]:
         """A page's pictures, name -> PNG bytes, drawn in the process; its exceptions are raised here."""
         try:
-            self._connection.send(inputs)
+            self._connection.send(picture_inputs(inputs))
             while True:
                 kind, payload = self._connection.recv()
                 if kind == "progress":
