@@ -242,3 +242,20 @@ def test_progress_line_shows_stages_and_candidates():
     silent("candidates", 1, 2)
     silent.close()
     assert quiet.getvalue() == ""
+
+
+def test_a_panel_draws_in_data_coordinates_inside_its_rectangle_only():
+    from fcso.render import Panel, _figure, png_bytes
+
+    figure = _figure("pose")  # 420 x 340 pixels
+    panel = Panel(figure, (0.5, 0.0, 0.5, 1.0))
+    panel.set_xlim(0.0, 1.0)
+    panel.set_ylim(0.0, 1.0)
+    panel.fill([-1.0, 2.0, 2.0, -1.0], [-1.0, -1.0, 2.0, 2.0], color=(1.0, 0.0, 0.0))
+    panel.fill([0.0, 0.5, 0.5, 0.0], [0.0, 0.0, 0.5, 0.5], color=(0.0, 0.0, 1.0), zorder=2)
+    pixels = np.asarray(Image.open(io.BytesIO(png_bytes(figure))).convert("RGB"))
+    assert pixels.shape == (340, 420, 3)
+    assert (pixels[:, :205] == 255).all()  # clipped to the right half
+    assert tuple(pixels[50, 300]) == (255, 0, 0)
+    # data (0.25, 0.25) is a quarter into the panel from its bottom-left corner
+    assert tuple(pixels[340 - 85, 210 + 52]) == (0, 0, 255)

@@ -11,7 +11,7 @@ import trimesh
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, View, decimate, draw_layers, png_bytes
+from ..render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, decimate, draw_layers, png_bytes
 from ..geometry import transform_points
 from .report import PoseSnapshot, ScenarioVerification, VerificationReport
 from .scene import PAD_AXES
@@ -64,10 +64,9 @@ def trial_picture(
     width = 1.0 / len(panels)
     for k, (result, name, moment) in enumerate(panels):
         snapshot = result.trial_start if moment == "start" else result.trial_end
-        axes = figure.add_axes((k * width + 0.005, 0.02, width - 0.01, 0.80))
         if snapshot is None:
-            axes.set_axis_off()
             continue
+        axes = Panel(figure, (k * width + 0.005, 0.02, width - 0.01, 0.80))
         layers = [Layer(transform_points(np.asarray(snapshot.part_pose), vertices), faces, PART_COLOUR)]
         pad = pads[result.kind]
         for side in (1, -1):
