@@ -200,33 +200,31 @@ def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: 
     yaws = config.sampler.yaw_deg
     subsets = max(1, -(-_SAMPLE_TASKS_PER_WORKER * jobs // (len(scenarios) * len(yaws))))
     sample_tasks = [(number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)]
-    grid, lattice = ScreenGrid.for_config(config), NormalLattice()
-    # one pool for both stages: the geometry tasks carry their samples
-    with WorkerPool((scenarios, config, plate, grid, lattice), jobs) as pool:
+    with WorkerPool((scenarios, config, plate), jobs) as pool:
         pieces = pool.map(_sample_task, sample_tasks)
-        for number, scenario in enumerate(scenarios):
-            scenario.sampler_result = _merge_sampler_results([(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number])
-        report_progress("sampling", len(scenarios), len(scenarios))
-        timings["sampling"] = time.perf_counter() - clock
-        empty = [s for s in scenarios if not s.sampler_result.samples]
-        if len(empty) == len(scenarios):
-            raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
-        ungraspable = [_ungraspable_report(s, config) for s in empty]
-        for entry in ungraspable:
-            warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
-        # (position among all scenarios, among the graspable ones)
-        graspable = [(position, s) for position, s in enumerate(scenarios) if s.sampler_result.samples]
+    for number, scenario in enumerate(scenarios):
+        scenario.sampler_result = _merge_sampler_results([(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number])
+    report_progress("sampling", len(scenarios), len(scenarios))
+    timings["sampling"] = time.perf_counter() - clock
+    empty = [s for s in scenarios if not s.sampler_result.samples]
+    if len(empty) == len(scenarios):
+        raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
+    ungraspable = [_ungraspable_report(s, config) for s in empty]
+    for entry in ungraspable:
+        warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
+    scenarios = [s for s in scenarios if s.sampler_result.samples]
 
-        clock = time.perf_counter()
-        tasks = [
-            (position, number, start, s.sampler_result.samples[start : start + _GEOMETRY_CHUNK])
-            for number, (position, s) in enumerate(graspable)
-            for start in range(0, len(s.sampler_result.samples), _GEOMETRY_CHUNK)
-        ]
-        scenarios = [s for _, s in graspable]
-        total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
-        report_progress("pad geometries", 0, total_samples)
-        for (_, number, _, _), made in zip(tasks, pool.map(_geometry_task, tasks)):
+    clock = time.perf_counter()
+    grid, lattice = ScreenGrid.for_config(config), NormalLattice()
+    tasks = [
+        (number, start, min(start + _GEOMETRY_CHUNK, len(s.sampler_result.samples)))
+        for number, s in enumerate(scenarios)
+        for start in range(0, len(s.sampler_result.samples), _GEOMETRY_CHUNK)
+    ]
+    total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
+    report_progress("pad geometries", 0, total_samples)
+    with WorkerPool((scenarios, config, grid, lattice), jobs) as pool:
+        for (number, _, _), made in zip(tasks, pool.map(_geometry_task, tasks)):
             scenarios[number].samples.extend(made)
             report_progress("pad geometries", sum(len(x.samples) for x in scenarios), total_samples)
     timings["pad_geometries"] = time.perf_counter() - clock
@@ -355,15 +353,14 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     budget = config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations
     expected = min(total, budget)
     screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
-    # one pool for screening and exact re-evaluation
-    pool_data = ([[g.screen for g in s.samples] for s in scenarios], config, lattice, scenarios)
+    screen_data = ([[g.screen for g in s.samples] for s in scenarios], config, lattice)
     screened_count, best_screened = 0, 0.0
     screened_bound = quality_upper_bound(screened_bounds)
     # when every candidate the search screens is listed in the report, keep
     # their per-scenario values as they are screened instead of screening again
     keep_screens = expected <= config.search.report_candidates
     kept_screens: dict[tuple[int, ...], ScreenedCandidate] = {}
-    with WorkerPool(pool_data, jobs) as pool:
+    with WorkerPool(screen_data, jobs) as pool:
 
         def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
             nonlocal screened_count, best_screened
@@ -389,11 +386,12 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
         kept_screens.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
         listed_screens = {c: kept_screens[c] for c in listed}
-        report_progress("screening", expected, expected)
-        timings["screening"] = time.perf_counter() - clock
+    report_progress("screening", expected, expected)
+    timings["screening"] = time.perf_counter() - clock
 
-        clock = time.perf_counter()
-        report_progress("exact", 0, len(finalists))
+    clock = time.perf_counter()
+    report_progress("exact", 0, len(finalists))
+    with WorkerPool((scenarios, config), jobs) as pool:
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
     report_progress("exact", len(finalists), len(finalists), f"best Q {max(e.quality for e in exact.values()):.1f} mm² (exact)")
     best_choice = max(finalists, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]))
@@ -524,7 +522,7 @@ def _progress_with_note(progress: Progress | None) -> Progress:
 
 
 def _sample_task(context, task: tuple[int, float, tuple[int, int]]) -> SamplerResult:
-    scenarios, config, plate, _, _ = context
+    scenarios, config, plate = context
     number, yaw, centres = task
     sampler = config.sampler.model_copy(update={"yaw_deg": [yaw]})
     return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
@@ -541,19 +539,19 @@ def _merge_sampler_results(results: list[tuple[float, SamplerResult]]) -> Sample
     return SamplerResult(samples, rejected, sum(r.tried for _, r in results))
 
 
-def _geometry_task(context, task: tuple[int, int, int, list[GraspSample]]) -> list[SampleGeometry]:
-    scenarios, config, _, grid, lattice = context
-    position, number, start, samples = task
-    scenario = scenarios[position]
+def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
+    scenarios, config, grid, lattice = context
+    number, start, stop = task
+    scenario = scenarios[number]
     part_manifold = to_manifold(scenario.mesh)
     return [
-        _sample_geometry(part_manifold, scenario.mesh, sample, config, (number, start + offset), grid, lattice)
-        for offset, sample in enumerate(samples)
+        _sample_geometry(part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice)
+        for index in range(start, stop)
     ]
 
 
 def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
-    screens, config, lattice, _ = context
+    screens, config, lattice = context
     # a batch of coordinate moves shares every scenario but one: carve those once
     first = choices[0]
     shared = [m for m in range(len(first)) if all(choice[m] == first[m] for choice in choices)]
@@ -566,7 +564,7 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
-    _, config, _, scenarios = context
+    scenarios, config = context
     return _evaluate(scenarios, choice, config, keep_pad=False)
 
 
