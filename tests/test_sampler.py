@@ -23,6 +23,15 @@ def block_part() -> trimesh.Trimesh:
     return to_trimesh(box((-15.0, -10.0, 0.0), (15.0, 10.0, 15.0)))
 
 
+def bunny_in_pose(index: int) -> trimesh.Trimesh:
+    """The paper's bunny (65 mm) resting in its stable pose ``index``."""
+    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
+    transforms, _ = stable_poses(part.mesh)
+    mesh = part.mesh.copy()
+    mesh.apply_transform(transforms[index])
+    return mesh
+
+
 def built_in_plate(sampler: SamplerConfig, gripper: GripperConfig) -> FingerPlate:
     return finger_plate(parametric_finger(sampler, gripper), sampler, gripper)
 
@@ -109,10 +118,7 @@ def _volume_inside(part: manifold3d.Manifold, lower, upper) -> float:
 
 def test_valid_bunny_samples_pass_every_check_independently():
     config = DesignConfig()
-    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
-    transforms, _ = stable_poses(part.mesh)
-    mesh = part.mesh.copy()
-    mesh.apply_transform(transforms[1])
+    mesh = bunny_in_pose(1)
     sampler, gripper = config.sampler, config.gripper
     plate = built_in_plate(sampler, gripper)
     result = sample_grasps(mesh, sampler, gripper, plate)
@@ -196,20 +202,14 @@ def test_thicker_plate_meets_what_a_thin_one_misses():
 def test_paper_bunny_has_base_level_grasps():
     # the paper found grasps "along the extrusions at the base" (METHOD §10)
     config = load_config(REPO / "examples" / "paper.toml")
-    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
-    transforms, _ = stable_poses(part.mesh)
-    mesh = part.mesh.copy()
-    mesh.apply_transform(transforms[1])
+    mesh = bunny_in_pose(1)
     result = sample_grasps(mesh, config.sampler, config.gripper, built_in_plate(config.sampler, config.gripper))
     assert any(s.h_mm <= 10.0 for s in result.samples)
 
 
 def test_every_nth_pad_position_together_make_the_whole_sampling():
     config = DesignConfig()
-    part = load_part(data_path("stanford_bunny_closed.ply"), scale_to_mm=65.0)
-    transforms, _ = stable_poses(part.mesh)
-    mesh = part.mesh.copy()
-    mesh.apply_transform(transforms[1])
+    mesh = bunny_in_pose(1)
     plate = built_in_plate(config.sampler, config.gripper)
     whole = sample_grasps(mesh, config.sampler, config.gripper, plate)
     subsets = [sample_grasps(mesh, config.sampler, config.gripper, plate, (k, 3)) for k in range(3)]
