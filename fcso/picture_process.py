@@ -12,10 +12,12 @@ and returns the PNG bytes. The pictures are the same as drawn in-process.
 from __future__ import annotations
 
 import multiprocessing
+import os
 from multiprocessing.connection import Connection
 
 from .errors import FcsoError
 from .html_report import Progress, ReportInputs, picture_inputs
+from .parallel import die_with_parent
 
 
 class PictureProcessError(FcsoError):
@@ -32,7 +34,7 @@ class PictureProcess:
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe()
         # not a daemonic process: it forks the picture workers itself
-        self._process = context.Process(target=_serve, args=(child_end,), name="fcso-pictures")
+        self._process = context.Process(target=_serve, args=(child_end, os.getpid()), name="fcso-pictures")
         self._process.start()
         child_end.close()
 
@@ -72,7 +74,9 @@ class PictureProcess:
         self._connection.close()
 
 
-def _serve(connection: Connection) -> None:
+def _serve(connection: Connection, parent_pid: int) -> None:
+    # the command's end of the pipe is open here too: without this a killed command would leave the process waiting
+    die_with_parent(parent_pid)
     from . import render  # noqa: F401  loaded now, while the design runs, not when the page arrives
     from .html_report import pictures
 

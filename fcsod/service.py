@@ -191,7 +191,12 @@ class Daemon:
             wait(waitables, timeout=TICK_S)
             for slot in list(self.slots):
                 self._drain(slot)
-                if not slot.process.is_alive() and not slot.open:
+                if not slot.process.is_alive():
+                    if slot.open:
+                        # what a dead worker sent is drained above; processes it forked may
+                        # still hold its end of the pipe open, so the end of file may never come
+                        slot.open = False
+                        slot.connection.close()
                     self._reap(slot)
             for folder in self.watcher.take_changed():
                 self.readiness.touch(folder)

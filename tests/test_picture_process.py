@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -57,3 +58,35 @@ def test_the_command_line_does_not_load_matplotlib_itself():
         cwd=REPO, capture_output=True, text=True, check=True,
     )
     assert loaded.stdout.strip() == "False"
+
+
+def test_workers_and_the_picture_process_die_with_a_killed_command(tmp_path):
+    # a process that opens a worker pool and a picture process, reports their pids, then waits to be killed
+    program = tmp_path / "holder.py"
+    program.write_text(
+        "import os, sys, time\n"
+        "from fcso.parallel import WorkerPool\n"
+        "from fcso.picture_process import PictureProcess\n"
+        "pictures = PictureProcess()\n"
+        "pool = WorkerPool(None, 2).__enter__()\n"
+        "children = [p.pid for p in pool._pool._processes.values()] + [pictures._process.pid]\n"
+        "print(' '.join(map(str, children)), flush=True)\n"
+        "time.sleep(600)\n"
+    )
+    holder = subprocess.Popen([sys.executable, str(program)], cwd=REPO, stdout=subprocess.PIPE, text=True)
+    children = [int(pid) for pid in holder.stdout.readline().split()]
+    assert len(children) == 3
+    holder.kill()
+    holder.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_running(pid) for pid in children):
+        time.sleep(0.1)
+    assert not any(_running(pid) for pid in children)
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
