@@ -19,6 +19,15 @@ def data_path(name: str) -> Path:
     return path
 
 
+def process_running(pid: int) -> bool:
+    """Whether process ``pid`` exists and has not exited (a zombie has)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 def small_config(**sections) -> DesignConfig:
     """A 10 x 10 mm pad (T = 4, D = 3) with a coarse stride, so designs take seconds.
 

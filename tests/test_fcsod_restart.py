@@ -11,6 +11,7 @@ import time
 
 from fcsod.recorder import TOPIC_STATE, read_record
 
+from tests.conftest import process_running
 from tests.fcsod_helpers import DATA, drop_job, free_port, start_daemon, start_subscriber, write_config
 
 SOLAR = DATA / "solar_tracker.stl"
@@ -51,14 +52,6 @@ class FakeSystemd:
         self._sock.close()
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
-
-
 def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
     config = write_config(tmp_path, free_port())
     systemd = FakeSystemd(tmp_path / "notify.sock")
@@ -74,9 +67,9 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
         first.stop(signal.SIGKILL)
     job_id, worker = started["job_id"], started["worker_pid"]
     deadline = time.monotonic() + 10
-    while _alive(worker) and time.monotonic() < deadline:
+    while process_running(worker) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not _alive(worker), "the worker outlived the killed daemon"
+    assert not process_running(worker), "the worker outlived the killed daemon"
     journal = tmp_path / "state" / "journal.sqlite3"
     with sqlite3.connect(journal) as db:
         assert db.execute("SELECT state FROM jobs WHERE job_id = ?", (job_id,)).fetchone() == ("running",)

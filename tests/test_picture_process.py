@@ -15,7 +15,7 @@ from fcso import design, load_part
 from fcso.html_report import pictures, report_inputs
 from fcso.picture_process import PictureProcess, PictureProcessError
 
-from .conftest import REPO, data_path, small_config
+from .conftest import REPO, data_path, process_running, small_config
 
 
 @pytest.fixture(scope="module")
@@ -79,14 +79,7 @@ def test_workers_and_the_picture_process_die_with_a_killed_command(tmp_path):
     holder.kill()
     holder.wait()
     deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and any(_running(pid) for pid in children):
+    while time.monotonic() < deadline and any(process_running(pid) for pid in children):
         time.sleep(0.1)
-    assert not any(_running(pid) for pid in children)
+    assert not any(process_running(pid) for pid in children)
 
-
-def _running(pid: int) -> bool:
-    try:
-        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
-    except FileNotFoundError:
-        return False
-    return state != "Z"
