@@ -190,11 +190,7 @@ def _design(args) -> int:
         return _report_sets(job, args)
     result = job.designs[0]
     if not args.quiet:
-        for entry in result.report.parts:
-            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
-            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
-        for entry in result.report.ungraspable:
-            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
+        _print_parts(result.report.parts, result.report.scenarios, result.report.ungraspable)
         print(quality_table(result.report))
         if result.report.finger_sets is not None:
             print(pick_plan_text(result.report.finger_sets))
@@ -206,15 +202,24 @@ def _design(args) -> int:
     return 0
 
 
+def _print_parts(parts, scenarios, ungraspable) -> None:
+    """A line per part (volume, shell handling, the stable poses designed for with their probabilities), then the ungraspable poses."""
+    poses: dict[str, dict[int, float]] = {}
+    for entry in [*scenarios, *ungraspable]:
+        poses.setdefault(entry.part, {})[entry.pose_index] = entry.pose_probability
+    for entry in parts:
+        handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
+        chosen = ", ".join(f"{index} (p = {probability:.3f})" for index, probability in sorted(poses.get(entry.name, {}).items()))
+        print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}; stable poses {chosen}")
+    for entry in ungraspable:
+        print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
+
+
 def _report_sets(job: SetsResult, args) -> int:
     """Print a job of several finger sets (and verify each set's finger when asked)."""
     sets = job.report
     if not args.quiet:
-        for entry in job.job_report.parts:
-            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
-            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
-        for entry in sets.ungraspable:
-            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
+        _print_parts(job.job_report.parts, [s for d in job.designs for s in d.report.scenarios], sets.ungraspable)
         print(pick_plan_text(sets))
         for warning in job.job_report.warnings:
             print(f"warning: {warning}")

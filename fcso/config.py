@@ -92,10 +92,17 @@ class PosesConfig(_Section):
     """Which stable poses of each part to plan for (METHOD §2)."""
 
     count: int = Field(2, ge=1, description="Number of stable poses per part, N_p")
+    # A part on a table rests in its probable poses: a uniform draw over all
+    # stable poses (the paper's wording, kept as "random") picked a tilted
+    # pose of probability < 1 % on a notched cube and found no grasp there.
+    # The most probable ones, not a probability-weighted draw: the same part
+    # always gets the same poses, and no draw can land on a rare one.
     select: Literal["random", "most_probable"] | list[int] = Field(
-        "random", description="'random' (seeded), 'most_probable', or explicit pose indices (0 = most probable)"
+        "most_probable",
+        description="'most_probable' (the count most probable poses), 'random' (uniform over all stable poses, seeded), "
+        "or explicit pose indices (0 = most probable)",
     )
-    seed: int = Field(0, description="Seed of the random pose selection")
+    seed: int = Field(0, description="Seed of the random pose selection (select = 'random')")
 
 
 class ContactConfig(_Section):

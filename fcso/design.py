@@ -508,6 +508,7 @@ def _ungraspable_report(scenario: Scenario, config: DesignConfig) -> Ungraspable
     return UngraspableReport(
         part=scenario.part.name,
         pose_index=scenario.pose_index,
+        pose_probability=_round(scenario.probability),
         tried_samples=result.tried,
         rejected=dict(result.rejected),
         reason=reason,

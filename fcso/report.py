@@ -35,6 +35,7 @@ class UngraspableReport(_Model):
 
     part: str
     pose_index: int
+    pose_probability: float = Field(description="Probability of the stable pose (METHOD §2)")
     tried_samples: int
     rejected: dict[str, int] = Field(description="Rejected samples per reason (METHOD §3)")
     reason: str = Field(description="Why, in one sentence")

@@ -678,6 +678,7 @@ def _zero_quality_report(scenario) -> UngraspableReport:
     return UngraspableReport(
         part=scenario.part.name,
         pose_index=scenario.pose_index,
+        pose_probability=round(float(scenario.probability), 6),
         tried_samples=result.tried,
         rejected=dict(result.rejected),
         reason="every valid sample loses all contact when its pad is carved and the part seated (E* = 0)",

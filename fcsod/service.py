@@ -31,7 +31,7 @@ from .ros2 import Ros2Node, node_fqn, record_ros2
 from .signing import daemon_signer, signing_key_path
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
-from .worker import RECORD_NAME, JobTask, worker_main
+from .worker import RECORD_NAME, SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, JobFolderDeleted, JobTask, time_limit_error, worker_main
 
 log = logging.getLogger("fcsod")
 
@@ -69,7 +69,9 @@ class WorkerSlot:
     ready: bool = False
     job: JobRow | None = None
     started: float = 0.0
-    limit_signalled_at: float | None = None
+    #: why and when the worker was told to stop: the job's error if it then dies
+    stop_error: str | None = None
+    stop_signalled_at: float | None = None
     finished: bool = False
     open: bool = True
     events: list = field(default_factory=list)
@@ -207,7 +209,7 @@ class Daemon:
                 next_rescan = now + watch.rescan_seconds
             for ready in self.readiness.poll():
                 self._enqueue(ready.folder, ready.inputs, ready.signature)
-            self._enforce_time_limits()
+            self._stop_overdue_and_withdrawn_jobs()
             self._dispatch()
             self._fill_workers()
             if ping_interval is not None and time.monotonic() >= next_ping:
@@ -325,8 +327,8 @@ class Daemon:
             if slot.job is None and not self.stopping:
                 log.error("worker process exited before taking a job", extra={"exit_code": slot.process.exitcode})
             return
-        if slot.limit_signalled_at is not None:
-            error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({self.config.jobs.time_limit_seconds:g} s)"
+        if slot.stop_error is not None:
+            error = slot.stop_error
         else:
             code = slot.process.exitcode
             how = f"killed by signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit code {code}"
@@ -365,17 +367,25 @@ class Daemon:
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
         self._publish(status)
 
-    def _enforce_time_limits(self) -> None:
+    def _stop_overdue_and_withdrawn_jobs(self) -> None:
+        """Stop a job over its time limit, or whose folder was deleted (the print job withdrawn), and kill its worker after the grace time."""
         jobs = self.config.jobs
         now = time.monotonic()
         for slot in self.slots:
             if slot.job is None or slot.finished or not slot.process.is_alive():
                 continue
-            if slot.limit_signalled_at is None and now - slot.started > jobs.time_limit_seconds:
-                log.warning("job over its time limit: stopping it", extra={"job_id": slot.job.job_id})
-                os.kill(slot.process.pid, signal.SIGUSR1)
-                slot.limit_signalled_at = now
-            elif slot.limit_signalled_at is not None and now - slot.limit_signalled_at > jobs.stop_grace_seconds:
+            if slot.stop_signalled_at is None:
+                if now - slot.started > jobs.time_limit_seconds:
+                    log.warning("job over its time limit: stopping it", extra={"job_id": slot.job.job_id})
+                    slot.stop_error, stop_signal = time_limit_error(jobs.time_limit_seconds), SIGNAL_TIME_LIMIT
+                elif not Path(slot.job.folder).is_dir():
+                    log.warning("job folder deleted: withdrawing its job", extra={"job_id": slot.job.job_id})
+                    slot.stop_error, stop_signal = str(JobFolderDeleted(Path(slot.job.folder))), SIGNAL_WITHDRAWN
+                else:
+                    continue
+                os.kill(slot.process.pid, stop_signal)
+                slot.stop_signalled_at = now
+            elif now - slot.stop_signalled_at > jobs.stop_grace_seconds:
                 slot.process.kill()
 
     # ---------------------------------------------------------------- bus

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,16 +143,19 @@ class Readiness:
     ----------
     settle_seconds : float
         How long the inputs must stay unchanged, s.
+    clock : callable
+        Source of monotonic time, s (default ``time.monotonic``).
     """
 
-    def __init__(self, settle_seconds: float):
+    def __init__(self, settle_seconds: float, clock: Callable[[], float] = time.monotonic):
         self.settle_seconds = settle_seconds
+        self.clock = clock
         self._pending: dict[Path, tuple[tuple | None, float]] = {}
         self._waiting_logged: set[tuple[Path, tuple[str, ...]]] = set()
 
     def touch(self, folder: Path) -> None:
         """Consider ``folder`` again (it changed or a rescan found it)."""
-        self._pending.setdefault(folder, (None, time.monotonic()))
+        self._pending.setdefault(folder, (None, self.clock()))
 
     @property
     def pending(self) -> list[Path]:
@@ -159,7 +163,7 @@ class Readiness:
 
     def poll(self) -> list[ReadyFolder]:
         """The pending folders that are ready now; they stop being pending."""
-        now, ready = time.monotonic(), []
+        now, ready = self.clock(), []
         for folder, (previous, since) in list(self._pending.items()):
             if not folder.is_dir():
                 del self._pending[folder]

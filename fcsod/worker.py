@@ -116,6 +116,20 @@ class TimeLimitExceeded(BaseException):
     """
 
 
+class Withdrawn(BaseException):
+    """Raised in the worker when the daemon signals that the job's folder was deleted (a BaseException, as above)."""
+
+
+#: The signals by which the daemon stops a running job: out of time, or withdrawn.
+SIGNAL_TIME_LIMIT = signal.SIGUSR1
+SIGNAL_WITHDRAWN = signal.SIGUSR2
+
+
+def time_limit_error(limit_seconds: float) -> str:
+    """The error of a job stopped by its time limit."""
+    return f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({limit_seconds:g} s)"
+
+
 @dataclass
 class JobTask:
     """What the daemon hands a worker.
@@ -687,9 +701,11 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         # a part that vanished is the symptom; a deleted folder is the cause
         error = str(exc) if run.folder.is_dir() else str(JobFolderDeleted(run.folder))
     except TimeLimitExceeded:
-        error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({config.jobs.time_limit_seconds:g} s)"
+        error = time_limit_error(config.jobs.time_limit_seconds)
     except JobFolderDeleted as exc:
         error = str(exc)
+    except Withdrawn:
+        error = str(JobFolderDeleted(run.folder))
     except OSError as exc:
         error = io_failure(exc, run.folder, output_root)
         if error is None:
@@ -812,6 +828,10 @@ def _time_limit(signum, frame) -> None:
     raise TimeLimitExceeded()
 
 
+def _withdrawn(signum, frame) -> None:
+    raise Withdrawn()
+
+
 def worker_main(connection: Connection, parent_pid: int) -> None:
     """Entry point of a worker process: announce readiness, take one job, run it, report, exit.
 
@@ -826,7 +846,8 @@ def worker_main(connection: Connection, parent_pid: int) -> None:
     # Ctrl-C in a terminal reaches the whole process group: the daemon decides what happens to jobs
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.signal(signal.SIGUSR1, _time_limit)
+    signal.signal(SIGNAL_TIME_LIMIT, _time_limit)
+    signal.signal(SIGNAL_WITHDRAWN, _withdrawn)
     connection.send(("ready", os.getpid()))
     task = connection.recv()
     if task is None:

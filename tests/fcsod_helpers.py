@@ -32,6 +32,26 @@ select = "most_probable"
 """
 
 
+#: fcso settings under which one solar tracker's design runs for many minutes: a
+#: 0.25 mm sampling step over six yaw angles in six poses, 400 surface samples
+#: per mm² (``fcso design solar_tracker.stl`` with them had not finished after
+#: 20 minutes on the 2-core development machine). A machine ten times faster
+#: still takes minutes, far over the 1 s time limit the tests set, so tests that
+#: must catch a job while it runs use these settings instead of hoping that a
+#: quick job is still running.
+SLOW_SECTIONS = {
+    "sampler": "stride_mm = 0.25\nyaw_deg = [0, 30, 60, 90, 120, 150]",
+    "poses": 'count = 6\nselect = "most_probable"',
+    "contact": "sample_density_per_mm2 = 400",
+}
+SLOW_DESIGN = "\n".join(f"[design.{name}]\n{body}\n" for name, body in SLOW_SECTIONS.items())
+
+
+def slow_manifest(part_file: str) -> str:
+    """A job.toml of one part designed with :data:`SLOW_SECTIONS`."""
+    return f'[[parts]]\nfile = "{part_file}"\n\n' + "\n".join(f"[{name}]\n{body}\n" for name, body in SLOW_SECTIONS.items())
+
+
 def free_port() -> int:
     """A TCP port on loopback that nothing listens on now."""
     with socket.socket() as sock:
@@ -40,11 +60,19 @@ def free_port() -> int:
 
 
 def write_config(
-    base: Path, port: int, settle_seconds: float = 0.7, extra: str = "", scheme: str = "tcp", zenoh_extra: str = "", bus_extra: str = ""
+    base: Path,
+    port: int,
+    settle_seconds: float = 0.7,
+    extra: str = "",
+    scheme: str = "tcp",
+    zenoh_extra: str = "",
+    bus_extra: str = "",
+    design: str = FAST_DESIGN,
 ) -> Path:
     """Write an fcsod.toml for a daemon listening on ``<scheme>/127.0.0.1:<port>`` with folders below ``base``.
 
-    ``zenoh_extra`` and ``bus_extra`` are lines added to the ``[zenoh]`` and ``[bus]`` sections.
+    ``zenoh_extra`` and ``bus_extra`` are lines added to the ``[zenoh]`` and ``[bus]`` sections;
+    ``design`` the daemon's ``[design.*]`` sections (:data:`FAST_DESIGN` or :data:`SLOW_DESIGN`).
 
     Returns
     -------
@@ -79,7 +107,7 @@ multicast_scouting = false
 [mcap]
 chunk_size_bytes = 4096
 {extra}
-{FAST_DESIGN}
+{design}
 """,
         encoding="utf-8",
     )

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from .conftest import REPO, data_path
+from .conftest import REPO, data_path, notched_cube_mesh
 
 
 def fcso(*args, cwd=None):
@@ -49,6 +49,23 @@ def test_finger_without_frame_and_unknown_config_key(tmp_path):
     assert_bad_input(fcso("design", data_path("20mm-xyz-cube.stl"), "--out", tmp_path, "--config", config), "bad.toml", "sampler.lenght_mm", "unknown key")
     config.write_text("[sampler]\npenetration_mm = 6\n")
     assert_bad_input(fcso("design", data_path("20mm-xyz-cube.stl"), "--out", tmp_path, "--config", config), "penetration_mm")
+
+
+def test_default_design_plans_for_the_most_probable_poses(tmp_path):
+    """No config: the part's two most probable stable poses, printed with their probabilities (METHOD §2 revision 3)."""
+    part = tmp_path / "notched.stl"
+    notched_cube_mesh().export(part)
+    # the reference: trimesh's own stable poses of the file as written
+    _, probabilities = trimesh.poses.compute_stable_poses(trimesh.load(part))
+    assert len(probabilities) >= 6 and min(probabilities) < 0.05, "the part must have improbable poses to avoid"
+    run = fcso("design", part, "--out", tmp_path / "out")
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    chosen = sorted(s["pose_probability"] for s in report["scenarios"])
+    assert chosen == pytest.approx(sorted(probabilities)[-2:], abs=1e-3)
+    line = next(line for line in run.stdout.splitlines() if line.startswith("part notched"))
+    for scenario in report["scenarios"]:
+        assert f"{scenario['pose_index']} (p = {scenario['pose_probability']:.3f})" in line
 
 
 def test_too_wide_part_is_bad_input(tmp_path):

@@ -6,7 +6,6 @@ import hashlib
 import json
 import shutil
 import sqlite3
-import time
 from pathlib import Path
 
 import pytest
@@ -55,9 +54,9 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     base, subscriber = cell["base"], cell["subscriber"]
     manifest = '[[parts]]\nfile = "parts/cube.stl"\nunits = "mm"\nquantity = 3\n\n[poses]\ncount = 1\n\n[gripper]\nmax_opening_mm = 45\n'
     folder = base / "watch" / "batch-slow"
-    # manifest first, then the part in two halves with pauses longer than settle_seconds' half
-    drop_job(folder, {"job.toml": manifest, "parts/cube.stl": CUBE}, pause_s=0.5)
-    dropped = time.monotonic()
+    # manifest first, then the part in two halves: pauses far below settle_seconds (0.7 s), so the
+    # folder never looks settled before it is complete (readiness itself: test_fcsod_jobs, clock stepped)
+    drop_job(folder, {"job.toml": manifest, "parts/cube.stl": CUBE}, pause_s=0.1)
     done = finished(subscriber, "batch-slow")
     assert done["body"]["state"] == "done", done
     job_id = done["job_id"]
@@ -71,7 +70,6 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     daemon_lines = cell["daemon"].json_lines()
     queued = next(v for v in daemon_lines if v.get("message") == "job queued" and v.get("job_id") == job_id)
     assert queued["inputs"] == 2
-    assert time.monotonic() - dropped < 90
 
     quality = next(v for v in lines if v["topic"] == "quality")["body"]
     assert quality["quality_mm2"] > 0 and quality["finger_watertight"] is True
@@ -188,7 +186,7 @@ def test_job_with_an_ungraspable_part_is_delivered_with_a_warning(cell):
 
 def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):
     base, job_id = cell["base"], cube_job
-    late = start_subscriber(cell["config"], save=base / "late", extra=["--timeout", "8"])
+    late = start_subscriber(cell["config"], save=base / "late")
     try:
         def replies() -> dict:
             return {v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id}

@@ -21,7 +21,7 @@ from fcsod.journal import journal_problem
 from fcsod.pki import add_client, init_pki
 from fcsod.recorder import TOPIC_STATE, read_record
 
-from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, slow_manifest, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
 SOLAR = DATA / "solar_tracker.stl"
@@ -122,13 +122,13 @@ def test_zenoh_router_down_at_start_then_up_late_subscriber_gets_every_result(tm
                 "connect_certificate": tls["cert"], "connect_private_key": tls["key"], "enable_mtls": True,
             }}},
         }))
-        router = subprocess.Popen([sys.executable, "-m", "tests.zenoh_probe", "--config", str(router_config), "--seconds", "120"],
-                                  cwd=REPO, stdout=subprocess.PIPE, text=True)
+        router = subprocess.Popen([sys.executable, "-m", "tests.zenoh_probe", "--config", str(router_config), "--hold"],
+                                  cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         assert json.loads(router.stdout.readline())["event"] == "open"
         # the cell controller reaches the daemon only through the router
         controller = pki / "clients" / "ctl1"
         late = start_subscriber(config, extra=["--zenoh-config", str(controller / "zenoh.json5"), "--verify-key", str(controller / "signing.pub"),
-                                               "--connect", f"tls/127.0.0.1:{router_port}", "--timeout", "10"])
+                                               "--connect", f"tls/127.0.0.1:{router_port}"])
         try:
             late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "design", 30)
         finally:
@@ -186,7 +186,7 @@ def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunni
     assert after == before
 
     daemon = start_daemon(config)
-    late = start_subscriber(config, extra=["--timeout", "8"])
+    late = start_subscriber(config)
     try:
         _daemon_says(daemon, "job already known: not run again", 30, job_id=done["job_id"])
         _daemon_says(daemon, "job already known: not run again", 30, job_id=failed["job_id"])
@@ -223,7 +223,8 @@ def test_job_folder_deleted_while_its_job_runs_fails_cleanly(tmp_path):
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
         folder, waiting = tmp_path / "watch" / "withdrawn", tmp_path / "watch" / "withdrawn-while-queued"
-        drop_job(folder, {"solar_tracker.stl": SOLAR})
+        # a design of many minutes: still running when its folder is deleted, which withdraws it at once
+        drop_job(folder, {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
         _daemon_says(daemon, "job started")
         daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
         # one job at a time: this one waits in the queue while the first runs

@@ -60,27 +60,29 @@ def test_manifest_inputs_and_missing_files(tmp_path):
 
 
 def test_readiness_waits_for_settled_files_and_named_parts(tmp_path):
+    # time is stepped by hand: what counts is the time the folder stayed unchanged, not how fast this machine is
+    now = [0.0]
     folder = tmp_path / "job"
     folder.mkdir()
     (folder / "job.toml").write_text('[[parts]]\nfile = "a.stl"\n')
-    readiness = Readiness(settle_seconds=0.3)
+    readiness = Readiness(settle_seconds=0.3, clock=lambda: now[0])
     readiness.touch(folder)
-    deadline = time.monotonic() + 1.0
-    while time.monotonic() < deadline:
+    for _ in range(5):
+        now[0] += 1.0
         assert readiness.poll() == [], "ready although the manifest names a missing part"
-        time.sleep(0.05)
     with open(folder / "a.stl", "wb") as stream:
         stream.write(CUBE.read_bytes()[:1000])
         stream.flush()
         assert readiness.poll() == []
-        time.sleep(0.2)
-        assert readiness.poll() == []
+        now[0] += 0.2
+        assert readiness.poll() == [], "ready 0.2 s after a change with settle_seconds = 0.3"
         stream.write(CUBE.read_bytes()[1000:])
-    ready = []
-    deadline = time.monotonic() + 3
-    while not ready and time.monotonic() < deadline:
-        ready = readiness.poll()
-        time.sleep(0.05)
+    # a size change is seen whatever the file system's mtime resolution
+    assert readiness.poll() == []
+    now[0] += 0.2
+    assert readiness.poll() == [], "ready although the file changed 0.2 s ago"
+    now[0] += 0.2
+    ready = readiness.poll()
     assert [r.folder for r in ready] == [folder]
     assert readiness.pending == []
 
@@ -95,7 +97,7 @@ def test_watcher_reports_changed_job_folders(tmp_path, polling):
         (tmp_path / "job" / "a.stl").write_bytes(b"x")
         (tmp_path / ".hidden" / "a.stl").write_bytes(b"x")
         changed = set()
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 60
         while (tmp_path / "job") not in changed and time.monotonic() < deadline:
             changed |= watcher.take_changed()
             time.sleep(0.1)

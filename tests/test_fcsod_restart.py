@@ -12,7 +12,7 @@ import time
 from fcsod.recorder import TOPIC_STATE, read_record
 
 from tests.conftest import process_running
-from tests.fcsod_helpers import DATA, drop_job, free_port, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import DATA, SLOW_DESIGN, drop_job, free_port, slow_manifest, start_daemon, start_subscriber, write_config
 
 SOLAR = DATA / "solar_tracker.stl"
 
@@ -53,20 +53,23 @@ class FakeSystemd:
 
 
 def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
-    config = write_config(tmp_path, free_port())
+    port = free_port()
+    # the first daemon's settings make the job run for minutes, so it is surely running when
+    # the daemon is killed; the restarted daemon's quick settings let it finish
+    config = write_config(tmp_path, port, design=SLOW_DESIGN)
     systemd = FakeSystemd(tmp_path / "notify.sock")
     environment = {"NOTIFY_SOCKET": systemd.path, "WATCHDOG_USEC": "1000000"}
 
     first = start_daemon(config, env=environment)
     try:
-        systemd.wait_for("READY=1", 10)
+        systemd.wait_for("READY=1", 60)
         drop_job(tmp_path / "watch" / "solar", {"solar_tracker.stl": SOLAR})
         started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
         first.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
     finally:
         first.stop(signal.SIGKILL)
     job_id, worker = started["job_id"], started["worker_pid"]
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 60
     while process_running(worker) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not process_running(worker), "the worker outlived the killed daemon"
@@ -76,17 +79,18 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
     assert not (tmp_path / "out" / job_id).exists()
 
     systemd.received.clear()
+    config = write_config(tmp_path, port)
     second = start_daemon(config, env=environment)
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
         done = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"), 120)
         assert done["job_id"] == job_id and done["body"]["state"] == "done", done
         assert done["body"]["attempt"] == 2
-        assert systemd.wait_for("WATCHDOG=1", 5) > systemd.wait_for("READY=1", 5)
+        assert systemd.wait_for("WATCHDOG=1", 60) > systemd.wait_for("READY=1", 60)
     finally:
         subscriber.stop()
         assert second.stop(signal.SIGTERM) == 0
-    systemd.wait_for("STOPPING=1", 5)
+    systemd.wait_for("STOPPING=1", 60)
     systemd.close()
 
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [job_id], "partial output left behind"
@@ -105,7 +109,8 @@ def test_job_over_its_time_limit_fails_with_a_finished_record(tmp_path):
     daemon = start_daemon(config)
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
-        drop_job(tmp_path / "watch" / "slow", {"solar_tracker.stl": SOLAR})
+        # a design of many minutes: over the 1 s limit on any machine
+        drop_job(tmp_path / "watch" / "slow", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
         failed = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"), 90)
     finally:
         subscriber.stop()
@@ -125,7 +130,8 @@ def test_worker_killed_mid_job_fails_that_job_only(tmp_path):
     daemon = start_daemon(config)
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
-        drop_job(tmp_path / "watch" / "victim", {"solar_tracker.stl": SOLAR})
+        # a design of many minutes: still running when its worker is killed
+        drop_job(tmp_path / "watch" / "victim", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
         started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
         daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
         os.kill(started["worker_pid"], signal.SIGKILL)

@@ -64,8 +64,14 @@ def ros2_job(tmp_path_factory):
         message = TYPESTORE.deserialize_cdr(bytes.fromhex(value["payload"]), "std_msgs/msg/String")
         return json.loads(message.data)["state"] in ("done", "failed")
 
+    def done_natively(value) -> bool:
+        if not (isinstance(value, dict) and value.get("event") == "sample" and value["key_expr"].endswith("/status") and value["source"] == "native"):
+            return False
+        return json.loads(bytes.fromhex(value["payload"]))["state"] in ("done", "failed")
+
+    # the daemon publishes each message natively, then on ROS 2: the last of both forms of the final status closes the job
     cell.wait_for(done_on_ros2, timeout=120)
-    time.sleep(0.5)
+    cell.wait_for(done_natively, timeout=120)
     finished_ns = time.time_ns()
     job_id = next(path.name for path in (base / "out").iterdir() if not path.name.startswith("."))
     yield {"base": base, "port": port, "daemon": daemon, "cell": cell, "job_id": job_id, "out": base / "out" / job_id, "window_ns": (started_ns, finished_ns)}

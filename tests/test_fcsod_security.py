@@ -14,7 +14,6 @@ import shutil
 import sqlite3
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -45,19 +44,26 @@ def probe(config: Path, *args: str, timeout: float = 60) -> list[dict]:
     return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
 
 
-def start_probe(config: Path, *args: str) -> subprocess.Popen:
-    """Start ``tests/zenoh_probe.py`` in the background and wait until its session is open."""
+def start_probe(config: Path, *args: str) -> tuple[subprocess.Popen, list[dict]]:
+    """Start ``tests/zenoh_probe.py --hold`` in the background; return it once every action is done, with its lines so far."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args], cwd=REPO, stdout=subprocess.PIPE, text=True
+        [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args, "--hold"],
+        cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
     )
-    assert json.loads(process.stdout.readline())["event"] == "open"
-    return process
+    lines = []
+    while not lines or lines[-1]["event"] != "ready":
+        line = process.stdout.readline()
+        assert line, f"the probe ended early: {lines}"
+        lines.append(json.loads(line))
+    assert lines[0]["event"] == "open"
+    return process, lines
 
 
-def probe_output(process: subprocess.Popen) -> list[dict]:
-    """Lines of a background probe once it has ended."""
+def probe_output(probe: tuple[subprocess.Popen, list[dict]]) -> list[dict]:
+    """Every line of a background probe, after closing its standard input (which ends it)."""
+    process, lines = probe
     out, _ = process.communicate(timeout=60)
-    return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    return lines + [json.loads(line) for line in out.splitlines() if line.startswith("{")]
 
 
 def client_args(pki: Path, name: str) -> list[str]:
@@ -215,14 +221,14 @@ def test_forged_publish_and_queryable_are_denied_by_access_control(secure):
     """ctl2 holds a valid certificate and publishes forged grasps under the daemon's keys; ctl1 never sees a byte of them."""
     pki, job_id = secure["pki"], secure["job_id"]
     key = f"fcso/test/jobs/{job_id}/grasps"
-    watcher = start_probe(pki / "clients" / "ctl1" / "zenoh.json5", "--subscribe", "fcso/test/jobs/**", "--seconds", "12")
+    watcher = start_probe(pki / "clients" / "ctl1" / "zenoh.json5", "--subscribe", "fcso/test/jobs/**")
+    # returns once its 30 forged puts (paced 50 ms apart) are sent: its queryable and token were declared before them
     forging = start_probe(pki / "clients" / "ctl2" / "zenoh.json5", "--put", key, "--payload", FORGED, "--count", "30",
-                          "--queryable", "fcso/test/jobs/**", "--token", "fcso/test/daemon", "--seconds", "8")
-    time.sleep(2.0)
+                          "--queryable", "fcso/test/jobs/**", "--token", "fcso/test/daemon")
     # ctl1 asks while ctl2's queryable is declared: only the daemon answers
     replies = [e for e in probe(pki / "clients" / "ctl1" / "zenoh.json5", "--query", "fcso/test/jobs/**") if e["event"] == "reply"]
     forger = probe_output(forging)
-    assert [e["event"] for e in forger][:1] == ["put"], forger
+    assert [e["event"] for e in forger][1:2] == ["put"], forger
     # a job published while the raw watcher listens shows that it receives what passes the daemon
     drop_job(secure["base"] / "watch" / "after-forgery", {"cube.stl": DATA / "capsela200_plug.stl"})
     finished(secure["subscriber"], "after-forgery")
@@ -299,7 +305,7 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
         finger.write_bytes(finger.read_bytes()[:-50] + bytes(50))
         with sqlite3.connect(cell["base"] / "state" / "journal.sqlite3") as db:
             db.execute("UPDATE messages SET payload = ? WHERE job_id = ? AND topic = 'grasps'", (FORGED.encode(), job_id))
-        late = start_subscriber(cell["config"], extra=[*client_args(pki, "ctl1"), "--timeout", "8"])
+        late = start_subscriber(cell["config"], extra=[*client_args(pki, "ctl1")])
         late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status", 30)
         late.stop()
     finally:

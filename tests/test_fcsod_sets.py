@@ -48,7 +48,7 @@ def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, cap
         job_id = done["job_id"]
         lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
         # a cell that connects later gets the plan and every set's finger from the daemon's queryable
-        late = start_subscriber(config, save=tmp_path / "late", extra=["--timeout", "8"])
+        late = start_subscriber(config, save=tmp_path / "late")
         try:
             def replies() -> dict:
                 return {v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id}

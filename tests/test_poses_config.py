@@ -56,8 +56,10 @@ def test_selection_random_seeded_most_probable_and_explicit():
     first, _ = select_poses(probabilities, PosesConfig(count=2, select="random", seed=5), 0, "p")
     again, _ = select_poses(probabilities, PosesConfig(count=2, select="random", seed=5), 0, "p")
     assert first == again and len(set(first)) == 2
-    seen = {tuple(select_poses(probabilities, PosesConfig(count=2, seed=s), 0, "p")[0]) for s in range(20)}
+    seen = {tuple(select_poses(probabilities, PosesConfig(count=2, select="random", seed=s), 0, "p")[0]) for s in range(20)}
     assert len(seen) > 1
+    # the default: the most probable poses, whatever the seed
+    assert {tuple(select_poses(probabilities, PosesConfig(count=2, seed=s), 0, "p")[0]) for s in range(20)} == {(0, 1)}
     assert select_poses(probabilities, PosesConfig(count=3, select="most_probable"), 0, "p")[0] == [0, 1, 2]
     assert select_poses(probabilities, PosesConfig(select=[3, 1]), 0, "p")[0] == [1, 3]
     chosen, warnings = select_poses(probabilities, PosesConfig(count=9, select="most_probable"), 0, "p")

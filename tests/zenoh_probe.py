@@ -2,7 +2,9 @@
 
 It opens a session from a zenoh config file, then does what it is told and
 prints one JSON line per event: ``open`` (or ``open_failed`` and exit 3),
-``liveliness``, ``reply``, ``received``, ``put``, ``queried_by``. An attacker
+``liveliness``, ``reply``, ``received``, ``put``, ``queried_by``, and with
+``--hold`` ``ready`` once every action is done, staying until its standard
+input closes. An attacker
 in these tests is this script holding a certificate.
 """
 
@@ -33,7 +35,7 @@ def main() -> int:
     parser.add_argument("--count", type=int, default=20)
     parser.add_argument("--queryable", metavar="KEY", help="answer queries on KEY with the forged payload")
     parser.add_argument("--token", metavar="KEY", help="declare a liveliness token on KEY")
-    parser.add_argument("--seconds", type=float, default=0.0, help="stay this long after the actions")
+    parser.add_argument("--hold", action="store_true", help="after the actions print 'ready' and stay until standard input closes")
     args = parser.parse_args()
     try:
         session = zenoh.open(zenoh.Config.from_file(args.config))
@@ -75,7 +77,10 @@ def main() -> int:
             publisher.put(args.payload.encode(), attachment=attachment)
             time.sleep(0.05)
         _print(event="put", count=args.count)
-    time.sleep(args.seconds)
+    if args.hold:
+        # the test, not a clock, decides how long this client stays
+        _print(event="ready")
+        sys.stdin.read()
     session.close()
     _print(event="closed")
     return 0
