@@ -39,6 +39,11 @@ class SamplerConfig(_Section):
     min_contact_area_mm2: float | None = Field(
         None, ge=0, description="Least part surface inside each pad box, mm²; default 10 % of L x W"
     )
+    feature_positions: bool = Field(
+        True,
+        description="Besides the stride, centre pads on the part's features: the concave intervals of its extent "
+        "profile along b and along the height (METHOD §3b); false is the paper's sampler",
+    )
 
     @model_validator(mode="after")
     def _penetration_inside_pad(self) -> "SamplerConfig":
@@ -235,6 +240,27 @@ class PrintConfig(_Section):
         return values
 
 
+class QualityConfig(_Section):
+    """How candidates are ranked (METHOD §7 and §7b).
+
+    The start errors, tolerances, friction and forces default to ``[verify]``'s,
+    the simulated tests the measure predicts.
+    """
+
+    measure: Literal["capture", "paper"] = Field(
+        "capture",
+        description="'capture': worst scenario of capture x min(1, holding / hold_force_n) x E (METHOD §7b); "
+        "'paper': Q = worst E (METHOD §7, the paper's experiment)",
+    )
+    position_error_mm: float = Field(2.0, gt=0, description="Start error along each table axis, -x..x, mm")
+    yaw_error_deg: float = Field(3.0, ge=0, description="Start error about the vertical, -x..x, degrees")
+    success_mm: float = Field(0.3, gt=0, description="A start is captured when the part ends this close to its seat, mm")
+    success_deg: float = Field(1.0, gt=0, description="... and this close in rotation, degrees")
+    friction: float = Field(0.4, ge=0, description="Coulomb friction coefficient between pad and part")
+    grip_force_n: float = Field(60.0, gt=0, description="Grip force of each finger, N")
+    hold_force_n: float = Field(30.0, gt=0, description="Largest push at the centre of mass that holding is measured up to, N")
+
+
 class FingerSetsConfig(_Section):
     """How many finger sets a job may use and what each part must keep (METHOD §11, ``[finger_sets]``)."""
 
@@ -266,6 +292,7 @@ class DesignConfig(_Section):
     finger: FingerConfig = Field(default_factory=FingerConfig)
     print: PrintConfig = Field(default_factory=PrintConfig)
     finger_sets: FingerSetsConfig = Field(default_factory=FingerSetsConfig)
+    quality: QualityConfig = Field(default_factory=QualityConfig)
 
     def updated(self, overrides: dict) -> "DesignConfig":
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""

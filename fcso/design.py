@@ -14,10 +14,12 @@ import trimesh
 
 from . import __version__
 from .config import DesignConfig
+from .capture import CaptureLandscape, pad_landscapes
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .errors import NoGraspError
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger
 from .geometry import to_manifold, to_trimesh
+from .holding import holding_forces_n
 from .grasps import tcp_pose
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
 from .parts import Part, load_parts
@@ -65,6 +67,8 @@ class SampleGeometry:
     effective_area_bound: float
     screen: tuple[ScreenGeometry, ScreenGeometry]
     screened_bound: float
+    centres_uv_mm: tuple[np.ndarray, np.ndarray]
+    flat_capture: float | None
 
 
 @dataclass
@@ -83,13 +87,21 @@ class Scenario:
 
 @dataclass
 class ScenarioEvaluation:
-    """One candidate in one scenario: seating of both pads and the quality."""
+    """One candidate in one scenario: seating of both pads and the quality.
+
+    ``capture`` (the pad as printed), ``holding_n`` (the worst of the six
+    pushes) and ``measure`` follow METHOD §7b; under the paper's measure
+    the first two are None and ``measure`` is E.
+    """
 
     contacts: tuple[PadContact, PadContact]
     contact_normals: np.ndarray
     rles: float
     contact_area_mm2: float
     effective_area: float
+    measure: float
+    capture: CaptureLandscape | None = None
+    holding_n: np.ndarray | None = None
 
 
 @dataclass
@@ -413,11 +425,18 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D - clearance = {floor:.3f} mm")
     warnings.extend(fit_warnings)
     timings["finger"] = time.perf_counter() - clock
+    versus_flat = _versus_flat(scenarios, best, exact.values())
+    for scenario, (capture, flat, beats) in zip(scenarios, versus_flat):
+        if not beats:
+            warnings.append(
+                f"{scenario.part.name} in stable pose {scenario.pose_index}: no pad captures it better than flat pads "
+                f"(capture {capture:.2f} against {flat:.2f} for flat ones): the carved pad is no improvement there"
+            )
 
     report = DesignReport(
         fcso_version=__version__,
         parts=[_part_report(p) for p in loaded],
-        scenarios=[_scenario_report(s) for s in scenarios],
+        scenarios=[_scenario_report(s, *v) for s, v in zip(scenarios, versus_flat)],
         candidates=_candidate_reports(ranked[: config.search.report_candidates], exact, listed_screens, indices),
         best=indices[best_choice],
         search=SearchReport(
@@ -583,6 +602,7 @@ def _sample_geometry(
     area = sum(len(s.points) * s.area_per_point_mm2 for s in surfaces)
     normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, frames)])
     bound = area / rles(normals) if len(normals) else 0.0
+    centres = tuple((f @ np.append(mesh.center_mass, 1.0))[:2] for f in frames)
     screens = tuple(
         prepare_geometry(
             column_heights(g.surface_vertices, g.surface_faces, grid),
@@ -596,6 +616,12 @@ def _sample_geometry(
         )
         for g, s, f in zip(geometries, surfaces, frames)
     )
+    flat_capture = None
+    if config.quality.measure == "capture":
+        # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
+        capture = pad_landscapes([screens], [centres], grid, config)[0].fraction
+        flat_capture = pad_landscapes([screens], [centres], grid, config, flat=True)[0].fraction
+        screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
         frames=frames,
@@ -603,7 +629,9 @@ def _sample_geometry(
         surfaces=surfaces,
         effective_area_bound=float(bound),
         screen=screens,
-        screened_bound=screened_bound(screens, lattice),
+        screened_bound=screened_bound(screens, lattice) * screens[0].capture,
+        centres_uv_mm=centres,
+        flat_capture=flat_capture,
     )
 
 
@@ -653,8 +681,11 @@ def _evaluate(
     travel = closing_travel_mm(fit["clearance_mm"]) if fitted else 0.0
     surfaces = [surface for sample in chosen for surface in sample.surfaces]
     seated = iter(seat(surfaces, vertices, faces, config.contact.eps_mm, travel_mm=travel))
+    by_capture = config.quality.measure == "capture"
+    if by_capture:
+        landscapes = pad_landscapes([s.screen for s in chosen], [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config)
     results = []
-    for sample in chosen:
+    for number, (scenario, sample) in enumerate(zip(scenarios, chosen)):
         contacts = (next(seated), next(seated))
         normals = np.vstack(
             [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
@@ -662,16 +693,42 @@ def _evaluate(
         area = float(sum(c.contact_area_mm2 for c in contacts))
         radius = rles(normals) if len(normals) else 2.0
         effective = area / radius if area > 0 else 0.0
-        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective))
-    effective_areas = [r.effective_area for r in results]
+        if not by_capture:
+            results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
+            continue
+        holding = _holding(scenario, sample, contacts, normals, config)
+        measure = landscapes[number].fraction * min(1.0, float(holding.min()) / config.quality.hold_force_n) * effective
+        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding))
+    measures = [r.measure for r in results]
     return CandidateEvaluation(
         choice=choice,
         scenarios=results,
-        quality=float(min(effective_areas)),
-        mean_effective_area=float(np.mean(effective_areas)),
+        quality=float(min(measures)),
+        mean_effective_area=float(np.mean(measures)),
         case=fingerpad.case,
         block_depth_mm=fingerpad.block_depth_mm,
         fingerpad=fingerpad if keep_pad else None,
+    )
+
+
+def _holding(scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig) -> np.ndarray:
+    """The six holding forces of one seated grasp (METHOD §7b), N."""
+    points = np.vstack(
+        [(np.linalg.inv(f) @ np.column_stack([s.points[c.contact], np.ones(int(c.contact.sum()))]).T).T[:, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
+    )
+    pads = np.concatenate([np.full(int(c.contact.sum()), side) for side, c in enumerate(contacts)])
+    density = config.print.resolved()["density_g_cm3"]
+    quality = config.quality
+    return holding_forces_n(
+        points,
+        -normals_rest,
+        pads,
+        sample.sample.closing_axis,
+        np.asarray(scenario.mesh.center_mass),
+        float(scenario.mesh.volume) * density * 1e-6,
+        quality.friction,
+        quality.grip_force_n,
+        quality.hold_force_n,
     )
 
 
@@ -743,9 +800,35 @@ def _part_report(part: Part) -> PartReport:
     )
 
 
-def _scenario_report(scenario: Scenario) -> ScenarioReport:
+#: How much more of the start errors a pad must capture than flat pads to count as better (2 of 20 starts).
+FLAT_MARGIN = 0.1
+
+
+def _versus_flat(scenarios: list[Scenario], best: CandidateEvaluation, finalists) -> list[tuple[float | None, float | None, bool]]:
+    """Per scenario: the chosen pad's capture, flat pads' capture, and whether any pad tried beats flat (METHOD §7b, §12).
+
+    A scenario is served better than by flat pads when the chosen pad's
+    capture exceeds the flat pads' by :data:`FLAT_MARGIN`; when no pad
+    screened or evaluated does, the design says so. Under the paper's
+    measure nothing is compared: ``(None, None, True)``.
+    """
+    if best.scenarios[0].capture is None:
+        return [(None, None, True)] * len(scenarios)
+    compared = []
+    for number, scenario in enumerate(scenarios):
+        chosen = best.scenarios[number].capture.fraction
+        flat = scenario.samples[best.choice[number]].flat_capture
+        tried = max([chosen] + [e.scenarios[number].capture.fraction for e in finalists] + [g.screen[0].capture for g in scenario.samples])
+        compared.append((chosen, flat, tried > flat + FLAT_MARGIN))
+    return compared
+
+
+def _scenario_report(scenario: Scenario, capture: float | None, flat_capture: float | None, beats_flat: bool) -> ScenarioReport:
     result = scenario.sampler_result
     return ScenarioReport(
+        capture=None if capture is None else _round(capture),
+        flat_capture=None if flat_capture is None else _round(flat_capture),
+        beats_flat=beats_flat,
         part=scenario.part.name,
         pose_index=scenario.pose_index,
         pose_probability=_round(scenario.probability),
@@ -765,6 +848,7 @@ def _scenario_report(scenario: Scenario) -> ScenarioReport:
                 ratio=[_round(p.ratio) for p in g.geometries],
                 depth_mm=[_round(p.depth_mm) for p in g.geometries],
                 effective_area_bound=_round(g.effective_area_bound),
+                on_feature=g.sample.on_feature,
             )
             for g in scenario.samples
         ],
@@ -790,7 +874,10 @@ def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateR
         evaluation.choice,
         index,
         "exact",
-        [(e.rles, e.contact_area_mm2, e.effective_area, [c.offset_mm for c in e.contacts]) for e in evaluation.scenarios],
+        [
+            (e.rles, e.contact_area_mm2, e.effective_area, [c.offset_mm for c in e.contacts], e.capture.fraction if e.capture else None, e.holding_n, e.measure)
+            for e in evaluation.scenarios
+        ],
         evaluation.quality,
         evaluation.mean_effective_area,
         evaluation.case,
@@ -803,7 +890,7 @@ def _screened_report(choice: tuple[int, ...], screened: ScreenedCandidate, index
         choice,
         index,
         "screened",
-        [(e.rles, e.contact_area_mm2, e.effective_area, list(e.seat_offsets_mm)) for e in screened.scenarios],
+        [(e.rles, e.contact_area_mm2, e.effective_area, list(e.seat_offsets_mm), e.capture, None, e.measure) for e in screened.scenarios],
         screened.quality,
         screened.mean_effective_area,
         screened.case,
@@ -812,7 +899,7 @@ def _screened_report(choice: tuple[int, ...], screened: ScreenedCandidate, index
 
 
 def _candidate_entry(choice, index, evaluation, per_scenario, quality, mean, case, block_depth) -> CandidateReport:
-    """A report entry; ``per_scenario`` holds (RLES, A, E, seat offsets) per scenario."""
+    """A report entry; ``per_scenario`` holds (RLES, A, E, seat offsets, capture, holding forces, measure) per scenario."""
     return CandidateReport(
         index=index,
         samples=list(choice),
@@ -823,8 +910,11 @@ def _candidate_entry(choice, index, evaluation, per_scenario, quality, mean, cas
                 contact_area_mm2=_round(area),
                 effective_area=_round(effective),
                 seat_offsets_mm=[_round(t) for t in offsets],
+                capture=None if capture is None else _round(capture),
+                holding_n=None if holding is None else [_round(f) for f in holding],
+                measure=_round(measure),
             )
-            for radius, area, effective, offsets in per_scenario
+            for radius, area, effective, offsets, capture, holding, measure in per_scenario
         ],
         quality=_round(quality),
         mean_effective_area=_round(mean),

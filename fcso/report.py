@@ -54,6 +54,7 @@ class SampleReport(_Model):
     ratio: list[float] = Field(description="R = (V_B - V_I) / V_B of the + and - geometries")
     depth_mm: list[float] = Field(description="d_n of the + and - geometries, mm")
     effective_area_bound: float = Field(description="Upper bound of E for any candidate using this sample, mm²")
+    on_feature: bool = Field(False, description="Its position or height was centred on a feature of the part (METHOD §3b), not taken from the stride")
 
 
 class ScenarioReport(_Model):
@@ -67,6 +68,13 @@ class ScenarioReport(_Model):
     valid_samples: int
     rejected: dict[str, int] = Field(description="Rejection reason -> count")
     samples: list[SampleReport]
+    capture: float | None = Field(
+        None, description="Share of the start errors the chosen pad seats (METHOD §7b), 0..1; null under the paper's measure"
+    )
+    flat_capture: float | None = Field(None, description="The same for flat pads on the chosen grasp, 0..1")
+    beats_flat: bool = Field(
+        True, description="Some pad tried captures this scenario better than flat pads; false: the design says flat is as good here"
+    )
 
 
 class ScenarioQuality(_Model):
@@ -76,6 +84,19 @@ class ScenarioQuality(_Model):
     contact_area_mm2: float = Field(description="A: contact area of both pads, mm²")
     effective_area: float = Field(description="E = A / RLES, mm²")
     seat_offsets_mm: list[float] = Field(description="Seating offset t of the + and - pads, mm")
+    capture: float | None = Field(
+        None,
+        description="Share of the start errors that closing the jaws seats (METHOD §7b), 0..1; screened: the sample's pads alone; "
+        "null under the paper's measure",
+    )
+    holding_n: list[float] | None = Field(
+        None,
+        description="Largest push at the centre of mass held, in the test's six directions (+b, -b, +a, -a, +z, -z), N; "
+        "exact candidates under the capture measure only",
+    )
+    measure: float = Field(
+        0.0, description="What ranks the scenario: E (paper), or capture x min(1, worst holding / hold force) x E (capture; screened: capture x E), mm²"
+    )
 
 
 class CandidateReport(_Model):
@@ -87,8 +108,8 @@ class CandidateReport(_Model):
         "exact", description="exact: METHOD §6-7 (re-evaluated finalists); screened: the fast ranking of METHOD §8b"
     )
     per_scenario: list[ScenarioQuality]
-    quality: float = Field(description="Q = min over scenarios of E, mm²")
-    mean_effective_area: float = Field(description="Mean E over scenarios (first tie-break), mm²")
+    quality: float = Field(description="The worst scenario's measure: Q = min E under the paper's measure, mm²")
+    mean_effective_area: float = Field(description="Mean measure over scenarios (first tie-break; mean E under the paper's measure), mm²")
     pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
     block_depth_mm: float | None = Field(None, description="d_B in the mixed case, mm")
 

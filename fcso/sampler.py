@@ -9,6 +9,7 @@ import trimesh
 
 from .config import GripperConfig, SamplerConfig
 from .geometry import clip_to_box, cut_at_levels, half_space_area, triangle_areas_normals
+from .screen import ScreenGrid, column_heights
 
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
@@ -17,6 +18,9 @@ REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
 SIDES = (1, -1)
 
 _INF = np.inf
+#: Resolution of the extent profiles that find features, mm, and the least dip that is one.
+PROFILE_STEP_MM = 0.25
+FEATURE_DEPTH_MM = 0.2
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,8 @@ class GraspSample:
         Part's extreme coordinates along ``a`` inside the footprint prism.
     area_plus_mm2, area_minus_mm2 : float
         Part surface inside the "+" and "-" pad boxes.
+    on_feature : bool
+        ``s`` or ``h`` was centred on a feature of the part (METHOD §3b), not taken from the stride.
     """
 
     yaw_deg: float
@@ -45,6 +51,7 @@ class GraspSample:
     a_min_mm: float
     area_plus_mm2: float
     area_minus_mm2: float
+    on_feature: bool = False
 
     @property
     def closing_axis(self) -> np.ndarray:
@@ -164,6 +171,14 @@ def sample_grasps(
         positions = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
         if len(positions) == 0:
             positions = np.array([(b_min + b_max) / 2.0])
+        feature_heights = np.zeros(0)
+        if sampler.feature_positions:
+            # pads centred on notches, holes and gaps, which the stride may straddle (METHOD §3b)
+            along_b, along_z = feature_centres(local, faces)
+            positions = _merge_positions(positions, along_b)
+            feature_heights = along_z - width / 2.0
+            feature_heights = feature_heights[(feature_heights >= clearance) & (feature_heights < top)]
+        stride_positions = set(np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride).tolist())
         for s in positions[centres[0] :: centres[1]]:
             slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
             if len(slab_f) == 0:
@@ -176,7 +191,8 @@ def sample_grasps(
             plate_slabs = {
                 side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
             }
-            heights = np.arange(clearance, top, stride)
+            stride_heights = np.arange(clearance, top, stride)
+            heights = _merge_positions(stride_heights, feature_heights)
             bands = _Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
             for h in heights:
                 prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
@@ -220,9 +236,77 @@ def sample_grasps(
                         a_min_mm=a_min,
                         area_plus_mm2=area_plus,
                         area_minus_mm2=area_minus,
+                        on_feature=bool(s not in stride_positions or not np.isin(h, stride_heights)),
                     )
                 )
     return SamplerResult(samples=samples, rejected=rejected, tried=tried)
+
+
+def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where pads centre on a part's features: along ``b`` and along the height (METHOD §3b).
+
+    The part is seen from each side of the closing axis as a map of its
+    outermost ``a`` over ``(b, z)`` cells :data:`PROFILE_STEP_MM` wide. Along
+    every row of the map (and every column), a stretch that dips below the
+    lower of the highest values on either side by at least
+    :data:`FEATURE_DEPTH_MM` is a concave interval: a notch, a hole, a gap
+    between teeth. The same test on the negated map finds convex intervals
+    (ribs, teeth, ridges), on whose middle a pocket holds the whole
+    feature. Cells that dip in at least four rows (1 mm of height) make
+    up the intervals along ``b`` whose middles are returned, and likewise
+    along the height.
+
+    Parameters
+    ----------
+    local : (n, 3) float
+        Part vertices in ``(a, b, z)`` coordinates, mm.
+    faces : (m, 3) int
+
+    Returns
+    -------
+    along_b, along_z : (k,) float
+        Feature centres, mm, ascending.
+    """
+    low = local.min(axis=0)
+    extent = local.max(axis=0) - low
+    count_b, count_z = int(np.ceil(extent[1] / PROFILE_STEP_MM)), int(np.ceil(extent[2] / PROFILE_STEP_MM))
+    if count_b < 3 or count_z < 3:
+        return np.zeros(0), np.zeros(0)
+    grid = ScreenGrid(PROFILE_STEP_MM, count_b, count_z)
+    dips = np.zeros((count_b, count_z), dtype=bool)
+    for side in (1.0, -1.0):
+        # u = outward distance along this side's a, shifted positive: 0 stays "no surface"
+        seen = np.column_stack([side * local[:, 0] - (side * local[:, 0]).min() + 1.0, local[:, 1] - low[1], local[:, 2] - low[2]])
+        outermost = column_heights(seen, faces, grid).reshape(count_b, count_z)
+        outermost = np.where(outermost > 0, outermost, -np.inf)
+        # concave intervals (notches, holes, gaps between teeth) and convex ones (ribs, teeth, ridges)
+        inward = np.where(np.isfinite(outermost), -outermost, -np.inf)
+        dips |= _dips(outermost) | _dips(outermost.T).T | _dips(inward) | _dips(inward.T).T
+    centres = []
+    for axis, origin in ((1, low[1]), (0, low[2])):
+        # along b: cells dipping in >= 4 rows of the height; along z: in >= 4 columns of b
+        run = dips.sum(axis=axis) >= 4
+        starts = np.flatnonzero(run & ~np.concatenate([[False], run[:-1]]))
+        ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
+        centres.append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
+    return centres[0], centres[1]
+
+
+def _dips(heights: np.ndarray) -> np.ndarray:
+    """Cells of each row (along axis 0) lying at least :data:`FEATURE_DEPTH_MM` below the water level of that row."""
+    left = np.maximum.accumulate(heights, axis=0)
+    right = np.maximum.accumulate(heights[::-1], axis=0)[::-1]
+    level = np.minimum(left, right)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(level) & (level - heights >= FEATURE_DEPTH_MM)
+
+
+def _merge_positions(stride: np.ndarray, features: np.ndarray) -> np.ndarray:
+    """Stride positions plus the feature positions not within 0.05 mm of one of them, ascending."""
+    features = np.asarray(features, dtype=float)
+    if len(stride) and len(features):
+        features = features[np.min(np.abs(features[:, None] - stride[None, :]), axis=1) > 0.05]
+    return np.unique(np.concatenate([stride, features]))
 
 
 def _plate_box(back_face_a: float, side: int, plate_thickness: float, b_range, z_low: float, z_high: float):

@@ -177,6 +177,9 @@ class ScreenGeometry:
     point_bin : (n,) int32
         Lattice bin of their normals in the grasp frame.
     area_per_point_mm2 : float
+    capture : float
+        Capture of the sample's pads alone (METHOD §7b), shared by its two
+        geometries; 1 under the paper's measure.
     """
 
     heights_mm: np.ndarray
@@ -188,6 +191,7 @@ class ScreenGeometry:
     point_cell: np.ndarray
     point_bin: np.ndarray
     area_per_point_mm2: float
+    capture: float = 1.0
 
 
 @dataclass
@@ -289,17 +293,24 @@ def screened_bound(geometries: tuple[ScreenGeometry, ScreenGeometry], lattice: N
 
 @dataclass
 class ScreenedScenario:
-    """Screened quality of one scenario of a candidate."""
+    """Screened quality of one scenario of a candidate; ``measure`` is what ranks it (E, or capture x E)."""
 
     rles: float
     contact_area_mm2: float
     effective_area: float
     seat_offsets_mm: tuple[float, float]
+    capture: float
+    measure: float
 
 
 @dataclass
 class ScreenedCandidate:
-    """Screened quality of a candidate: ``Q = min E`` and the mean E, per scenario values, pad case."""
+    """Screened quality of a candidate: the worst scenario's measure and the mean, per scenario values, pad case.
+
+    Under the paper's measure that is ``Q = min E`` (METHOD §7); under the
+    capture measure each scenario's E is scaled by the capture of its
+    sample's pads alone (METHOD §7b; the exact stage measures the whole pad).
+    """
 
     quality: float
     mean_effective_area: float
@@ -374,6 +385,22 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
     return Carving(top, owner, second, top_high, done | frozenset(pairs))
 
 
+def pad_case(geometries: list[ScreenGeometry], config: DesignConfig) -> tuple[str, float]:
+    """The pad's case (METHOD §5) and the height of its face where nothing is carved, mm.
+
+    Only good geometries: carved, face at 0; only bad ones: a flat pad, face
+    at D; both: the block B of depth ``K min d_n`` over the good ones, face
+    at ``D - K min d_n``.
+    """
+    depth = config.sampler.penetration_mm
+    good = [g for g in geometries if g.good]
+    if not good:
+        return "bad", depth
+    if len(good) == len(geometries):
+        return "good", 0.0
+    return "mixed", max(depth - min(g.depth_mm for g in good) * config.filter.block_factor, 0.0)
+
+
 def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignConfig, lattice: NormalLattice, carved: Carving | None = None) -> ScreenedCandidate:
     """Screen one candidate: one sample's two geometries per scenario.
 
@@ -393,16 +420,9 @@ def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignCo
     -------
     ScreenedCandidate
     """
-    depth, eps = config.sampler.penetration_mm, config.contact.eps_mm
+    eps = config.contact.eps_mm
     geometries = [g for pair in chosen for g in pair]
-    good = [g for g in geometries if g.good]
-    if not good:
-        case, floor = "bad", depth
-    elif len(good) == len(geometries):
-        case, floor = "good", 0.0
-    else:
-        block_depth = min(g.depth_mm for g in good) * config.filter.block_factor
-        case, floor = "mixed", max(depth - block_depth, 0.0)
+    case, floor = pad_case(geometries, config)
     done = carved.pairs if carved is not None else frozenset()
     carving = carve_heights(chosen, [p for p in range(len(chosen)) if p not in done], carved)
     floor = np.float32(floor)
@@ -429,6 +449,7 @@ def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignCo
         occupied = np.unique(np.concatenate(bins))
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
-        results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1])))
-    effective_areas = [r.effective_area for r in results]
-    return ScreenedCandidate(float(min(effective_areas)), float(np.mean(effective_areas)), results, case)
+        capture = geometries[2 * pair_number].capture
+        results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, capture * effective))
+    measures = [r.measure for r in results]
+    return ScreenedCandidate(float(min(measures)), float(np.mean(measures)), results, case)

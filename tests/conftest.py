@@ -28,24 +28,6 @@ def process_running(pid: int) -> bool:
         return False
 
 
-def notched_cube_mesh():
-    """A 30 mm cube with two 8 mm through holes and 45° notches along its four vertical edges, made with manifold3d.
-
-    It has ten stable poses, four of them tilted ones of probability about 3 %.
-    """
-    import manifold3d
-    import trimesh
-
-    cube = manifold3d.Manifold.cube([30, 30, 30], center=True)
-    hole = manifold3d.Manifold.cylinder(40, 4, 4, 48, center=True)
-    cube = cube - hole - hole.rotate([90, 0, 0])
-    notch = manifold3d.Manifold.cube([6, 6, 40], center=True).rotate([0, 0, 45])
-    for x, y in ((-15, -15), (-15, 15), (15, -15), (15, 15)):
-        cube = cube - notch.translate([x, y, 0])
-    mesh = cube.to_mesh()
-    return trimesh.Trimesh(mesh.vert_properties[:, :3], mesh.tri_verts)
-
-
 def small_config(**sections) -> DesignConfig:
     """A 10 x 10 mm pad (T = 4, D = 3) with a coarse stride, so designs take seconds.
 

@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from .conftest import REPO, data_path, notched_cube_mesh
+from examples.sim_parts import holed_notched_cube
+
+from .conftest import REPO, data_path
 
 
 def fcso(*args, cwd=None):
@@ -54,7 +56,7 @@ def test_finger_without_frame_and_unknown_config_key(tmp_path):
 def test_default_design_plans_for_the_most_probable_poses(tmp_path):
     """No config: the part's two most probable stable poses, printed with their probabilities (METHOD §2 revision 3)."""
     part = tmp_path / "notched.stl"
-    notched_cube_mesh().export(part)
+    holed_notched_cube().export(part)
     # the reference: trimesh's own stable poses of the file as written
     _, probabilities = trimesh.poses.compute_stable_poses(trimesh.load(part))
     assert len(probabilities) >= 6 and min(probabilities) < 0.05, "the part must have improbable poses to avoid"

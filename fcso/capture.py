@@ -1,0 +1,284 @@
+"""Capture: the share of start errors from which closing the jaws seats the part (METHOD §7b).
+
+The model is the quasi-static squeeze of Goldberg's squeeze function and of
+Zhang and Goldberg's self-aligning jaws, on the ``(v, w)`` column heights of
+the screening (METHOD §8b). For the part displaced on the table by ``δ =
+(t, θ)`` (``t`` along the sliding axis ``b``, ``θ`` about the vertical through
+its centre of mass), ``s(δ)`` is the jaw separation at which both pads first
+touch it. A displacement along the closing axis moves one pad's contact in
+and the other's out by the same amount, so it does not change ``s``: the
+symmetric jaws absorb it. Closing lowers the separation, so the part slides
+towards smaller ``s``, but only where the slope of ``s`` beats friction:
+each jaw pushes along the closing axis, and a contact surface sloping by
+``tan α`` turns that push sideways only when ``tan α > μ``. With two jaws,
+``Δs / (2 Δ) > μ`` along a move of length ``Δ`` (a turn ``Δθ`` counted as
+the arc ``r Δθ`` at the contacts' distance ``r`` from the centre). A start is
+captured when steepest descent of ``s`` from it ends within the success
+tolerance of the seat.
+
+In the pad frame of side ``σ`` (``u = σ a``, ``v = σ b``, :meth:`fcso.sampler.
+GraspSample.pad_frame`), the displaced part's surface moves by ``Δv = σ t + θ
+(u - u_c)`` and ``Δu = -θ (v - v_c)``, ``(u_c, v_c)`` being its centre of mass
+there. The part's column heights are shifted by whole cells along ``v`` (the
+shift at ``u = D``, where the contact lies) and tilted by ``Δu``; the pad's
+heights stay. ``s`` then is a minimum over cells of shifted height maps:
+a landscape of a few hundred ``δ`` costs about a millisecond.
+
+Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it:
+the clearance grows each carved geometry by ``c`` (a disc-shaped maximum
+filter, then ``+ c`` in depth) and the lead-in drafts every pocket wall,
+``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
+depth).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import maximum_filter
+
+from .config import DesignConfig, QualityConfig
+from .screen import ScreenGeometry, ScreenGrid, pad_case
+
+#: Steps of the yaw grid of the landscape, degrees.
+YAW_STEP_DEG = 0.5
+#: How far the landscape reaches beyond the start error box, mm and degrees:
+#: a descent may leave the box on its way to the seat.
+MARGIN_MM, MARGIN_DEG = 1.0, 1.0
+#: Spacing of the rows across the pad width that the landscape reads, mm.
+W_STEP_MM = 0.6
+
+
+@dataclass
+class CaptureLandscape:
+    """The jaw separation over start errors and what it captures.
+
+    Attributes
+    ----------
+    offsets_mm : (nt,) float
+        Start errors along the sliding axis, mm.
+    yaws_deg : (ny,) float
+        Start errors about the vertical, degrees.
+    separation_mm : (nt, ny) float
+        ``s(δ) - s(0)``, mm; ``inf`` where a pad loses the part.
+    captured : (nt, ny) bool
+        Starts whose descent ends at the seat.
+    in_box : (nt, ny) bool
+        Starts inside the test's error box.
+    fraction : float
+        Captured share of the starts in the box, in [0, 1].
+    """
+
+    offsets_mm: np.ndarray
+    yaws_deg: np.ndarray
+    separation_mm: np.ndarray
+    captured: np.ndarray
+    in_box: np.ndarray
+    fraction: float
+
+
+def fitted_pad_heights(carved_mm: np.ndarray, floor_mm: float, cell_mm: float, clearance_mm: float, lead_in_deg: float) -> np.ndarray:
+    """The pad's face heights ``P = {u >= H}`` as printed.
+
+    Parameters
+    ----------
+    carved_mm : (count_v, count_w) float
+        Largest column height of the carved (good) geometries, mm; ``-inf``
+        where none carves.
+    floor_mm : float
+        The pad face where nothing is carved (0, the block's ``D - d_B``, or
+        ``D`` for a flat pad), mm.
+    cell_mm : float
+        Grid cell, mm.
+    clearance_mm, lead_in_deg : float
+        ``[print]``'s fit; 0 and 0 give the exact pocket.
+
+    Returns
+    -------
+    (count_v, count_w) float
+    """
+    heights = np.asarray(carved_mm, dtype=np.float64).copy()
+    if clearance_mm > 0 and np.isfinite(heights).any():
+        # the part grown by a ball: grey dilation by a hemisphere, so pocket edges are rounded as carved
+        radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
+        padded = np.pad(heights, radius, constant_values=-np.inf)
+        grown = np.full_like(heights, -np.inf)
+        count_v, count_w = heights.shape
+        for dv in range(-radius, radius + 1):
+            for dw in range(-radius, radius + 1):
+                lateral = np.hypot(dv, dw) * cell_mm
+                if lateral <= clearance_mm + 1e-9:
+                    window = padded[radius + dv : radius + dv + count_v, radius + dw : radius + dw + count_w]
+                    np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
+        heights = grown
+    if lead_in_deg > 0 and np.isfinite(heights).any():
+        drop = cell_mm / np.tan(np.radians(lead_in_deg))
+        diagonal = drop * np.sqrt(2.0)
+        for _ in range(heights.shape[0] + heights.shape[1]):
+            straight = maximum_filter(heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf)
+            corner = maximum_filter(heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf)
+            grown = np.maximum(heights, np.maximum(straight - drop, corner - diagonal))
+            if np.array_equal(grown, heights):
+                break
+            heights = grown
+    return np.maximum(heights, floor_mm)
+
+
+def capture_landscape(
+    pad_mm: np.ndarray,
+    part_mm: tuple[np.ndarray, np.ndarray],
+    centres_uv_mm: tuple[np.ndarray, np.ndarray],
+    cell_mm: float,
+    depth_mm: float,
+    config: QualityConfig,
+) -> CaptureLandscape:
+    """Squeeze one part between two pads from every start error of a grid and tell which starts are captured.
+
+    Parameters
+    ----------
+    pad_mm : (count_v, count_w) float
+        The pad's face heights (:func:`fitted_pad_heights`), shared by both fingers.
+    part_mm : two (count_v, count_w) float
+        The part's column heights in the "+" and "-" pad frames at its
+        nominal grasp, mm; ``<= 0`` where the part is not in the pad box.
+    centres_uv_mm : two (2,) float
+        The part's centre of mass ``(u, v)`` in each pad frame, mm.
+    cell_mm : float
+        Grid cell, mm.
+    depth_mm : float
+        Penetration D: where the contact lies in ``u``.
+    config : QualityConfig
+        Start error box, success tolerance, friction.
+
+    Returns
+    -------
+    CaptureLandscape
+    """
+    reach_mm = config.position_error_mm + MARGIN_MM
+    reach_deg = config.yaw_error_deg + MARGIN_DEG
+    steps = int(np.ceil(reach_mm / cell_mm))
+    offsets = np.arange(-steps, steps + 1) * cell_mm
+    turns = int(np.ceil(reach_deg / YAW_STEP_DEG))
+    yaws_deg = np.arange(-turns, turns + 1) * YAW_STEP_DEG
+    yaws = np.radians(yaws_deg)
+    count_v = pad_mm.shape[0]
+    v_mm = (np.arange(count_v) + 0.5) * cell_mm
+    # every few rows of w: the squeeze is decided along v, and a coarser w costs a fraction
+    rows_w = slice(0, None, max(1, int(round(W_STEP_MM / cell_mm))))
+    pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, rows_w]
+    gap = np.zeros((len(offsets), len(yaws)))
+    levers = []
+    for sign, heights, (u_c, v_c) in zip((1.0, -1.0), part_mm, centres_uv_mm):
+        heights = np.asarray(heights, dtype=np.float64)[:, rows_w]
+        part = np.where(heights > 0, heights, -np.inf)
+        # the shift along v of every start in cells: the clearance per column is known for whole
+        # cells and interpolated between them, so the landscape has no steps of a cell's rounding
+        shift = (sign * offsets[:, None] + yaws[None, :] * (depth_mm - u_c)) / cell_mm
+        whole = np.floor(shift).astype(np.int64)
+        fraction = (shift - whole)[:, :, None]
+        lowest, highest = int(whole.min()), int(whole.max()) + 1
+        source_rows = np.clip(np.arange(count_v)[None, :] - np.arange(lowest, highest + 1)[:, None], 0, count_v - 1)
+        per_shift = np.min(pad_mm[None, :, :] - part[source_rows], axis=2)
+        with np.errstate(invalid="ignore"):
+            shifted = (1.0 - fraction) * per_shift[whole - lowest] + fraction * per_shift[whole + 1 - lowest]
+        shifted = np.where(np.isnan(shifted), np.inf, shifted)
+        # tilt: the displaced surface rises by -θ (v - v_c)
+        columns = shifted + yaws[None, :, None] * (v_mm - v_c)[None, None, :]
+        gap += np.min(columns, axis=2)
+        levers.append(abs(depth_mm - u_c))
+    centre = (steps, turns)
+    separation = -(gap - gap[centre])
+    separation[~np.isfinite(separation)] = np.inf
+    lever_mm = max(float(np.mean(levers)), cell_mm)
+    successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * lever_mm, config.friction)
+    seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9)
+    captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
+    in_box = (np.abs(offsets)[:, None] <= config.position_error_mm + 1e-9) & (np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + 1e-9)
+    return CaptureLandscape(
+        offsets_mm=offsets,
+        yaws_deg=yaws_deg,
+        separation_mm=separation,
+        captured=captured,
+        in_box=in_box,
+        fraction=float(captured[in_box].mean()),
+    )
+
+
+def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: float) -> np.ndarray:
+    """Where steepest descent of ``separation`` ends from every node (flat indices).
+
+    A move to one of the eight neighbours is taken when its drop over twice
+    its length (two jaws) exceeds ``friction``; the steepest such move wins.
+    """
+    rows, columns = separation.shape
+    padded = np.pad(separation, 1, constant_values=np.inf)
+    index = np.pad(np.arange(separation.size).reshape(rows, columns), 1, constant_values=-1)
+    best_slope = np.full(separation.shape, friction)
+    successor = np.arange(separation.size).reshape(rows, columns)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr == 0 and dc == 0:
+                continue
+            neighbour = padded[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + columns]
+            length = np.hypot(dr * step_mm, dc * turn_mm)
+            with np.errstate(invalid="ignore"):
+                slope = (separation - neighbour) / (2.0 * length)
+            slope = np.where(np.isfinite(slope), slope, -np.inf)
+            better = slope > best_slope
+            best_slope = np.where(better, slope, best_slope)
+            successor = np.where(better, index[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + columns], successor)
+    successor = successor.ravel()
+    # pointer jumping: separation falls along every move, so the chains end
+    for _ in range(int(np.ceil(np.log2(separation.size))) + 1):
+        successor = successor[successor]
+    return successor
+
+
+def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.ndarray:
+    """Largest column height of the good geometries, ``(count_v, count_w)`` mm; ``-inf`` where none carves."""
+    carved = np.full((grid.count_v, grid.count_w), -np.inf)
+    for geometry in geometries:
+        if geometry.good:
+            heights = geometry.heights_mm.reshape(grid.count_v, grid.count_w)
+            np.maximum(carved, np.where(heights > 0, heights, -np.inf), out=carved)
+    return carved
+
+
+def pad_landscapes(
+    chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
+    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+    grid: ScreenGrid,
+    config: DesignConfig,
+    flat: bool = False,
+) -> list[CaptureLandscape]:
+    """The capture landscape of every scenario on the pad these samples carve, printed with ``[print]``'s fit.
+
+    Parameters
+    ----------
+    chosen : list of (ScreenGeometry, ScreenGeometry)
+        One sample's "+" and "-" geometries per scenario: a candidate, or one sample alone.
+    centres_uv_mm : list of two (2,) float
+        Each scenario's centre of mass ``(u, v)`` in the "+" and "-" pad frames, mm.
+    grid : ScreenGrid
+    config : DesignConfig
+    flat : bool
+        Squeeze between flat pads instead (face at ``D``): the control of METHOD §12.
+
+    Returns
+    -------
+    list of CaptureLandscape, one per scenario.
+    """
+    depth = config.sampler.penetration_mm
+    if flat:
+        pad = np.full((grid.count_v, grid.count_w), depth)
+    else:
+        geometries = [g for pair in chosen for g in pair]
+        fit = config.print.resolved()
+        _, floor = pad_case(geometries, config)
+        pad = fitted_pad_heights(carved_heights(geometries, grid), floor, grid.cell_mm, fit["clearance_mm"], fit["lead_in_deg"])
+    shape = (grid.count_v, grid.count_w)
+    return [
+        capture_landscape(pad, (pair[0].heights_mm.reshape(shape), pair[1].heights_mm.reshape(shape)), centres, grid.cell_mm, depth, config.quality)
+        for pair, centres in zip(chosen, centres_uv_mm)
+    ]

@@ -1,0 +1,95 @@
+"""Capture and holding (METHOD §7b) on parts whose answer is known by construction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fcso
+from examples.sim_parts import featured_cube, ribbed_block, two_ridge_block, upright_grasp_settings
+from fcso.capture import pad_landscapes
+from fcso.design import prepare
+from fcso.holding import holding_forces_n
+from fcso.parts import Part
+from fcso.screen import ScreenGrid
+
+
+def _prepared(mesh, name: str, **sections):
+    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"stride_mm": 2.0}, **sections})
+    return prepare([Part(name=name, path=name, mesh=mesh)], config), config
+
+
+def _sample_at(prepared, s_mm: float, h_mm: float):
+    """The valid sample whose footprint centre and bottom are nearest to (s, h)."""
+    samples = prepared.scenarios[0].samples
+    return min(samples, key=lambda g: abs(g.sample.s_mm - s_mm) + abs(g.sample.h_mm - h_mm))
+
+
+def _landscape(prepared, config, sample, flat: bool = False):
+    return pad_landscapes([sample.screen], [sample.centres_uv_mm], ScreenGrid.for_config(config), config, flat=flat)[0]
+
+
+def _captured_at(landscape, offset_mm: float, yaw_deg: float = 0.0) -> bool:
+    row = int(np.argmin(np.abs(landscape.offsets_mm - offset_mm)))
+    column = int(np.argmin(np.abs(landscape.yaws_deg - yaw_deg)))
+    return bool(landscape.captured[row, column])
+
+
+def test_a_v_notch_captures_two_millimetres_and_flat_pads_capture_nothing():
+    # 90-degree walls (slope 1 > friction 0.4), 8 mm deep: every start within +-2 mm slides into the notch
+    prepared, config = _prepared(featured_cube(notch_mm=8.0), "cube")
+    centred = _sample_at(prepared, 0.0, 5.0)
+    assert centred.sample.on_feature or abs(centred.sample.s_mm) < 1e-6
+    carved = _landscape(prepared, config, centred)
+    assert all(_captured_at(carved, t) for t in (-2.0, -1.0, 1.0, 2.0))
+    assert carved.fraction >= 0.9
+    # flat pads: nothing moves the part along the pads, only starts already within 0.3 mm succeed
+    flat = _landscape(prepared, config, centred, flat=True)
+    assert not any(_captured_at(flat, t) for t in (-2.0, -1.0, -0.6, 0.6, 1.0, 2.0))
+    assert flat.fraction <= (2 * 0.3 + 0.2) / 4.0
+
+
+def test_a_pocket_without_lead_in_jams_where_the_same_pocket_with_one_does_not():
+    exact, config_exact = _prepared(ribbed_block(), "ribbed", print={"profile": "custom"})
+    drafted, config_drafted = _prepared(ribbed_block(), "ribbed", print={"profile": "custom", "lead_in_deg": 30.0})
+    # the rib's centre: the pad's pocket holds the whole rib
+    jammed = _landscape(exact, config_exact, _sample_at(exact, 0.0, 5.0))
+    guided = _landscape(drafted, config_drafted, _sample_at(drafted, 0.0, 5.0))
+    assert not _captured_at(jammed, 1.0) and not _captured_at(jammed, -1.0)
+    assert _captured_at(guided, 1.0) and _captured_at(guided, -1.0)
+    assert guided.fraction > jammed.fraction + 0.3
+
+
+def test_capture_chooses_the_ridge_that_centres_where_q_chooses_the_larger_area():
+    mesh = two_ridge_block()
+    part = Part(name="two-ridge", path="two-ridge", mesh=mesh)
+    settings = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"length_mm": 10.0, "width_mm": 10.0, "stride_mm": 2.0}})
+    by_q = fcso.design([part], settings.updated({"quality": {"measure": "paper"}}))
+    by_capture = fcso.design([part], settings)
+    # the vertical ridge runs up to 20 mm, the horizontal ones from 24 mm: a pad from h to h + 10 mm
+    # (the grasp at its middle) holds some of the vertical ridge when h < 20
+    assert by_q.report.grasps[0].position_mm[2] - 5.0 >= 20.0
+    assert by_capture.report.grasps[0].position_mm[2] - 5.0 < 20.0
+    chosen = next(c for c in by_capture.report.candidates if c.index == by_capture.report.best)
+    assert chosen.per_scenario[0].capture >= 0.8
+
+
+def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():
+    # two 10 x 10 mm flat patches squeezing a box along x, 60 N each, friction 0.4
+    grid = np.stack(np.meshgrid(np.linspace(-4.5, 4.5, 10), np.linspace(-4.5, 4.5, 10)), -1).reshape(-1, 2)
+    plus = np.column_stack([np.full(len(grid), 10.0), grid])
+    minus = np.column_stack([np.full(len(grid), -10.0), grid])
+    points = np.vstack([plus, minus])
+    normals = np.vstack([np.tile([-1.0, 0.0, 0.0], (len(grid), 1)), np.tile([1.0, 0.0, 0.0], (len(grid), 1))])
+    pads = np.repeat([0, 1], len(grid))
+    at_centre = holding_forces_n(points, normals, pads, np.array([1.0, 0.0, 0.0]), np.zeros(3), 0.05, 0.4, 60.0, 30.0)
+    # friction alone resists 2 x 0.4 x 60 = 48 N in any direction along the pads: the 30 N test is held
+    assert at_centre == pytest.approx(np.full(6, 30.0), abs=1e-6)
+    below = holding_forces_n(points, normals, pads, np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -25.0]), 0.05, 0.4, 60.0, 30.0)
+    # a push 25 mm below the patches turns the part about x, which only friction over the patches resists:
+    # at most 0.4 x 120 N at the corners, 6.36 mm from the centre, 0.305 N m, so F <= 0.305 / 0.025 = 12.2 N;
+    # spread evenly (mean distance 3.83 mm) the same friction gives 7.4 N, 6.8 N inside the eight-edged cones (x cos 22.5°)
+    sideways = below[:2]
+    assert np.all(sideways >= 6.8) and np.all(sideways <= 12.2)
+    # along the closing axis the coupled fingers hold the part whatever the lever
+    assert below[2:4] == pytest.approx([30.0, 30.0], abs=1e-6)
