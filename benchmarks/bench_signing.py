@@ -5,7 +5,7 @@ Usage::
     python -m benchmarks.bench_signing [--runs N]
 
 Prints the median time (and range) over ``--runs`` rounds of 200 messages of
-the daemon signing (:meth:`fcsod.signing.Signer.attachment`) and a cell
+the daemon signing (:meth:`fcsod.bus.signing.Signer.attachment`) and a cell
 controller verifying (:func:`fcsod.verify_message`) a status-sized JSON
 message and a design-sized STL payload (a real part mesh).
 """
@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from fcsod.signing import generate_signing_key, load_verify_key, verify_message
+from fcsod.bus.signing import generate_signing_key, load_verify_key, verify_message
 
 ROOT = Path(__file__).resolve().parents[1]
 MESSAGES_PER_ROUND = 200

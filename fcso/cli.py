@@ -10,15 +10,18 @@ from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
 from .sets import SetsResult, design_sets
-from .sets_output import is_job_folder, pick_plan_text, rebuild_job_report, write_set_outputs
+from .output.design_page import rebuild_report
+from .output.files import rebuild_job_report, write_set_outputs
+from .output.layout import set_folder
+from .output.picture_process import PictureProcess
+from .output.read import is_job_folder
+from .output.sets_page import pick_plan_text
+from .output.table import quality_table
 from .errors import FcsoError, GeometryError
-from .html_report import rebuild_report
 from .parts import load_part, load_parts
-from .picture_process import PictureProcess
 from .poses import stable_poses
 from .schema import write_schemas
 from .sim.cli import add_design_options, add_settings_options, add_verify_command, restore_section, run_verify, verify_design_outputs
-from .table import quality_table
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -186,42 +189,32 @@ def _design(args) -> int:
             write_set_outputs(job, args.out, progress=progress, draw=draw_pictures)
         finally:
             progress.close()
-    if job.job_report is not None:
-        return _report_sets(job, args)
-    result = job.designs[0]
-    if not args.quiet:
-        for entry in result.report.parts:
-            handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
-            print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
-        for entry in result.report.ungraspable:
-            print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
-        print(quality_table(result.report))
-        if result.report.finger_sets is not None:
-            print(pick_plan_text(result.report.finger_sets))
-        for warning in result.report.warnings:
-            print(f"warning: {warning}")
-        print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
-    if args.verify or args.verify_top:
-        return verify_design_outputs(result, args, ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
-    return 0
+    return _report_sets(job, args)
 
 
 def _report_sets(job: SetsResult, args) -> int:
-    """Print a job of several finger sets (and verify each set's finger when asked)."""
-    sets = job.report
+    """Print what a job's finger sets (one or several) made, and verify each set's finger when asked."""
+    report, sets = job.job(), job.report
     if not args.quiet:
-        for entry in job.job_report.parts:
+        for entry in report.parts:
             handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
             print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}")
-        for entry in sets.ungraspable:
+        for entry in (sets or report).ungraspable:
             print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")
-        print(pick_plan_text(sets))
-        for warning in job.job_report.warnings:
+        if not job.several:
+            print(quality_table(report))
+        if sets is not None:
+            print(pick_plan_text(sets))
+        for warning in report.warnings:
             print(f"warning: {warning}")
-        print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
+        if job.several:
+            print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
+        else:
+            print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
     if args.verify or args.verify_top:
-        for entry, result in zip(sets.sets, job.designs):
-            code = verify_design_outputs(result, argparse.Namespace(**{**vars(args), "out": args.out / entry.folder}), ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
+        for number, result in enumerate(job.designs, start=1):
+            out = args.out / set_folder(number, job.several)
+            code = verify_design_outputs(result, argparse.Namespace(**{**vars(args), "out": out}), ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
             if code:
                 return code
     return 0

@@ -177,7 +177,7 @@ def sample_grasps(
                 side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
             }
             heights = np.arange(clearance, top, stride)
-            bands = _Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
+            bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
             for h in heights:
                 prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
                 if len(prism_f) == 0:
@@ -286,7 +286,7 @@ def _inside(triangles: np.ndarray, point: np.ndarray) -> bool:
     return bool(np.count_nonzero(hit & (crossing > point[0])) % 2)
 
 
-class _Bands:
+class Bands:
     """A slab's surface cut once into height bands, so every window of heights is a union of bands.
 
     The sampler's windows ``[h, h + W]`` and columns ``z >= h`` all start and

@@ -110,9 +110,9 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .journal import JournalCorrupt
+    from .service.journal import JournalCorrupt
     from .logs import setup_logging
-    from .service import Daemon, StateDirBusy
+    from .service.daemon import Daemon, StateDirBusy
 
     config = load_daemon_config(args.config)
     setup_logging(logging.getLevelName(args.log_level.upper()))
@@ -128,7 +128,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _audit(args: argparse.Namespace) -> int:
-    from .audit import audit
+    from .record.audit import audit
 
     if not args.record.is_file():
         print(f"fcsod: {args.record}: file not found", file=sys.stderr)
@@ -144,10 +144,10 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .bus import open_session, put
-    from .messages import BusMessage, BusRecord, jobs_key
-    from .recorder import TOPIC_BUS, read_record
-    from .signing import Signer, signing_key_path
+    from .bus.session import open_session, put
+    from .bus.messages import BusMessage, BusRecord, jobs_key
+    from .record.recorder import TOPIC_BUS, read_record
+    from .bus.signing import Signer, signing_key_path
 
     config = load_daemon_config(args.config)
     signer = Signer.from_file(signing_key_path(config))
@@ -192,10 +192,10 @@ def _subscriber_endpoints(config: DaemonConfig, override: list[str] | None) -> l
 def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .bus import open_session
+    from .bus.session import open_session
     from .config import ZenohConfig
-    from .messages import ENCODING_JSON, daemon_key, jobs_key
-    from .signing import SignatureError, load_verify_key, verify_key_path, verify_message
+    from .bus.messages import ENCODING_JSON, daemon_key, jobs_key
+    from .bus.signing import SignatureError, load_verify_key, verify_key_path, verify_message
 
     config = load_daemon_config(args.config)
     prefix, cell = config.bus.prefix, config.bus.cell
@@ -295,7 +295,7 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _pki(args: argparse.Namespace) -> int:
-    from .pki import add_client, config_lines, init_pki
+    from .bus.pki import add_client, config_lines, init_pki
 
     if args.pki_command == "add-client":
         folder = add_client(args.directory, args.name, args.connect, args.host)
@@ -312,10 +312,10 @@ def _pki(args: argparse.Namespace) -> int:
 
 
 def _journal(args: argparse.Namespace) -> int:
-    from .journal import journal_problem
-    from .journal_repair import rebuild_journal
-    from .service import StateDirBusy, lock_state_dir
-    from .signing import daemon_signer
+    from .service.journal import journal_problem
+    from .service.journal_repair import rebuild_journal
+    from .service.daemon import StateDirBusy, lock_state_dir
+    from .bus.signing import daemon_signer
 
     config = load_daemon_config(args.config)
     path = config.state.dir / "journal.sqlite3"

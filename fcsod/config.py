@@ -27,9 +27,8 @@ from fcso.config import (
 from fcso.errors import ConfigError, MeshError
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from .build3mf import parse_transform
-from .placement import BuildConfig
-from .ros2 import Ros2Config
+from .build.models import BuildConfig, parse_transform
+from .bus.ros2_config import Ros2Config
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"

@@ -30,7 +30,7 @@ def test_deployed_example_config_is_valid(tmp_path):
     (tmp_path / "fcsod.toml").write_text(text)
     config = load_daemon_config(tmp_path / "fcsod.toml")
     assert config.zenoh.config_file == REPO / "deploy" / "zenoh.json5"
-    from fcsod.bus import session_config
+    from fcsod.bus.session import session_config
 
     assert session_config(config.zenoh) is not None
 

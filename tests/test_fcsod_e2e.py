@@ -14,7 +14,7 @@ import trimesh
 from mcap.reader import make_reader
 
 from fcsod.cli import main
-from fcsod.recorder import ALWAYS_RECORDED, DESIGN_RECORDED, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record
+from fcsod.record.recorder import ALWAYS_RECORDED, DESIGN_RECORDED, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record
 
 from tests.fcsod_helpers import DATA, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 

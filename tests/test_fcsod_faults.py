@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from fcsod.journal import journal_problem
-from fcsod.pki import add_client, init_pki
-from fcsod.recorder import TOPIC_STATE, read_record
+from fcsod.service.journal import journal_problem
+from fcsod.bus.pki import add_client, init_pki
+from fcsod.record.recorder import TOPIC_STATE, read_record
 
 from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 

@@ -12,14 +12,14 @@ import zipfile
 import pytest
 from fcso.errors import ConfigError, MeshError
 
-from fcsod.audit import audit
+from fcsod.record.audit import audit
 from fcsod.config import JobManifest, LimitsConfig, PartEntry
-from fcsod.jobs import check_parts, hash_inputs, job_id, job_inputs
-from fcsod.journal import Journal, StoredMessage, stored_messages
-from fcsod.messages import LogRecord, StateChangeRecord
-from fcsod.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
-from fcsod.systemd import notify, watchdog_interval
-from fcsod.watcher import FolderWatcher, Readiness
+from fcsod.job.inputs import check_parts, hash_inputs, job_id, job_inputs
+from fcsod.service.journal import Journal, StoredMessage, stored_messages
+from fcsod.bus.messages import LogRecord, StateChangeRecord
+from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
+from fcsod.service.systemd import notify, watchdog_interval
+from fcsod.service.watcher import FolderWatcher, Readiness
 
 from tests.fcsod_helpers import DATA
 

@@ -15,7 +15,7 @@ from cryptography.x509.oid import NameOID
 from fcso.errors import ConfigError
 
 from fcsod.cli import main
-from fcsod.pki import access_control, daemon_zenoh_config, init_pki, link_weaknesses
+from fcsod.bus.pki import access_control, daemon_zenoh_config, init_pki, link_weaknesses
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -9,7 +9,7 @@ import sqlite3
 import threading
 import time
 
-from fcsod.recorder import TOPIC_STATE, read_record
+from fcsod.record.recorder import TOPIC_STATE, read_record
 
 from tests.conftest import process_running
 from tests.fcsod_helpers import DATA, drop_job, free_port, start_daemon, start_subscriber, write_config

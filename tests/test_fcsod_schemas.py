@@ -7,7 +7,7 @@ import json
 import pytest
 from fcso.schema import schema_text
 
-from fcsod.recorder import CHANNELS
+from fcsod.record.recorder import CHANNELS
 from fcsod.schema import FCSOD_SCHEMAS
 
 from tests.fcsod_helpers import REPO

@@ -2,7 +2,7 @@
 
 The daemon (``fcsod run``), the cell controller (``fcsod subscribe``) and the
 attackers (``tests/zenoh_probe.py``) are separate processes; the
-certificates come from :func:`fcsod.pki.init_pki`.
+certificates come from :func:`fcsod.bus.pki.init_pki`.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from rosbags.typesys import Stores, get_typestore
 
 import fcsod
-from fcsod.pki import add_client, init_pki
-from fcsod.signing import generate_signing_key
+from fcsod.bus.pki import add_client, init_pki
+from fcsod.bus.signing import generate_signing_key
 
 from tests.fcsod_helpers import DATA, REPO, Process, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 

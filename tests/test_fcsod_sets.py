@@ -14,7 +14,7 @@ import zipfile
 from pathlib import Path
 
 from fcsod.cli import main
-from fcsod.recorder import TOPIC_BUS, TOPIC_DESIGN, TOPIC_GRASPS, read_record
+from fcsod.record.recorder import TOPIC_BUS, TOPIC_DESIGN, TOPIC_GRASPS, read_record
 
 from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 from tests.test_sets import NARROWING, WIDENING

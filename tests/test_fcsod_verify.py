@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 
 from examples.sim_parts import ridged_block
-from fcsod.recorder import TOPIC_BUS, read_record
-from fcsod.verification import RECORD_NAME, TOPIC_VERIFICATION, TOPIC_VERIFICATION_SCENE
+from fcsod.record.recorder import TOPIC_BUS, read_record
+from fcsod.record.recorder import TOPIC_VERIFICATION, TOPIC_VERIFICATION_SCENE, VERIFICATION_RECORD_NAME
 
 from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
@@ -40,7 +40,7 @@ def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
         verification = json.loads((out / "verification.json").read_text())
         assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
         assert "<!-- fcso verify -->" in (out / "report.html").read_text()
-        record = read_record(out / RECORD_NAME)
+        record = read_record(out / VERIFICATION_RECORD_NAME)
         assert record.of(TOPIC_VERIFICATION)[0]["passed"] == body["passed"]
         scenes = record.of(TOPIC_VERIFICATION_SCENE)
         assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
@@ -107,5 +107,5 @@ def test_every_finger_set_of_a_job_is_verified_into_its_folder_and_on_its_key(tm
         written = json.loads((folder / "verification.json").read_text())
         assert written["scenarios"][0]["fcso"]["success_rate"] == body["scenarios"][0]["success_rate"]
         assert "<!-- fcso verify -->" in (folder / "report.html").read_text()
-        assert any(b["key_expr"].endswith(f"/verification/{number}") for b in read_record(folder / RECORD_NAME).of(TOPIC_BUS))
+        assert any(b["key_expr"].endswith(f"/verification/{number}") for b in read_record(folder / VERIFICATION_RECORD_NAME).of(TOPIC_BUS))
     assert "verification" not in messages

@@ -7,7 +7,7 @@ import pytest
 
 from fcso import load_part
 from fcso.geometry import box, clip_to_box, half_space_area, ray_hits, to_trimesh, triangle_areas_normals
-from fcso.sampler import _Bands
+from fcso.sampler import Bands
 
 from .conftest import data_path
 
@@ -67,7 +67,7 @@ def test_area_beyond_a_plane_of_a_block_by_hand():
 )
 def test_height_bands_hold_the_surface_a_cut_between_their_levels_holds(surface, levels):
     vertices, faces = surface()
-    bands = _Bands(vertices, faces, levels)
+    bands = Bands(vertices, faces, levels)
     ordered = np.unique(levels)
     for low, high in zip(ordered[:-1], ordered[1:]):
         band_vertices, band_faces, band_areas, (a_min, a_max) = bands.between(low, high)

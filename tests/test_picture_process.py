@@ -12,8 +12,8 @@ import time
 import pytest
 
 from fcso import design, load_part
-from fcso.html_report import pictures, report_inputs
-from fcso.picture_process import PictureProcess, PictureProcessError
+from fcso.output.design_page import pictures, report_inputs
+from fcso.output.picture_process import PictureProcess, PictureProcessError
 
 from .conftest import REPO, data_path, process_running, small_config
 
@@ -66,7 +66,7 @@ def test_workers_and_the_picture_process_die_with_a_killed_command(tmp_path):
     program.write_text(
         "import os, sys, time\n"
         "from fcso.parallel import WorkerPool\n"
-        "from fcso.picture_process import PictureProcess\n"
+        "from fcso.output.picture_process import PictureProcess\n"
         "pictures = PictureProcess()\n"
         "pool = WorkerPool(None, 2).__enter__()\n"
         "children = [p.pid for p in pool._pool._processes.values()] + [pictures._process.pid]\n"

@@ -14,11 +14,11 @@ import fcso
 from fcso.config import DesignConfig, PrintConfig, load_config
 from fcso.contact import sample_surface
 from fcso.errors import ConfigError
-from fcso.html_report import rebuild_report
-from fcso.report import DesignReport
+from fcso.output.design_page import rebuild_report
+from fcso.report.models import DesignReport
 from fcso.finger import finger_plate, fuse, parametric_finger
 from fcso.geometry import box, to_manifold
-from fcso.pad import _U_TO_Z, build_fingerpad, pad_box, pad_geometry, surface_in_pad
+from fcso.pad import build_fingerpad, pad_box, pad_geometry, surface_in_pad
 from fcso.poses import stable_poses
 from fcso.printfit import CONE_SEGMENTS, carve, open_thin_walls, thinnest_wall_mm
 from fcso.sampler import SIDES, sample_grasps
@@ -115,9 +115,13 @@ def _peg_part(pegs) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices, faces, process=True)
 
 
+#: Pad frame (u, v, w) -> (v, w, u): manifold3d slices along z, the pad's depth is u.
+U_TO_Z = [[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]]
+
+
 def _pocket_extent(pocket: manifold3d.Manifold, u: float) -> np.ndarray:
     """(v_min, w_min, v_max, w_max) of the pocket's cross-section at depth u."""
-    return np.asarray(pocket.transform(_U_TO_Z.tolist()).slice(u).bounds(), dtype=float)
+    return np.asarray(pocket.transform(U_TO_Z).slice(u).bounds(), dtype=float)
 
 
 @pytest.mark.parametrize("angle, clearance", [(15.0, 0.0), (25.0, 0.0), (15.0, 0.3)])

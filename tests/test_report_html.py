@@ -15,10 +15,9 @@ from PIL import Image
 
 from fcso import design, load_config, load_part, write_outputs
 from fcso.cli import ProgressLine, main
-from fcso.html_report import load_report_inputs
-from fcso.render import CONTACT_COLOUR, PICTURE_SIZES
-from fcso.report import DesignReport
-from fcso.table import ranked_candidates
+from fcso.output.design_page import load_report_inputs
+from fcso.output.render import CONTACT_COLOUR, PICTURE_SIZES
+from fcso.report.models import DesignReport, ranked_candidates
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
@@ -245,9 +244,9 @@ def test_progress_line_shows_stages_and_candidates():
 
 
 def test_a_panel_draws_in_data_coordinates_inside_its_rectangle_only():
-    from fcso.render import Panel, _figure, png_bytes
+    from fcso.output.render import Panel, new_figure, png_bytes
 
-    figure = _figure("pose")  # 420 x 340 pixels
+    figure = new_figure("pose")  # 420 x 340 pixels
     panel = Panel(figure, (0.5, 0.0, 0.5, 1.0))
     panel.set_xlim(0.0, 1.0)
     panel.set_ylim(0.0, 1.0)

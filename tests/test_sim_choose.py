@@ -12,7 +12,7 @@ from fcso.geometry import to_manifold
 from fcso.parts import Part
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
-from fcso.table import chosen_candidate
+from fcso.report.models import chosen_candidate
 
 
 def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):

@@ -32,6 +32,7 @@ import numpy as np
 import trimesh
 
 from ..geometry import box, to_manifold, to_trimesh
+from ..output.layout import write_atomic
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "coacd-4"
@@ -191,10 +192,7 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
         pieces = decompose()
         cached = False
         if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            temporary = path.with_suffix(".tmp")
-            temporary.write_bytes(_write_pieces(pieces))
-            temporary.replace(path)
+            write_atomic(path, _write_pieces(pieces))
     excess, missing = union_volume_errors(mesh, pieces)
     return ConvexPieces(pieces=pieces, volume_error=excess - missing, missing_fraction=missing, cached=cached)
 

@@ -26,6 +26,7 @@ import numpy as np
 import trimesh
 
 from .config import VerifyConfig
+from .report import PoseSnapshot
 
 #: mm to MuJoCo's metres.
 M = 1e-3
@@ -229,3 +230,14 @@ def build_scene(
         part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
         pad_geoms=pad_geoms,
     )
+
+
+def pad_in_world(snapshot: PoseSnapshot, side: int, pad_gap_mm: float, pad_size_mm) -> np.ndarray:
+    """4x4 pad frame -> world of one finger at a snapshot, mm."""
+    thickness, length, width = pad_size_mm
+    in_tcp = np.eye(4)
+    in_tcp[:3, :3] = PAD_AXES[side]
+    in_tcp[:3, 3] = [-side * length / 2.0, side * pad_gap_mm / 2.0, width / 2.0]
+    opened = np.eye(4)
+    opened[0, 3] = snapshot.opening_mm
+    return np.asarray(snapshot.gripper_pose) @ in_tcp @ opened

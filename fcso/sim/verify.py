@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import mujoco
@@ -12,19 +11,15 @@ import numpy as np
 import trimesh
 
 from .. import __version__
-from ..design import DesignResult
-from ..finger import load_finger, pad_to_finger, parametric_finger
-from ..html_report import read_report, read_stl, reload_parts
-from ..report import DesignReport, GraspReport
+from ..design import DesignResult, flat_finger
+from ..finger import pad_to_finger
+from ..progress import Progress
+from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, convex_pieces, finger_body_hull, zoned_pieces
 from .config import VerifyConfig
-from .html import error_picture, holding_picture, section_html, trial_picture, write_section
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
 from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
-
-#: ``progress(stage, done, total)``.
-Progress = Callable[[str, int, int], None]
 
 
 @dataclass
@@ -81,23 +76,6 @@ def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.T
     )
 
 
-def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
-    """Read a design's output folder (``report.json``, ``finger.stl``, ``fingerpad.stl`` and the part files it names).
-
-    Raises
-    ------
-    MeshError
-        A file is missing or unreadable (named in the message).
-    """
-    directory = Path(directory)
-    report = read_report(directory)
-    parts = {entry.name: part.mesh for entry, part in zip(report.parts, reload_parts(report, directory))}
-    cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
-    fingerpad = read_stl(directory / "fingerpad.stl")
-    finger = read_stl(directory / "finger.stl")
-    return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
-
-
 def design_under_test(result: DesignResult) -> DesignUnderTest:
     """The simulation's inputs from a design that was just run (no files needed)."""
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
@@ -108,7 +86,7 @@ def design_under_test(result: DesignResult) -> DesignUnderTest:
 def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
     """Hull of a design's finger body behind its pad (pad frame, mm)."""
     config = report.settings
-    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    flat = flat_finger(config)
     return finger_body_hull(finger, pad_to_finger(flat, config.sampler), config.sampler.thickness_mm)
 
 
@@ -373,39 +351,3 @@ def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
     return pad
 
 
-def verification_pictures(verification: VerificationReport, design: DesignUnderTest) -> dict[str, bytes]:
-    """The section's pictures: per scenario k, ``trial k``, ``errors k`` and ``holding k`` (PNG)."""
-    settings = verification.settings
-    images = {}
-    for k, (scenario, case) in enumerate(zip(verification.scenarios, design.cases)):
-        pads = {"fcso": design.fingerpad, "flat": flat_pad(case.pad_size_mm, case.penetration_mm)}
-        images[f"trial {k}"] = trial_picture(case.part, pads, scenario, case.pad_gap_mm, case.pad_size_mm)
-        images[f"errors {k}"] = error_picture(scenario, settings.success_mm, settings.success_deg)
-        images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
-    return images
-
-
-def write_verification(directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = "") -> list[Path]:
-    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
-
-    Returns
-    -------
-    list of Path
-        The files written.
-    """
-    directory = Path(directory)
-    target = directory / "verification.json"
-    temporary = directory / ".verification.json.tmp"
-    temporary.write_text(verification.model_dump_json(indent=2) + "\n", encoding="utf-8")
-    temporary.replace(target)
-    page = directory / "report.html"
-    write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
-    return [target, page]
-
-
-def read_verification(directory: str | Path) -> VerificationReport | None:
-    """``verification.json`` of a design's folder, or None when there is none."""
-    path = Path(directory) / "verification.json"
-    if not path.is_file():
-        return None
-    return VerificationReport.model_validate_json(path.read_text(encoding="utf-8"))
