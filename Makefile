@@ -19,8 +19,8 @@ setup: $(STAMP)
 
 # ruff's rules and format are in pyproject.toml
 lint: setup
-	$(VENV)/bin/ruff check fcso fcsod tests benchmarks examples
-	$(VENV)/bin/ruff format --check fcso fcsod tests benchmarks examples
+	$(VENV)/bin/ruff check fcso fcsod tests benchmarks examples docs/images
+	$(VENV)/bin/ruff format --check fcso fcsod tests benchmarks examples docs/images
 
 # pytest exits 5 when it collected no tests: that is a failure here.
 test: setup lint

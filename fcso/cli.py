@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
-from .sets import SetsResult, design_sets
+from .errors import FcsoError, GeometryError
 from .output.design_page import rebuild_report
 from .output.files import rebuild_job_report, write_set_outputs
 from .output.layout import set_folder
@@ -17,11 +17,18 @@ from .output.picture_process import PictureProcess
 from .output.read import is_job_folder
 from .output.sets_page import pick_plan_text
 from .output.table import quality_table
-from .errors import FcsoError, GeometryError
 from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
-from .sim.cli import add_design_options, add_settings_options, add_verify_command, restore_section, run_verify, verify_design_outputs
+from .sets import SetsResult, design_sets
+from .sim.cli import (
+    add_design_options,
+    add_settings_options,
+    add_verify_command,
+    restore_section,
+    run_verify,
+    verify_design_outputs,
+)
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -88,7 +95,11 @@ def _parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("design", help="design a fingerpad and finger for one or more parts")
     run.add_argument(
-        "parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object"
+        "parts",
+        nargs="+",
+        type=Path,
+        metavar="PART",
+        help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object",
     )
     run.add_argument("--out", required=True, type=Path, help="output folder")
     run.add_argument("--config", type=Path, help="settings (TOML)")
@@ -96,18 +107,38 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--scale-to", type=float, metavar="MM", help="scale each part so its longest side is MM")
     run.add_argument("--poses", type=int, metavar="N", help="stable poses per part (poses.count)")
     run.add_argument("--seed", type=int, help="seed of the random pose choice (poses.seed)")
-    run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
+    run.add_argument(
+        "--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)"
+    )
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
-    run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
-    run.add_argument("--finger-sets", type=int, metavar="N", help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part")
-    run.add_argument("--min-retained", type=float, metavar="R", help="least E / E* every scenario should keep in its set (finger_sets.min_retained, default 0.5)")
+    run.add_argument(
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="worker processes (search.jobs; default: every core); results do not depend on it",
+    )
+    run.add_argument(
+        "--finger-sets",
+        type=int,
+        metavar="N",
+        help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part",
+    )
+    run.add_argument(
+        "--min-retained",
+        type=float,
+        metavar="R",
+        help="least E / E* every scenario should keep in its set (finger_sets.min_retained, default 0.5)",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
     add_design_options(run)
     add_settings_options(run)
 
     report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
     report.add_argument(
-        "directory", type=Path, metavar="DIR", help="output folder of fcso design (report.json, finger.stl, fingerpad.stl)"
+        "directory",
+        type=Path,
+        metavar="DIR",
+        help="output folder of fcso design (report.json, finger.stl, fingerpad.stl)",
     )
     report.add_argument("--quiet", action="store_true", help="no progress")
 
@@ -181,7 +212,13 @@ def _design(args) -> int:
         parts = [
             part
             for path in args.parts
-            for part in load_parts(path, units=args.units, scale_to_mm=args.scale_to, repair=args.repair, split_bodies=config.parts.split_bodies)
+            for part in load_parts(
+                path,
+                units=args.units,
+                scale_to_mm=args.scale_to,
+                repair=args.repair,
+                split_bodies=config.parts.split_bodies,
+            )
         ]
         progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
         try:
@@ -214,7 +251,11 @@ def _report_sets(job: SetsResult, args) -> int:
     if args.verify or args.verify_top:
         for number, result in enumerate(job.designs, start=1):
             out = args.out / set_folder(number, job.several)
-            code = verify_design_outputs(result, argparse.Namespace(**{**vars(args), "out": out}), ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
+            code = verify_design_outputs(
+                result,
+                argparse.Namespace(**{**vars(args), "out": out}),
+                ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()),
+            )
             if code:
                 return code
     return 0

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import trimesh
@@ -104,14 +104,21 @@ class Prepared:
 
 
 def flat_finger(config: DesignConfig, repair: bool = False) -> FlatFinger:
-    """The finger the pads are fused onto: ``[finger] mesh`` when given, else the parametric finger of ``[sampler]`` and ``[gripper]``.
+    """The finger the pads are fused onto: ``[finger] mesh`` when given, else the parametric finger of ``[sampler]`` and
+    ``[gripper]``.
 
     ``repair`` repairs a finger mesh that is not a closed volume.
     """
-    return load_finger(config.finger, repair=repair) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    return (
+        load_finger(config.finger, repair=repair)
+        if config.finger.mesh
+        else parametric_finger(config.sampler, config.gripper)
+    )
 
 
-def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None = None, repair: bool = False) -> Prepared:
+def prepare(
+    parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None = None, repair: bool = False
+) -> Prepared:
     """Load, pose, sample and intersect: everything before the search (METHOD §1-5).
 
     Parameters and errors as :func:`design`.
@@ -126,7 +133,9 @@ def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: 
     loaded = [
         one
         for p in parts
-        for one in ([p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies))
+        for one in (
+            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
+        )
     ]
     warnings = list(dict.fromkeys(w for p in loaded for w in p.warnings))
     finger = flat_finger(config, repair=repair)
@@ -145,11 +154,15 @@ def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: 
     # tasks of about equal size
     yaws = config.sampler.yaw_deg
     subsets = max(1, -(-_SAMPLE_TASKS_PER_WORKER * jobs // (len(scenarios) * len(yaws))))
-    sample_tasks = [(number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)]
+    sample_tasks = [
+        (number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)
+    ]
     with WorkerPool((scenarios, config, plate), jobs) as pool:
         pieces = pool.map(_sample_task, sample_tasks)
     for number, scenario in enumerate(scenarios):
-        scenario.sampler_result = _merge_sampler_results([(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number])
+        scenario.sampler_result = _merge_sampler_results(
+            [(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number]
+        )
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
     empty = [s for s in scenarios if not s.sampler_result.samples]
@@ -157,7 +170,9 @@ def prepare(parts: Sequence[Part | str | Path], config: DesignConfig, progress: 
         raise NoGraspError("; ".join(_no_grasp_message(s, config) for s in empty))
     ungraspable = [ungraspable_report(s, config) for s in empty]
     for entry in ungraspable:
-        warnings.append(f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}")
+        warnings.append(
+            f"{entry.part} in stable pose {entry.pose_index} cannot be grasped and is left out: {entry.reason}"
+        )
     scenarios = [s for s in scenarios if s.sampler_result.samples]
 
     clock = time.perf_counter()
@@ -199,14 +214,25 @@ def finish_candidate(
     choice = tuple(choice)
     fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True)
     fit, sampler = config.print.resolved(), config.sampler
-    exact = evaluate_candidate(scenarios, choice, config, keep_pad=True) if any(v > 0 for k, v in fit.items() if k != "density_g_cm3") else fitted
+    exact = (
+        evaluate_candidate(scenarios, choice, config, keep_pad=True)
+        if any(v > 0 for k, v in fit.items() if k != "density_g_cm3")
+        else fitted
+    )
     thinnest = thinnest_wall_mm(fitted.fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
     warnings: list[str] = []
     # the opening's ball is a polyhedron and the wall is measured by rays: 0.05 mm of slack
     if fit["min_wall_mm"] > 0 and thinnest < fit["min_wall_mm"] - 0.05:
-        warnings.append(f"the pad keeps a wall of {thinnest:.3f} mm, thinner than print.min_wall_mm = {fit['min_wall_mm']:.3f} mm")
+        warnings.append(
+            f"the pad keeps a wall of {thinnest:.3f} mm, thinner than print.min_wall_mm = {fit['min_wall_mm']:.3f} mm"
+        )
     print_fit = print_fit_report(config, exact, fitted, thinnest)
-    return fitted, [grasp_report(s, k, e, config) for s, k, e in zip(scenarios, choice, fitted.scenarios)], print_fit, warnings
+    return (
+        fitted,
+        [grasp_report(s, k, e, config) for s, k, e in zip(scenarios, choice, fitted.scenarios)],
+        print_fit,
+        warnings,
+    )
 
 
 def design(
@@ -325,12 +351,21 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
                 scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
             screened_count += len(choices)
             best_screened = max([best_screened] + [q for q, _ in scored])
-            report_progress("screening", min(screened_count, expected), expected, f"best Q {best_screened:.1f} of bound {screened_bound:.1f} mm² (screened)")
+            report_progress(
+                "screening",
+                min(screened_count, expected),
+                expected,
+                f"best Q {best_screened:.1f} of bound {screened_bound:.1f} mm² (screened)",
+            )
             return scored
 
         outcome = search(counts, screened_bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
         indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
-        ranked = sorted(outcome.evaluated, key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]), reverse=True)
+        ranked = sorted(
+            outcome.evaluated,
+            key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]),
+            reverse=True,
+        )
         finalists = ranked[: config.search.exact_top_k]
         # the report lists each screened candidate's per-scenario values: screen those not kept again, on every core
         listed = ranked[config.search.exact_top_k : config.search.report_candidates]
@@ -345,9 +380,14 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     report_progress("exact", 0, len(finalists))
     with WorkerPool((scenarios, config), jobs) as pool:
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
-    report_progress("exact", len(finalists), len(finalists), f"best Q {max(e.quality for e in exact.values()):.1f} mm² (exact)")
+    report_progress(
+        "exact", len(finalists), len(finalists), f"best Q {max(e.quality for e in exact.values()):.1f} mm² (exact)"
+    )
     best_choice = max(finalists, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]))
-    upper_bound = max(quality_upper_bound([np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]), exact[best_choice].quality)
+    upper_bound = max(
+        quality_upper_bound([np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]),
+        exact[best_choice].quality,
+    )
     if not outcome.proven_optimal:
         warnings.append(
             f"search screened {len(outcome.evaluated)} of {outcome.total} candidates (search.max_evaluations) "
@@ -362,7 +402,9 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     # a clearance deepens the pocket by c: the carving demands that much less
     floor = config.sampler.thickness_mm - config.sampler.penetration_mm - config.print.resolved()["clearance_mm"]
     if fused.min_pad_thickness_mm < floor - 1e-3:
-        warnings.append(f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D - clearance = {floor:.3f} mm")
+        warnings.append(
+            f"thinnest pad section is {fused.min_pad_thickness_mm:.3f} mm, below T - D - clearance = {floor:.3f} mm"
+        )
     warnings.extend(fit_warnings)
     timings["finger"] = time.perf_counter() - clock
 
@@ -433,7 +475,9 @@ def _choose_scenarios(parts: list[Part], config: DesignConfig, warnings: list[st
 
 
 def _no_grasp_message(scenario: Scenario, config: DesignConfig) -> str:
-    rejected = ", ".join(f"{k} {v}" for k, v in scenario.sampler_result.rejected.items() if v) or "no footprint met the part"
+    rejected = (
+        ", ".join(f"{k} {v}" for k, v in scenario.sampler_result.rejected.items() if v) or "no footprint met the part"
+    )
     return (
         f"{scenario.part.path}: no valid grasp in stable pose {scenario.pose_index} "
         f"(rejected: {rejected}; gripper opening {config.gripper.max_opening_mm:g} mm)"
@@ -455,12 +499,16 @@ def _sample_task(context, task: tuple[int, float, tuple[int, int]]) -> SamplerRe
 
 
 def _merge_sampler_results(results: list[tuple[float, SamplerResult]]) -> SamplerResult:
-    """One scenario's sampler result from its results per yaw angle and subset of pad positions, in (yaw, s, h) order."""
+    """One scenario's sampler result from its results per yaw angle and subset of pad positions, in (yaw, s, h)
+    order.
+    """
     rejected = {reason: sum(r.rejected[reason] for _, r in results) for reason in results[0][1].rejected}
     yaws = list(dict.fromkeys(yaw for yaw, _ in results))
     # each position lies in one subset, its samples in h order: a stable sort by s restores (s, h)
     samples = [
-        sample for yaw in yaws for sample in sorted((x for y, r in results if y == yaw for x in r.samples), key=lambda x: x.s_mm)
+        sample
+        for yaw in yaws
+        for sample in sorted((x for y, r in results if y == yaw for x in r.samples), key=lambda x: x.s_mm)
     ]
     return SamplerResult(samples, rejected, sum(r.tried for _, r in results))
 
@@ -471,7 +519,9 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
     scenario = scenarios[number]
     part_manifold = to_manifold(scenario.mesh)
     return [
-        sample_geometry(part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice)
+        sample_geometry(
+            part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice
+        )
         for index in range(start, stop)
     ]
 
@@ -481,7 +531,11 @@ def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandi
     # a batch of coordinate moves shares every scenario but one: carve those once
     first = choices[0]
     shared = [m for m in range(len(first)) if all(choice[m] == first[m] for choice in choices)]
-    carved = carve_heights([screens[m][k] for m, k in enumerate(first)], shared) if len(choices) > 1 and len(shared) > 1 else None
+    carved = (
+        carve_heights([screens[m][k] for m, k in enumerate(first)], shared)
+        if len(choices) > 1 and len(shared) > 1
+        else None
+    )
     return [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
 
 
@@ -492,5 +546,3 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
     scenarios, config = context
     return evaluate_candidate(scenarios, choice, config, keep_pad=False)
-
-

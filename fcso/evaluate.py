@@ -78,7 +78,13 @@ class CandidateEvaluation:
 
 
 def sample_geometry(
-    part_manifold: manifold3d.Manifold, mesh: trimesh.Trimesh, sample: GraspSample, config: DesignConfig, seed, grid: ScreenGrid, lattice: NormalLattice
+    part_manifold: manifold3d.Manifold,
+    mesh: trimesh.Trimesh,
+    sample: GraspSample,
+    config: DesignConfig,
+    seed,
+    grid: ScreenGrid,
+    lattice: NormalLattice,
 ) -> SampleGeometry:
     """A valid sample's pad geometries, contact samples, screening geometry and bounds (METHOD §4-5, §8b).
 
@@ -88,7 +94,8 @@ def sample_geometry(
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
     surfaces = tuple(
-        contact_samples(g.surface_vertices, g.surface_faces, config, *seed, side_number) for side_number, g in enumerate(geometries)
+        contact_samples(g.surface_vertices, g.surface_faces, config, *seed, side_number)
+        for side_number, g in enumerate(geometries)
     )
     # contact points and normals are subsets of these samples, so A <= the sampled
     # area and RLES >= the RLES of all sampled normals: E can never exceed this
@@ -120,7 +127,12 @@ def sample_geometry(
 
 
 def contact_samples(
-    vertices: np.ndarray, faces: np.ndarray, config: DesignConfig, scenario_number: int, sample_index: int, side_number: int
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    config: DesignConfig,
+    scenario_number: int,
+    sample_index: int,
+    side_number: int,
 ) -> SurfaceSamples:
     """The design's surface samples of one pad geometry.
 
@@ -157,7 +169,9 @@ def evaluate_candidate(
     fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
     if fitted:
         sampler = config.sampler
-        opened = open_thin_walls(fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, fit["min_wall_mm"])
+        opened = open_thin_walls(
+            fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, fit["min_wall_mm"]
+        )
         fingerpad = Fingerpad(opened, fingerpad.case, fingerpad.block_depth_mm)
     pad_mesh = fingerpad.pad.to_mesh()
     vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
@@ -187,7 +201,9 @@ def evaluate_candidate(
     )
 
 
-def fitted_geometries(scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig) -> list[PadGeometry]:
+def fitted_geometries(
+    scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
+) -> list[PadGeometry]:
     """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving."""
     fit = config.print.resolved()
     if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
@@ -284,7 +300,9 @@ def reseat_grasps(report: DesignReport, parts: list[Part], fingerpad: trimesh.Tr
         )
         frames = [sample.pad_frame(side, config.sampler) for side in SIDES]
         surfaces = [
-            contact_samples(*surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number)
+            contact_samples(
+                *surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number
+            )
             for side_number, frame in enumerate(frames)
         ]
         travel = closing_travel_mm(config.print.resolved()["clearance_mm"])

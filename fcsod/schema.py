@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fcso.schema import write_schemas
-from fcso.sim.report import VerificationReport
 from pydantic import BaseModel
 
-from .config import DaemonConfig, JobManifest
+from fcso.schema import write_schemas
+from fcso.sim.report import VerificationReport
+
+from .build.models import PlacementReport
 from .bus.messages import (
     DesignAttachment,
     GraspsMessage,
@@ -19,7 +20,7 @@ from .bus.messages import (
     StatusMessage,
     VerificationMessage,
 )
-from .build.models import PlacementReport
+from .config import DaemonConfig, JobManifest
 from .record.recorder import CHANNELS, TOPIC_VERIFICATION
 
 

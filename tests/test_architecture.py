@@ -22,7 +22,8 @@ PACKAGES = ("fcso", "fcsod")
 PRESENTATION = ("fcso.output", "fcso.cli", "fcso.sim.cli", "matplotlib")
 #: What the method may take from the output package: the names of the folder layout, which the reports record.
 LAYOUT = "fcso.output.layout"
-#: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade ``fcso``).
+#: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
+#: ``fcso``).
 NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.sim.cli", "fcso.output")
 
 
@@ -41,7 +42,8 @@ def source_modules(packages=PACKAGES) -> dict[str, Path]:
 def _type_checking_block(node: ast.AST) -> bool:
     test = getattr(node, "test", None)
     return isinstance(node, ast.If) and (
-        (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+        (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING")
+        or (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
     )
 
 
@@ -155,7 +157,9 @@ def test_the_cycle_finder_finds_a_cycle_hidden_in_a_function(tmp_path, monkeypat
 
 
 def test_the_method_does_not_import_presentation():
-    """fcso's method (everything but the command line, the schemas and fcso.output) imports no page, picture or folder code."""
+    """fcso's method (everything but the command line, the schemas and fcso.output) imports no page, picture or folder
+    code.
+    """
     modules = source_modules(("fcso",))
     known = set(modules)
     offending = [
@@ -170,7 +174,10 @@ def test_the_method_does_not_import_presentation():
 
 def test_no_private_name_is_used_outside_its_module():
     """``from x import _name`` across modules of fcso, fcsod, the tests and the benchmarks."""
-    files = {**source_modules(), **{module_name(p): p for folder in ("tests", "benchmarks") for p in (REPO / folder).rglob("*.py")}}
+    files = {
+        **source_modules(),
+        **{module_name(p): p for folder in ("tests", "benchmarks") for p in (REPO / folder).rglob("*.py")},
+    }
     known = set(files)
     offending = [
         f"{name} (line {line}) takes {', '.join(private)} from {module}"
@@ -184,7 +191,9 @@ def test_no_private_name_is_used_outside_its_module():
 
 
 def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tmp_path):
-    """The supervisor (its loop, the worker's entry point, the journal's repair) and ``fcsod schema`` run without a physics engine or a plotter."""
+    """The supervisor (its loop, the worker's entry point, the journal's repair) and ``fcsod schema`` run without a
+    physics engine or a plotter.
+    """
     script = (
         "import sys\n"
         "import fcsod.service.daemon, fcsod.service.journal_repair, fcsod.job.process\n"

@@ -9,9 +9,9 @@ the same page without designing again.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import trimesh
@@ -71,7 +71,13 @@ class ReportInputs:
 
 def report_inputs(result: DesignResult) -> ReportInputs:
     """The page's inputs from a design that was just run."""
-    return ReportInputs(result.report, result.finger, result.fingerpad, result.pad_to_finger, chosen_grasp_scenes(result.scenarios, result.best))
+    return ReportInputs(
+        result.report,
+        result.finger,
+        result.fingerpad,
+        result.pad_to_finger,
+        chosen_grasp_scenes(result.scenarios, result.best),
+    )
 
 
 def load_report_inputs(directory: str | Path) -> ReportInputs:
@@ -127,22 +133,36 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
 
     def gripper() -> bytes:
         closing = first.sample.closing_axis
-        return gripper_picture(first.mesh, inputs.finger, inputs.pad_to_finger, first.placements, pad_size, closing, labels[0])
+        return gripper_picture(
+            first.mesh, inputs.finger, inputs.pad_to_finger, first.placements, pad_size, closing, labels[0]
+        )
 
     jobs: list[tuple[str, Callable[[], bytes]]] = [
         ("gripper", gripper),
-        ("finger", lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)")),
-        ("fingerpad", lambda: fingerpad_picture(inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)")),
+        (
+            "finger",
+            lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)"),
+        ),
+        (
+            "fingerpad",
+            lambda: fingerpad_picture(
+                inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)"
+            ),
+        ),
     ]
     for m, grasp in enumerate(inputs.grasps):
         jobs += [
             (
                 f"grasp {m}",
-                lambda g=grasp, t=labels[m]: grasp_picture(g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t),
+                lambda g=grasp, t=labels[m]: grasp_picture(
+                    g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t
+                ),
             ),
             (
                 f"normals {m}",
-                lambda g=grasp, t=labels[m]: normals_picture(g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}"),
+                lambda g=grasp, t=labels[m]: normals_picture(
+                    g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}"
+                ),
             ),
             (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
         ]
@@ -202,7 +222,9 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
     body += [
         "<h2>Stable poses used</h2>",
         _poses_table(report),
-        '<div class="poses">' + "".join(image(images[f"pose {m}"], "pose", titles[m]) for m in range(len(inputs.grasps))) + "</div>",
+        '<div class="poses">'
+        + "".join(image(images[f"pose {m}"], "pose", titles[m]) for m in range(len(inputs.grasps)))
+        + "</div>",
         "<h2>Quality of all evaluated candidates</h2>",
         "<p>Best first (Q, then mean E, then index); the chosen candidate is marked &#9733;. "
         "RLES: radius of the largest empty sphere of contact normals (smaller is better); "
@@ -234,13 +256,24 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
 def _placement_section(placement: dict) -> list[str]:
     """Where the finger copies go in the job's build (set by fcsod): a summary and one row per item."""
     summary = [(key, value) for key, value in placement.items() if not isinstance(value, (list, dict))]
-    header = "".join(f"<th>{name}</th>" for name in ("item", "kind", "placed by", "bounds (mm)", "nearest gap (mm)", "nearest item"))
+    header = "".join(
+        f"<th>{name}</th>" for name in ("item", "kind", "placed by", "bounds (mm)", "nearest gap (mm)", "nearest item")
+    )
     rows = []
     for item in placement.get("items", []):
         bounds = item.get("bounds_mm")
-        bounds_text = " – ".join("(" + ", ".join(f"{x:.1f}" for x in corner) + ")" for corner in bounds) if bounds else ""
+        bounds_text = (
+            " – ".join("(" + ", ".join(f"{x:.1f}" for x in corner) + ")" for corner in bounds) if bounds else ""
+        )
         gap = item.get("nearest_distance_mm")
-        cells = (item.get("name"), item.get("kind"), item.get("placed_by"), bounds_text, "" if gap is None else f"{gap:.2f}", item.get("nearest_item") or "")
+        cells = (
+            item.get("name"),
+            item.get("kind"),
+            item.get("placed_by"),
+            bounds_text,
+            "" if gap is None else f"{gap:.2f}",
+            item.get("nearest_item") or "",
+        )
         rows.append("<tr>" + "".join(f'<td class="text">{text(c)}</td>' for c in cells) + "</tr>")
     return [
         "<h2>Build placement</h2>",
@@ -261,19 +294,28 @@ def _print_fit_section(report: DesignReport) -> list[str]:
         ("thinnest pad wall", "none" if fit.thinnest_wall_mm is None else f"{fit.thinnest_wall_mm:.2f} mm"),
     ]
     titles = _scenario_titles(report)
-    header = "<tr><th class=\"text\">chosen candidate</th><th>pocket volume (mm³)</th><th>Q (mm²)</th>" + "".join(
-        f"<th>A {text(t)} (mm²)</th><th>seat offsets {text(t)} (mm)</th>" for t in titles
-    ) + "</tr>"
+    header = (
+        '<tr><th class="text">chosen candidate</th><th>pocket volume (mm³)</th><th>Q (mm²)</th>'
+        + "".join(f"<th>A {text(t)} (mm²)</th><th>seat offsets {text(t)} (mm)</th>" for t in titles)
+        + "</tr>"
+    )
     rows = []
-    for label, effect in (("exact pocket (METHOD §4-6)", fit.exact), ("as printed (clearance, lead-in, walls)", fit.fitted)):
+    for label, effect in (
+        ("exact pocket (METHOD §4-6)", fit.exact),
+        ("as printed (clearance, lead-in, walls)", fit.fitted),
+    ):
         cells = "".join(
             f"<td>{a:.1f}</td><td>{', '.join(f'{t:+.3f}' for t in offsets)}</td>"
             for a, offsets in zip(effect.contact_area_mm2, effect.seat_offsets_mm)
         )
-        rows.append(f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td><td>{effect.quality:.1f}</td>{cells}</tr>')
+        rows.append(
+            f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td>'
+            f"<td>{effect.quality:.1f}</td>{cells}</tr>"
+        )
     return [
         "<h2>Printed fit</h2>",
-        "<p>The finger is carved with the clearance and lead-in of <code>[print]</code>, and pad walls thinner than the "
+        "<p>The finger is carved with the clearance and lead-in of <code>[print]</code>, and pad walls thinner than "
+        "the "
         "minimum are removed; as the gripper closes, the pads travel on toward the part until contact (negative seat "
         "offsets), so a clearance costs quality only where it changes how the part seats.</p>",
         key_value_table(settings),
@@ -285,13 +327,24 @@ def _summary(report: DesignReport, chosen) -> str:
     rows = [
         ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
         ("scenarios", len(report.scenarios)),
-        ("search", f"{report.search.kind}: {report.search.screened} of C = {report.search.candidates_total} candidates screened, "
-         f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
-         f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
-         f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is {report.search.gap or 0:.0%} of it"),
-        ("chosen candidate", f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad"),
-        ("finger", f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
-         f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}"),
+        (
+            "search",
+            f"{report.search.kind}: {report.search.screened} of C = {report.search.candidates_total} candidates "
+            f"screened, "
+            f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
+            f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
+            f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is "
+            f"{report.search.gap or 0:.0%} of it",
+        ),
+        (
+            "chosen candidate",
+            f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad",
+        ),
+        (
+            "finger",
+            f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
+            f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}",
+        ),
         ("fcso", report.fcso_version),
     ]
     return key_value_table(rows)
@@ -306,14 +359,20 @@ def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
         ("sample", f"{chosen.samples[m]}: yaw {sample.yaw_deg:g}°, s = {sample.s_mm:.2f} mm, h = {sample.h_mm:.2f} mm"),
         (
             "filter labels (+, -)",
-            ", ".join(f"{label} (R = {r:.3f}, d = {d:.2f} mm)" for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm)),
+            ", ".join(
+                f"{label} (R = {r:.3f}, d = {d:.2f} mm)"
+                for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm)
+            ),
         ),
         ("seat offsets t (+, -)", ", ".join(f"{t:.3f} mm" for t in quality.seat_offsets_mm)),
         ("contact area A", f"{quality.contact_area_mm2:.1f} mm²"),
         ("RLES", f"{quality.rles:.4f} (drawn: {grasp.rles:.4f}, {len(grasp.normals)} contact normals)"),
         ("effective area E", f"{quality.effective_area:.1f} mm²"),
-        ("TCP (resting frame)", f"position {robot.position_mm} mm, quaternion wxyz {robot.quaternion_wxyz}, "
-         f"closing width {robot.closing_width_mm:.2f} mm"),
+        (
+            "TCP (resting frame)",
+            f"position {robot.position_mm} mm, quaternion wxyz {robot.quaternion_wxyz}, "
+            f"closing width {robot.closing_width_mm:.2f} mm",
+        ),
     ]
     return key_value_table(rows)
 
@@ -329,10 +388,14 @@ def _poses_table(report: DesignReport) -> str:
 
 
 def _sampler_table(report: DesignReport) -> str:
-    reasons = list(REJECTION_REASONS) + sorted({r for s in report.scenarios for r in s.rejected} - set(REJECTION_REASONS))
-    header = "<tr><th class=\"text\">scenario</th><th>tried</th><th>valid</th>" + "".join(
-        f"<th>rejected: {text(r)}</th>" for r in reasons
-    ) + "</tr>"
+    reasons = list(REJECTION_REASONS) + sorted(
+        {r for s in report.scenarios for r in s.rejected} - set(REJECTION_REASONS)
+    )
+    header = (
+        '<tr><th class="text">scenario</th><th>tried</th><th>valid</th>'
+        + "".join(f"<th>rejected: {text(r)}</th>" for r in reasons)
+        + "</tr>"
+    )
     rows = "".join(
         f'<tr><td class="text">{text(label)}</td><td>{s.tried_samples}</td><td>{s.valid_samples}</td>'
         + "".join(f"<td>{s.rejected.get(r, 0)}</td>" for r in reasons)
@@ -360,9 +423,11 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
     """
     columns = quality_columns(report)
     count = len(scenario_labels(report))
-    top = '<tr><th rowspan="2">i</th>' + "".join(
-        f'<th colspan="{count}">{text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS
-    ) + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
+    top = (
+        '<tr><th rowspan="2">i</th>'
+        + "".join(f'<th colspan="{count}">{text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS)
+        + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
+    )
     second = "<tr>" + "".join(f"<th>{text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
     lines = [f'<table id="{table_id}" class="quality">', top, second]
     for row in rows:
@@ -370,7 +435,9 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
         cells = [f"{'&#9733; ' if chosen else ''}{row.index}"] + [f"{c.value(row):.{c.decimals}f}" for c in columns]
         attributes = ' class="chosen"' if chosen else ""
         lines.append(
-            f"<tr{attributes}>" + "".join(f"<td>{cell}</td>" for cell in cells) + f'<td class="text">{text(row.pad_case)}</td></tr>'
+            f"<tr{attributes}>"
+            + "".join(f"<td>{cell}</td>" for cell in cells)
+            + f'<td class="text">{text(row.pad_case)}</td></tr>'
         )
     lines.append("</table>")
     return "\n".join(lines)

@@ -15,7 +15,9 @@ from .read import read_stl
 from .sets_page import job_html
 
 
-def output_files(result: DesignResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> dict[str, bytes]:
+def output_files(
+    result: DesignResult, progress: Progress | None = None, draw: DrawPictures | None = None
+) -> dict[str, bytes]:
     """The files of a design.
 
     Parameters
@@ -53,7 +55,9 @@ def write_outputs(result: DesignResult, out_dir: str | Path, progress: Progress 
     return [write_atomic(out_dir / name, data) for name, data in output_files(result, progress).items()]
 
 
-def sets_output_files(result: SetsResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> dict[str, bytes]:
+def sets_output_files(
+    result: SetsResult, progress: Progress | None = None, draw: DrawPictures | None = None
+) -> dict[str, bytes]:
     """The files of a job's finger sets: relative path -> bytes (see the module's layout).
 
     ``draw`` draws each design page's pictures (:func:`fcso.output.design_page.pictures` when None).
@@ -73,7 +77,9 @@ def sets_output_files(result: SetsResult, progress: Progress | None = None, draw
 def write_set_outputs(
     result: SetsResult, out_dir: str | Path, progress: Progress | None = None, draw: DrawPictures | None = None
 ) -> list[Path]:
-    """Write :func:`sets_output_files` into ``out_dir``, each under a temporary name renamed into place; return the paths."""
+    """Write :func:`sets_output_files` into ``out_dir``, each under a temporary name renamed into place; return the
+    paths.
+    """
     out_dir = Path(out_dir)
     return [write_atomic(out_dir / name, data) for name, data in sets_output_files(result, progress, draw).items()]
 

@@ -32,7 +32,9 @@ VERIFICATION_JSON = "verification.json"
 
 
 def set_folder(number: int, several: bool = True) -> str:
-    """Folder of finger set ``number`` (from 1), relative to the output folder: ``set-<k>``, or ``.`` when one set serves the job."""
+    """Folder of finger set ``number`` (from 1), relative to the output folder: ``set-<k>``, or ``.`` when one set
+    serves the job.
+    """
     return f"set-{number}" if several else "."
 
 

@@ -39,7 +39,7 @@ class PictureProcess:
         self._process.start()
         child_end.close()
 
-    def __enter__(self) -> "PictureProcess":
+    def __enter__(self) -> PictureProcess:
         return self
 
     def __exit__(self, *exc) -> None:

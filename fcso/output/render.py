@@ -107,7 +107,9 @@ class Layer:
     alpha: float = 1.0
 
 
-def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int = MAX_DRAWN_FACES) -> tuple[np.ndarray, np.ndarray]:
+def decimate(
+    vertices: np.ndarray, faces: np.ndarray, max_faces: int = MAX_DRAWN_FACES
+) -> tuple[np.ndarray, np.ndarray]:
     """Fewer triangles for drawing, by vertex clustering on a grid.
 
     Vertices in one grid cell merge into their mean; triangles that collapse
@@ -140,7 +142,9 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, max_faces: int = MAX_DRAWN
         np.add.at(merged, cluster, vertices)
         merged /= counts[:, None]
         remapped = cluster[faces]
-        whole = (remapped[:, 0] != remapped[:, 1]) & (remapped[:, 1] != remapped[:, 2]) & (remapped[:, 0] != remapped[:, 2])
+        whole = (
+            (remapped[:, 0] != remapped[:, 1]) & (remapped[:, 1] != remapped[:, 2]) & (remapped[:, 0] != remapped[:, 2])
+        )
         remapped = remapped[whole]
         _, first = np.unique(np.sort(remapped, axis=1), axis=0, return_index=True)
         remapped = remapped[np.sort(first)]
@@ -197,7 +201,9 @@ def draw_layers(
         edges = colours.copy()
         edges[edges[:, 3] < 1.0, 3] = 0.0
         axes.add_collection(
-            PolyCollection(polygons[order], facecolors=colours[order], edgecolors=edges[order], linewidths=0.8, zorder=zorder),
+            PolyCollection(
+                polygons[order], facecolors=colours[order], edgecolors=edges[order], linewidths=0.8, zorder=zorder
+            ),
             autolim=False,
         )
         corners.append(polygons.reshape(-1, 2))
@@ -241,12 +247,16 @@ class Panel:
         self._add(collection)
 
     def fill(self, x, y, color, alpha: float | None = None, zorder: float = 1.0) -> None:
-        self._add(Polygon(np.column_stack([x, y]), closed=True, facecolor=color, edgecolor="none", alpha=alpha, zorder=zorder))
+        self._add(
+            Polygon(np.column_stack([x, y]), closed=True, facecolor=color, edgecolor="none", alpha=alpha, zorder=zorder)
+        )
 
     def plot(self, x, y, style: str = "-", color="k", linewidth: float = 1.0, zorder: float = 2.0) -> None:
         self._add(Line2D(x, y, linestyle=style, color=color, linewidth=linewidth, zorder=zorder))
 
-    def scatter(self, x, y, s: float, color, alpha: float | None = None, linewidths: float = 0.0, zorder: float = 1.0) -> None:
+    def scatter(
+        self, x, y, s: float, color, alpha: float | None = None, linewidths: float = 0.0, zorder: float = 1.0
+    ) -> None:
         marker = MarkerStyle("o")
         points = PathCollection(
             [marker.get_path().transformed(marker.get_transform())],
@@ -263,7 +273,9 @@ class Panel:
         self.figure.add_artist(points)
 
     def annotate(self, text: str, xy, fontsize: float, color, ha: str, va: str) -> None:
-        self._add(Text(xy[0], xy[1], text, fontsize=fontsize, color=color, horizontalalignment=ha, verticalalignment=va))
+        self._add(
+            Text(xy[0], xy[1], text, fontsize=fontsize, color=color, horizontalalignment=ha, verticalalignment=va)
+        )
 
     def _add(self, artist) -> None:
         artist.set_transform(self.transData)
@@ -321,7 +333,9 @@ def _mesh_arrays(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
 
 
-def finger_picture(finger: trimesh.Trimesh, pad_to_finger: np.ndarray, pad_size: tuple[float, float, float], title: str = "") -> bytes:
+def finger_picture(
+    finger: trimesh.Trimesh, pad_to_finger: np.ndarray, pad_size: tuple[float, float, float], title: str = ""
+) -> bytes:
     """The finger with its fingerpad, from three views.
 
     Parameters
@@ -368,8 +382,10 @@ def _finger_colours(pad_frame_vertices: np.ndarray, faces: np.ndarray, pad_size)
     tolerance = 1e-3
     on_pad = (
         (centroids[:, 0] < thickness - tolerance)
-        & (centroids[:, 1] > -tolerance) & (centroids[:, 1] < length + tolerance)
-        & (centroids[:, 2] > -tolerance) & (centroids[:, 2] < width + tolerance)
+        & (centroids[:, 1] > -tolerance)
+        & (centroids[:, 1] < length + tolerance)
+        & (centroids[:, 2] > -tolerance)
+        & (centroids[:, 2] < width + tolerance)
     )
     return np.where(on_pad[:, None], PAD_COLOUR, FINGER_COLOUR)
 
@@ -505,11 +521,15 @@ def grasp_picture(
         View(tuple(side * closing + 0.7 * sliding + (0.0, 0.0, 0.8)), (0.0, 0.0, 1.0), f"from the {name} pad")
         for side, name in ((1.0, "+"), (-1.0, "-"))
     ]
-    views.append(View(tuple(0.35 * closing + sliding + (0.0, 0.0, 0.5)), (0.0, 0.0, 1.0), "close-up, part cut around the pads"))
+    views.append(
+        View(tuple(0.35 * closing + sliding + (0.0, 0.0, 0.5)), (0.0, 0.0, 1.0), "close-up, part cut around the pads")
+    )
     # the close-up leaves out the part away from the pads, which would hide them
     pads = np.vstack(seated_pads)
     margin = 0.5 * max(pad_size)
-    near = np.all((vertices >= pads.min(axis=0) - margin) & (vertices <= pads.max(axis=0) + margin), axis=1)[faces].all(axis=1)
+    near = np.all((vertices >= pads.min(axis=0) - margin) & (vertices <= pads.max(axis=0) + margin), axis=1)[faces].all(
+        axis=1
+    )
     close_layers = [Layer(vertices, faces[keep & near], PART_COLOUR)] + layers[1:]
     figure = new_figure("grasp")
     if title:
@@ -587,7 +607,12 @@ def pose_picture(part: trimesh.Trimesh, title: str = "") -> bytes:
     vertices, faces = decimate(*_mesh_arrays(part))
     figure = new_figure("pose")
     axes = Panel(figure, (0.02, 0.02, 0.96, 0.84))
-    draw_layers(axes, [Layer(vertices, faces, PART_COLOUR)], View((1.0, -1.2, 0.9), (0.0, 0.0, 1.0)), background=[_table(vertices)])
+    draw_layers(
+        axes,
+        [Layer(vertices, faces, PART_COLOUR)],
+        View((1.0, -1.2, 0.9), (0.0, 0.0, 1.0)),
+        background=[_table(vertices)],
+    )
     _caption(axes, title)
     return png_bytes(figure)
 
@@ -662,7 +687,9 @@ def normals_picture(normals: np.ndarray, radius: float, centre: np.ndarray, titl
         if len(normals):
             screen = normals @ basis.T
             front = screen[:, 2] >= 0.0
-            axes.scatter(screen[~front, 0], screen[~front, 1], s=3, color=NORMAL_COLOUR, alpha=0.15, linewidths=0, zorder=1.6)
+            axes.scatter(
+                screen[~front, 0], screen[~front, 1], s=3, color=NORMAL_COLOUR, alpha=0.15, linewidths=0, zorder=1.6
+            )
             axes.scatter(screen[front, 0], screen[front, 1], s=5, color=NORMAL_COLOUR, linewidths=0, zorder=4)
         for axis, name in ((0, "x"), (1, "y"), (2, "z")):
             tip = np.eye(3)[axis] @ basis.T

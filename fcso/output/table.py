@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from ..report.models import CandidateReport, DesignReport, chosen_candidate, ranked_candidates
 
@@ -39,7 +39,9 @@ class QualityColumn:
 
 def scenario_labels(report: DesignReport) -> list[str]:
     """Short ``part/p<pose>`` label of each grasp scenario."""
-    return [f"{s.part if len(s.part) <= 10 else s.part[:6] + '~' + s.part[-3:]}/p{s.pose_index}" for s in report.scenarios]
+    return [
+        f"{s.part if len(s.part) <= 10 else s.part[:6] + '~' + s.part[-3:]}/p{s.pose_index}" for s in report.scenarios
+    ]
 
 
 def quality_columns(report: DesignReport) -> list[QualityColumn]:
@@ -81,7 +83,8 @@ def quality_table(report: DesignReport, limit: int | None = 20) -> str:
         cells += [f"{column.value(row):>{w}.{column.decimals}f}" for column, w in zip(columns, widths)]
         lines.append(" ".join(cells))
     lines.append(
-        f"{len(rows)} of {len(report.candidates)} listed candidates shown ({report.search.kind}: {report.search.screened} screened "
+        f"{len(rows)} of {len(report.candidates)} listed candidates shown ({report.search.kind}: "
+        f"{report.search.screened} screened "
         f"of C = {report.search.candidates_total}, the best {report.search.exact} re-evaluated exactly); * = chosen, "
         f"Q = {chosen_candidate(report).quality:.1f} mm², {_gap(report)}"
     )

@@ -1,4 +1,6 @@
-"""The verification section of ``report.html`` (fcso.sim, METHOD §12): pictures and tables of ``verification.json``, and writing both."""
+"""The verification section of ``report.html`` (fcso.sim, METHOD §12): pictures and tables of ``verification.json``, and
+writing both.
+"""
 
 from __future__ import annotations
 
@@ -12,9 +14,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..geometry import transform_points
+from ..report.models import DesignReport
 from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport
 from ..sim.scene import pad_in_world
-from ..report.models import DesignReport
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
 from .layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, VERIFICATION_JSON, write_atomic
 from .read import read_report, read_stl, reload_parts
@@ -64,7 +66,9 @@ def trial_picture(
         pad = pads[result.kind]
         for side in (1, -1):
             placed = transform_points(pad_in_world(snapshot, side, pad_gap_mm, pad_size_mm), np.asarray(pad.vertices))
-            layers.append(Layer(placed, np.asarray(pad.faces), PAD_COLOUR if result.kind == "fcso" else FINGER_COLOUR, alpha=0.55))
+            layers.append(
+                Layer(placed, np.asarray(pad.faces), PAD_COLOUR if result.kind == "fcso" else FINGER_COLOUR, alpha=0.55)
+            )
         draw_layers(axes, layers, View((0.25, -0.35, 1.0), (0.0, 1.0, 0.0)))
         trial = result.trials[0]
         caption = f"{name.split()[0]}, {moment}" + (
@@ -82,7 +86,9 @@ def error_picture(scenario: ScenarioVerification, success_mm: float, success_deg
     figure = _figure(1100, 300)
     for k, (field, limit, unit) in enumerate((("error_mm", success_mm, "mm"), ("error_deg", success_deg, "degrees"))):
         axes = figure.add_axes((0.08 + k * 0.48, 0.2, 0.40, 0.65))
-        for row, (result, colour, label) in enumerate(((scenario.fcso, FCSO_COLOUR, "designed"), (scenario.flat, FLAT_COLOUR, "flat"))):
+        for row, (result, colour, label) in enumerate(
+            ((scenario.fcso, FCSO_COLOUR, "designed"), (scenario.flat, FLAT_COLOUR, "flat"))
+        ):
             values = np.array([getattr(t, field) for t in result.trials])
             jitter = np.linspace(-0.15, 0.15, len(values)) if len(values) > 1 else np.zeros(len(values))
             axes.scatter(np.maximum(values, 1e-4), row + jitter, color=colour, s=22, label=label)
@@ -102,7 +108,10 @@ def holding_picture(scenario: ScenarioVerification, hold_force_n: float) -> byte
     axes = figure.add_axes((0.08, 0.15, 0.9, 0.7))
     directions = list(scenario.fcso.holding_n)
     positions = np.arange(len(directions))
-    for offset, (result, colour, label) in ((-0.2, (scenario.fcso, FCSO_COLOUR, "designed")), (0.2, (scenario.flat, FLAT_COLOUR, "flat"))):
+    for offset, (result, colour, label) in (
+        (-0.2, (scenario.fcso, FCSO_COLOUR, "designed")),
+        (0.2, (scenario.flat, FLAT_COLOUR, "flat")),
+    ):
         values = [hold_force_n if result.holding_n[d] is None else result.holding_n[d] for d in directions]
         held = [result.holding_n[d] is None for d in directions]
         bars = axes.bar(positions + offset, values, width=0.4, color=colour, label=label)
@@ -114,12 +123,17 @@ def holding_picture(scenario: ScenarioVerification, hold_force_n: float) -> byte
     axes.set_ylabel("slip force, N", fontsize=8)
     axes.legend(fontsize=8, loc="lower right")
     axes.tick_params(labelsize=8)
-    figure.suptitle(f"{scenario.part}, pose {scenario.pose_index}: holding test (hatched: held at {hold_force_n:g} N)", fontsize=10)
+    figure.suptitle(
+        f"{scenario.part}, pose {scenario.pose_index}: holding test (hatched: held at {hold_force_n:g} N)", fontsize=10
+    )
     return png_bytes(figure)
 
 
 def _image(png: bytes, alt: str) -> str:
-    return f'<img data-kind="verification" alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+    return (
+        f'<img data-kind="verification" alt="{html.escape(alt)}" '
+        f'src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+    )
 
 
 def _holding_text(value: float | None) -> str:
@@ -142,12 +156,16 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
     lines = [
         BEGIN,
         "<h2>Verification in simulation (METHOD §12)</h2>",
-        f"<p>MuJoCo {html.escape(verification.mujoco_version)}: {settings.trials} trials per scenario with the part placed "
-        f"±{settings.position_error_mm:g} mm and ±{settings.yaw_error_deg:g}° off, closing at {settings.closing_speed_mm_s:g} mm/s "
+        f"<p>MuJoCo {html.escape(verification.mujoco_version)}: {settings.trials} trials per scenario with the part "
+        f"placed "
+        f"±{settings.position_error_mm:g} mm and ±{settings.yaw_error_deg:g}° off, closing at "
+        f"{settings.closing_speed_mm_s:g} mm/s "
         f"with {settings.force_limit_n:g} N per finger, friction {settings.friction:g}, lift {settings.lift_mm:g} mm. "
-        f"A trial succeeds within {settings.success_mm:g} mm and {settings.success_deg:g}° of the unperturbed grasp's seat. "
+        f"A trial succeeds within {settings.success_mm:g} mm and {settings.success_deg:g}° of the unperturbed grasp's "
+        f"seat. "
         f"The design <b>{verdict}</b> (a scenario passes at {settings.pass_success_rate:.0%} success).</p>",
-        "<table><tr><th class=\"text\">scenario</th><th>designed: success</th><th>median / worst mm</th><th>median / worst °</th>"
+        '<table><tr><th class="text">scenario</th><th>designed: success</th><th>median / worst mm</th><th>median / '
+        "worst °</th>"
         "<th>flat: success</th><th>median / worst mm</th><th>median / worst °</th>"
         "<th>pieces part / pad</th><th>volume error part / pad</th><th>seated penetration mm</th></tr>",
     ]
@@ -170,7 +188,9 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
     for k, s in enumerate(verification.scenarios):
         title = f"{s.part}, pose {s.pose_index}"
         rows = "".join(
-            f"<tr><td class=\"text\">{name}</td>" + "".join(f"<td>{_holding_text(r.holding_n[d])}</td>" for d in r.holding_n) + "</tr>"
+            f'<tr><td class="text">{name}</td>'
+            + "".join(f"<td>{_holding_text(r.holding_n[d])}</td>" for d in r.holding_n)
+            + "</tr>"
             for name, r in (("designed", s.fcso), ("flat", s.flat))
         )
         lines += [
@@ -178,7 +198,11 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
             _image(pictures[f"trial {k}"], f"trial of {title}"),
             _image(pictures[f"errors {k}"], f"errors of {title}"),
             _image(pictures[f"holding {k}"], f"holding of {title}"),
-            "<table><tr><th class=\"text\">slip force, N</th>" + "".join(f"<th>{d}</th>" for d in s.fcso.holding_n) + "</tr>" + rows + "</table>",
+            '<table><tr><th class="text">slip force, N</th>'
+            + "".join(f"<th>{d}</th>" for d in s.fcso.holding_n)
+            + "</tr>"
+            + rows
+            + "</table>",
         ]
     if verification.warnings:
         lines.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in verification.warnings) + "</ul>")
@@ -202,7 +226,11 @@ def insert_section(page: str, section: str) -> str:
 
 def write_section(report_html: Path, section: str) -> None:
     """Insert the section into ``report.html`` (written under a temporary name, then renamed)."""
-    page = report_html.read_text(encoding="utf-8") if report_html.is_file() else "<!DOCTYPE html>\n<html><body>\n</body></html>\n"
+    page = (
+        report_html.read_text(encoding="utf-8")
+        if report_html.is_file()
+        else "<!DOCTYPE html>\n<html><body>\n</body></html>\n"
+    )
     write_atomic(report_html, insert_section(page, section).encode("utf-8"))
 
 
@@ -218,7 +246,9 @@ def verification_pictures(verification: VerificationReport, design: DesignUnderT
     return images
 
 
-def write_verification(directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = "") -> list[Path]:
+def write_verification(
+    directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = ""
+) -> list[Path]:
     """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
 
     Returns
@@ -227,7 +257,9 @@ def write_verification(directory: str | Path, verification: VerificationReport, 
         The files written.
     """
     directory = Path(directory)
-    target = write_atomic(directory / VERIFICATION_JSON, (verification.model_dump_json(indent=2) + "\n").encode("utf-8"))
+    target = write_atomic(
+        directory / VERIFICATION_JSON, (verification.model_dump_json(indent=2) + "\n").encode("utf-8")
+    )
     page = directory / REPORT_HTML
     write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
     return [target, page]
@@ -250,7 +282,8 @@ def ranking_html(ranking: list[RankedCandidate]) -> str:
         return ""
     rows = "".join(
         f"<tr{CHOSEN if r.chosen else ''}><td>{r.rank_by_quality}</td><td>{r.index}</td><td>{r.quality:.1f}</td>"
-        f"<td>{' / '.join(f'{x:.0%}' for x in r.success_rates)}</td><td>{' / '.join(f'{x:.0%}' for x in r.flat_success_rates)}</td>"
+        f"<td>{' / '.join(f'{x:.0%}' for x in r.success_rates)}</td>"
+        f"<td>{' / '.join(f'{x:.0%}' for x in r.flat_success_rates)}</td>"
         f"<td>{'yes' if r.passed else 'no'}</td><td>{'&#9733;' if r.chosen else ''}</td></tr>"
         for r in ranking
     )

@@ -21,11 +21,11 @@ from .models import (
     UngraspableReport,
 )
 
-
 #: One sentence per rejection reason, for a scenario that reason emptied.
 _REJECTION_SENTENCES = {
     "contact": "no pad box holds the least contact area ({area:g} mm² per side) on both sides",
-    "fit": "wherever the pads meet it, the part is too wide for the open gripper ({opening:g} mm) or too narrow to close on",
+    "fit": "wherever the pads meet it, the part is too wide for the open gripper ({opening:g} mm) or too narrow to "
+    "close on",
     "collision_finger": "the finger plate behind every pad would hit the part",
     "collision_descent": "the open fingers would hit the part on their way down",
 }
@@ -37,7 +37,9 @@ def ungraspable_report(scenario: Scenario, config: DesignConfig) -> UngraspableR
         reason = "no pad footprint meets the part above the table clearance"
     else:
         worst = max(result.rejected, key=lambda k: result.rejected[k])
-        reason = _REJECTION_SENTENCES[worst].format(area=config.sampler.min_contact_area, opening=config.gripper.max_opening_mm)
+        reason = _REJECTION_SENTENCES[worst].format(
+            area=config.sampler.min_contact_area, opening=config.gripper.max_opening_mm
+        )
         reason = f"{reason} ({result.rejected[worst]} of {result.tried} samples)"
     return UngraspableReport(
         part=scenario.part.name,
@@ -53,7 +55,9 @@ def rounded(value: float) -> float:
     return round(float(value), 6)
 
 
-def print_fit_report(config: DesignConfig, exact: CandidateEvaluation, fitted: CandidateEvaluation, thinnest_wall_mm: float) -> PrintFitReport:
+def print_fit_report(
+    config: DesignConfig, exact: CandidateEvaluation, fitted: CandidateEvaluation, thinnest_wall_mm: float
+) -> PrintFitReport:
     """``[print]`` as used, the chosen pad's thinnest wall, and the chosen candidate exact (METHOD §4-6) and as printed.
 
     Parameters
@@ -130,7 +134,9 @@ def scenario_report(scenario: Scenario) -> ScenarioReport:
 
 
 def candidate_reports(choices, exact: dict, screened: dict, indices: dict) -> list[CandidateReport]:
-    """Report entries, by index: exact numbers for re-evaluated candidates, screened ones (``screened[choice]``) for the rest."""
+    """Report entries, by index: exact numbers for re-evaluated candidates, screened ones (``screened[choice]``) for the
+    rest.
+    """
     entries = []
     for choice in sorted(choices, key=lambda c: indices[c]):
         if choice in exact:
@@ -148,7 +154,10 @@ def _candidate_report(evaluation: CandidateEvaluation, index: int) -> CandidateR
         evaluation.choice,
         index,
         "exact",
-        [(e.rles, e.contact_area_mm2, e.effective_area, [c.offset_mm for c in e.contacts]) for e in evaluation.scenarios],
+        [
+            (e.rles, e.contact_area_mm2, e.effective_area, [c.offset_mm for c in e.contacts])
+            for e in evaluation.scenarios
+        ],
         evaluation.quality,
         evaluation.mean_effective_area,
         evaluation.case,
@@ -191,9 +200,14 @@ def _candidate_entry(choice, index, evaluation, per_scenario, quality, mean, cas
     )
 
 
-def grasp_report(scenario: Scenario, sample_index: int, evaluation: ScenarioEvaluation, config: DesignConfig) -> GraspReport:
+def grasp_report(
+    scenario: Scenario, sample_index: int, evaluation: ScenarioEvaluation, config: DesignConfig
+) -> GraspReport:
     pose = tcp_pose(
-        scenario.samples[sample_index].sample, evaluation.contacts[0].offset_mm, evaluation.contacts[1].offset_mm, config.sampler
+        scenario.samples[sample_index].sample,
+        evaluation.contacts[0].offset_mm,
+        evaluation.contacts[1].offset_mm,
+        config.sampler,
     )
     return GraspReport(
         part=scenario.part.name,

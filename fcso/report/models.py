@@ -20,7 +20,6 @@ class ReportModel(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-
 class PartReport(ReportModel):
     """A part as it was used."""
 
@@ -35,7 +34,9 @@ class PartReport(ReportModel):
     solid_index: int | None = Field(
         None, description="k of the name <file>#<k> when the file held several separate solids (1 = largest), else null"
     )
-    shell_handling: str | None = Field(None, description="How the file's shells were made one solid; null for a single shell")
+    shell_handling: str | None = Field(
+        None, description="How the file's shells were made one solid; null for a single shell"
+    )
 
 
 class UngraspableReport(ReportModel):
@@ -103,14 +104,20 @@ class CandidateReport(ReportModel):
 class SearchReport(ReportModel):
     """How the candidates were searched (METHOD §8, §8b)."""
 
-    kind: str = Field(description="exhaustive, branch_and_bound or branch_and_bound+coordinate_ascent (over screened quality)")
+    kind: str = Field(
+        description="exhaustive, branch_and_bound or branch_and_bound+coordinate_ascent (over screened quality)"
+    )
     evaluated: int = Field(description="Candidates evaluated (screened)")
     screened: int = Field(0, description="Candidates screened")
     exact: int = Field(0, description="Best screened candidates re-evaluated exactly; the design is the best of these")
     candidates_total: int = Field(description="C = product of valid samples per scenario")
-    proven_optimal: bool = Field(description="Every candidate was screened, or branch and bound proved the screened best")
+    proven_optimal: bool = Field(
+        description="Every candidate was screened, or branch and bound proved the screened best"
+    )
     jobs: int = Field(1, description="Worker processes used")
-    quality_upper_bound: float | None = Field(None, description="No candidate's exact Q exceeds this (per-sample bounds), mm²")
+    quality_upper_bound: float | None = Field(
+        None, description="No candidate's exact Q exceeds this (per-sample bounds), mm²"
+    )
     gap: float | None = Field(None, description="Chosen Q over quality_upper_bound (1 = provably optimal)")
 
 
@@ -122,12 +129,16 @@ class GraspReport(ReportModel):
     sample: int
     rest_transform: list[list[float]] = Field(description="4x4, part file frame to resting frame (mm)")
     position_mm: list[float] = Field(description="TCP position in the resting frame, mm")
-    quaternion_wxyz: list[float] = Field(description="TCP orientation in the resting frame (z: approach, y: closing axis)")
+    quaternion_wxyz: list[float] = Field(
+        description="TCP orientation in the resting frame (z: approach, y: closing axis)"
+    )
     approach_direction: list[float]
     closing_axis: list[float]
     pad_gap_mm: float = Field(description="Distance between the two pad faces at contact, mm")
     closing_width_mm: float = Field(description="Distance between the flat fingers' contact faces at contact, mm")
-    finger_set: int | None = Field(None, description="Finger set making this grasp (METHOD §11), 1 = first; null with [finger_sets] max = 1")
+    finger_set: int | None = Field(
+        None, description="Finger set making this grasp (METHOD §11), 1 = first; null with [finger_sets] max = 1"
+    )
 
 
 class FingerReport(ReportModel):
@@ -145,7 +156,9 @@ class PrintFitEffect(ReportModel):
     pocket_volume_mm3: float = Field(description="Pad box volume minus pad volume, mm³")
     contact_area_mm2: list[float] = Field(description="A per scenario (same order as scenarios), mm²")
     effective_area: list[float] = Field(description="E per scenario, mm²")
-    seat_offsets_mm: list[list[float]] = Field(description="Seating offset t of the + and - pads per scenario (negative: the pad closed a clearance), mm")
+    seat_offsets_mm: list[list[float]] = Field(
+        description="Seating offset t of the + and - pads per scenario (negative: the pad closed a clearance), mm"
+    )
     quality: float = Field(description="Q = min E, mm²")
 
 
@@ -157,12 +170,17 @@ class PrintFitReport(ReportModel):
     lead_in_deg: float = Field(description="Effective lead-in draft, degrees")
     min_wall_mm: float = Field(description="Effective minimum wall, mm")
     density_g_cm3: float = Field(description="Effective part material density, g/cm³")
-    thinnest_wall_mm: float | None = Field(description="Thinnest wall of the chosen pad (fused side excluded), mm; null for an empty pad")
-    exact: PrintFitEffect = Field(description="The chosen candidate with the exact pocket of METHOD §4 (no clearance, no lead-in)")
+    thinnest_wall_mm: float | None = Field(
+        description="Thinnest wall of the chosen pad (fused side excluded), mm; null for an empty pad"
+    )
+    exact: PrintFitEffect = Field(
+        description="The chosen candidate with the exact pocket of METHOD §4 (no clearance, no lead-in)"
+    )
     fitted: PrintFitEffect = Field(description="The chosen candidate as designed, with clearance and lead-in")
 
 
 # the finger sets of a job (METHOD §11)
+
 
 class SetScenarioReport(ReportModel):
     """One scenario (a part in one stable pose) in the finger set that serves it."""
@@ -170,17 +188,26 @@ class SetScenarioReport(ReportModel):
     part: str
     pose_index: int
     set: int | None = Field(description="Finger set serving it (1 = first); null when the scenario is ungraspable")
-    effective_area: float = Field(description="E of the scenario with its set's finger (exact pocket, METHOD §6-7), mm²")
-    solo_effective_area: float = Field(description="E*: best E of a design for this scenario alone (0: ungraspable), mm²")
+    effective_area: float = Field(
+        description="E of the scenario with its set's finger (exact pocket, METHOD §6-7), mm²"
+    )
+    solo_effective_area: float = Field(
+        description="E*: best E of a design for this scenario alone (0: ungraspable), mm²"
+    )
     retained: float | None = Field(description="E / E*; null when E* = 0")
-    screened_retained: float | None = Field(description="E / E* under screening, as the partition search saw it; null when not screened")
+    screened_retained: float | None = Field(
+        description="E / E* under screening, as the partition search saw it; null when not screened"
+    )
 
 
 class FingerSetReport(ReportModel):
     """One finger set: a finger designed for some of the job's parts."""
 
     set: int = Field(description="Set number, 1 = first (sets numbered by their first part in job order)")
-    folder: str = Field(description="Folder of its finger.stl, fingerpad.stl and report, relative to the job's report ('.' with one set)")
+    folder: str = Field(
+        description="Folder of its finger.stl, fingerpad.stl and report, relative to the job's report ('.' with one "
+        "set)"
+    )
     parts: list[str] = Field(description="Distinct parts it serves, job order")
     quality: float = Field(description="Q = min E over its scenarios (exact, as printed), mm²")
     worst_retained: float = Field(description="Least E / E* over its scenarios")
@@ -208,18 +235,26 @@ class PartitionSearchReport(ReportModel):
 
     method: Literal["single_set", "single_part", "exhaustive", "conflict_graph_colouring+local_moves"] = Field(
         description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
-        "exhaustive: every partition screened; conflict_graph_colouring+local_moves: greedy sets from pair conflicts, improved by moving parts"
+        "exhaustive: every partition screened; conflict_graph_colouring+local_moves: greedy sets from pair conflicts, "
+        "improved by moving parts"
     )
     description: str = Field(description="The same in words, with what it proves")
-    proven: bool = Field(description="The partition is the best under screening (every partition into at most max sets screened)")
+    proven: bool = Field(
+        description="The partition is the best under screening (every partition into at most max sets screened)"
+    )
     sets_tried: list[int] = Field(description="Numbers of sets the search tried")
     set_screenings: int = Field(description="Distinct candidate sets screened")
-    lower_bound_sets: int = Field(description="Largest group of pairwise conflicting parts: no partition reaching min_retained has fewer sets")
+    lower_bound_sets: int = Field(
+        description="Largest group of pairwise conflicting parts: no partition reaching min_retained has fewer sets"
+    )
     conflict_clique: list[str] = Field(description="That group of parts")
     worst_retained_bound: float | None = Field(
-        description="When that group is larger than max, two of its parts share a set: no partition keeps a larger worst E / E* (screened)"
+        description="When that group is larger than max, two of its parts share a set: no partition keeps a larger "
+        "worst E / E* (screened)"
     )
-    blocking_pairs: list[PairConflictReport] = Field(description="Pairs of parts that keep less than min_retained when they share a finger")
+    blocking_pairs: list[PairConflictReport] = Field(
+        description="Pairs of parts that keep less than min_retained when they share a finger"
+    )
     explanation: str | None = Field(description="Why min_retained is not reached, when it is not")
 
 
@@ -246,11 +281,15 @@ class FingerSetsReport(ReportModel):
     max_sets: int = Field(description="[finger_sets] max")
     min_retained: float = Field(description="[finger_sets] min_retained")
     sets: list[FingerSetReport]
-    scenarios: list[SetScenarioReport] = Field(description="Every scenario of every distinct part: those with samples in job order, then those without")
+    scenarios: list[SetScenarioReport] = Field(
+        description="Every scenario of every distinct part: those with samples in job order, then those without"
+    )
     worst_retained: float | None = Field(description="Least E / E* over graspable scenarios")
     median_retained: float | None = Field(description="Median E / E* over graspable scenarios")
     min_retained_reached: bool = Field(description="Every graspable scenario keeps at least min_retained (exact)")
-    identical_parts: list[IdenticalPartsReport] = Field(description="Groups of identical parts designed once (only groups of two or more)")
+    identical_parts: list[IdenticalPartsReport] = Field(
+        description="Groups of identical parts designed once (only groups of two or more)"
+    )
     ungraspable_parts: list[str] = Field(description="Parts no set can grasp in any chosen pose: not in the pick plan")
     ungraspable: list[UngraspableReport] = Field(description="Every ungraspable scenario")
     pick_plan: list[PickStep] = Field(description="Finger sets in the order to mount them, each with the parts to pick")
@@ -271,15 +310,21 @@ class DesignReport(ReportModel):
         default_factory=list, description="Parts in stable poses that no sample can grasp; the design serves the others"
     )
     finger: FingerReport
-    timings_s: dict[str, float] = Field(description="Wall time per stage, s (the only field that varies between identical runs)")
+    timings_s: dict[str, float] = Field(
+        description="Wall time per stage, s (the only field that varies between identical runs)"
+    )
     warnings: list[str]
     settings: DesignConfig
     print_fit: PrintFitReport | None = Field(None, description="[print] as used and what clearance and lead-in changed")
     placement: dict | None = Field(
-        None, description="Where the finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
+        None,
+        description="Where the finger copies go in the job's build volume, added by fcsod (schema: "
+        "schemas/placement-report.json)",
     )
     finger_sets: FingerSetsReport | None = Field(
-        None, description="The job's finger sets and pick plan when it ran with [finger_sets] max > 1 and one set serves it (METHOD §11)"
+        None,
+        description="The job's finger sets and pick plan when it ran with [finger_sets] max > 1 and one set serves it "
+        "(METHOD §11)",
     )
 
 
@@ -293,7 +338,9 @@ class JobReport(ReportModel):
     warnings: list[str]
     settings: DesignConfig
     placement: dict | None = Field(
-        None, description="Where every set's finger copies go in the job's build volume, added by fcsod (schema: schemas/placement-report.json)"
+        None,
+        description="Where every set's finger copies go in the job's build volume, added by fcsod (schema: "
+        "schemas/placement-report.json)",
     )
 
 
@@ -305,5 +352,7 @@ def chosen_candidate(report: DesignReport) -> CandidateReport:
 def ranked_candidates(report: DesignReport, limit: int | None = None) -> list[CandidateReport]:
     """Candidates best first, at most ``limit``: the exactly evaluated ones, then the screened ones,
     each by larger Q, then larger mean E, then smaller index."""
-    rows = sorted(report.candidates, key=lambda c: (c.evaluation != "exact", -c.quality, -c.mean_effective_area, c.index))
+    rows = sorted(
+        report.candidates, key=lambda c: (c.evaluation != "exact", -c.quality, -c.mean_effective_area, c.index)
+    )
     return rows if limit is None else rows[:limit]

@@ -40,7 +40,9 @@ def _ratio(value: float, reference: float) -> float:
     return round(float(value) / float(reference), 6)
 
 
-def sets_report(prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config) -> FingerSetsReport:
+def sets_report(
+    prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+) -> FingerSetsReport:
     """The report of the sets, their scenarios, identical parts and the pick plan."""
     settings = config.finger_sets
     several = len(designs) > 1
@@ -95,7 +97,17 @@ def sets_report(prepared, loaded, groups, solos, designs, members, outcome, gras
             )
         )
     for entry in prepared.ungraspable:
-        scenarios.append(SetScenarioReport(part=entry.part, pose_index=entry.pose_index, set=None, effective_area=0.0, solo_effective_area=0.0, retained=None, screened_retained=None))
+        scenarios.append(
+            SetScenarioReport(
+                part=entry.part,
+                pose_index=entry.pose_index,
+                set=None,
+                effective_area=0.0,
+                solo_effective_area=0.0,
+                retained=None,
+                screened_retained=None,
+            )
+        )
     kept = [s.retained for s in scenarios if s.retained is not None]
     served = {prepared.parts[u].name for u in graspable}
     names = [prepared.parts[u].name for u in graspable]
@@ -116,7 +128,9 @@ def sets_report(prepared, loaded, groups, solos, designs, members, outcome, gras
         min_retained_reached=reached,
         identical_parts=[
             IdenticalPartsReport(
-                part=loaded[g[0]].name, copies=[loaded[i].name for i in g], quantity=sum(len(loaded[i].instances) for i in g)
+                part=loaded[g[0]].name,
+                copies=[loaded[i].name for i in g],
+                quantity=sum(len(loaded[i].instances) for i in g),
             )
             for g in groups
             if len(g) > 1
@@ -132,7 +146,9 @@ def sets_report(prepared, loaded, groups, solos, designs, members, outcome, gras
             set_screenings=outcome.set_screenings,
             lower_bound_sets=outcome.lower_bound_sets,
             conflict_clique=[names[i] for i in outcome.conflict_clique],
-            worst_retained_bound=None if outcome.worst_retained_bound is None else round(outcome.worst_retained_bound, 6),
+            worst_retained_bound=None
+            if outcome.worst_retained_bound is None
+            else round(outcome.worst_retained_bound, 6),
             blocking_pairs=blocking,
             explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
         ),
@@ -145,26 +161,39 @@ def _search_description(outcome: PartitionOutcome, parts: int, settings) -> str:
     if outcome.method == "exhaustive":
         return (
             f"every partition of the {parts} distinct parts into at most {settings.max} sets was screened "
-            f"({outcome.set_screenings} distinct sets): the chosen one is the best under screening; its sets were then designed exactly"
+            f"({outcome.set_screenings} distinct sets): the chosen one is the best under screening; its sets were "
+            f"then designed exactly"
         )
     clique = len(outcome.conflict_clique)
     return (
-        f"the {parts * (parts - 1) // 2} pairs of parts were screened as sets; the largest group of pairwise conflicting parts "
-        f"has {clique} parts, so no partition reaching min_retained = {settings.min_retained:g} has fewer than {outcome.lower_bound_sets} sets "
-        f"(if a part never keeps more of its quality in a larger set); for {', '.join(map(str, outcome.sets_tried))} sets, parts were "
-        f"placed greedily (most conflicted first, with the parts they conflict with least) and the worst set's parts moved while the "
+        f"the {parts * (parts - 1) // 2} pairs of parts were screened as sets; the largest group of pairwise "
+        f"conflicting parts "
+        f"has {clique} parts, so no partition reaching min_retained = {settings.min_retained:g} has fewer than "
+        f"{outcome.lower_bound_sets} sets "
+        f"(if a part never keeps more of its quality in a larger set); for {', '.join(map(str, outcome.sets_tried))} "
+        f"sets, parts were "
+        f"placed greedily (most conflicted first, with the parts they conflict with least) and the worst set's parts "
+        f"moved while the "
         f"objective improved ({outcome.set_screenings} distinct sets screened); not proven optimal"
     )
 
 
 def _explanation(scenarios, blocking, outcome: PartitionOutcome, names, settings) -> str:
     worst = min((s for s in scenarios if s.retained is not None), key=lambda s: s.retained)
-    words = [f"{worst.part} in stable pose {worst.pose_index} keeps {worst.retained:.2f} of its solo quality in set {worst.set}"]
+    words = [
+        f"{worst.part} in stable pose {worst.pose_index} keeps {worst.retained:.2f} of its solo quality in set "
+        f"{worst.set}"
+    ]
     if len(outcome.conflict_clique) > settings.max:
         group = ", ".join(names[i] for i in outcome.conflict_clique)
-        words.append(f"parts {group} conflict pairwise: they need {len(outcome.conflict_clique)} sets, more than max = {settings.max}")
+        words.append(
+            f"parts {group} conflict pairwise: they need {len(outcome.conflict_clique)} sets, more than max = "
+            f"{settings.max}"
+        )
     if blocking:
-        pairs = "; ".join(f"{b.parts[0]} + {b.parts[1]} ({b.retained[0]:.2f}, {b.retained[1]:.2f})" for b in blocking[:8])
+        pairs = "; ".join(
+            f"{b.parts[0]} + {b.parts[1]} ({b.retained[0]:.2f}, {b.retained[1]:.2f})" for b in blocking[:8]
+        )
         words.append(f"pairs that cannot share a finger (screened retained of each): {pairs}")
     if worst.screened_retained is not None and worst.screened_retained >= settings.min_retained:
         words.append(f"under screening it kept {worst.screened_retained:.2f}: the exact design keeps less")

@@ -16,7 +16,14 @@ effective area E in mm²; retained qualities are ratios (0..1).
 
 from .design import SetsResult, design_sets
 from .identity import SAME_GEOMETRY_TOLERANCE_MM, identical_groups, same_geometry
-from .partition import PartitionOutcome, canonical_assignment, max_clique, partition_key, restricted_growth, search_partition
+from .partition import (
+    PartitionOutcome,
+    canonical_assignment,
+    max_clique,
+    partition_key,
+    restricted_growth,
+    search_partition,
+)
 from .screening import SetScreener, SetScreening, SoloQuality, screen_set, screening_pools, solo_quality
 
 __all__ = [

@@ -1,11 +1,13 @@
-"""Designing a job's finger sets: identical parts once, solo qualities, the partition, every set's finger (METHOD §11)."""
+"""Designing a job's finger sets: identical parts once, solo qualities, the partition, every set's finger (METHOD
+§11).
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 from .. import __version__
 from ..config import DesignConfig
@@ -52,7 +54,10 @@ class SetsResult:
 
 
 def design_sets(
-    parts: Sequence[Part | str | Path], config: DesignConfig | None = None, progress: Progress | None = None, repair: bool = False
+    parts: Sequence[Part | str | Path],
+    config: DesignConfig | None = None,
+    progress: Progress | None = None,
+    repair: bool = False,
 ) -> SetsResult:
     """Design the finger sets of a job (METHOD §11): at most ``[finger_sets] max`` fingers for its parts.
 
@@ -85,7 +90,9 @@ def design_sets(
     loaded = [
         one
         for p in parts
-        for one in ([p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies))
+        for one in (
+            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
+        )
     ]
     groups = identical_groups([p.mesh for p in loaded])
     unique = [loaded[g[0]] for g in groups]
@@ -106,23 +113,35 @@ def design_sets(
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
     ungraspable = list(prepared.ungraspable)
-    for number, (scenario, solo) in enumerate(zip(prepared.scenarios, solos)):
+    for scenario, solo in zip(prepared.scenarios, solos):
         if solo.exact_mm2 <= 0:
             ungraspable.append(zero_quality_report(scenario))
-            warnings.append(f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left out")
+            warnings.append(
+                f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left "
+                f"out"
+            )
     part_scenarios = [
-        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact_mm2 > 0] for u in range(len(unique))
+        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact_mm2 > 0]
+        for u in range(len(unique))
     ]
     graspable = [u for u in range(len(unique)) if part_scenarios[u]]
     if not graspable:
-        raise NoGraspError("no scenario of the job keeps any contact with a pad: " + "; ".join(f"{u.part} pose {u.pose_index}" for u in ungraspable))
+        raise NoGraspError(
+            "no scenario of the job keeps any contact with a pad: "
+            + "; ".join(f"{u.part} pose {u.pose_index}" for u in ungraspable)
+        )
 
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
     # one part has one partition: nothing to screen in parallel
     with WorkerPool((prepared, pools, config), prepared.jobs if len(graspable) > 1 else 1) as pool:
         screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, config, pool)
-        outcome = search_partition(screener, len(graspable), config, lambda stage, done, total, note="": report_progress(stage, done, total, note))
+        outcome = search_partition(
+            screener,
+            len(graspable),
+            config,
+            lambda stage, done, total, note="": report_progress(stage, done, total, note),
+        )
     timings["partition"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
@@ -134,7 +153,9 @@ def design_sets(
         report_progress("finger sets", label, labels, f"set {label + 1} of {labels}")
         made = design_prepared(subset(prepared, numbers), config, progress)
         # every grasp says which finger set makes it
-        made.report = made.report.model_copy(update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]})
+        made.report = made.report.model_copy(
+            update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+        )
         designs.append(made)
         members.append((chosen, numbers))
     report_progress("finger sets", labels, labels, "")

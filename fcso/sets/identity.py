@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
-
 
 #: Largest distance between matching vertices of identical parts, mm (STL stores float32: ~1e-5 mm at 100 mm).
 SAME_GEOMETRY_TOLERANCE_MM = 1e-3

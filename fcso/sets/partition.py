@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -49,7 +49,9 @@ def partition_key(assignment: Sequence[int], retained: Sequence[float], min_reta
 
 
 def restricted_growth(parts: int, max_sets: int):
-    """Every partition of ``parts`` items into at most ``max_sets`` sets, as canonical assignments in lexicographic order."""
+    """Every partition of ``parts`` items into at most ``max_sets`` sets, as canonical assignments in lexicographic
+    order.
+    """
     if parts == 0:
         yield ()
         return
@@ -226,7 +228,9 @@ def search_partition(screener: SetScreener, parts: int, config: DesignConfig, pr
 
 
 def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: float) -> tuple[int, ...]:
-    """Most conflicted parts first, each to the set whose worst pair with it is best (a new set while any is left and none is good enough)."""
+    """Most conflicted parts first, each to the set whose worst pair with it is best (a new set while any is left and
+    none is good enough).
+    """
     parts = len(compatibility)
     conflicts = (compatibility < threshold).sum(axis=1)
     order = sorted(range(parts), key=lambda p: (-conflicts[p], p))
@@ -245,7 +249,9 @@ def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: floa
     return canonical_assignment(assignment)
 
 
-def _improve(screener: SetScreener, assignment: tuple[int, ...], max_sets: int, threshold: float, key) -> tuple[int, ...]:
+def _improve(
+    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, threshold: float, key
+) -> tuple[int, ...]:
     """Move parts of the worst set to other sets (or a new one) while a move improves the objective."""
     current = assignment
     for _ in range(4 * len(assignment)):

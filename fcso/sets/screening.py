@@ -1,10 +1,12 @@
-"""Screened quality of candidate finger sets: every scenario's solo quality E*, and a set's screened E (METHOD §11, §8b)."""
+"""Screened quality of candidate finger sets: every scenario's solo quality E*, and a set's screened E (METHOD §11,
+§8b).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -89,7 +91,9 @@ class SetScreening:
     evaluated: int
 
 
-def screen_set(prepared: Prepared, scenario_numbers: Sequence[int], pools: Sequence[np.ndarray], config: DesignConfig) -> SetScreening:
+def screen_set(
+    prepared: Prepared, scenario_numbers: Sequence[int], pools: Sequence[np.ndarray], config: DesignConfig
+) -> SetScreening:
     """Screen the design of one finger set over each scenario's pool of samples.
 
     The search (:func:`fcso.search.search`) maximises the screened Q, as the
@@ -143,7 +147,14 @@ class SetScreener:
         Whose context is ``(prepared, pools, config)``.
     """
 
-    def __init__(self, prepared: Prepared, part_scenarios: list[list[int]], solos: list[SoloQuality], config: DesignConfig, pool: WorkerPool):
+    def __init__(
+        self,
+        prepared: Prepared,
+        part_scenarios: list[list[int]],
+        solos: list[SoloQuality],
+        config: DesignConfig,
+        pool: WorkerPool,
+    ):
         self.prepared = prepared
         self.part_scenarios = part_scenarios
         self.solos = solos
@@ -179,7 +190,11 @@ class SetScreener:
 
 def sets_of(assignment: Sequence[int]) -> list[frozenset[int]]:
     """The sets of a partition (``assignment[p]`` is part ``p``'s set), as sets of parts."""
-    return [frozenset(p for p, a in enumerate(assignment) if a == label) for label in range(max(assignment) + 1)] if assignment else []
+    return (
+        [frozenset(p for p, a in enumerate(assignment) if a == label) for label in range(max(assignment) + 1)]
+        if assignment
+        else []
+    )
 
 
 def _screen_set_task(context, scenario_numbers: tuple[int, ...]) -> SetScreening:

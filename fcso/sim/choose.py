@@ -6,8 +6,8 @@ from ..design import DesignResult, finish_candidate
 from ..evaluate import CandidateEvaluation
 from ..finger import fuse
 from ..geometry import to_trimesh
-from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from ..progress import Progress
+from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
 from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify
@@ -33,7 +33,9 @@ def candidate_design(
     warnings : list of str
         The print fit's warnings.
     """
-    evaluation, grasps, print_fit, warnings = finish_candidate(result.scenarios, candidate.samples, result.report.settings)
+    evaluation, grasps, print_fit, warnings = finish_candidate(
+        result.scenarios, candidate.samples, result.report.settings
+    )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
     report = result.report.model_copy(update={"grasps": grasps})
     cases = [grasp_case(report, g, parts[g.part]) for g in grasps]
@@ -93,15 +95,25 @@ def verify_top(
         )
         result = _with_candidate(result, candidate, *built[1:], why)
     elif not passing:
-        verification.warnings.append(f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q")
+        verification.warnings.append(
+            f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q"
+        )
     verification = verification.model_copy(update={"ranking": ranking})
     return result, verification, design, ranking
 
 
 def _with_candidate(
-    result: DesignResult, candidate: CandidateReport, evaluation: CandidateEvaluation, grasps, print_fit, fit_warnings, why: str
+    result: DesignResult,
+    candidate: CandidateReport,
+    evaluation: CandidateEvaluation,
+    grasps,
+    print_fit,
+    fit_warnings,
+    why: str,
 ) -> DesignResult:
-    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit in the report."""
+    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit
+    in the report.
+    """
     config = result.report.settings
     fused = fuse(result.flat_finger, evaluation.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     report: DesignReport = result.report.model_copy(
@@ -129,5 +141,3 @@ def _with_candidate(
         flat_finger=result.flat_finger,
         pad_to_finger=result.pad_to_finger,
     )
-
-

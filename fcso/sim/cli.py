@@ -72,9 +72,7 @@ def summary(verification: VerificationReport) -> str:
         for name, r in (("designed", s.fcso), ("flat", s.flat)):
             holding = " ".join(f"{d} {'held' if v is None else f'{v:.1f}'}" for d, v in r.holding_n.items())
             median = "-" if r.median_error_mm is None else f"{r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg"
-            lines.append(
-                f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}"
-            )
+            lines.append(f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}")
     lines.append(f"verification {'passed' if verification.passed else 'did not pass'}")
     lines.extend(f"warning: {w}" for w in verification.warnings)
     return "\n".join(lines)
@@ -114,11 +112,20 @@ def verify_design_outputs(result, args, progress) -> int:
 
 def restore_section(directory: Path) -> None:
     """After ``fcso report`` rebuilt report.html: put the verification section back when verification.json exists."""
-    from ..output.verification_page import load_design, ranking_html, read_verification, section_html, verification_pictures, write_section
+    from ..output.verification_page import (
+        load_design,
+        ranking_html,
+        read_verification,
+        section_html,
+        verification_pictures,
+        write_section,
+    )
 
     verification = read_verification(directory)
     if verification is None:
         return
     _, design = load_design(directory)
     extra = ranking_html(verification.ranking or [])
-    write_section(Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra))
+    write_section(
+        Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra)
+    )

@@ -150,7 +150,9 @@ def zoned_pieces(
         f"zoned {float(fine_threshold)!r} {float(coarse_threshold)!r} "
         f"{np.round(to_zones, 6).tolist()} {np.round(fine_boxes, 4).tolist()}"
     )
-    return _cached_pieces(mesh, settings, lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold), cache_dir)
+    return _cached_pieces(
+        mesh, settings, lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold), cache_dir
+    )
 
 
 def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -160,7 +162,11 @@ def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list
     lower, upper = moved.bounds[0] - 1.0, moved.bounds[1] + 1.0
     # the grid's planes: the boxes' faces inside the part's bounds
     planes = [
-        np.unique(np.clip(np.concatenate([[lower[axis], upper[axis]], fine_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]))
+        np.unique(
+            np.clip(
+                np.concatenate([[lower[axis], upper[axis]], fine_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]
+            )
+        )
         for axis in range(3)
     ]
     back = np.linalg.inv(to_zones)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import mujoco
 import numpy as np
@@ -140,7 +140,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     )
 
 
-def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
+def fitted_pieces(
+    case: GraspCase, design: DesignUnderTest, config: VerifyConfig
+) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
     """The part's and the pad's convex pieces, refined until they overlap little at the nominal seated grasp.
 
     A convex piece that bridges a pad pocket, or fills a notch of the part
@@ -182,15 +184,21 @@ def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig
         if refined is not None:
             penetration, part, pad = refined
         else:
-            return part, pad, [
-                f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
-                f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not resolved"
-            ]
+            return (
+                part,
+                pad,
+                [
+                    f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
+                    f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not "
+                    f"resolved"
+                ],
+            )
     return part, pad, []
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig, threshold: float | None = None) -> ConvexPieces:
-    """The part's convex pieces in its resting frame: fine where the pads can reach, coarse elsewhere (:func:`pad_reach_boxes`).
+    """The part's convex pieces in its resting frame: fine where the pads can reach, coarse elsewhere
+    (:func:`pad_reach_boxes`).
 
     ``threshold`` is the CoACD threshold near the pads (default ``decomposition_threshold``).
     """
@@ -226,12 +234,20 @@ def pad_reach_boxes(case: GraspCase, config: VerifyConfig) -> np.ndarray:
     com = to_tcp[:3, :3] @ np.asarray(case.part.center_mass, dtype=float) + to_tcp[:3, 3]
     radius = float(np.hypot(np.abs(com[0]) + reach[0], np.abs(com[1]) + reach[1]))
     turn = np.radians(config.yaw_error_deg + config.slip_deg)
-    margin = float(np.hypot(config.position_error_mm, config.position_error_mm) + radius * np.sin(turn) + config.slip_mm)
+    margin = float(
+        np.hypot(config.position_error_mm, config.position_error_mm) + radius * np.sin(turn) + config.slip_mm
+    )
     top = float((np.asarray(case.part.vertices) @ to_tcp[2, :3] + to_tcp[2, 3]).min()) - margin
     return np.array(
         [
-            [[-length / 2.0 - margin, half_gap - margin, top], [length / 2.0 + margin, half_gap + thickness + opening + margin, width / 2.0 + margin]],
-            [[-length / 2.0 - margin, -half_gap - thickness - opening - margin, top], [length / 2.0 + margin, -half_gap + margin, width / 2.0 + margin]],
+            [
+                [-length / 2.0 - margin, half_gap - margin, top],
+                [length / 2.0 + margin, half_gap + thickness + opening + margin, width / 2.0 + margin],
+            ],
+            [
+                [-length / 2.0 - margin, -half_gap - thickness - opening - margin, top],
+                [length / 2.0 + margin, -half_gap + margin, width / 2.0 + margin],
+            ],
         ]
     )
 
@@ -292,7 +308,9 @@ def verify_case(
                 pictured = run.frames
         if kind == "fcso":
             frames = nominal.frames
-        results[kind] = _finger_result(kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured)
+        results[kind] = _finger_result(
+            kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured
+        )
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
         part_volume_error=round(pieces.volume_error, 6),
@@ -314,7 +332,9 @@ def verify_case(
     )
 
 
-def _finger_result(kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None) -> FingerResult:
+def _finger_result(
+    kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None
+) -> FingerResult:
     moved = np.array([t.error_mm for t in trials])
     turned = np.array([t.error_deg for t in trials])
     any_trials = len(trials) > 0
@@ -349,5 +369,3 @@ def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
     thickness, length, width = pad_size_mm
     pad = trimesh.creation.box(bounds=[[penetration_mm, 0.0, 0.0], [thickness, length, width]])
     return pad
-
-

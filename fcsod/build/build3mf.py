@@ -43,6 +43,8 @@ _RELS = (
     b'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>'
     b"</Relationships>"
 )
+
+
 @dataclass
 class BuildItem:
     """One object of a build.
@@ -224,7 +226,9 @@ def export_build_3mf(
     """
     p_uuid = f"{{{_PRODUCTION_NS}}}UUID"
     object_ids: dict[int, int] = {}
-    model = etree.Element(f"{{{_CORE_NS}}}model", nsmap={None: _CORE_NS, "p": _PRODUCTION_NS, "fcso": FCSO_3MF_NS}, unit="millimeter")
+    model = etree.Element(
+        f"{{{_CORE_NS}}}model", nsmap={None: _CORE_NS, "p": _PRODUCTION_NS, "fcso": FCSO_3MF_NS}, unit="millimeter"
+    )
     model.set("{http://www.w3.org/XML/1998/namespace}lang", "en-US")
     for name, value in (("Title", job_id), ("Application", application), ("CreationDate", creation_date)):
         etree.SubElement(model, f"{{{_CORE_NS}}}metadata", name=name).text = value
@@ -236,8 +240,14 @@ def export_build_3mf(
         key = id(item.mesh)
         if key not in object_ids:
             object_ids[key] = len(object_ids) + 1
-            object_part_number = f"fcso-finger-{item.finger_set or finger_set}" if item.kind == "finger" else item.part_number or item.name
-            _add_mesh_object(resources, object_ids[key], object_part_number, item.mesh, _uuid(job_id, f"object/{object_ids[key]}"))
+            object_part_number = (
+                f"fcso-finger-{item.finger_set or finger_set}"
+                if item.kind == "finger"
+                else item.part_number or item.name
+            )
+            _add_mesh_object(
+                resources, object_ids[key], object_part_number, item.mesh, _uuid(job_id, f"object/{object_ids[key]}")
+            )
         element = etree.SubElement(
             build,
             f"{{{_CORE_NS}}}item",
@@ -277,11 +287,19 @@ def write_build_3mf(items: Sequence[BuildItem], path: str | Path) -> Path:
 
 
 def _add_mesh_object(resources, object_id: int, part_number: str, mesh: trimesh.Trimesh, object_uuid: str) -> None:
-    """Append a 3MF ``object`` named and numbered ``part_number`` holding ``mesh``, faces wound outward, to ``resources``."""
+    """Append a 3MF ``object`` named and numbered ``part_number`` holding ``mesh``, faces wound outward, to
+    ``resources``.
+    """
     obj = etree.SubElement(
         resources,
         f"{{{_CORE_NS}}}object",
-        {"id": str(object_id), "type": "model", "name": part_number, "partnumber": part_number, f"{{{_PRODUCTION_NS}}}UUID": object_uuid},
+        {
+            "id": str(object_id),
+            "type": "model",
+            "name": part_number,
+            "partnumber": part_number,
+            f"{{{_PRODUCTION_NS}}}UUID": object_uuid,
+        },
     )
     mesh_element = etree.SubElement(obj, f"{{{_CORE_NS}}}mesh")
     vertices = etree.SubElement(mesh_element, f"{{{_CORE_NS}}}vertices")

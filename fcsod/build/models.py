@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from fcso.errors import MeshError
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from fcso.errors import MeshError
 
 
 class BuildConfig(BaseModel):
@@ -21,12 +22,15 @@ class BuildConfig(BaseModel):
         (0.0, 0.0, 0.0), description="Lower corner of the build volume in the build's coordinates, mm"
     )
     spacing_mm: float = Field(5.0, ge=0, description="Minimum gap between any two items, mm")
-    wall_margin_mm: float = Field(10.0, ge=0, description="Minimum gap between an item and the volume's walls, floor and top, mm")
+    wall_margin_mm: float = Field(
+        10.0, ge=0, description="Minimum gap between an item and the volume's walls, floor and top, mm"
+    )
     finger_copies: int = Field(2, ge=1, description="Finger copies the job needs (a gripper's pair)")
     spare_fingers: int = Field(0, ge=0, description="Extra finger copies, placed when there is room")
     finger_orientations: Literal["axis_aligned", "pad_up"] = Field(
         "axis_aligned",
-        description="axis_aligned: the 24 axis-aligned rotations, pad face up preferred; pad_up: only the 4 with the pad face up",
+        description="axis_aligned: the 24 axis-aligned rotations, pad face up preferred; pad_up: only the 4 with the "
+        "pad face up",
     )
     part_orientations: Literal["as_given", "z_rotations", "axis_aligned"] = Field(
         "z_rotations", description="Rotations allowed when packing unplaced parts (z_rotations keeps each part's up)"
@@ -52,7 +56,9 @@ class PlacedItemReport(BaseModel):
     placed_by: Literal["build", "placer"] = Field(description="build: the job's own placement; placer: placed by fcsod")
     transform: list[list[float]] = Field(description="4x4 row-major, mesh frame to build-volume frame, mm")
     bounds_mm: list[list[float]] = Field(description="[[xmin, ymin, zmin], [xmax, ymax, zmax]] of the placed mesh, mm")
-    nearest_distance_mm: float | None = Field(description="Gap to the nearest other item (exact to 0.1 mm); None when alone")
+    nearest_distance_mm: float | None = Field(
+        description="Gap to the nearest other item (exact to 0.1 mm); None when alone"
+    )
     nearest_item: str | None
 
 
@@ -75,7 +81,8 @@ class PlacementReport(BaseModel):
     build_height_mm: float = Field(description="Top of the highest item above the volume floor, mm")
     packing_density: float = Field(description="Volume of the items / (volume x * y * build height)")
     extra_height_needed_mm: float | None = Field(
-        description="When items did not fit: the build height missing to fit them; None when everything fits or nothing would"
+        description="When items did not fit: the build height missing to fit them; None when everything fits or "
+        "nothing would"
     )
     items: list[PlacedItemReport]
     unplaced_items: list[str]

@@ -26,7 +26,6 @@ Lengths are millimetres; the build volume spans ``origin_mm`` to
 from __future__ import annotations
 
 import dataclasses
-
 import itertools
 import time
 from collections.abc import Sequence
@@ -109,7 +108,9 @@ def axis_aligned_rotations() -> np.ndarray:
 
 def z_rotations() -> np.ndarray:
     """The 4 quarter turns about z, (4, 3, 3), identity first."""
-    return np.array([trimesh.transformations.rotation_matrix(k * np.pi / 2.0, [0, 0, 1])[:3, :3].round() for k in range(4)])
+    return np.array(
+        [trimesh.transformations.rotation_matrix(k * np.pi / 2.0, [0, 0, 1])[:3, :3].round() for k in range(4)]
+    )
 
 
 def finger_rotations(pad_normal: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +167,9 @@ def _bounds_span(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(np.maximum(a[1], b[1]) - np.minimum(a[0], b[0])))
 
 
-def _poses(mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, voxel: float, spacing: float) -> list[_Pose]:
+def _poses(
+    mesh: trimesh.Trimesh, rotations: np.ndarray, penalties: np.ndarray, voxel: float, spacing: float
+) -> list[_Pose]:
     """Voxelise ``mesh`` once and turn its kernel and mark into each rotation.
 
     The voxel box starts at the mesh's bounding-box corner; an axis-aligned
@@ -237,7 +240,11 @@ def _spectrum(block: np.ndarray, fft_shape: Sequence[int]) -> np.ndarray:
 
 
 def _correlation(
-    forbidden_spectrum: np.ndarray, kernel_spectrum: np.ndarray, fft_shape: Sequence[int], low: np.ndarray, stop: np.ndarray
+    forbidden_spectrum: np.ndarray,
+    kernel_spectrum: np.ndarray,
+    fft_shape: Sequence[int],
+    low: np.ndarray,
+    stop: np.ndarray,
 ) -> np.ndarray:
     """Circular correlation of two blocks from their :func:`_spectrum`, at indices ``low`` to ``stop`` (exclusive).
 
@@ -312,7 +319,9 @@ def _lowest_position(
         if forbidden_spectrum is None:
             forbidden_spectrum = _spectrum(forbidden[region], fft_shape)
         local_low, local_high = low - region_low, high - region_low
-        counts = _correlation(forbidden_spectrum, _spectrum(pose.kernel, fft_shape), fft_shape, local_low, local_high + 1)
+        counts = _correlation(
+            forbidden_spectrum, _spectrum(pose.kernel, fft_shape), fft_shape, local_low, local_high + 1
+        )
         free = counts < 0.5
         for pose_index, position in rejected:
             local = np.array(position) - low
@@ -426,18 +435,27 @@ def _placed_solid(solid: manifold3d.Manifold, transform: np.ndarray) -> manifold
 
 
 def _mark(forbidden: np.ndarray, start: np.ndarray, block: np.ndarray) -> None:
-    """Forbid (in place) the voxels of ``block`` placed at grid index ``start``; what lies outside the grid is dropped."""
+    """Forbid (in place) the voxels of ``block`` placed at grid index ``start``; what lies outside the grid is
+    dropped.
+    """
     low = np.maximum(start, 0)
     high = np.minimum(start + np.array(block.shape), forbidden.shape)
     if np.any(high <= low):
         return
-    forbidden[tuple(slice(a, b) for a, b in zip(low, high))] |= block[tuple(slice(a, b) for a, b in zip(low - start, high - start))]
+    forbidden[tuple(slice(a, b) for a, b in zip(low, high))] |= block[
+        tuple(slice(a, b) for a, b in zip(low - start, high - start))
+    ]
 
 
 def _clear_of(
-    bounds: np.ndarray, solid: manifold3d.Manifold, others: Sequence[tuple[np.ndarray, manifold3d.Manifold]], spacing: float
+    bounds: np.ndarray,
+    solid: manifold3d.Manifold,
+    others: Sequence[tuple[np.ndarray, manifold3d.Manifold]],
+    spacing: float,
 ) -> bool:
-    """True when ``solid`` is at least ``spacing`` from every solid of ``others`` (exact check; boxes skip the far ones)."""
+    """True when ``solid`` is at least ``spacing`` from every solid of ``others`` (exact check; boxes skip the far
+    ones).
+    """
     for other_bounds, other in others:
         if _bounds_gap(bounds, other_bounds) >= spacing:
             continue
@@ -446,7 +464,9 @@ def _clear_of(
     return True
 
 
-def _nearest_neighbours(bounds: Sequence[np.ndarray], solids: Sequence[manifold3d.Manifold]) -> list[tuple[float | None, int | None]]:
+def _nearest_neighbours(
+    bounds: Sequence[np.ndarray], solids: Sequence[manifold3d.Manifold]
+) -> list[tuple[float | None, int | None]]:
     """Each solid's gap to its nearest other solid and that solid's index.
 
     Candidates go by bounding-box gap; each exact gap is searched no further
@@ -532,7 +552,9 @@ def place_fingers(
     ]
     pose_sets = {id(finger): _poses(finger, finger_rots, finger_penalties, config.voxel_mm, config.spacing_mm)}
     for item in unplaced_parts:
-        pose_sets[id(item.mesh)] = _poses(item.mesh, part_rots, np.zeros(len(part_rots)), config.voxel_mm, config.spacing_mm)
+        pose_sets[id(item.mesh)] = _poses(
+            item.mesh, part_rots, np.zeros(len(part_rots)), config.voxel_mm, config.spacing_mm
+        )
     solids = {id(item.mesh): solid_manifold(item.mesh) for item in build.items}
     solids[id(finger)] = solid_manifold(finger)
     # largest first packs tighter; the spares come last so they never take a
@@ -552,17 +574,24 @@ def place_fingers(
             needed = max(float(_placed_vertices(item)[:, 2].max() - config.origin_mm[2]) for item in tall_placed)
             extra_height = round(needed + config.wall_margin_mm - config_volume[2], 3)
 
-    items = fixed + [item for item in placed if item.kind == "part"] + [item for item in placed if item.kind == "finger"]
+    items = (
+        fixed + [item for item in placed if item.kind == "part"] + [item for item in placed if item.kind == "finger"]
+    )
     bounds_list = [_vertex_bounds(_placed_vertices(item)) for item in items]
     fixed_ids = {id(item) for item in fixed}
     nearest = _nearest_neighbours(bounds_list, [_placed_solid(solids[id(item.mesh)], item.transform) for item in items])
     lower, upper = np.array(config.origin_mm), np.array(config.origin_mm) + config_volume
     item_reports = []
     for item, bounds, (distance, neighbour) in zip(items, bounds_list, nearest):
-        if np.any(bounds[0] < lower + config.wall_margin_mm - 1e-6) or np.any(bounds[1] > upper - config.wall_margin_mm + 1e-6):
+        if np.any(bounds[0] < lower + config.wall_margin_mm - 1e-6) or np.any(
+            bounds[1] > upper - config.wall_margin_mm + 1e-6
+        ):
             warnings.append(f"{item.name} lies outside the build volume minus the wall margin")
         if distance is not None and distance < config.spacing_mm - GAP_TOLERANCE_MM and id(item) in fixed_ids:
-            warnings.append(f"{item.name} is {distance:.2f} mm from {items[neighbour].name}, closer than spacing_mm in the job's build")
+            warnings.append(
+                f"{item.name} is {distance:.2f} mm from {items[neighbour].name}, closer than spacing_mm in the job's "
+                f"build"
+            )
         item_reports.append(
             PlacedItemReport(
                 name=item.name,
@@ -605,11 +634,16 @@ def place_fingers(
     return PlacementResult(items=items, report=report)
 
 
-def _message(fingers_fit: bool, fingers_placed: int, missing: list[str], extra_height: float | None, height: float) -> str:
+def _message(
+    fingers_fit: bool, fingers_placed: int, missing: list[str], extra_height: float | None, height: float
+) -> str:
     """One sentence for the operator and the cell controller."""
     if not missing:
         return f"{fingers_placed} finger copies placed; build height {height:.1f} mm"
     what = "the fingers do not fit into the build volume" if not fingers_fit else f"no room for {', '.join(missing)}"
     if extra_height is None:
         return f"{what}, at any build height; the design is delivered without them in the build"
-    return f"{what}: {extra_height:.1f} mm more free build height needed; the design is delivered without them in the build"
+    return (
+        f"{what}: {extra_height:.1f} mm more free build height needed; the design is delivered without them in the "
+        f"build"
+    )

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import base64
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Literal
 
-from fcso.report.models import CandidateReport, GraspReport, PickPart, ScenarioQuality
 from pydantic import BaseModel, ConfigDict, Field
+
+from fcso.report.models import CandidateReport, GraspReport, PickPart, ScenarioQuality
 
 #: States of a job in the journal and on the bus.
 JobState = Literal["queued", "running", "done", "failed"]
@@ -21,7 +22,7 @@ JobState = Literal["queued", "running", "done", "failed"]
 
 def utc_now() -> str:
     """Now as a UTC ISO 8601 string with milliseconds."""
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 class _Message(BaseModel):
@@ -44,7 +45,8 @@ class StatusMessage(_Message):
     error: str | None = Field(None, description="Why the job failed, naming the file and the defect")
     outputs: list[str] = Field(default_factory=list, description="Files in <output_root>/<job_id>/ when done")
     warnings: list[str] = Field(
-        default_factory=list, description="What a done job could not deliver, such as fingers that did not fit into the build volume"
+        default_factory=list,
+        description="What a done job could not deliver, such as fingers that did not fit into the build volume",
     )
 
 
@@ -87,7 +89,9 @@ class MessageSignature(_Message):
     """Ed25519 signature of one zenoh message (see :mod:`fcsod.signing` for the signed bytes)."""
 
     algorithm: Literal["ed25519"] = "ed25519"
-    key_id: str = Field(pattern=r"^[0-9a-f]{16}$", description="First 16 hex digits of the SHA-256 of the raw public key")
+    key_id: str = Field(
+        pattern=r"^[0-9a-f]{16}$", description="First 16 hex digits of the SHA-256 of the raw public key"
+    )
     signature_base64: str = Field(description="The 64-byte signature, base64")
 
 
@@ -105,7 +109,9 @@ class DesignAttachment(_Message):
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the STL payload, hex")
     file: str = Field("finger.stl", description="Name of the file in the job's output folder")
     size_bytes: int
-    finger_set: int | None = Field(None, description="Finger set of this finger when the job has several (key .../design/<set>)")
+    finger_set: int | None = Field(
+        None, description="Finger set of this finger when the job has several (key .../design/<set>)"
+    )
     signature: MessageSignature | None = Field(None, description="Added by the daemon when it publishes or replies")
 
 
@@ -113,22 +119,28 @@ class PlanSet(_Message):
     """One finger set of a pick plan: the finger to mount and the parts to pick with it."""
 
     set: int = Field(description="Finger set, 1 = first; mount the sets in the plan's order")
-    finger_key: str = Field(description="zenoh key of the set's finger STL (<prefix>/<cell>/jobs/<job_id>/design[/<set>])")
+    finger_key: str = Field(
+        description="zenoh key of the set's finger STL (<prefix>/<cell>/jobs/<job_id>/design[/<set>])"
+    )
     finger_file: str = Field(description="The finger STL in the job's output folder")
     finger_sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the finger STL, hex")
-    finger_copies: int = Field(description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested)")
+    finger_copies: int = Field(
+        description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested)"
+    )
     quality_mm2: float = Field(description="Q of the set's finger (min E over its scenarios), mm²")
     worst_retained: float = Field(description="Least E / E* over the set's scenarios")
     parts: list[PickPart] = Field(description="Parts to pick with this finger, with quantities and grasps")
 
 
 class PlanMessage(_Message):
-    """``<prefix>/<cell>/jobs/<job_id>/plan``: the pick plan, which finger set to mount and which parts to pick with it (METHOD §11)."""
+    """``<prefix>/<cell>/jobs/<job_id>/plan``: the pick plan, which finger set to mount and which parts to pick with it (METHOD §11)."""  # noqa: E501
 
     job_id: str
     sets: list[PlanSet] = Field(description="In the order to mount them")
     min_retained: float = Field(description="[finger_sets] min_retained of the job")
-    min_retained_reached: bool = Field(description="Every graspable scenario keeps at least min_retained of its solo quality")
+    min_retained_reached: bool = Field(
+        description="Every graspable scenario keeps at least min_retained of its solo quality"
+    )
     worst_retained: float | None = Field(description="Least E / E* over the job's graspable scenarios")
     ungraspable_parts: list[str] = Field(description="Parts no set can grasp: not in the plan")
     partition: str = Field(description="How the sets were found and what bounds them")
@@ -147,7 +159,8 @@ class PlacementMessage(_Message):
     build_height_mm: float = Field(description="Top of the highest item above the volume floor, mm")
     packing_density: float = Field(description="Volume of the items / (volume x * y * build height)")
     extra_height_needed_mm: float | None = Field(
-        description="When items did not fit: the build height missing to fit them, mm; None when everything fits or nothing would"
+        description="When items did not fit: the build height missing to fit them, mm; None when everything fits or "
+        "nothing would"
     )
     unplaced_items: list[str] = Field(description="Items left out of build.3mf")
     message: str
@@ -171,7 +184,9 @@ class JobSpecRecord(_Message):
     manifest: str | None = Field(description="Text of job.toml, none without a manifest")
     parts: list[dict] = Field(description="Parts as used: file, units, quantity, scale_to_mm")
     settings: dict = Field(description="The fcso settings of the job (design-config.json)")
-    build: dict | None = Field(None, description="The job's build placement settings (the [build] section of job-manifest.json)")
+    build: dict | None = Field(
+        None, description="The job's build placement settings (the [build] section of job-manifest.json)"
+    )
     fcsod_version: str
     fcso_version: str
 
@@ -242,7 +257,7 @@ class DesignRecord(_Message):
 
 
 class OutputFilesRecord(_Message):
-    """``/job/outputs``: the files of the job's output folder with their hashes (checked by ``fcsod audit --verify``)."""
+    """``/job/outputs``: the files of the job's output folder with their hashes (checked by ``fcsod audit --verify``)."""  # noqa: E501
 
     job_id: str
     files: list[InputFile]
@@ -358,7 +373,9 @@ def job_key(prefix: str, cell: str, job_id: str, topic: str) -> str:
 
 
 def split_job_key(key_expr: str) -> tuple[str, str] | None:
-    """``(job_id, topic)`` of a job's key, where a finger set's topics are ``design/<set>`` and ``verification/<set>``; None for other keys."""
+    """``(job_id, topic)`` of a job's key, where a finger set's topics are ``design/<set>`` and ``verification/<set>``;
+    None for other keys.
+    """
     parts = key_expr.split("/")
     for width in (1, 2):
         if len(parts) >= 3 + width and parts[-2 - width] == "jobs":
@@ -396,7 +413,7 @@ class BusMessage:
     attachment: bytes | None = None
 
     @classmethod
-    def json_body(cls, prefix: str, cell: str, topic: str, body: BaseModel) -> "BusMessage":
+    def json_body(cls, prefix: str, cell: str, topic: str, body: BaseModel) -> BusMessage:
         """A JSON message of one of the job's topics; ``body`` has a ``job_id``."""
         job_id = body.job_id
         return cls(job_id, topic, job_key(prefix, cell, job_id, topic), ENCODING_JSON, body.model_dump_json().encode())
@@ -413,10 +430,14 @@ class BusMessage:
         )
 
     @classmethod
-    def from_record(cls, record: BusRecord) -> "BusMessage":
+    def from_record(cls, record: BusRecord) -> BusMessage:
         """The message a :class:`BusRecord` keeps (for replay)."""
         job_id, topic = split_job_key(record.key_expr) or ("", record.key_expr.rsplit("/", 1)[-1])
-        payload = record.payload_text.encode() if record.payload_text is not None else base64.b64decode(record.payload_base64 or "")
+        payload = (
+            record.payload_text.encode()
+            if record.payload_text is not None
+            else base64.b64decode(record.payload_base64 or "")
+        )
         attachment = record.attachment.encode() if record.attachment is not None else None
         return cls(job_id, topic, record.key_expr, record.encoding, payload, attachment)
 
@@ -444,7 +465,9 @@ class VerificationMessage(BaseModel):
     job_id: str
     passed: bool = Field(description="Every scenario reached the success threshold")
     file: str = Field(description="The full result, relative to the job's output folder")
-    finger_set: int | None = Field(None, description="The finger set verified when the job has several (key .../verification/<set>)")
+    finger_set: int | None = Field(
+        None, description="The finger set verified when the job has several (key .../verification/<set>)"
+    )
     scenarios: list[ScenarioOutcome]
     chosen_candidate: int | None = Field(None, description="top_k: the candidate verification chose")
     warnings: list[str]

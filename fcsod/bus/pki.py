@@ -1,4 +1,5 @@
-"""``fcsod pki init``: a small local CA, the daemon's and the cell controllers' certificates, zenoh configs with mTLS and access control.
+"""``fcsod pki init``: a small local CA, the daemon's and the cell controllers' certificates, zenoh configs with mTLS
+and access control.
 
 Layout written below ``DIR`` (private keys mode 0600 in 0700 folders)::
 
@@ -26,6 +27,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
 from fcso.errors import ConfigError
 
 from .ros2_config import LIVELINESS_ADMIN_SPACE
@@ -57,7 +59,9 @@ class PkiFiles:
 
 
 def _name(common_name: str) -> x509.Name:
-    return x509.Name([x509.NameAttribute(NameOID.ORGANIZATION_NAME, "fcsod"), x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
+    return x509.Name(
+        [x509.NameAttribute(NameOID.ORGANIZATION_NAME, "fcsod"), x509.NameAttribute(NameOID.COMMON_NAME, common_name)]
+    )
 
 
 def _write_key(key: ec.EllipticCurvePrivateKey, path: Path) -> None:
@@ -79,7 +83,7 @@ def _private_dir(path: Path) -> Path:
 def create_ca(common_name: str) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
     """A self-signed CA certificate (may sign leaf certificates only) and its key."""
     key = ec.generate_private_key(ec.SECP256R1())
-    now = datetime.datetime.now(datetime.timezone.utc)
+    now = datetime.datetime.now(datetime.UTC)
     certificate = (
         x509.CertificateBuilder()
         .subject_name(_name(common_name))
@@ -90,7 +94,17 @@ def create_ca(common_name: str) -> tuple[x509.Certificate, ec.EllipticCurvePriva
         .not_valid_after(now + datetime.timedelta(days=CA_DAYS))
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
         .add_extension(
-            x509.KeyUsage(False, False, False, False, False, key_cert_sign=True, crl_sign=True, encipher_only=False, decipher_only=False),
+            x509.KeyUsage(
+                False,
+                False,
+                False,
+                False,
+                False,
+                key_cert_sign=True,
+                crl_sign=True,
+                encipher_only=False,
+                decipher_only=False,
+            ),
             critical=True,
         )
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
@@ -115,7 +129,7 @@ def issue(
         client checks the daemon's against the host it connects to).
     """
     key = ec.generate_private_key(ec.SECP256R1())
-    now = datetime.datetime.now(datetime.timezone.utc)
+    now = datetime.datetime.now(datetime.UTC)
     names: list[x509.GeneralName] = []
     for host in dict.fromkeys(hosts or [common_name]):
         try:
@@ -132,9 +146,12 @@ def issue(
         .not_valid_after(now + datetime.timedelta(days=LEAF_DAYS))
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(
-            x509.KeyUsage(True, False, False, False, False, False, False, encipher_only=False, decipher_only=False), critical=True
+            x509.KeyUsage(True, False, False, False, False, False, False, encipher_only=False, decipher_only=False),
+            critical=True,
         )
-        .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
+        .add_extension(
+            x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False
+        )
         .add_extension(x509.SubjectAlternativeName(names), critical=False)
         .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
         .sign(ca_key, hashes.SHA256())
@@ -168,16 +185,34 @@ def access_control(prefix: str, cell: str, clients: list[str], ros2_domain_id: i
     if ros2_domain_id is not None:
         # ** never matches a verbatim chunk such as @adv: the AdvancedPublisher's cache,
         # heartbeat and detection token (<topic key>/@adv/pub/...) need their own key
-        keys += [f"{ros2_domain_id}/**", f"{ros2_domain_id}/**/@adv/**", f"{LIVELINESS_ADMIN_SPACE}/{ros2_domain_id}/**"]
+        keys += [
+            f"{ros2_domain_id}/**",
+            f"{ros2_domain_id}/**/@adv/**",
+            f"{LIVELINESS_ADMIN_SPACE}/{ros2_domain_id}/**",
+        ]
     return {
         "enabled": True,
         "default_permission": "deny",
         "rules": [
-            {"id": "clients-ask", "messages": CLIENT_INGRESS, "flows": ["ingress"], "permission": "allow", "key_exprs": keys},
-            {"id": "daemon-tells", "messages": DAEMON_EGRESS, "flows": ["egress"], "permission": "allow", "key_exprs": keys},
+            {
+                "id": "clients-ask",
+                "messages": CLIENT_INGRESS,
+                "flows": ["ingress"],
+                "permission": "allow",
+                "key_exprs": keys,
+            },
+            {
+                "id": "daemon-tells",
+                "messages": DAEMON_EGRESS,
+                "flows": ["egress"],
+                "permission": "allow",
+                "key_exprs": keys,
+            },
         ],
         "subjects": [{"id": "cell-controllers", "cert_common_names": list(clients)}],
-        "policies": [{"id": "cell-controllers", "rules": ["clients-ask", "daemon-tells"], "subjects": ["cell-controllers"]}],
+        "policies": [
+            {"id": "cell-controllers", "rules": ["clients-ask", "daemon-tells"], "subjects": ["cell-controllers"]}
+        ],
     }
 
 
@@ -201,7 +236,12 @@ def daemon_zenoh_config(listen: list[str], key_dir: Path, acl: dict | None) -> d
 
 def client_zenoh_config(connect: list[str], key_dir: Path) -> dict:
     """A cell controller's zenoh session: client mode, connecting over TLS with its certificate."""
-    return _tls_session("client", listen=[], connect=connect, tls={"root_ca_certificate": str(key_dir / "ca.pem"), **_tls_connect(key_dir)})
+    return _tls_session(
+        "client",
+        listen=[],
+        connect=connect,
+        tls={"root_ca_certificate": str(key_dir / "ca.pem"), **_tls_connect(key_dir)},
+    )
 
 
 def _tls_connect(key_dir: Path) -> dict:
@@ -274,7 +314,11 @@ def add_client(directory: str | Path, name: str, connect: list[str], hosts: list
     verify_key = directory / "daemon" / VERIFY_KEY_NAME
     if verify_key.is_file():
         (folder / VERIFY_KEY_NAME).write_bytes(verify_key.read_bytes())
-    write_json5(folder / "zenoh.json5", f"zenoh session of cell controller {name!r}", client_zenoh_config(connect, folder.resolve()))
+    write_json5(
+        folder / "zenoh.json5",
+        f"zenoh session of cell controller {name!r}",
+        client_zenoh_config(connect, folder.resolve()),
+    )
     return folder
 
 
@@ -355,7 +399,14 @@ def init_pki(
     host = hosts[0]
     connect = [f"tls/{f'[{host}]' if ':' in host else host}:{port}"]
     written = {name: add_client(directory, name, connect) for name in clients}
-    return PkiFiles(directory, daemon_dir / "zenoh.json5", daemon_dir / SIGNING_KEY_NAME, daemon_dir / VERIFY_KEY_NAME, written, key_dir)
+    return PkiFiles(
+        directory,
+        daemon_dir / "zenoh.json5",
+        daemon_dir / SIGNING_KEY_NAME,
+        daemon_dir / VERIFY_KEY_NAME,
+        written,
+        key_dir,
+    )
 
 
 def config_lines(files: PkiFiles) -> list[str]:
@@ -372,14 +423,19 @@ def config_lines(files: PkiFiles) -> list[str]:
         "",
         f"the daemon reads ca.pem, cert.pem, key.pem and {SIGNING_KEY_NAME} from {files.runtime_dir}; with systemd:",
     ]
-    lines += [f"  LoadCredential={name}:{(daemon / name).resolve()}" for name in ("ca.pem", "cert.pem", "key.pem", SIGNING_KEY_NAME)]
+    lines += [
+        f"  LoadCredential={name}:{(daemon / name).resolve()}"
+        for name in ("ca.pem", "cert.pem", "key.pem", SIGNING_KEY_NAME)
+    ]
     lines.append("")
     for name, folder in files.clients.items():
         folder = folder.resolve()
         lines += [
             f"cell controller {name!r}: copy {folder} to it, then",
-            f"  fcsod subscribe --config fcsod.toml --zenoh-config {folder / 'zenoh.json5'} --verify-key {folder / VERIFY_KEY_NAME}",
-            f"  (python: fcsod.verify_message(key, payload, attachment, fcsod.load_verify_key('{folder / VERIFY_KEY_NAME}')))",
+            f"  fcsod subscribe --config fcsod.toml --zenoh-config {folder / 'zenoh.json5'} --verify-key "
+            f"{folder / VERIFY_KEY_NAME}",
+            f"  (python: fcsod.verify_message(key, payload, attachment, "
+            f"fcsod.load_verify_key('{folder / VERIFY_KEY_NAME}')))",
         ]
     return lines
 
@@ -412,11 +468,14 @@ def link_weaknesses(config) -> list[str]:
     plain = [e for e in endpoints if e.split("/", 1)[0] not in ("tls", "quic")]
     if plain:
         weaknesses.append(
-            f"zenoh endpoints without TLS ({', '.join(plain)}): anyone who reaches them can read every design and publish "
+            f"zenoh endpoints without TLS ({', '.join(plain)}): anyone who reaches them can read every design and "
+            f"publish "
             "under the daemon's keys; use them in a lab only (fcsod pki init makes the secure set-up)"
         )
     if len(plain) < len(endpoints) and json.loads(config.get_json("transport/link/tls/enable_mtls")) is not True:
-        weaknesses.append("zenoh TLS without client certificates (transport/link/tls/enable_mtls is not true): any client may connect")
+        weaknesses.append(
+            "zenoh TLS without client certificates (transport/link/tls/enable_mtls is not true): any client may connect"
+        )
     if json.loads(config.get_json("access_control/enabled")) is not True:
         weaknesses.append("zenoh access control is off: every connected client may publish under the daemon's keys")
     return weaknesses

@@ -39,7 +39,7 @@ import re
 import threading
 import time
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from typing import TYPE_CHECKING
 
 import xxhash
@@ -92,7 +92,9 @@ def topic_name(config: Ros2Config, relative: str) -> str:
 
 
 def dds_type_name(type_name: str) -> str:
-    """The type name rmw_zenoh puts in keys: ``geometry_msgs/msg/PoseArray`` -> ``geometry_msgs::msg::dds_::PoseArray_``."""
+    """The type name rmw_zenoh puts in keys: ``geometry_msgs/msg/PoseArray`` ->
+    ``geometry_msgs::msg::dds_::PoseArray_``.
+    """
     package, kind, name = type_name.split("/")
     return f"{package}::{kind}::dds_::{name}_"
 
@@ -102,7 +104,7 @@ def type_hash(type_name: str) -> str:
     return TYPESTORE.hash_rihs01(type_name)
 
 
-@lru_cache(maxsize=None)
+@cache
 def message_definition(type_name: str) -> str:
     """The ``ros2msg`` definition text of a type with its dependencies (an MCAP schema)."""
     return TYPESTORE.generate_msgdef(type_name, ros_version=2)[0]
@@ -152,11 +154,23 @@ def liveliness_key_expr(
     topic, type_name : str, optional
         The publisher's fully qualified topic and ROS 2 type.
     """
-    chunks = [LIVELINESS_ADMIN_SPACE, str(domain_id), zid, str(node_id), str(entity_id), "NN" if topic is None else "MP"]
+    chunks = [
+        LIVELINESS_ADMIN_SPACE,
+        str(domain_id),
+        zid,
+        str(node_id),
+        str(entity_id),
+        "NN" if topic is None else "MP",
+    ]
     # enclave "/" (the default), then namespace and node name, mangled
     chunks += [mangle("/"), mangle(config.namespace), mangle(config.node_name)]
     if topic is not None:
-        chunks += [mangle(topic), mangle(dds_type_name(type_name)), type_hash(type_name), qos_key_chunk(config.history_depth)]
+        chunks += [
+            mangle(topic),
+            mangle(dds_type_name(type_name)),
+            type_hash(type_name),
+            qos_key_chunk(config.history_depth),
+        ]
     return "/".join(chunks)
 
 
@@ -167,14 +181,18 @@ def entity_gid(liveliness_key: str) -> bytes:
 
 def encode_attachment(sequence_number: int, source_timestamp_ns: int, gid: bytes) -> bytes:
     """rmw_zenoh's attachment: zenoh-ext serialisation of (int64, int64, 16 bytes as a sequence)."""
-    return zenoh.ext.z_serialize((zenoh.ext.Int64(sequence_number), zenoh.ext.Int64(source_timestamp_ns), gid)).to_bytes()
+    return zenoh.ext.z_serialize(
+        (zenoh.ext.Int64(sequence_number), zenoh.ext.Int64(source_timestamp_ns), gid)
+    ).to_bytes()
 
 
 # ------------------------------------------------------------------ messages
 
 
 def rest_frame_id(part: str, pose_index: int) -> str:
-    """The frame id of a part's resting frame: ``fcso_<part>_rest<pose_index>`` (characters other than letters, digits and ``_`` become ``_``)."""
+    """The frame id of a part's resting frame: ``fcso_<part>_rest<pose_index>`` (characters other than letters, digits
+    and ``_`` become ``_``).
+    """
     return re.sub(r"[^A-Za-z0-9_]", "_", f"fcso_{part}_rest{pose_index}")
 
 
@@ -195,7 +213,11 @@ def grasp_pose_arrays(grasps: list[dict], stamp_ns: int) -> list:
     """
     types = TYPESTORE.types
     header_type, pose_type = types["std_msgs/msg/Header"], types["geometry_msgs/msg/Pose"]
-    point_type, quaternion_type, array_type = types["geometry_msgs/msg/Point"], types["geometry_msgs/msg/Quaternion"], types[POSE_ARRAY]
+    point_type, quaternion_type, array_type = (
+        types["geometry_msgs/msg/Point"],
+        types["geometry_msgs/msg/Quaternion"],
+        types[POSE_ARRAY],
+    )
     arrays = []
     for grasp in grasps:
         x, y, z = (value / 1000.0 for value in grasp["position_mm"])
@@ -230,8 +252,9 @@ def ros2_messages(message: BusMessage, stamp_ns: int) -> list[tuple[str, str, by
     return [(relative, type_name, bytes(TYPESTORE.serialize_cdr(body, type_name))) for body in bodies]
 
 
-def record_ros2(recorder: "Recorder", message: BusMessage, config: Ros2Config, log_time_ns: int | None = None) -> None:
-    """Write the ROS 2 form of a native message to ``job.mcap``: ``cdr`` messages on ``ros2msg`` channels named like the live topics.
+def record_ros2(recorder: Recorder, message: BusMessage, config: Ros2Config, log_time_ns: int | None = None) -> None:
+    """Write the ROS 2 form of a native message to ``job.mcap``: ``cdr`` messages on ``ros2msg`` channels named like the
+    live topics.
 
     The channels carry rosbag2's ``topic_type_hash`` metadata, so
     ``ros2 bag play`` (rosbag2's MCAP storage) replays them.
@@ -300,11 +323,15 @@ class Ros2Node:
                 reliability=zenoh.Reliability.RELIABLE,
                 congestion_control=zenoh.CongestionControl.DROP,
                 cache=zenoh.ext.CacheConfig(config.history_depth),
-                sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=_HEARTBEAT_PERIOD_S),
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=None, sporadic_heartbeat=_HEARTBEAT_PERIOD_S
+                ),
                 publisher_detection=True,
             )
             token = session.liveliness().declare_token(token_key)
-            self.publishers[relative] = _Publisher(name, type_name, key_expr, token_key, entity_gid(token_key), publisher, token)
+            self.publishers[relative] = _Publisher(
+                name, type_name, key_expr, token_key, entity_gid(token_key), publisher, token
+            )
 
     def publish(self, message: BusMessage) -> list[str]:
         """Publish the ROS 2 form of a native message; returns the key expressions put (none for other topics)."""

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-
 #: Admin space of rmw_zenoh's liveliness tokens.
 LIVELINESS_ADMIN_SPACE = "@ros2_lv"
 

@@ -20,7 +20,9 @@ from .messages import BusMessage, daemon_key, jobs_key
 log = logging.getLogger("fcsod.bus")
 
 
-def session_config(settings: ZenohConfig, listen: list[str] | None = None, connect: list[str] | None = None) -> zenoh.Config:
+def session_config(
+    settings: ZenohConfig, listen: list[str] | None = None, connect: list[str] | None = None
+) -> zenoh.Config:
     """A zenoh config: the config file if any, then the inline settings, then ``listen``/``connect`` overrides.
 
     Parameters
@@ -35,14 +37,19 @@ def session_config(settings: ZenohConfig, listen: list[str] | None = None, conne
         config.insert_json5("mode", json.dumps(settings.mode))
     if settings.multicast_scouting is not None:
         config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
-    endpoints = {"listen": listen if listen is not None else settings.listen, "connect": connect if connect is not None else settings.connect}
+    endpoints = {
+        "listen": listen if listen is not None else settings.listen,
+        "connect": connect if connect is not None else settings.connect,
+    }
     for kind, values in endpoints.items():
         if values is not None:
             config.insert_json5(f"{kind}/endpoints", json.dumps(values))
     return config
 
 
-def open_session(settings: ZenohConfig, listen: list[str] | None = None, connect: list[str] | None = None) -> zenoh.Session:
+def open_session(
+    settings: ZenohConfig, listen: list[str] | None = None, connect: list[str] | None = None
+) -> zenoh.Session:
     """Open a zenoh session from the ``[zenoh]`` section (see :func:`session_config`)."""
     return zenoh.open(session_config(settings, listen, connect))
 

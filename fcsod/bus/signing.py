@@ -28,6 +28,7 @@ from pathlib import Path
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+
 from fcso.errors import ConfigError
 
 from ..config import DaemonConfig
@@ -47,7 +48,9 @@ class SignatureError(Exception):
 
 def signed_bytes(key_expr: str, job_id: str, payload: bytes) -> bytes:
     """The bytes a signature covers: context, key expression, job id and the payload's SHA-256 (hex)."""
-    return b"\0".join([SIGNATURE_CONTEXT, key_expr.encode(), job_id.encode(), hashlib.sha256(payload).hexdigest().encode()])
+    return b"\0".join(
+        [SIGNATURE_CONTEXT, key_expr.encode(), job_id.encode(), hashlib.sha256(payload).hexdigest().encode()]
+    )
 
 
 def key_id(public_key: Ed25519PublicKey) -> str:
@@ -57,7 +60,9 @@ def key_id(public_key: Ed25519PublicKey) -> str:
 
 
 def job_id_of(key_expr: str) -> str | None:
-    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>`` (:func:`fcsod.messages.split_job_key`), None for other keys."""
+    """The job id chunk of ``<prefix>/<cell>/jobs/<job_id>/<topic>`` (:func:`fcsod.bus.messages.split_job_key`), None
+    for other keys.
+    """
     split = split_job_key(key_expr)
     return split[0] if split is not None else None
 
@@ -76,7 +81,7 @@ class Signer:
         self.key_id = key_id(self.public_key)
 
     @classmethod
-    def from_file(cls, path: str | Path) -> "Signer":
+    def from_file(cls, path: str | Path) -> Signer:
         """Load a PEM (PKCS#8) Ed25519 private key.
 
         Raises
@@ -88,7 +93,9 @@ class Signer:
 
     def sign(self, message: BusMessage) -> BusMessage:
         """``message`` with its signed attachment (see :meth:`attachment`)."""
-        return replace(message, attachment=self.attachment(message.key_expr, message.job_id, message.payload, message.attachment))
+        return replace(
+            message, attachment=self.attachment(message.key_expr, message.job_id, message.payload, message.attachment)
+        )
 
     def attachment(self, key_expr: str, job_id: str, payload: bytes, attachment: bytes | None) -> bytes:
         """The attachment to send: ``attachment``'s JSON object (or ``{"job_id": ...}``) plus ``signature``.
@@ -104,7 +111,9 @@ class Signer:
         """
         body = json.loads(attachment) if attachment else {"job_id": job_id}
         signature = self.private_key.sign(signed_bytes(key_expr, job_id, payload))
-        body["signature"] = MessageSignature(key_id=self.key_id, signature_base64=base64.b64encode(signature).decode()).model_dump()
+        body["signature"] = MessageSignature(
+            key_id=self.key_id, signature_base64=base64.b64encode(signature).decode()
+        ).model_dump()
         return json.dumps(body, separators=(",", ":")).encode()
 
 
@@ -151,7 +160,9 @@ def verify_message(key_expr: str, payload: bytes, attachment: bytes | None, publ
     try:
         public_key.verify(raw, signed_bytes(key_expr, job_id, payload))
     except InvalidSignature:
-        raise SignatureError(f"{key_expr}: bad signature (key, job id or payload changed after signing, or a forged key id)") from None
+        raise SignatureError(
+            f"{key_expr}: bad signature (key, job id or payload changed after signing, or a forged key id)"
+        ) from None
     return body
 
 
@@ -164,7 +175,9 @@ def generate_signing_key(path: str | Path) -> Signer:
     """
     path = Path(path)
     private_key = Ed25519PrivateKey.generate()
-    pem = private_key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+    pem = private_key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
     write_private(path, pem)
     write_public_key(private_key.public_key(), path.with_name(VERIFY_KEY_NAME))
     return Signer(private_key)
@@ -172,7 +185,9 @@ def generate_signing_key(path: str | Path) -> Signer:
 
 def write_public_key(public_key: Ed25519PublicKey, path: Path) -> None:
     """Write a public key as PEM (SubjectPublicKeyInfo), mode 0644."""
-    path.write_bytes(public_key.public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo))
+    path.write_bytes(
+        public_key.public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo)
+    )
     path.chmod(0o644)
 
 

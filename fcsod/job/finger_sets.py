@@ -32,12 +32,21 @@ def place_sets(build: Build, sets: SetsResult, config: BuildConfig) -> list[Plac
     """
     results = []
     for number, design in enumerate(sets.designs, start=1):
-        placed = place_fingers(build, design.finger, config, pad_normal=design.flat_finger.contact_normal, finger_name=f"fcso-finger-{number}")
+        placed = place_fingers(
+            build,
+            design.finger,
+            config,
+            pad_normal=design.flat_finger.contact_normal,
+            finger_name=f"fcso-finger-{number}",
+        )
         for item in placed.items:
             if item.kind == "finger" and item.finger_set is None:
                 item.finger_set = number
         results.append(placed)
-        build = Build(items=[BuildItem(i.name, i.mesh, i.transform, i.kind, i.part_number, i.finger_set) for i in placed.items], source=build.source)
+        build = Build(
+            items=[BuildItem(i.name, i.mesh, i.transform, i.kind, i.part_number, i.finger_set) for i in placed.items],
+            source=build.source,
+        )
     return results
 
 
@@ -47,13 +56,26 @@ def design_messages(prefix: str, cell: str, job_id: str, sets: SetsResult, files
     for number in range(1, len(sets.designs) + 1):
         name = set_finger_path(number, sets.several)
         data = files[name]
-        attachment = DesignAttachment(job_id=job_id, sha256=hashlib.sha256(data).hexdigest(), file=name, size_bytes=len(data), finger_set=number)
+        attachment = DesignAttachment(
+            job_id=job_id, sha256=hashlib.sha256(data).hexdigest(), file=name, size_bytes=len(data), finger_set=number
+        )
         topic = f"design/{number}"
-        messages.append(BusMessage(job_id, topic, job_key(prefix, cell, job_id, topic), ENCODING_STL, data, attachment.model_dump_json().encode()))
+        messages.append(
+            BusMessage(
+                job_id,
+                topic,
+                job_key(prefix, cell, job_id, topic),
+                ENCODING_STL,
+                data,
+                attachment.model_dump_json().encode(),
+            )
+        )
     return messages
 
 
-def plan_message(prefix: str, cell: str, job_id: str, sets: SetsResult, files: dict[str, bytes], copies: list[int]) -> BusMessage:
+def plan_message(
+    prefix: str, cell: str, job_id: str, sets: SetsResult, files: dict[str, bytes], copies: list[int]
+) -> BusMessage:
     """The pick plan on ``<prefix>/<cell>/jobs/<job_id>/plan``.
 
     Parameters
@@ -97,15 +119,20 @@ def plan_lines(plan: dict) -> list[str]:
     lines = [
         f"pick plan: {len(plan['sets'])} finger set(s), worst retained "
         + ("-" if plan["worst_retained"] is None else f"{plan['worst_retained']:.3f}")
-        + f", min_retained {plan['min_retained']:g} " + ("reached" if plan["min_retained_reached"] else "NOT reached")
+        + f", min_retained {plan['min_retained']:g} "
+        + ("reached" if plan["min_retained_reached"] else "NOT reached")
     ]
     for entry in plan["sets"]:
         lines.append(
-            f"  set {entry['set']}: mount {entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, sha256 {entry['finger_sha256']}, "
+            f"  set {entry['set']}: mount {entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, "
+            f"sha256 {entry['finger_sha256']}, "
             f"Q = {entry['quality_mm2']:.1f} mm²)"
         )
         for part in entry["parts"]:
-            lines.append(f"    pick {part['quantity']} x {part['part']} (poses {', '.join(str(g['pose_index']) for g in part['grasps'])})")
+            lines.append(
+                f"    pick {part['quantity']} x {part['part']} (poses "
+                f"{', '.join(str(g['pose_index']) for g in part['grasps'])})"
+            )
     if plan["ungraspable_parts"]:
         lines.append("  not picked (no set can grasp them): " + ", ".join(plan["ungraspable_parts"]))
     return lines

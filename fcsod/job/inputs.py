@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from fcso.config import DesignConfig
 from fcso.errors import ConfigError, MeshError
 from fcso.parts import MESH_SUFFIXES
 
-from ..config import MANIFEST_NAME, JobManifest, LimitsConfig, PartEntry, parse_manifest
-from ..bus.messages import InputFile
 from ..build.models import BuildConfig
+from ..bus.messages import InputFile
+from ..config import MANIFEST_NAME, JobManifest, LimitsConfig, PartEntry, parse_manifest
 
 #: (relative path, size in bytes, mtime in ns); size -1 for a missing file.
 FileStat = tuple[str, int, int]
@@ -43,7 +44,9 @@ def is_mesh(relative: str) -> bool:
 
 
 def inside(folder: Path, relative: str) -> Path | None:
-    """The file ``relative`` names in ``folder``, or None when it leaves the folder (absolute, ``..`` or a symlink out)."""
+    """The file ``relative`` names in ``folder``, or None when it leaves the folder (absolute, ``..`` or a symlink
+    out).
+    """
     if Path(relative).is_absolute():
         return None
     resolved_folder = folder.resolve()
@@ -116,7 +119,9 @@ def stat_inputs(folder: Path, inputs: FolderInputs) -> tuple[FileStat, ...]:
 
 
 def slug(name: str) -> str:
-    """A folder name as a key-expression-safe chunk: lower case letters, digits, ``-`` and ``_``, at most 48 characters."""
+    """A folder name as a key-expression-safe chunk: lower case letters, digits, ``-`` and ``_``, at most 48
+    characters.
+    """
     text = re.sub(r"[^a-z0-9_-]+", "-", name.lower()).strip("-_")
     return text[:48] or "job"
 
@@ -187,7 +192,9 @@ def read_manifest(
     if inside(folder, MANIFEST_NAME) is None:
         raise ConfigError(path, "symlink pointing outside the job folder")
     if path.stat().st_size > limits.max_file_bytes:
-        raise ConfigError(path, f"{path.stat().st_size} bytes, more than limits.max_file_bytes ({limits.max_file_bytes})")
+        raise ConfigError(
+            path, f"{path.stat().st_size} bytes, more than limits.max_file_bytes ({limits.max_file_bytes})"
+        )
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -215,14 +222,23 @@ def check_parts(folder: Path, manifest: JobManifest, limits: LimitsConfig) -> li
     if not entries:
         raise MeshError(folder, f"no part: no mesh file ({', '.join(MESH_SUFFIXES)}) in the job folder")
     if len(entries) > limits.max_parts:
-        raise ConfigError(manifest_path if manifest.parts else folder, f"{len(entries)} parts, more than limits.max_parts ({limits.max_parts})")
+        raise ConfigError(
+            manifest_path if manifest.parts else folder,
+            f"{len(entries)} parts, more than limits.max_parts ({limits.max_parts})",
+        )
     checked, total = [], 0
     for number, entry in enumerate(entries):
         where = f"parts.{number}.file" if manifest.parts else entry.file
         path = inside(folder, entry.file)
         if path is None:
-            what = "symlink pointing outside the job folder" if (folder / entry.file).is_symlink() else "path leaves the job folder"
-            raise ConfigError(manifest_path if manifest.parts else folder / entry.file, f"{where}: {entry.file!r}: {what}")
+            what = (
+                "symlink pointing outside the job folder"
+                if (folder / entry.file).is_symlink()
+                else "path leaves the job folder"
+            )
+            raise ConfigError(
+                manifest_path if manifest.parts else folder / entry.file, f"{where}: {entry.file!r}: {what}"
+            )
         if not path.is_file():
             raise ConfigError(manifest_path, f"{where}: {entry.file!r}: file not found in the job folder")
         if not is_mesh(entry.file):
@@ -263,7 +279,9 @@ def _check_3mf(path: Path, limits: LimitsConfig) -> None:
     total = sum(e.file_size for e in entries)
     if total > limits.max_3mf_uncompressed_bytes:
         raise MeshError(
-            path, f"3MF entries inflate to {total} bytes, more than limits.max_3mf_uncompressed_bytes ({limits.max_3mf_uncompressed_bytes})"
+            path,
+            f"3MF entries inflate to {total} bytes, more than limits.max_3mf_uncompressed_bytes "
+            f"({limits.max_3mf_uncompressed_bytes})",
         )
     for entry in entries:
         if entry.compress_size and entry.file_size / entry.compress_size > limits.max_3mf_ratio:

@@ -34,7 +34,8 @@ def worker_main(connection: Connection, parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGUSR1, _time_limit)
-    # the job's code (fcso's design, MuJoCo, matplotlib) loads here, before the worker says it is ready, not in the daemon
+    # the job's code (fcso's design, MuJoCo, matplotlib) loads here, before the worker says it is ready, not in the
+    # daemon
     from .running import run_job
 
     connection.send(("ready", os.getpid()))

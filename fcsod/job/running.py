@@ -1,4 +1,6 @@
-"""Running one job start to end, and what happens when it fails: the record always finishes, the folder always moves into place."""
+"""Running one job start to end, and what happens when it fails: the record always finishes, the folder always moves
+into place.
+"""
 
 from __future__ import annotations
 
@@ -7,13 +9,14 @@ import os
 import shutil
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from fcso import FcsoError
 
 from ..bus.messages import BusMessage, StateChangeRecord, utc_now
-from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder, record_failure
+from ..record.failure import record_failure
+from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder
 from .steps import STEPS
 from .task import JobFolderDeleted, JobRun, JobTask, TimeLimitExceeded, status_message
 from .verification import verify_done_job
@@ -53,13 +56,20 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         for step in STEPS:
             started = time.perf_counter()
             step(run)
-            run.log("info", f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s", stage=step.__name__.removeprefix("step_"))
+            run.log(
+                "info",
+                f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s",
+                stage=step.__name__.removeprefix("step_"),
+            )
             recorder.flush()
     except FcsoError as exc:
         # a part that vanished is the symptom; a deleted folder is the cause
         error = str(exc) if run.folder.is_dir() else str(JobFolderDeleted(run.folder))
     except TimeLimitExceeded:
-        error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({config.jobs.time_limit_seconds:g} s)"
+        error = (
+            f"time limit exceeded: the job ran longer than jobs.time_limit_seconds "
+            f"({config.jobs.time_limit_seconds:g} s)"
+        )
     except JobFolderDeleted as exc:
         error = str(exc)
     except OSError as exc:
@@ -136,11 +146,20 @@ def finish_failed(run: JobRun, error: str) -> BusMessage:
         run.recorder.close_unfinished()
     final = run.status("failed", finished_at=utc_now(), error=error, record=False)
     try:
-        record_failure(run.work_dir, run.task.job_id, error, final, utc_now(), run.task.config.mcap, run.task.config.ros2)
+        record_failure(
+            run.work_dir, run.task.job_id, error, final, utc_now(), run.task.config.mcap, run.task.config.ros2
+        )
         _fsync_files(run.work_dir)
     except OSError:
         shutil.rmtree(run.work_dir, ignore_errors=True)
-        run.emit(("log", "error", "no space even for the job's record: nothing of the job is kept on disk", {"path": str(run.work_dir)}))
+        run.emit(
+            (
+                "log",
+                "error",
+                "no space even for the job's record: nothing of the job is kept on disk",
+                {"path": str(run.work_dir)},
+            )
+        )
     return final
 
 

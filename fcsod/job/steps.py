@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import hashlib
 import time
-from typing import Callable
+from collections.abc import Callable
+
+import numpy as np
 
 import fcso
-import numpy as np
 from fcso import DesignResult, MeshError, load_parts
 from fcso.output.files import sets_output_files
 from fcso.output.layout import FINGER_STL, FINGERPAD_STL, set_folder
@@ -104,21 +105,34 @@ def step_load(run: JobRun) -> None:
         )
         for one in loaded:
             if len(one.mesh.faces) > max_faces:
-                raise MeshError(part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})")
+                raise MeshError(
+                    part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})"
+                )
             if part.path.suffix.lower() == ".3mf":
-                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for transform in one.instances)
+                items.extend(
+                    BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for transform in one.instances
+                )
             else:
                 transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
-                items.extend(BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity))
+                items.extend(
+                    BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity)
+                )
                 # the pieces to pick (fcso counts a part's build items)
                 one.instances = [transform] * part.entry.quantity
             run.loaded.append(one)
             shells = f", {one.shell_note}" if one.shell_note else ""
-            run.log("info", f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents {np.round(one.mesh.extents, 2).tolist()} mm{shells}")
+            run.log(
+                "info",
+                f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents "
+                f"{np.round(one.mesh.extents, 2).tolist()} mm{shells}",
+            )
             for warning in one.warnings:
                 run.log("warning", warning)
     if len(run.loaded) > run.task.config.limits.max_parts:
-        raise MeshError(run.folder, f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})")
+        raise MeshError(
+            run.folder,
+            f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})",
+        )
     make_names_unique(items)
     run.build = Build(items=items, source=str(run.folder))
     placed = sum(1 for item in items if item.transform is not None)
@@ -144,16 +158,28 @@ def step_design(run: JobRun) -> None:
     for entry in run.sets.report.ungraspable if run.sets.report else run.result.report.ungraspable:
         run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
     if run.sets.report is not None:
-        for line in run.sets.report.search.description, *(f"set {s.set}: {', '.join(s.parts)} (Q = {s.quality:.1f} mm², worst retained {s.worst_retained:.3f})" for s in run.sets.report.sets):
+        for line in (
+            run.sets.report.search.description,
+            *(
+                f"set {s.set}: {', '.join(s.parts)} (Q = {s.quality:.1f} mm², worst retained {s.worst_retained:.3f})"
+                for s in run.sets.report.sets
+            ),
+        ):
             run.log("info", f"finger sets: {line}")
 
 
 def step_choose_by_verification(run: JobRun) -> None:
-    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is verified when done)."""
+    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is
+    verified when done).
+    """
     if run.sets.several:
         settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
         if settings.top_k > 0:
-            run.log("warning", "verify top_k chooses among one finger's candidates: with several finger sets each set's design is verified as it is")
+            run.log(
+                "warning",
+                "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
+                "verified as it is",
+            )
         return
     choose_by_verification(run)
 
@@ -165,7 +191,9 @@ def step_record_design(run: JobRun) -> None:
     run.files = {}
     for number, result in enumerate(designs, start=1):
         _record_one_design(run, result, number)
-    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=[g for d in designs for g in d.report.grasps]))
+    recorder.write(
+        TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=[g for d in designs for g in d.report.grasps])
+    )
 
 
 def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
@@ -174,7 +202,12 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
     for scenario in report.scenarios:
         recorder.write(
             TOPIC_POSES,
-            PoseRecord(part=scenario.part, pose_index=scenario.pose_index, probability=scenario.pose_probability, rest_transform=scenario.rest_transform),
+            PoseRecord(
+                part=scenario.part,
+                pose_index=scenario.pose_index,
+                probability=scenario.pose_probability,
+                rest_transform=scenario.rest_transform,
+            ),
         )
         recorder.write(
             TOPIC_SAMPLES,
@@ -188,7 +221,12 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
             ),
         )
     for candidate in report.candidates:
-        recorder.write(TOPIC_CANDIDATES, CandidateRecord(candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario))
+        recorder.write(
+            TOPIC_CANDIDATES,
+            CandidateRecord(
+                candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario
+            ),
+        )
     # report.json and report.html wait for the placement section (step_outputs)
     folder = f"{set_folder(number)}/" if run.sets.several else ""
     finger = run.files[f"{folder}{FINGER_STL}"] = result.finger.export(file_type="stl")
@@ -208,7 +246,8 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
 
 
 def step_placement(run: JobRun) -> None:
-    """Place every finger set's copies into the job's build volume (:func:`fcsod.job.finger_sets.place_sets`, one set or several):
+    """Place every finger set's copies into the job's build volume (:func:`fcsod.job.finger_sets.place_sets`, one set or
+    several):
     ``build.3mf``, the report's placement section, record, scene, bus message.
 
     Fingers that do not fit leave the job done with its design, a warning
@@ -220,7 +259,11 @@ def step_placement(run: JobRun) -> None:
     for placed in placements:
         run.recorder.write(TOPIC_PLACEMENT, placed.report)
     run.files[BUILD_NAME] = export_build_3mf(
-        placements[-1].items, job_id=run.task.job_id, application=f"fcsod {__version__}", creation_date=utc_now(), finger_set=FINGER_SET
+        placements[-1].items,
+        job_id=run.task.job_id,
+        application=f"fcsod {__version__}",
+        creation_date=utc_now(),
+        finger_set=FINGER_SET,
     )
     # the job's report: the job report with several sets, the design's with one (the one verification may have chosen)
     job = run.sets.job_report if several else run.result.report
@@ -237,7 +280,12 @@ def step_placement(run: JobRun) -> None:
                 run.log("warning", f"placement: {warning}")
     if several:
         placement["finger_sets"] = [
-            {"set": k, "finger_copies_placed": p.report.finger_copies_placed, "fingers_fit": p.report.fingers_fit, "message": p.report.message}
+            {
+                "set": k,
+                "finger_copies_placed": p.report.finger_copies_placed,
+                "fingers_fit": p.report.fingers_fit,
+                "message": p.report.message,
+            }
             for k, p in enumerate(placements, start=1)
         ]
     update: dict = {"placement": placement}
@@ -279,14 +327,17 @@ def step_outputs(run: JobRun) -> None:
         TOPIC_OUTPUTS,
         OutputFilesRecord(
             job_id=run.task.job_id,
-            files=[InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in run.files.items()],
+            files=[
+                InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in run.files.items()
+            ],
         ),
     )
     bus, report = run.task.config.bus, run.result.report
     if run.sets is not None and run.sets.report is not None:
-        copies = [int(p.get("finger_copies_placed", 0)) for p in (run.sets.job_report or report).placement.get("finger_sets", [])] or [
-            report.placement["finger_copies_placed"]
-        ]
+        copies = [
+            int(p.get("finger_copies_placed", 0))
+            for p in (run.sets.job_report or report).placement.get("finger_sets", [])
+        ] or [report.placement["finger_copies_placed"]]
         plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files, copies)
     if run.sets.several:
         grasps = [g for d in run.sets.designs for g in d.report.grasps]
@@ -309,7 +360,13 @@ def step_outputs(run: JobRun) -> None:
         candidates_total=report.search.candidates_total,
         proven_optimal=report.search.proven_optimal,
         scenarios=[
-            ScenarioSummary(part=s.part, pose_index=s.pose_index, rles=q.rles, contact_area_mm2=q.contact_area_mm2, effective_area_mm2=q.effective_area)
+            ScenarioSummary(
+                part=s.part,
+                pose_index=s.pose_index,
+                rles=q.rles,
+                contact_area_mm2=q.contact_area_mm2,
+                effective_area_mm2=q.effective_area,
+            )
             for s, q in zip(report.scenarios, best.per_scenario)
         ],
         finger_volume_mm3=report.finger.volume_mm3,
@@ -319,10 +376,14 @@ def step_outputs(run: JobRun) -> None:
         timings_s=report.timings_s,
     )
     finger = run.files[FINGER_STL]
-    attachment = DesignAttachment(job_id=run.task.job_id, sha256=hashlib.sha256(finger).hexdigest(), size_bytes=len(finger))
+    attachment = DesignAttachment(
+        job_id=run.task.job_id, sha256=hashlib.sha256(finger).hexdigest(), size_bytes=len(finger)
+    )
     run.outgoing = [
         BusMessage.json_body(bus.prefix, bus.cell, "quality", quality),
-        BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=report.grasps)),
+        BusMessage.json_body(
+            bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=report.grasps)
+        ),
         BusMessage(
             run.task.job_id,
             "design",

@@ -12,9 +12,9 @@ each takes the :class:`JobRun` and records what it made.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import fcso
 from fcso import DesignConfig, DesignResult
@@ -42,7 +42,9 @@ class JobFolderDeleted(Exception):
     """The job folder disappeared while its job ran: the print job was withdrawn."""
 
     def __init__(self, folder: Path):
-        super().__init__(f"{folder}: the job folder was deleted while its job ran: the job is withdrawn, nothing of it is published")
+        super().__init__(
+            f"{folder}: the job folder was deleted while its job ran: the job is withdrawn, nothing of it is published"
+        )
 
 
 class TimeLimitExceeded(BaseException):
@@ -123,11 +125,16 @@ class JobRun:
         warnings: list[str] | None = None,
         record: bool = True,
     ) -> BusMessage:
-        """The job's status message, recorded on the bus and ROS 2 channels and as a state change (unless ``record`` is false)."""
+        """The job's status message, recorded on the bus and ROS 2 channels and as a state change (unless ``record`` is
+        false).
+        """
         message = status_message(self.task, state, finished_at, error, outputs, warnings)
         if record:
             self.record_published(message)
-            self.recorder.write(TOPIC_STATE, StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error))
+            self.recorder.write(
+                TOPIC_STATE,
+                StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error),
+            )
         return message
 
 
@@ -162,5 +169,3 @@ def status_message(
 
 
 # ------------------------------------------------------------------------ running
-
-

@@ -16,8 +16,8 @@ several finger sets verifies every set's finger, each on
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from fcso.output.design_page import rebuild_report
 from fcso.output.layout import set_folder
@@ -29,7 +29,13 @@ from fcso.sim.verify import DesignUnderTest, design_under_test, verify
 
 from ..bus.messages import BusMessage, ScenarioOutcome, VerificationMessage
 from ..config import VerifySettings
-from ..record.recorder import TOPIC_BUS, TOPIC_VERIFICATION, TOPIC_VERIFICATION_SCENE, VERIFICATION_RECORD_NAME, Recorder
+from ..record.recorder import (
+    TOPIC_BUS,
+    TOPIC_VERIFICATION,
+    TOPIC_VERIFICATION_SCENE,
+    VERIFICATION_RECORD_NAME,
+    Recorder,
+)
 from ..record.scene import scene_updates
 
 
@@ -43,7 +49,12 @@ def choose_by_verification(run) -> None:
     settings = _settings(run)
     if settings.top_k <= 0:
         return
-    chosen, verification, design, ranking = verify_top(run.result, settings.top_k, with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings), _progress(run.log))
+    chosen, verification, design, ranking = verify_top(
+        run.result,
+        settings.top_k,
+        with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings),
+        _progress(run.log),
+    )
     run.sets.designs[0] = chosen
     run.verified = (verification, design, ranking_html(ranking))
     run.log("info", f"verification chose candidate {chosen.report.best} among the {len(ranking)} best by Q")
@@ -71,7 +82,9 @@ def verify_done_job(run, final_dir: Path) -> None:
         _verify_one(run, run.result, final_dir, "", None, settings, log)
 
 
-def _verify_one(run, result, final_dir: Path, folder: str, finger_set: int | None, settings: VerifySettings, log: Callable) -> None:
+def _verify_one(
+    run, result, final_dir: Path, folder: str, finger_set: int | None, settings: VerifySettings, log: Callable
+) -> None:
     """Verify one finger's design, write into ``final_dir / folder``, record and publish; a failure is a warning."""
     name = f"verification of finger set {finger_set}" if finger_set is not None else "verification"
     out = final_dir / folder if folder else final_dir
@@ -84,16 +97,29 @@ def _verify_one(run, result, final_dir: Path, folder: str, finger_set: int | Non
         else:
             log("info", f"{name}: started")
             design = design_under_test(result)
-            verification, extra = verify(design, with_print_density(VerifyConfig(trials=settings.trials), result.report.settings), _progress(log)), ""
+            verification, extra = (
+                verify(
+                    design,
+                    with_print_density(VerifyConfig(trials=settings.trials), result.report.settings),
+                    _progress(log),
+                ),
+                "",
+            )
         write_verification(out, verification, design, extra)
         bus = run.task.config.bus
         topic = "verification" if finger_set is None else f"verification/{finger_set}"
         file = f"{folder}/verification.json" if folder else "verification.json"
-        message = BusMessage.json_body(bus.prefix, bus.cell, topic, _message(run.task.job_id, verification, file, finger_set))
+        message = BusMessage.json_body(
+            bus.prefix, bus.cell, topic, _message(run.task.job_id, verification, file, finger_set)
+        )
         _record(out / VERIFICATION_RECORD_NAME, verification, design, message, run.task.config.mcap)
         run.emit(("publish", message))
         level = "info" if verification.passed else "warning"
-        log(level, f"{name}: design {'passed' if verification.passed else 'did not pass'} in {time.perf_counter() - started:.1f} s")
+        log(
+            level,
+            f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
+            f"{time.perf_counter() - started:.1f} s",
+        )
         for warning in verification.warnings:
             log("warning", f"{name}: {warning}")
     except Exception as exc:  # the design is delivered; verification is extra
@@ -144,7 +170,9 @@ def _message(job_id: str, verification: VerificationReport, file: str, finger_se
 
 
 def _record(path: Path, verification: VerificationReport, design: DesignUnderTest, message: BusMessage, mcap) -> None:
-    """``verification.mcap``: the verification, a Foxglove scene per frame of the first scenario's unperturbed grasp, the bus message."""
+    """``verification.mcap``: the verification, a Foxglove scene per frame of the first scenario's unperturbed grasp,
+    the bus message.
+    """
     recorder = Recorder(path, mcap.compression, mcap.chunk_size_bytes)
     try:
         start = time.time_ns()
@@ -154,5 +182,3 @@ def _record(path: Path, verification: VerificationReport, design: DesignUnderTes
         recorder.write(TOPIC_BUS, message.record(), start)
     finally:
         recorder.finish()
-
-

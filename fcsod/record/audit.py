@@ -69,10 +69,23 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
     if content.truncated:
         say(f"TRUNCATED: the record was cut off ({content.problem}); everything up to the cut is shown")
     for spec in content.of(TOPIC_SPEC):
-        say(f"job {spec['job_id']} from folder {spec['folder']} (fcsod {spec['fcsod_version']}, fcso {spec['fcso_version']})")
+        say(
+            f"job {spec['job_id']} from folder {spec['folder']} (fcsod {spec['fcsod_version']}, fcso "
+            f"{spec['fcso_version']})"
+        )
         for part in spec["parts"]:
-            say(f"  part {part['file']}: units {part['units']}, quantity {part['quantity']}" + (f", scaled to {part['scale_to_mm']} mm" if part.get("scale_to_mm") else ""))
-        say("  manifest: " + ("none (every mesh file, mm)" if spec["manifest"] is None else f"{len(spec['manifest'].splitlines())} lines"))
+            say(
+                f"  part {part['file']}: units {part['units']}, quantity {part['quantity']}"
+                + (f", scaled to {part['scale_to_mm']} mm" if part.get("scale_to_mm") else "")
+            )
+        say(
+            "  manifest: "
+            + (
+                "none (every mesh file, mm)"
+                if spec["manifest"] is None
+                else f"{len(spec['manifest'].splitlines())} lines"
+            )
+        )
     for inputs in content.of(TOPIC_INPUTS):
         for item in inputs["files"]:
             say(f"  input {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}")
@@ -82,24 +95,37 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
         body = message.json()
         if message.topic == TOPIC_STATE:
             say(f"{body['at']} state {body['state']}" + (f": {body['error']}" if body.get("error") else ""))
-        elif message.topic == TOPIC_LOG and (body["level"] != "info" or body.get("stage") is None or body.get("done") is None):
+        elif message.topic == TOPIC_LOG and (
+            body["level"] != "info" or body.get("stage") is None or body.get("done") is None
+        ):
             say(f"  {body['level']}: {body['message']}")
     poses = content.of(TOPIC_POSES)
     if poses:
         say("poses: " + ", ".join(f"{p['part']} #{p['pose_index']} (p={p['probability']:.3f})" for p in poses))
     for samples in content.of(TOPIC_SAMPLES):
         rejected = ", ".join(f"{k} {v}" for k, v in samples["rejected"].items() if v) or "none"
-        say(f"samples {samples['part']} #{samples['pose_index']}: {samples['valid_samples']} valid of {samples['tried_samples']} (rejected: {rejected})")
+        say(
+            f"samples {samples['part']} #{samples['pose_index']}: {samples['valid_samples']} valid of "
+            f"{samples['tried_samples']} (rejected: {rejected})"
+        )
     candidates = content.of(TOPIC_CANDIDATES)
     if candidates:
         best = [c for c in candidates if c["best"]]
-        say(f"candidates: {len(candidates)} evaluated" + (f", best #{best[0]['candidate']['index']} Q = {best[0]['candidate']['quality']:.3f} mm²" if best else ""))
+        say(
+            f"candidates: {len(candidates)} evaluated"
+            + (f", best #{best[0]['candidate']['index']} Q = {best[0]['candidate']['quality']:.3f} mm²" if best else "")
+        )
     for design in content.of(TOPIC_DESIGN):
         data = base64.b64decode(design["finger_stl_base64"])
         actual = hashlib.sha256(data).hexdigest()
-        say(f"design: finger set {design.get('finger_set', 1)}: {len(data)} bytes sha256 {design['finger_sha256']}, volume {design['finger_volume_mm3']:.1f} mm³")
+        say(
+            f"design: finger set {design.get('finger_set', 1)}: {len(data)} bytes sha256 {design['finger_sha256']}, "
+            f"volume {design['finger_volume_mm3']:.1f} mm³"
+        )
         if actual != design["finger_sha256"]:
-            result.problems.append(f"{TOPIC_DESIGN}: recorded finger bytes hash to {actual}, record says {design['finger_sha256']}")
+            result.problems.append(
+                f"{TOPIC_DESIGN}: recorded finger bytes hash to {actual}, record says {design['finger_sha256']}"
+            )
     for placement in content.of(TOPIC_PLACEMENT):
         volume = " x ".join(f"{size:g}" for size in placement["volume_mm"])
         say(
@@ -112,7 +138,11 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
         for warning in placement["warnings"]:
             say(f"  placement warning: {warning}")
     for body in content.of(TOPIC_BUS):
-        size = len(body["payload_text"] or "") if body["payload_base64"] is None else len(base64.b64decode(body["payload_base64"]))
+        size = (
+            len(body["payload_text"] or "")
+            if body["payload_base64"] is None
+            else len(base64.b64decode(body["payload_base64"]))
+        )
         line = f"published {body['key_expr']} ({body['encoding']}, {size} bytes)"
         if body["payload_text"] is not None and body["key_expr"].endswith("/status"):
             status = json.loads(body["payload_text"])
@@ -125,7 +155,9 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
             announced = json.loads(body["attachment"]).get("sha256")
             actual = hashlib.sha256(base64.b64decode(body["payload_base64"])).hexdigest()
             if announced != actual:
-                result.problems.append(f"{body['key_expr']}: payload hashes to {actual}, attachment announces {announced}")
+                result.problems.append(
+                    f"{body['key_expr']}: payload hashes to {actual}, attachment announces {announced}"
+                )
     ros2 = Counter((m.topic, m.schema_name) for m in content.messages if m.message_encoding == "cdr")
     for (topic, type_name), count in ros2.items():
         say(f"ROS 2 {topic} ({type_name}, cdr): {count} messages, for ros2 bag play")

@@ -2,8 +2,9 @@
 
 Messages are JSON (``message_encoding="json"``) with JSON Schema schemas
 (``encoding="jsonschema"``) generated from the pydantic models of
-:mod:`fcsod.messages`, plus the ROS 2 form of the published messages
-(``cdr`` with ``ros2msg`` schemas, written by :func:`fcsod.ros2.record_ros2`). Chunks are small and flushed after every stage, so a
+:mod:`fcsod.bus.messages`, plus the ROS 2 form of the published messages
+(``cdr`` with ``ros2msg`` schemas, written by :func:`fcsod.bus.ros2.record_ros2`). Chunks are small and flushed after
+every stage, so a
 job cut off by a crash leaves a record readable up to the last flush.
 """
 
@@ -17,15 +18,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from fcso.schema import schema_text
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 from pydantic import BaseModel
 
+from fcso.schema import schema_text
+
 from .. import __version__
+from ..build.models import PlacementReport
 from ..bus.messages import (
-    BusMessage,
     BusRecord,
     CandidateRecord,
     DesignRecord,
@@ -39,10 +41,6 @@ from ..bus.messages import (
     SceneUpdate,
     StateChangeRecord,
 )
-from ..build.models import PlacementReport
-from ..bus.ros2 import record_ros2
-from ..bus.ros2_config import Ros2Config
-from ..config import McapConfig
 
 #: The record of every job, in its output folder.
 JOB_RECORD_NAME = "job.mcap"
@@ -87,7 +85,16 @@ CHANNELS: dict[str, type[BaseModel]] = {
 ALWAYS_RECORDED = (TOPIC_SPEC, TOPIC_INPUTS, TOPIC_STATE, TOPIC_LOG, TOPIC_BUS)
 
 #: Channels a finished design adds.
-DESIGN_RECORDED = (TOPIC_POSES, TOPIC_SAMPLES, TOPIC_CANDIDATES, TOPIC_DESIGN, TOPIC_GRASPS, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_PLACEMENT)
+DESIGN_RECORDED = (
+    TOPIC_POSES,
+    TOPIC_SAMPLES,
+    TOPIC_CANDIDATES,
+    TOPIC_DESIGN,
+    TOPIC_GRASPS,
+    TOPIC_OUTPUTS,
+    TOPIC_SCENE,
+    TOPIC_PLACEMENT,
+)
 
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -120,7 +127,15 @@ class Recorder:
         self._sequence = 0
         self.finished = False
 
-    def _channel(self, topic: str, name: str, schema: bytes, schema_encoding: str, message_encoding: str, metadata: dict[str, str] | None) -> int:
+    def _channel(
+        self,
+        topic: str,
+        name: str,
+        schema: bytes,
+        schema_encoding: str,
+        message_encoding: str,
+        metadata: dict[str, str] | None,
+    ) -> int:
         if topic not in self._channels:
             key = (name, schema)
             if key not in self._schemas:
@@ -133,7 +148,9 @@ class Recorder:
     def write(self, topic: str, message: BaseModel, log_time_ns: int | None = None) -> None:
         """Record one message; the channel is registered on first use with the message model's schema."""
         model = type(message)
-        self.write_raw(topic, schema_name(model), schema_text(model).encode(), message.model_dump_json().encode(), log_time_ns)
+        self.write_raw(
+            topic, schema_name(model), schema_text(model).encode(), message.model_dump_json().encode(), log_time_ns
+        )
 
     def write_raw(
         self,
@@ -176,7 +193,8 @@ class Recorder:
         try:
             self._stream.close()
         except OSError:
-            # closing flushes what the failed write left buffered: on a full disk that fails again, and the file is abandoned anyway
+            # closing flushes what the failed write left buffered: on a full disk that fails again, and the file is
+            # abandoned anyway
             pass
 
 
@@ -280,25 +298,3 @@ def salvage(source: Path, target: Path, compression: str, chunk_size_bytes: int)
             message.metadata,
         )
     return recorder
-
-
-def record_failure(work_dir: Path, job_id: str, error: str, status: BusMessage, finished_at: str, mcap: McapConfig, ros2: Ros2Config) -> None:
-    """Finish a job's cut-off record with its failure, in place.
-
-    What ``job.mcap`` in ``work_dir`` holds is salvaged into a new record,
-    which gets the error, the ``failed`` status (bus and ROS 2 channels) and
-    the state change, and then takes the old one's name.
-
-    Raises
-    ------
-    OSError
-        The disk cannot take the new record (a full disk).
-    """
-    salvaged = work_dir / f"salvaged-{JOB_RECORD_NAME}"
-    recorder = salvage(work_dir / JOB_RECORD_NAME, salvaged, mcap.compression, mcap.chunk_size_bytes)
-    recorder.write(TOPIC_LOG, LogRecord(level="error", message=error))
-    recorder.write(TOPIC_BUS, status.record())
-    record_ros2(recorder, status, ros2)
-    recorder.write(TOPIC_STATE, StateChangeRecord(job_id=job_id, state="failed", at=finished_at, error=error))
-    recorder.finish()
-    os.replace(salvaged, work_dir / JOB_RECORD_NAME)

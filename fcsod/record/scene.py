@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import trimesh
+
 from fcso import DesignResult
 from fcso.output.render import decimate
 from fcso.sim.report import VerificationReport
@@ -23,12 +24,17 @@ def base64_text(data: bytes) -> str:
     return base64.b64encode(data).decode()
 
 
-def triangles(mesh: trimesh.Trimesh, transform: np.ndarray, color: tuple[float, float, float, float]) -> TriangleListPrimitive:
+def triangles(
+    mesh: trimesh.Trimesh, transform: np.ndarray, color: tuple[float, float, float, float]
+) -> TriangleListPrimitive:
     """``mesh`` moved by ``transform`` (mm) as a Foxglove triangle list in metres, coloured RGBA 0..1."""
     vertices = trimesh.transformations.transform_points(np.asarray(mesh.vertices), transform)
     return TriangleListPrimitive.model_validate(
         {
-            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+            "pose": {
+                "position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+            },
             "points": [{"x": x, "y": y, "z": z} for x, y, z in (vertices / 1000.0).tolist()],
             "color": dict(zip("rgba", color)),
             "indices": np.asarray(mesh.faces).reshape(-1).tolist(),
@@ -46,7 +52,9 @@ def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
     stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
     to_pad = np.linalg.inv(result.pad_to_finger)
     entities, offset_x = [], 0.0
-    for number, (scenario, sample_index, evaluation) in enumerate(zip(result.scenarios, result.best.choice, result.best.scenarios)):
+    for number, (scenario, sample_index, evaluation) in enumerate(
+        zip(result.scenarios, result.best.choice, result.best.scenarios)
+    ):
         sample = scenario.samples[sample_index]
         bounds = scenario.mesh.bounds
         gap = 0.5 * float(np.ptp(bounds[:, 0])) + 60.0
@@ -78,7 +86,8 @@ def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
 
 
 def build_scene_update(items: list[BuildItem], report: PlacementReport, config: BuildConfig) -> SceneUpdate:
-    """Foxglove SceneUpdate of the placed build in metres: the build volume, each part's bounding box and the finger copies.
+    """Foxglove SceneUpdate of the placed build in metres: the build volume, each part's bounding box and the finger
+    copies.
 
     Parts are drawn as their boxes (a build may hold many large meshes); the
     fingers, small and the job's design, as triangles.
@@ -131,7 +140,9 @@ SCENE_FACES = 1500
 
 
 def scene_updates(verification: VerificationReport, design: DesignUnderTest, start_ns: int):
-    """Foxglove SceneUpdates (metres) of the first scenario's unperturbed grasp with the designed pads; yields (update, log time ns)."""
+    """Foxglove SceneUpdates (metres) of the first scenario's unperturbed grasp with the designed pads; yields (update,
+    log time ns).
+    """
     if not verification.scenarios:
         return
     scenario, case = verification.scenarios[0], design.cases[0]
@@ -142,7 +153,13 @@ def scene_updates(verification: VerificationReport, design: DesignUnderTest, sta
         stamp = FoxgloveTime(sec=at // 1_000_000_000, nsec=at % 1_000_000_000)
         drawn = [triangles(part, np.asarray(snapshot.part_pose), (0.6, 0.6, 0.65, 1.0))]
         for side in (1, -1):
-            drawn.append(triangles(design.fingerpad, pad_in_world(snapshot, side, case.pad_gap_mm, case.pad_size_mm), (0.9, 0.45, 0.1, 1.0)))
+            drawn.append(
+                triangles(
+                    design.fingerpad,
+                    pad_in_world(snapshot, side, case.pad_gap_mm, case.pad_size_mm),
+                    (0.9, 0.45, 0.1, 1.0),
+                )
+            )
         entity = SceneEntity(
             timestamp=stamp,
             frame_id="fcso_verify",

@@ -20,19 +20,20 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from .. import __version__
-from ..bus.session import Bus, session_config
-from ..config import DaemonConfig
-from ..job.inputs import hash_inputs, job_id, job_inputs
-from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
 from ..bus.messages import BusMessage, BusRecord, StatusMessage, utc_now
 from ..bus.pki import link_weaknesses
-from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record, record_failure
 from ..bus.ros2 import Ros2Node, node_fqn
+from ..bus.session import Bus, session_config
 from ..bus.signing import daemon_signer, signing_key_path
-from .systemd import notify, watchdog_interval
-from .watcher import FolderWatcher, Readiness, signature_of
+from ..config import DaemonConfig
+from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import worker_main
 from ..job.task import JobTask
+from ..record.failure import record_failure
+from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
+from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
+from .systemd import notify, watchdog_interval
+from .watcher import FolderWatcher, Readiness, signature_of
 
 log = logging.getLogger("fcsod")
 
@@ -107,7 +108,8 @@ class Daemon:
         if problem is not None:
             raise JournalCorrupt(
                 f"{self.journal_path}: the journal is corrupt ({problem}); fcsod does not start on it. "
-                "Run `fcsod journal rebuild --config FILE` to rebuild it from the job records (job.mcap) in the output folder"
+                "Run `fcsod journal rebuild --config FILE` to rebuild it from the job records (job.mcap) in the "
+                "output folder"
             )
         self.journal = Journal(self.journal_path)
         self._clean_work_dirs()
@@ -117,14 +119,20 @@ class Daemon:
         signal.signal(signal.SIGINT, self._on_stop_signal)
         signer, created = daemon_signer(self.config)
         if created:
-            log.info("created the message-signing key: give signing.pub to the cell controllers", extra={"path": str(signing_key_path(self.config))})
+            log.info(
+                "created the message-signing key: give signing.pub to the cell controllers",
+                extra={"path": str(signing_key_path(self.config))},
+            )
         for weakness in link_weaknesses(session_config(self.config.zenoh)):
             log.warning(f"insecure bus: {weakness}")
         self.signer = signer
         self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
         self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
         if self.ros2 is not None:
-            log.info("ROS 2 node " + node_fqn(self.config.ros2), extra={"ros2_key_exprs": [p.key_expr for p in self.ros2.publishers.values()]})
+            log.info(
+                "ROS 2 node " + node_fqn(self.config.ros2),
+                extra={"ros2_key_exprs": [p.key_expr for p in self.ros2.publishers.values()]},
+            )
         watch = self.config.watch
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
@@ -171,7 +179,9 @@ class Daemon:
             if slot.job is not None and not slot.finished:
                 shutil.rmtree(self.output_root / f".tmp-{slot.job.job_id}", ignore_errors=True)
                 self.journal.requeue_running()
-                log.info("stopped a running job; it will run again at the next start", extra={"job_id": slot.job.job_id})
+                log.info(
+                    "stopped a running job; it will run again at the next start", extra={"job_id": slot.job.job_id}
+                )
         if self.ros2 is not None:
             self.ros2.close()
         self.bus.close()
@@ -232,7 +242,10 @@ class Daemon:
         self.known[folder] = signature
         if not self.journal.add(identity, str(folder), utc_now()):
             row = self.journal.get(identity)
-            log.info("job already known: not run again", extra={"job_id": identity, "folder": str(folder), "state": row.state})
+            log.info(
+                "job already known: not run again",
+                extra={"job_id": identity, "folder": str(folder), "state": row.state},
+            )
             return
         row = self.journal.get(identity)
         log.info("job queued", extra={"job_id": identity, "folder": str(folder), "inputs": len(hashed)})
@@ -255,17 +268,23 @@ class Daemon:
             task = JobTask(row.job_id, row.folder, row.attempt, row.queued_at, row.started_at, self.config)
             slot.connection.send(task)
             free -= 1
-            log.info("job started", extra={"job_id": row.job_id, "attempt": row.attempt, "worker_pid": slot.process.pid})
+            log.info(
+                "job started", extra={"job_id": row.job_id, "attempt": row.attempt, "worker_pid": slot.process.pid}
+            )
 
     def _adopt(self, row: JobRow) -> None:
-        """Finish the journal of a job whose output folder is complete (the daemon stopped between rename and journal)."""
+        """Finish the journal of a job whose output folder is complete (the daemon stopped between rename and
+        journal).
+        """
         content = read_record(self.output_root / row.job_id / JOB_RECORD_NAME)
         states = content.of(TOPIC_STATE)
         final = states[-1] if states else {"state": "failed", "error": "record holds no state"}
         state = final["state"] if final["state"] in ("done", "failed") else "failed"
         self.journal.mark_running(row.job_id, row.started_at or utc_now())
         self.journal.mark_finished(row.job_id, state, final.get("at") or utc_now(), final.get("error"))
-        log.info("job output already complete: journal updated from its record", extra={"job_id": row.job_id, "state": state})
+        log.info(
+            "job output already complete: journal updated from its record", extra={"job_id": row.job_id, "state": state}
+        )
         for body in content.of(TOPIC_BUS):
             self._publish(BusMessage.from_record(BusRecord.model_validate(body)))
 
@@ -327,10 +346,17 @@ class Daemon:
                 log.error("worker process exited before taking a job", extra={"exit_code": slot.process.exitcode})
             return
         if slot.limit_signalled_at is not None:
-            error = f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({self.config.jobs.time_limit_seconds:g} s)"
+            error = (
+                f"time limit exceeded: the job ran longer than jobs.time_limit_seconds "
+                f"({self.config.jobs.time_limit_seconds:g} s)"
+            )
         else:
             code = slot.process.exitcode
-            how = f"killed by signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit code {code}"
+            how = (
+                f"killed by signal {signal.Signals(-code).name}"
+                if code is not None and code < 0
+                else f"exit code {code}"
+            )
             error = f"worker process died while running the job ({how})"
         self._fail_dead_job(slot.job, error)
 
@@ -354,7 +380,9 @@ class Daemon:
         except OSError as exc:
             # e.g. the output disk is full: the journal and the bus still say why the job failed
             shutil.rmtree(work_dir, ignore_errors=True)
-            log.error(f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)})
+            log.error(
+                f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)}
+            )
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
         self._publish(status)
 

@@ -94,7 +94,9 @@ def journal_problem(path: str | Path) -> str | None:
             found = [row[0] for row in db.execute("PRAGMA quick_check").fetchall()]
             tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
             if found == ["ok"] and {"jobs", "messages"} <= tables:
-                db.execute("SELECT job_id, folder, state, attempt, queued_at, started_at, finished_at, error FROM jobs").fetchall()
+                db.execute(
+                    "SELECT job_id, folder, state, attempt, queued_at, started_at, finished_at, error FROM jobs"
+                ).fetchall()
         finally:
             db.close()
     except sqlite3.DatabaseError as exc:
@@ -148,7 +150,8 @@ class Journal:
         """Start a run of the job (counts the attempt)."""
         with self._db:
             self._db.execute(
-                "UPDATE jobs SET state = 'running', attempt = attempt + 1, started_at = ?, finished_at = NULL, error = NULL "
+                "UPDATE jobs SET state = 'running', attempt = attempt + 1, started_at = ?, finished_at = NULL, error "
+                "= NULL "
                 "WHERE job_id = ?",
                 (started_at, job_id),
             )
@@ -158,7 +161,8 @@ class Journal:
         """End the job as ``done`` or ``failed``."""
         with self._db:
             self._db.execute(
-                "UPDATE jobs SET state = ?, finished_at = ?, error = ? WHERE job_id = ?", (state, finished_at, error, job_id)
+                "UPDATE jobs SET state = ?, finished_at = ?, error = ? WHERE job_id = ?",
+                (state, finished_at, error, job_id),
             )
         return self.get(job_id)
 
@@ -167,7 +171,16 @@ class Journal:
         with self._db:
             self._db.execute(
                 "INSERT OR REPLACE INTO jobs VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (row.job_id, row.folder, row.state, row.attempt, row.queued_at, row.started_at, row.finished_at, row.error),
+                (
+                    row.job_id,
+                    row.folder,
+                    row.state,
+                    row.attempt,
+                    row.queued_at,
+                    row.started_at,
+                    row.finished_at,
+                    row.error,
+                ),
             )
 
     def requeue_running(self) -> list[str]:
@@ -182,7 +195,15 @@ class Journal:
         with self._db:
             self._db.execute(
                 "INSERT OR REPLACE INTO messages VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (message.job_id, message.topic, message.key_expr, message.encoding, message.payload, message.attachment, message.file),
+                (
+                    message.job_id,
+                    message.topic,
+                    message.key_expr,
+                    message.encoding,
+                    message.payload,
+                    message.attachment,
+                    message.file,
+                ),
             )
 
 

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
-from .journal import JobRow, Journal, stored_message
 from ..bus.messages import BusMessage, BusRecord, StatusMessage
-from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
 from ..bus.signing import Signer
+from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
+from .journal import JobRow, Journal, stored_message
 
 
 @dataclass
@@ -48,7 +48,11 @@ def job_row_from_record(job_id: str, record: Path) -> tuple[JobRow, list[BusMess
     states = content.of(TOPIC_STATE)
     # a record in the output folder is a finished job; one that stops early (cut off) counts as failed
     state = last.state if last.state in ("done", "failed") else "failed"
-    error = last.error if state == last.state else f"record ends in state {last.state}" + (" (truncated)" if content.truncated else "")
+    error = (
+        last.error
+        if state == last.state
+        else f"record ends in state {last.state}" + (" (truncated)" if content.truncated else "")
+    )
     finished_at = last.finished_at or (states[-1]["at"] if states else None)
     row = JobRow(job_id, last.folder, state, last.attempt, last.queued_at, last.started_at, finished_at, error)
     latest = {m.topic: m for m in published}
@@ -56,7 +60,8 @@ def job_row_from_record(job_id: str, record: Path) -> tuple[JobRow, list[BusMess
 
 
 def rebuild_journal(journal_path: str | Path, output_root: str | Path, signer: Signer) -> RebuildResult:
-    """Write a new journal from every ``<output_root>/<job_id>/job.mcap``; an existing journal file is moved aside, never deleted.
+    """Write a new journal from every ``<output_root>/<job_id>/job.mcap``; an existing journal file is moved aside,
+    never deleted.
 
     Parameters
     ----------
@@ -75,7 +80,7 @@ def rebuild_journal(journal_path: str | Path, output_root: str | Path, signer: S
     journal_path, output_root = Path(journal_path), Path(output_root)
     moved = None
     if journal_path.exists():
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         moved = journal_path.with_name(f"{journal_path.name}.corrupt-{stamp}")
         os.replace(journal_path, moved)
         for suffix in ("-wal", "-shm"):
@@ -102,4 +107,3 @@ def rebuild_journal(journal_path: str | Path, output_root: str | Path, signer: S
     finally:
         journal.close()
     return result
-

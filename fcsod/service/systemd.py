@@ -26,7 +26,9 @@ def notify(message: str) -> bool:
 
 
 def watchdog_interval() -> float | None:
-    """Seconds between watchdog pings (half of ``WATCHDOG_USEC``), or None when systemd expects none from this process."""
+    """Seconds between watchdog pings (half of ``WATCHDOG_USEC``), or None when systemd expects none from this
+    process.
+    """
     usec = os.environ.get("WATCHDOG_USEC")
     pid = os.environ.get("WATCHDOG_PID")
     if not usec or (pid and pid.isdigit() and int(pid) != os.getpid()):

@@ -42,7 +42,7 @@ _READ_ONLY_EVENTS = {"opened", "closed_no_write"}
 
 
 class _Handler(FileSystemEventHandler):
-    def __init__(self, watcher: "FolderWatcher"):
+    def __init__(self, watcher: FolderWatcher):
         self.watcher = watcher
 
     def on_any_event(self, event: FileSystemEvent) -> None:
@@ -114,7 +114,9 @@ class FolderWatcher:
         return changed
 
     def all_folders(self) -> list[Path]:
-        """Every job folder below the roots (hidden folders, used for writing before a rename, and symlinks excluded)."""
+        """Every job folder below the roots (hidden folders, used for writing before a rename, and symlinks
+        excluded).
+        """
         folders = []
         for root in self.roots:
             try:
@@ -176,7 +178,10 @@ class Readiness:
             if inputs.missing:
                 if (folder, inputs.missing) not in self._waiting_logged:
                     self._waiting_logged.add((folder, inputs.missing))
-                    log.info("waiting for files the manifest names", extra={"folder": str(folder), "missing": list(inputs.missing)})
+                    log.info(
+                        "waiting for files the manifest names",
+                        extra={"folder": str(folder), "missing": list(inputs.missing)},
+                    )
                 continue
             if now - since >= self.settle_seconds:
                 del self._pending[folder]
