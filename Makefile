@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test demo paper bench schema clean
+.PHONY: setup lint test demo paper bench schema clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -17,8 +17,13 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 	@$(PY) -m compileall -q fcso fcsod >/dev/null
 
+# ruff's rules and format are in pyproject.toml
+lint: setup
+	$(VENV)/bin/ruff check fcso fcsod tests benchmarks examples docs/images
+	$(VENV)/bin/ruff format --check fcso fcsod tests benchmarks examples docs/images
+
 # pytest exits 5 when it collected no tests: that is a failure here.
-test: setup
+test: setup lint
 	$(PY) -m pytest -q; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc

@@ -37,7 +37,12 @@ def _design_alone(runs: int, base: Path) -> tuple[list[float], list[float]]:
     """Wall times of fcso's design + output files in-process, and of the ``fcso design`` command, s."""
     from fcso import DesignConfig, design, load_part, output_files
 
-    settings = DesignConfig().updated({"sampler": {"length_mm": 10, "width_mm": 10, "thickness_mm": 4, "penetration_mm": 3, "stride_mm": 5}, "poses": {"count": 1, "select": "most_probable"}})
+    settings = DesignConfig().updated(
+        {
+            "sampler": {"length_mm": 10, "width_mm": 10, "thickness_mm": 4, "penetration_mm": 3, "stride_mm": 5},
+            "poses": {"count": 1, "select": "most_probable"},
+        }
+    )
     config_file = base / "design.toml"
     config_file.write_text(FAST_DESIGN.replace("[design.", "["))
     in_process, command = [], []
@@ -47,8 +52,21 @@ def _design_alone(runs: int, base: Path) -> tuple[list[float], list[float]]:
         in_process.append(time.perf_counter() - started)
         started = time.perf_counter()
         subprocess.run(
-            [sys.executable, "-m", "fcso.cli", "design", str(PART), "--out", str(base / f"alone-{number}"), "--config", str(config_file), "--quiet"],
-            cwd=REPO, check=True, capture_output=True,
+            [
+                sys.executable,
+                "-m",
+                "fcso.cli",
+                "design",
+                str(PART),
+                "--out",
+                str(base / f"alone-{number}"),
+                "--config",
+                str(config_file),
+                "--quiet",
+            ],
+            cwd=REPO,
+            check=True,
+            capture_output=True,
         )
         command.append(time.perf_counter() - started)
     return in_process, command
@@ -71,9 +89,22 @@ def main() -> int:
             folder = base / "watch" / f"single-{number}"
             folder.mkdir()
             shutil.copy(PART, folder / PART.name)
-            done = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done" and v["body"]["folder"] == str(folder), 300)
+            done = subscriber.wait_for(
+                lambda v, folder=folder: (
+                    isinstance(v, dict)
+                    and v.get("topic") == "status"
+                    and v["body"]["state"] == "done"
+                    and v["body"]["folder"] == str(folder)
+                ),
+                300,
+            )
             received = time.time()
-            queued = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job queued" and v.get("job_id") == done["job_id"], 10)
+            queued = daemon.wait_for(
+                lambda v, done=done: (
+                    isinstance(v, dict) and v.get("message") == "job queued" and v.get("job_id") == done["job_id"]
+                ),
+                10,
+            )
             latencies.append(received - _stamp(queued["time"]))
 
         batch_started = time.time()
@@ -87,7 +118,11 @@ def main() -> int:
         finished: set[str] = set()
         deadline = time.monotonic() + 1800
         while len(finished) < args.batch and time.monotonic() < deadline:
-            finished = {v["job_id"] for v in subscriber.json_lines() if v.get("topic") == "status" and v["body"]["state"] == "done" and "/batch-" in v["body"]["folder"]}
+            finished = {
+                v["job_id"]
+                for v in subscriber.json_lines()
+                if v.get("topic") == "status" and v["body"]["state"] == "done" and "/batch-" in v["body"]["folder"]
+            }
             time.sleep(0.1)
         batch_seconds = time.time() - batch_started
     finally:
@@ -99,9 +134,18 @@ def main() -> int:
     print(json.dumps({"latencies_s": [round(x, 3) for x in latencies]}))
     print(f"part: {PART.name}, fast fcso settings, concurrency {args.concurrency}")
     print(f"readiness -> done on zenoh, median of {args.runs}: {latency:.2f} s")
-    print(f"fcso design + output files in-process, median: {statistics.median(in_process):.2f} s -> daemon overhead {latency - statistics.median(in_process):.2f} s")
-    print(f"'fcso design' command incl. start-up, median: {statistics.median(command):.2f} s -> daemon overhead {latency - statistics.median(command):.2f} s")
-    print(f"{len(finished)} of {args.batch} jobs dropped at once done in {batch_seconds:.1f} s: {len(finished) / batch_seconds * 60:.1f} jobs/min")
+    print(
+        f"fcso design + output files in-process, median: {statistics.median(in_process):.2f} s -> daemon overhead "
+        f"{latency - statistics.median(in_process):.2f} s"
+    )
+    print(
+        f"'fcso design' command incl. start-up, median: {statistics.median(command):.2f} s -> daemon overhead "
+        f"{latency - statistics.median(command):.2f} s"
+    )
+    print(
+        f"{len(finished)} of {args.batch} jobs dropped at once done in {batch_seconds:.1f} s: "
+        f"{len(finished) / batch_seconds * 60:.1f} jobs/min"
+    )
     shutil.rmtree(base, ignore_errors=True)
     return 0 if len(finished) == args.batch else 1
 

@@ -59,8 +59,18 @@ FOUR_PART_JOB = ("20mm-xyz-cube.stl", "solar_tracker.stl", "capsela200_plug.stl"
 
 def paper_command(python: str, source: Path, out: Path) -> list[str]:
     return [
-        python, "-m", "fcso.cli", "design", str(source / "examples" / "parts" / "stanford_bunny_closed.ply"),
-        "--scale-to", "65", "--config", str(source / "examples" / "paper.toml"), "--out", str(out), "--quiet",
+        python,
+        "-m",
+        "fcso.cli",
+        "design",
+        str(source / "examples" / "parts" / "stanford_bunny_closed.ply"),
+        "--scale-to",
+        "65",
+        "--config",
+        str(source / "examples" / "paper.toml"),
+        "--out",
+        str(out),
+        "--quiet",
     ]
 
 
@@ -88,7 +98,11 @@ def baseline_tree(commit: str, into: Path) -> Path:
 
 
 def sixteen_scenarios() -> tuple[list, fcso.DesignConfig]:
-    parts = [p for name, units, scale in SIXTEEN_SCENARIO_PARTS for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)]
+    parts = [
+        p
+        for name, units, scale in SIXTEEN_SCENARIO_PARTS
+        for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)
+    ]
     # the second and third most probable poses: every part is graspable in both
     return parts, fcso.DesignConfig().updated({"poses": {"count": 2, "select": [1, 2]}})
 
@@ -136,12 +150,21 @@ def peak_memory_mb() -> float:
 
 def sixteen_scenario_memory_mb() -> float:
     """Peak memory of the 16-scenario design alone, in a fresh process (:func:`peak_memory_mb` there)."""
-    done = subprocess.run([sys.executable, "-m", "benchmarks.bench_design", "--memory-child"], cwd=REPO, check=True, capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks.bench_design", "--memory-child"],
+        cwd=REPO,
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return float(done.stdout.split()[-1])
 
 
 def summary(seconds: list[float]) -> str:
-    return f"median {statistics.median(seconds):.2f} s (min {min(seconds):.2f}, max {max(seconds):.2f}, {len(seconds)} runs)"
+    return (
+        f"median {statistics.median(seconds):.2f} s (min {min(seconds):.2f}, max {max(seconds):.2f}, "
+        f"{len(seconds)} runs)"
+    )
 
 
 def main() -> None:
@@ -166,16 +189,25 @@ def main() -> None:
         new, *old = timed_commands(commands, args.runs)
         print(f"paper experiment, whole fcso design command: {summary(new)}  (target <= 3 s)")
         if old:
-            print(f"  same command on {args.baseline}, in turns with it: {summary(old[0])}; ratio {statistics.median(old[0]) / statistics.median(new):.2f}x")
+            print(
+                f"  same command on {args.baseline}, in turns with it: {summary(old[0])}; ratio "
+                f"{statistics.median(old[0]) / statistics.median(new):.2f}x"
+            )
     if args.paper_only:
         return
 
-    parts, config = [fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)], fcso.load_config(REPO / "examples" / "paper.toml")
+    parts, config = (
+        [fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)],
+        fcso.load_config(REPO / "examples" / "paper.toml"),
+    )
     prepared = prepare(parts, config)
     counts = [len(s.samples) for s in prepared.scenarios]
     everything = list(itertools.product(*(range(c) for c in counts)))
     rates = [screening_rate(prepared, config, 4 * len(everything), seed) for seed in range(args.runs)]
-    print(f"screening, 2 scenarios: median {statistics.median(rates):.0f} candidates/s over {resolve_jobs(0)} cores  (target >= 1000)")
+    print(
+        f"screening, 2 scenarios: median {statistics.median(rates):.0f} candidates/s over {resolve_jobs(0)} cores  "
+        f"(target >= 1000)"
+    )
 
     parts, config = sixteen_scenarios()
     seconds, result = design_figures(parts, config, args.runs)
@@ -187,12 +219,19 @@ def main() -> None:
     )
     print(
         f"  Q = {q:.2f} mm², upper bound {report.search.quality_upper_bound:.2f} (gap {report.search.gap:.0%}), "
-        f"screened {report.search.screened}, exact {report.search.exact}, {report.search.kind}; stages {report.timings_s}"
+        f"screened {report.search.screened}, exact {report.search.exact}, {report.search.kind}; stages "
+        f"{report.timings_s}"
     )
     prepared = prepare(parts, config)
     rates = [screening_rate(prepared, config, 2000, seed) for seed in range(args.runs)]
-    print(f"screening, {len(prepared.scenarios)} scenarios: median {statistics.median(rates):.0f} candidates/s  (target >= 200)")
-    print(f"  peak memory of the 16-scenario design in a fresh process (process + largest worker): {sixteen_scenario_memory_mb():.0f} MB  (target <= 2048)")
+    print(
+        f"screening, {len(prepared.scenarios)} scenarios: median {statistics.median(rates):.0f} candidates/s  (target "
+        f">= 200)"
+    )
+    print(
+        f"  peak memory of the 16-scenario design in a fresh process (process + largest worker): "
+        f"{sixteen_scenario_memory_mb():.0f} MB  (target <= 2048)"
+    )
     if not args.skip_budget:
         budget = config.search.max_evaluations * 10
         started = time.perf_counter()
@@ -208,7 +247,8 @@ def main() -> None:
     report = result.report
     q = next(c.quality for c in report.candidates if c.index == report.best)
     print(
-        f"four-part job (--poses 1): {len(report.scenarios)} scenarios, whole design {summary(seconds)}, Q = {q:.2f} mm², "
+        f"four-part job (--poses 1): {len(report.scenarios)} scenarios, whole design {summary(seconds)}, Q = {q:.2f} "
+        f"mm², "
         f"gap {report.search.gap:.0%}, ungraspable {[u.part for u in report.ungraspable]}  (target <= 20 s)"
     )
 

@@ -42,10 +42,19 @@ def small_case() -> tuple[list, fcso.DesignConfig]:
 
 def batch_case() -> tuple[list, fcso.DesignConfig]:
     """Two fixture parts, one pose each, 10 mm pads: flat faces and mixed pads, the hardest case for screening."""
-    parts = [fcso.load_part(REPO / "tests" / "data" / "20mm-xyz-cube.stl"), fcso.load_part(REPO / "tests" / "data" / "solar_tracker.stl")]
+    parts = [
+        fcso.load_part(REPO / "tests" / "data" / "20mm-xyz-cube.stl"),
+        fcso.load_part(REPO / "tests" / "data" / "solar_tracker.stl"),
+    ]
     config = fcso.DesignConfig().updated(
         {
-            "sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 6.0},
+            "sampler": {
+                "length_mm": 10.0,
+                "width_mm": 10.0,
+                "thickness_mm": 4.0,
+                "penetration_mm": 3.0,
+                "stride_mm": 6.0,
+            },
             "poses": {"count": 1, "select": "most_probable"},
         }
     )
@@ -75,7 +84,9 @@ def fidelity(parts, config: fcso.DesignConfig) -> dict:
     screened_q = np.array([s.quality for s in screened])
     exact_q = np.array([e.quality for e in exact])
     k = config.search.exact_top_k
-    order = sorted(range(len(choices)), key=lambda i: (screened[i].quality, screened[i].mean_effective_area, -i), reverse=True)
+    order = sorted(
+        range(len(choices)), key=lambda i: (screened[i].quality, screened[i].mean_effective_area, -i), reverse=True
+    )
     finalists = order[:k]
     chosen = max(finalists, key=lambda i: (exact[i].quality, exact[i].mean_effective_area, -i))
     return {
@@ -111,7 +122,8 @@ def report(name: str, result: dict) -> None:
         f"screening ranks the exact optimum {result['optimum_screened_rank']}"
     )
     print(
-        f"per candidate: screening {result['screen_seconds'] * 1e3:.2f} ms, exact {result['exact_seconds'] * 1e3:.1f} ms "
+        f"per candidate: screening {result['screen_seconds'] * 1e3:.2f} ms, exact {result['exact_seconds'] * 1e3:.1f} "
+        f"ms "
         f"({result['exact_seconds'] / result['screen_seconds']:.0f}x)"
     )
 

@@ -72,12 +72,16 @@ def demo_parts() -> tuple[list[Part], dict]:
 
 
 def design(parts: list[Part], settings: dict, profile: str, clearance: float, lead_in: float) -> fcso.DesignResult:
-    config = fcso.DesignConfig().updated({**settings, "print": {"profile": profile, "clearance_mm": clearance, "lead_in_deg": lead_in}})
+    config = fcso.DesignConfig().updated(
+        {**settings, "print": {"profile": profile, "clearance_mm": clearance, "lead_in_deg": lead_in}}
+    )
     return fcso.design(parts, config)
 
 
 def oversized(under_test: DesignUnderTest, grown_mm: float) -> DesignUnderTest:
-    """The same grasps on parts printed ``grown_mm`` too large on every side (an offset surface, as printing deviates)."""
+    """The same grasps on parts printed ``grown_mm`` too large on every side (an offset surface, as printing
+    deviates).
+    """
     cases = []
     for case in under_test.cases:
         part_file = to_trimesh(grow(to_manifold(case.part_file), grown_mm))
@@ -89,7 +93,11 @@ def oversized(under_test: DesignUnderTest, grown_mm: float) -> DesignUnderTest:
 
 def _weakest(holding: dict) -> str:
     forces = [v for v in holding.values() if v is not None]
-    return "held 30" if not forces else f"{min(forces):.0f} ({min(holding, key=lambda d: holding[d] if holding[d] is not None else np.inf)})"
+    return (
+        "held 30"
+        if not forces
+        else f"{min(forces):.0f} ({min(holding, key=lambda d: holding[d] if holding[d] is not None else np.inf)})"
+    )
 
 
 HEADER = (
@@ -117,17 +125,22 @@ def run(label: str, parts, settings, profile: str, combos, config: VerifyConfig,
             r = scenario.fcso
             seat = fit.fitted.seat_offsets_mm[m]
             print(
-                f"{under_test.cases[m].name[:34]:<34} {clearance:>5.2f} {lead_in:>5.0f} {fit.exact.quality:>8.1f} {fit.fitted.quality:>8.1f} "
-                f"{seat[0]:>+6.2f},{seat[1]:>+6.2f} {r.success_rate:>8.0%} {r.median_error_mm:>9.3f} {r.worst_error_mm:>9.3f} "
+                f"{under_test.cases[m].name[:34]:<34} {clearance:>5.2f} {lead_in:>5.0f} {fit.exact.quality:>8.1f} "
+                f"{fit.fitted.quality:>8.1f} "
+                f"{seat[0]:>+6.2f},{seat[1]:>+6.2f} {r.success_rate:>8.0%} {r.median_error_mm:>9.3f} "
+                f"{r.worst_error_mm:>9.3f} "
                 f"{r.median_error_deg:>8.2f} {r.worst_error_deg:>7.2f} {_weakest(r.holding_n):>16}"
             )
             flat_rows.setdefault(under_test.cases[m].name, scenario.flat)
-        print(f"{'':<34} (design {designed:.0f} s, simulation {simulated:.0f} s, seated penetration "
-              f"{max(s.fidelity.seated_penetration_mm for s in verification.scenarios):.3f} mm)")
+        print(
+            f"{'':<34} (design {designed:.0f} s, simulation {simulated:.0f} s, seated penetration "
+            f"{max(s.fidelity.seated_penetration_mm for s in verification.scenarios):.3f} mm)"
+        )
     for name, r in flat_rows.items():
         print(
             f"{'flat pads: ' + name:<34.34} {'':>5} {'':>5} {'':>8} {'':>8} {'':>13} {r.success_rate:>8.0%} "
-            f"{r.median_error_mm:>9.3f} {r.worst_error_mm:>9.3f} {r.median_error_deg:>8.2f} {r.worst_error_deg:>7.2f} {_weakest(r.holding_n):>16}"
+            f"{r.median_error_mm:>9.3f} {r.worst_error_mm:>9.3f} {r.median_error_deg:>8.2f} {r.worst_error_deg:>7.2f} "
+            f"{_weakest(r.holding_n):>16}"
         )
 
 
@@ -137,7 +150,9 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--quick", action="store_true", help="the paper's cube only")
     parser.add_argument("--sets", default="cube,demo,bunny", help="comma-separated part sets: cube, demo, bunny")
-    parser.add_argument("--oversize", type=float, default=0.0, help="also simulate the cube printed this much too large per side, mm")
+    parser.add_argument(
+        "--oversize", type=float, default=0.0, help="also simulate the cube printed this much too large per side, mm"
+    )
     args = parser.parse_args()
     values = PRINT_PROFILES[args.profile]
     clearance, lead_in = values["clearance_mm"], values["lead_in_deg"]
@@ -145,21 +160,45 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         config = VerifyConfig(trials=args.trials, density_g_cm3=values["density_g_cm3"], cache_dir=Path(scratch))
         print(
-            f"profile {args.profile}: clearance {clearance} mm, lead-in {lead_in} deg, min wall {values['min_wall_mm']} mm, "
-            f"density {values['density_g_cm3']} g/cm3; {args.trials} trials per scenario, +-2 mm +-3 deg, success within 0.3 mm and 1 deg"
+            f"profile {args.profile}: clearance {clearance} mm, lead-in {lead_in} deg, min wall "
+            f"{values['min_wall_mm']} mm, "
+            f"density {values['density_g_cm3']} g/cm3; {args.trials} trials per scenario, +-2 mm +-3 deg, success "
+            f"within 0.3 mm and 1 deg"
         )
         sets = ["cube"] if args.quick else args.sets.split(",")
         if "cube" in sets:
-            run("paper's cube-like part: 30 mm cube, 8 mm V-notches, 8 mm hole", *cube_parts(), args.profile, combos, config)
+            run(
+                "paper's cube-like part: 30 mm cube, 8 mm V-notches, 8 mm hole",
+                *cube_parts(),
+                args.profile,
+                combos,
+                config,
+            )
             if args.oversize > 0:
                 run(
                     f"the same cube printed {args.oversize:g} mm too large per side",
-                    *cube_parts(), args.profile, [(0.0, 0.0), (clearance, 0.0), (clearance, lead_in)], config, grown_mm=args.oversize,
+                    *cube_parts(),
+                    args.profile,
+                    [(0.0, 0.0), (clearance, 0.0), (clearance, lead_in)],
+                    config,
+                    grown_mm=args.oversize,
                 )
         if "demo" in sets:
-            run("demo parts: 20 mm xyz cube and solar tracker, one finger (batch-demo settings)", *demo_parts(), args.profile, combos, config)
+            run(
+                "demo parts: 20 mm xyz cube and solar tracker, one finger (batch-demo settings)",
+                *demo_parts(),
+                args.profile,
+                combos,
+                config,
+            )
         if "bunny" in sets:
-            run("paper experiment: bunny 65 mm, poses 1 and 3 (examples/paper.toml)", *bunny_parts(), args.profile, combos, config)
+            run(
+                "paper experiment: bunny 65 mm, poses 1 and 3 (examples/paper.toml)",
+                *bunny_parts(),
+                args.profile,
+                combos,
+                config,
+            )
 
 
 if __name__ == "__main__":

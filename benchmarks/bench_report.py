@@ -20,8 +20,8 @@ from pathlib import Path
 import trimesh
 
 from fcso import design, load_config, load_part
-from fcso.html_report import load_report_inputs, render_html, report_inputs
-from fcso.render import grasp_picture
+from fcso.output.design_page import load_report_inputs, render_html, report_inputs
+from fcso.output.render import grasp_picture
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,7 +36,10 @@ def _timed(function, runs: int) -> list[float]:
 
 
 def _line(name: str, times: list[float]) -> str:
-    return f"{name:<44} median {statistics.median(times):6.2f} s  (min {min(times):.2f}, max {max(times):.2f}, {len(times)} runs)"
+    return (
+        f"{name:<44} median {statistics.median(times):6.2f} s  (min {min(times):.2f}, max {max(times):.2f}, "
+        f"{len(times)} runs)"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -47,14 +50,20 @@ def main(argv: list[str] | None = None) -> None:
     if args.dir is None:
         config = load_config(ROOT / "examples" / "paper.toml")
         started = time.perf_counter()
-        result = design([load_part(ROOT / "examples" / "parts" / "stanford_bunny_closed.ply", scale_to_mm=65.0)], config)
+        result = design(
+            [load_part(ROOT / "examples" / "parts" / "stanford_bunny_closed.ply", scale_to_mm=65.0)], config
+        )
         print(f"bunny design (not part of the rendering time): {time.perf_counter() - started:.1f} s")
         inputs = report_inputs(result)
     else:
         print(_line("fcso report: reload and re-seat", _timed(lambda: load_report_inputs(args.dir), args.runs)))
         inputs = load_report_inputs(args.dir)
     faces = [len(g.mesh.faces) for g in inputs.grasps]
-    print(_line(f"report.html, bunny ({faces[0]} faces, {len(faces)} poses)", _timed(lambda: render_html(inputs), args.runs)))
+    print(
+        _line(
+            f"report.html, bunny ({faces[0]} faces, {len(faces)} poses)", _timed(lambda: render_html(inputs), args.runs)
+        )
+    )
     grasp = inputs.grasps[0]
     vertices, big_faces = trimesh.remesh.subdivide(*trimesh.remesh.subdivide(grasp.mesh.vertices, grasp.mesh.faces))
     big = trimesh.Trimesh(vertices, big_faces, process=False)
@@ -63,7 +72,10 @@ def main(argv: list[str] | None = None) -> None:
     print(
         _line(
             f"one grasp picture, bunny at {len(big.faces)} faces",
-            _timed(lambda: grasp_picture(big, inputs.fingerpad, grasp.placements, pad_size, grasp.sample.closing_axis), args.runs),
+            _timed(
+                lambda: grasp_picture(big, inputs.fingerpad, grasp.placements, pad_size, grasp.sample.closing_axis),
+                args.runs,
+            ),
         )
     )
 

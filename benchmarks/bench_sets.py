@@ -68,7 +68,9 @@ def knob(base: float, top_scale: float) -> manifold3d.Manifold:
     """A 60 mm plate, too wide for the gripper, with a 16 mm knob tapering by ``top_scale``."""
     plate = box(60.0, 60.0, 6.0).translate([-30.0, -30.0, 0.0])
     square = manifold3d.CrossSection.square([base, base], center=True)
-    return plate + manifold3d.Manifold.extrude(square, 16.0, scale_top=[top_scale, top_scale]).translate([0.0, 0.0, 5.99])
+    return plate + manifold3d.Manifold.extrude(square, 16.0, scale_top=[top_scale, top_scale]).translate(
+        [0.0, 0.0, 5.99]
+    )
 
 
 def parametric_parts(count: int) -> list[fcso.Part]:
@@ -91,14 +93,20 @@ def parametric_parts(count: int) -> list[fcso.Part]:
 
 def job(parts: int) -> list[fcso.Part]:
     """The fixture parts plus parametric ones, ``parts`` in all."""
-    fixtures = [p for name, units, scale in FIXTURE_PARTS for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)]
+    fixtures = [
+        p for name, units, scale in FIXTURE_PARTS for p in fcso.load_parts(DATA / name, units=units, scale_to_mm=scale)
+    ]
     return fixtures + parametric_parts(parts - len(fixtures))
 
 
 def retained_of_single(single: fcso.DesignResult, stars: dict[tuple[str, int], float]) -> np.ndarray:
     """E / E* of every graspable scenario with one finger for all (E* from the sets run)."""
     exact = single.report.print_fit.exact.effective_area
-    values = [e / stars[(s.part, s.pose_index)] for s, e in zip(single.report.scenarios, exact) if stars.get((s.part, s.pose_index), 0) > 0]
+    values = [
+        e / stars[(s.part, s.pose_index)]
+        for s, e in zip(single.report.scenarios, exact)
+        if stars.get((s.part, s.pose_index), 0) > 0
+    ]
     return np.array(values)
 
 
@@ -118,20 +126,34 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
     stars = {(s.part, s.pose_index): s.solo_effective_area for s in report.scenarios}
     single_retained = retained_of_single(single, stars)
     sets_median = statistics.median(sets_seconds)
-    print(f"{parts}-part job ({len(report.scenarios)} scenarios, {len(report.ungraspable_parts)} ungraspable parts: {', '.join(report.ungraspable_parts) or 'none'})")
     print(
-        f"  finger sets (max {report.max_sets}, min_retained {report.min_retained:g}): {sets_median:.1f} s median of {runs} "
-        f"(target <= {target_s:.0f} s: {'met' if sets_median <= target_s else 'NOT met'}); timings of the last run: {result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
+        f"{parts}-part job ({len(report.scenarios)} scenarios, {len(report.ungraspable_parts)} ungraspable parts: "
+        f"{', '.join(report.ungraspable_parts) or 'none'})"
     )
-    print(f"  {len(report.sets)} sets, worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, partition: {report.search.method}")
     print(
-        f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: {', '.join(report.search.conflict_clique)}), "
-        f"{len(report.search.blocking_pairs)} conflicting pairs, {report.search.set_screenings} sets screened, sets tried {report.search.sets_tried}"
+        f"  finger sets (max {report.max_sets}, min_retained {report.min_retained:g}): {sets_median:.1f} s median of "
+        f"{runs} "
+        f"(target <= {target_s:.0f} s: {'met' if sets_median <= target_s else 'NOT met'}); timings of the last run: "
+        f"{result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
+    )
+    print(
+        f"  {len(report.sets)} sets, worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, "
+        f"partition: {report.search.method}"
+    )
+    print(
+        f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: "
+        f"{', '.join(report.search.conflict_clique)}), "
+        f"{len(report.search.blocking_pairs)} conflicting pairs, {report.search.set_screenings} sets screened, sets "
+        f"tried {report.search.sets_tried}"
     )
     for entry in report.sets:
-        print(f"    set {entry.set}: {len(entry.parts)} parts, Q {entry.quality:.1f} mm², worst retained {entry.worst_retained:.3f}: {', '.join(entry.parts)}")
+        print(
+            f"    set {entry.set}: {len(entry.parts)} parts, Q {entry.quality:.1f} mm², worst retained "
+            f"{entry.worst_retained:.3f}: {', '.join(entry.parts)}"
+        )
     print(
-        f"  one finger (--finger-sets 1): {statistics.median(single_seconds):.1f} s median of {runs}, Q {single.best.quality:.1f} mm², "
+        f"  one finger (--finger-sets 1): {statistics.median(single_seconds):.1f} s median of {runs}, Q "
+        f"{single.best.quality:.1f} mm², "
         f"worst retained {single_retained.min():.3f}, median {np.median(single_retained):.3f}"
     )
     better = report.worst_retained >= single_retained.min() - 1e-9

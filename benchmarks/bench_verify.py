@@ -1,4 +1,5 @@
-"""Grasp verification in simulation (METHOD §12): the paper's precision experiment in silico, the fixtures, and the time.
+"""Grasp verification in simulation (METHOD §12): the paper's precision experiment in silico, the fixtures, and the
+time.
 
 Run from the repository root::
 
@@ -62,14 +63,23 @@ def demo_design() -> fcso.DesignResult:
     config = fcso.DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 10.0},
+            "sampler": {
+                "length_mm": 10.0,
+                "width_mm": 10.0,
+                "thickness_mm": 4.0,
+                "penetration_mm": 3.0,
+                "stride_mm": 10.0,
+            },
         }
     )
     return fcso.design([fcso.load_part(DEMO / "20mm-xyz-cube.stl"), fcso.load_part(DEMO / "solar_tracker.stl")], config)
 
 
 def paper_design() -> fcso.DesignResult:
-    return fcso.design([fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)], fcso.load_config(REPO / "examples" / "paper.toml"))
+    return fcso.design(
+        [fcso.load_part(PARTS / "stanford_bunny_closed.ply", scale_to_mm=65.0)],
+        fcso.load_config(REPO / "examples" / "paper.toml"),
+    )
 
 
 def _holding(values: dict) -> str:
@@ -81,13 +91,16 @@ def print_verification(name: str, verification: VerificationReport, errors: bool
     for s in verification.scenarios:
         f = s.fidelity
         print(
-            f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part {f.part_volume_error:+.2%} "
+            f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part "
+            f"{f.part_volume_error:+.2%} "
             f"pad {f.pad_volume_error:+.2%}, seated penetration {f.seated_penetration_mm:.3f} mm"
         )
         for label, r in (("designed", s.fcso), ("flat", s.flat)):
             print(
-                f"    {label:<8} success {r.success_rate:4.0%}  median {r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg  "
-                f"worst {r.worst_error_mm:.3f} mm {r.worst_error_deg:.2f} deg  held after lift {sum(t.held for t in r.trials)}/{len(r.trials)}  "
+                f"    {label:<8} success {r.success_rate:4.0%}  median {r.median_error_mm:.3f} mm "
+                f"{r.median_error_deg:.2f} deg  "
+                f"worst {r.worst_error_mm:.3f} mm {r.worst_error_deg:.2f} deg  held after lift "
+                f"{sum(t.held for t in r.trials)}/{len(r.trials)}  "
                 f"holding N {_holding(r.holding_n)}"
             )
             if errors:
@@ -106,16 +119,29 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         cache = Path(scratch) / "warm"
         config = VerifyConfig(trials=args.trials, cache_dir=cache)
-        print(f"MuJoCo verification, {args.trials} trials per scenario, +-2 mm +-3 deg, 60 N, friction 0.4, lift 100 mm")
+        print(
+            f"MuJoCo verification, {args.trials} trials per scenario, +-2 mm +-3 deg, 60 N, friction 0.4, lift 100 mm"
+        )
 
         cube = design_under_test(cube_design(8.0))
-        print_verification("paper precision experiment in silico: 30 mm cube, 8 mm V-notches, 8 mm hole", verify(cube, config), errors=True)
+        print_verification(
+            "paper precision experiment in silico: 30 mm cube, 8 mm V-notches, 8 mm hole",
+            verify(cube, config),
+            errors=True,
+        )
         shallow = cube_design(7.0)
         case = next(c for c in shallow.report.candidates if c.index == shallow.report.best).pad_case
-        print_verification(f"the same cube with 7 mm notches (pad case {case!r})", verify(design_under_test(shallow), config), errors=True)
+        print_verification(
+            f"the same cube with 7 mm notches (pad case {case!r})",
+            verify(design_under_test(shallow), config),
+            errors=True,
+        )
 
         if not args.quick:
-            for name, make in (("batch-demo job: xyz cube + solar tracker", demo_design), ("paper experiment: bunny 65 mm, poses 1 and 3", paper_design)):
+            for name, make in (
+                ("batch-demo job: xyz cube + solar tracker", demo_design),
+                ("paper experiment: bunny 65 mm, poses 1 and 3", paper_design),
+            ):
                 design = design_under_test(make())
                 fixture_cache = config.model_copy(update={"cache_dir": Path(scratch) / name})
                 started = time.perf_counter()
@@ -124,7 +150,9 @@ def main() -> None:
                 started = time.perf_counter()
                 verification = verify(design, fixture_cache)
                 warm_s = time.perf_counter() - started
-                print_verification(f"{name}: verification cold cache {cold_s:.1f} s, warm cache {warm_s:.1f} s", verification)
+                print_verification(
+                    f"{name}: verification cold cache {cold_s:.1f} s, warm cache {warm_s:.1f} s", verification
+                )
 
         cold, warm = [], []
         for run in range(args.runs):
@@ -138,7 +166,8 @@ def main() -> None:
         print(
             f"\none-part verification (paper cube, {args.trials} trials x 2 fingers + holding): "
             f"cold cache median {statistics.median(cold):.1f} s (min {min(cold):.1f}, max {max(cold):.1f}), "
-            f"warm cache median {statistics.median(warm):.1f} s (min {min(warm):.1f}, max {max(warm):.1f}); target <= 60 s"
+            f"warm cache median {statistics.median(warm):.1f} s (min {min(warm):.1f}, max {max(warm):.1f}); target <= "
+            f"60 s"
         )
 
 

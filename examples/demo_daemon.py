@@ -8,7 +8,8 @@ configs with mTLS and access control, the message-signing key), starts
 view, every message's signature checked), drops the bundled batch
 ``examples/jobs/batch-demo`` into the watch folder file by file, shows what
 the subscriber receives (the job needs two finger sets: each set's finger on
-``.../design/<set>`` and the pick plan on ``.../plan``, as the cell gets them), shows that a client without a certificate is
+``.../design/<set>`` and the pick plan on ``.../plan``, as the cell gets them), shows that a client without a
+certificate is
 refused, audits the job's MCAP record and stops the daemon. ``[ros2]`` is
 enabled: a zenoh session of the demo with the controller's certificate,
 standing in for a ROS 2 cell on rmw_zenoh, lists the ROS 2 key expressions
@@ -74,30 +75,57 @@ def _show(line: str) -> None:
         extra = body.get("error") or ", ".join(body.get("outputs", []))
         print(f"  {message['key']}: {body['state']}" + (f" ({extra})" if extra else ""))
     elif topic == "quality":
-        print(f"  {message['key']}: Q = {body['quality_mm2']:.2f} mm², {body['candidates_evaluated']} candidates, pad {body['pad_case']}")
+        print(
+            f"  {message['key']}: Q = {body['quality_mm2']:.2f} mm², {body['candidates_evaluated']} candidates, pad "
+            f"{body['pad_case']}"
+        )
     elif topic == "grasps":
         for grasp in body["grasps"]:
             position = ", ".join(f"{x:.1f}" for x in grasp["position_mm"])
-            print(f"  {message['key']}: {grasp['part']} pose {grasp['pose_index']} (finger set {grasp['finger_set']}): TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
+            print(
+                f"  {message['key']}: {grasp['part']} pose {grasp['pose_index']} (finger set {grasp['finger_set']}): "
+                f"TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm"
+            )
     elif topic == "placement":
         fit = "fingers placed" if body["fingers_fit"] else "FINGERS DO NOT FIT"
-        print(f"  {message['key']}: {fit} ({body['finger_copies_placed']}/{body['finger_copies_requested']}), "
-              f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}")
+        print(
+            f"  {message['key']}: {fit} ({body['finger_copies_placed']}/{body['finger_copies_requested']}), "
+            f"build height {body['build_height_mm']:.1f} mm, density {body['packing_density']:.3f}, {body['file']}"
+        )
     elif topic == "design" or topic.startswith("design/"):
-        print(f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: {message['sha256_ok']}, saved {message['saved']}")
+        print(
+            f"  {message['key']}: {message['bytes']} bytes of STL, sha256 {message['sha256'][:16]}… matches: "
+            f"{message['sha256_ok']}, saved {message['saved']}"
+        )
     elif topic == "plan":
         reached = "reached" if body["min_retained_reached"] else "NOT reached"
-        print(f"  {message['key']}: pick plan, {len(body['sets'])} finger set(s), min_retained {body['min_retained']:g} {reached}")
+        print(
+            f"  {message['key']}: pick plan, {len(body['sets'])} finger set(s), min_retained {body['min_retained']:g} "
+            f"{reached}"
+        )
         for entry in body["sets"]:
-            print(f"    mount set {entry['set']}: {entry['finger_key']} (sha256 {entry['finger_sha256'][:16]}…, {entry['finger_copies']} copies in build.3mf, Q = {entry['quality_mm2']:.1f} mm²)")
+            print(
+                f"    mount set {entry['set']}: {entry['finger_key']} (sha256 {entry['finger_sha256'][:16]}…, "
+                f"{entry['finger_copies']} copies in build.3mf, Q = {entry['quality_mm2']:.1f} mm²)"
+            )
             for part in entry["parts"]:
                 for grasp in part["grasps"]:
                     position = ", ".join(f"{x:.1f}" for x in grasp["position_mm"])
-                    print(f"      pick {part['quantity']} x {part['part']} lying in pose {grasp['pose_index']}: TCP ({position}) mm, close to {grasp['closing_width_mm']:.2f} mm")
+                    print(
+                        f"      pick {part['quantity']} x {part['part']} lying in pose {grasp['pose_index']}: TCP "
+                        f"({position}) mm, close to {grasp['closing_width_mm']:.2f} mm"
+                    )
         if body["ungraspable_parts"]:
             print(f"    not picked (no finger can grasp them): {', '.join(body['ungraspable_parts'])}")
-    if "signature_ok" in message and message["topic"] == "status" and (message.get("body") or {}).get("state") == "queued":
-        print(f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the daemon's public key, signing.pub)")
+    if (
+        "signature_ok" in message
+        and message["topic"] == "status"
+        and (message.get("body") or {}).get("state") == "queued"
+    ):
+        print(
+            f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the "
+            f"daemon's public key, signing.pub)"
+        )
 
 
 def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
@@ -111,29 +139,52 @@ def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
     }
     intruder.write_text(json.dumps(settings), encoding="utf-8")
     attempt = subprocess.run(
-        [sys.executable, "-m", "fcsod", "subscribe", "--config", str(config), "--zenoh-config", str(intruder),
-         "--verify-key", str(controller / "signing.pub"), "--timeout", "3"],
-        cwd=REPO, capture_output=True, text=True,
+        [
+            sys.executable,
+            "-m",
+            "fcsod",
+            "subscribe",
+            "--config",
+            str(config),
+            "--zenoh-config",
+            str(intruder),
+            "--verify-key",
+            str(controller / "signing.pub"),
+            "--timeout",
+            "3",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
     )
-    print(f"a client without a certificate: exit code {attempt.returncode}, {attempt.stderr.strip().splitlines()[-1][:140]}")
+    print(
+        f"a client without a certificate: exit code {attempt.returncode}, "
+        f"{attempt.stderr.strip().splitlines()[-1][:140]}"
+    )
 
 
 class Ros2Cell:
-    """What a ROS 2 cell on rmw_zenoh sees of the daemon: data on ``<domain>/**`` and liveliness tokens under ``@ros2_lv/<domain>/**``."""
+    """What a ROS 2 cell on rmw_zenoh sees of the daemon: data on ``<domain>/**`` and liveliness tokens under
+    ``@ros2_lv/<domain>/**``.
+    """
 
     def __init__(self, zenoh_config: Path):
         self.session = zenoh.open(zenoh.Config.from_file(str(zenoh_config)))
         self.samples: list[tuple[str, bytes]] = []
         self.tokens: list[str] = []
-        self._subscriber = self.session.declare_subscriber(f"{ROS_DOMAIN_ID}/**", lambda s: self.samples.append((str(s.key_expr), s.payload.to_bytes())))
+        self._subscriber = self.session.declare_subscriber(
+            f"{ROS_DOMAIN_ID}/**", lambda s: self.samples.append((str(s.key_expr), s.payload.to_bytes()))
+        )
         self._tokens = self.session.liveliness().declare_subscriber(
             f"@ros2_lv/{ROS_DOMAIN_ID}/**", lambda s: self.tokens.append(str(s.key_expr)), history=True
         )
 
     def show(self) -> None:
         typestore = get_typestore(Stores.ROS2_JAZZY)
-        print("ROS 2 (rmw_zenoh wire format, read over TLS with the controller's certificate through the access control;"
-              " unsigned: rmw_zenoh's attachment has no room for a signature)")
+        print(
+            "ROS 2 (rmw_zenoh wire format, read over TLS with the controller's certificate through the access control;"
+            " unsigned: rmw_zenoh's attachment has no room for a signature)"
+        )
         print("liveliness tokens: what `ros2 node list` / `ros2 topic list` read")
         for token in dict.fromkeys(self.tokens):
             print(f"  {token}")
@@ -145,8 +196,11 @@ class Ros2Cell:
                 message = typestore.deserialize_cdr(payload, "geometry_msgs/msg/PoseArray")
                 for pose in message.poses:
                     p, q = pose.position, pose.orientation
-                    print(f"  PoseArray in frame {message.header.frame_id}: position ({p.x:.4f}, {p.y:.4f}, {p.z:.4f}) m, "
-                          f"orientation xyzw ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})")
+                    print(
+                        f"  PoseArray in frame {message.header.frame_id}: position ({p.x:.4f}, {p.y:.4f}, {p.z:.4f}) "
+                        f"m, "
+                        f"orientation xyzw ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})"
+                    )
 
     def close(self) -> None:
         self.session.close()
@@ -157,11 +211,31 @@ def main() -> int:
     (BASE / "watch").mkdir(parents=True)
     port = _free_port()
     pki = BASE / "pki"
-    print(f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port {port} --ros2-domain-id {ROS_DOMAIN_ID}")
+    print(
+        f"making the secure set-up: fcsod pki init {pki} --cell demo --client demo-controller --host 127.0.0.1 --port "
+        f"{port} --ros2-domain-id {ROS_DOMAIN_ID}"
+    )
     subprocess.run(
-        [sys.executable, "-m", "fcsod", "pki", "init", str(pki), "--cell", "demo", "--client", "demo-controller", "--host", "127.0.0.1", "--port", str(port),
-         "--ros2-domain-id", str(ROS_DOMAIN_ID)],
-        cwd=REPO, check=True,
+        [
+            sys.executable,
+            "-m",
+            "fcsod",
+            "pki",
+            "init",
+            str(pki),
+            "--cell",
+            "demo",
+            "--client",
+            "demo-controller",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--ros2-domain-id",
+            str(ROS_DOMAIN_ID),
+        ],
+        cwd=REPO,
+        check=True,
     )
     controller = pki / "clients" / "demo-controller"
     config = BASE / "fcsod.toml"
@@ -200,8 +274,19 @@ namespace = "/demo"
             with open(BASE / "daemon.log") as reader:
                 _wait_for_line(reader, '"fcsod started"', 120)
             subscriber = _fcsod(
-                "subscribe", "--config", str(config), "--save", str(BASE / "received"), "--exit-after", "1", "--timeout", "600",
-                "--zenoh-config", str(controller / "zenoh.json5"), "--verify-key", str(controller / "signing.pub"),
+                "subscribe",
+                "--config",
+                str(config),
+                "--save",
+                str(BASE / "received"),
+                "--exit-after",
+                "1",
+                "--timeout",
+                "600",
+                "--zenoh-config",
+                str(controller / "zenoh.json5"),
+                "--verify-key",
+                str(controller / "signing.pub"),
                 stdout=subprocess.PIPE,
             )
             _wait_for_line(subscriber.stdout, '"alive"', 120)
@@ -227,7 +312,9 @@ namespace = "/demo"
     results = sorted(p for p in (BASE / "out").iterdir() if p.is_dir())
     for result in results:
         print(f"\naudit of {result / 'job.mcap'}:")
-        subprocess.run([sys.executable, "-m", "fcsod", "audit", str(result / "job.mcap"), "--verify", str(result)], cwd=REPO)
+        subprocess.run(
+            [sys.executable, "-m", "fcsod", "audit", str(result / "job.mcap"), "--verify", str(result)], cwd=REPO
+        )
         print(f"\noutputs to open: {result}")
         for path in sorted(p for p in result.rglob("*") if p.is_file()):
             print(f"  {path.relative_to(result)}  ({path.stat().st_size} bytes)")

@@ -25,7 +25,9 @@ def _mesh(solid: manifold3d.Manifold) -> trimesh.Trimesh:
 
 
 def _v_prism(depth_mm: float, height_mm: float) -> manifold3d.Manifold:
-    """A vertical prism with a right-angled triangular cross-section, apex at the origin pointing -x, base at x = depth."""
+    """A vertical prism with a right-angled triangular cross-section, apex at the origin pointing -x, base at x =
+    depth.
+    """
     triangle = [[0.0, 0.0], [depth_mm, -depth_mm], [depth_mm, depth_mm]]  # counter-clockwise
     return manifold3d.Manifold.extrude(manifold3d.CrossSection([triangle]), height_mm)
 
@@ -55,7 +57,9 @@ def featured_cube(size_mm: float = 30.0, notch_mm: float = 8.0, hole_mm: float =
     return _mesh(solid)
 
 
-def ridged_block(length_mm: float = 20.0, width_mm: float = 20.0, height_mm: float = 14.0, ridge_mm: float = 6.0) -> trimesh.Trimesh:
+def ridged_block(
+    length_mm: float = 20.0, width_mm: float = 20.0, height_mm: float = 14.0, ridge_mm: float = 6.0
+) -> trimesh.Trimesh:
     """A block with a vertical 90-degree ridge on each end along x (corner of the block at the origin).
 
     Parameters
@@ -73,7 +77,12 @@ def ridged_block(length_mm: float = 20.0, width_mm: float = 20.0, height_mm: flo
 
 
 def two_ridge_block(
-    length_mm: float = 20.0, width_mm: float = 20.0, low_mm: float = 20.0, gap_mm: float = 4.0, high_mm: float = 20.0, ridge_mm: float = 4.0
+    length_mm: float = 20.0,
+    width_mm: float = 20.0,
+    low_mm: float = 20.0,
+    gap_mm: float = 4.0,
+    high_mm: float = 20.0,
+    ridge_mm: float = 4.0,
 ) -> trimesh.Trimesh:
     """A block whose two x ends carry, low, a vertical 90-degree ridge and, high, two horizontal ones.
 

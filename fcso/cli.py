@@ -9,16 +9,26 @@ import time
 from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
-from .sets import SetsResult, design_sets
-from .sets_output import is_job_folder, pick_plan_text, rebuild_job_report, write_set_outputs
 from .errors import FcsoError, GeometryError
-from .html_report import rebuild_report
+from .output.design_page import rebuild_report
+from .output.files import rebuild_job_report, write_set_outputs
+from .output.layout import set_folder
+from .output.picture_process import PictureProcess
+from .output.read import is_job_folder
+from .output.sets_page import pick_plan_text
+from .output.table import quality_table
 from .parts import load_part, load_parts
-from .picture_process import PictureProcess
 from .poses import stable_poses
 from .schema import write_schemas
-from .sim.cli import add_design_options, add_settings_options, add_verify_command, restore_section, run_verify, verify_design_outputs
-from .table import quality_table
+from .sets import SetsResult, design_sets
+from .sim.cli import (
+    add_design_options,
+    add_settings_options,
+    add_verify_command,
+    restore_section,
+    run_verify,
+    verify_design_outputs,
+)
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -85,7 +95,11 @@ def _parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("design", help="design a fingerpad and finger for one or more parts")
     run.add_argument(
-        "parts", nargs="+", type=Path, metavar="PART", help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object"
+        "parts",
+        nargs="+",
+        type=Path,
+        metavar="PART",
+        help="part meshes (STL, 3MF, OBJ, PLY); a 3MF build gives one part per object",
     )
     run.add_argument("--out", required=True, type=Path, help="output folder")
     run.add_argument("--config", type=Path, help="settings (TOML)")
@@ -93,18 +107,38 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--scale-to", type=float, metavar="MM", help="scale each part so its longest side is MM")
     run.add_argument("--poses", type=int, metavar="N", help="stable poses per part (poses.count)")
     run.add_argument("--seed", type=int, help="seed of the random pose choice (poses.seed)")
-    run.add_argument("--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)")
+    run.add_argument(
+        "--finger", type=Path, metavar="FINGER", help="flat finger mesh (finger.mesh; frame from --config)"
+    )
     run.add_argument("--repair", action="store_true", help="repair meshes that are not closed volumes")
-    run.add_argument("--jobs", type=int, metavar="N", help="worker processes (search.jobs; default: every core); results do not depend on it")
-    run.add_argument("--finger-sets", type=int, metavar="N", help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part")
-    run.add_argument("--min-retained", type=float, metavar="R", help="least E / E* every scenario should keep in its set (finger_sets.min_retained, default 0.5)")
+    run.add_argument(
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="worker processes (search.jobs; default: every core); results do not depend on it",
+    )
+    run.add_argument(
+        "--finger-sets",
+        type=int,
+        metavar="N",
+        help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part",
+    )
+    run.add_argument(
+        "--min-retained",
+        type=float,
+        metavar="R",
+        help="least E / E* every scenario should keep in its set (finger_sets.min_retained, default 0.5)",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress and no table")
     add_design_options(run)
     add_settings_options(run)
 
     report = commands.add_parser("report", help="rebuild report.html in a design's output folder")
     report.add_argument(
-        "directory", type=Path, metavar="DIR", help="output folder of fcso design (report.json, finger.stl, fingerpad.stl)"
+        "directory",
+        type=Path,
+        metavar="DIR",
+        help="output folder of fcso design (report.json, finger.stl, fingerpad.stl)",
     )
     report.add_argument("--quiet", action="store_true", help="no progress")
 
@@ -178,7 +212,13 @@ def _design(args) -> int:
         parts = [
             part
             for path in args.parts
-            for part in load_parts(path, units=args.units, scale_to_mm=args.scale_to, repair=args.repair, split_bodies=config.parts.split_bodies)
+            for part in load_parts(
+                path,
+                units=args.units,
+                scale_to_mm=args.scale_to,
+                repair=args.repair,
+                split_bodies=config.parts.split_bodies,
+            )
         ]
         progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
         try:
@@ -186,20 +226,7 @@ def _design(args) -> int:
             write_set_outputs(job, args.out, progress=progress, draw=draw_pictures)
         finally:
             progress.close()
-    if job.job_report is not None:
-        return _report_sets(job, args)
-    result = job.designs[0]
-    if not args.quiet:
-        _print_parts(result.report.parts, result.report.scenarios, result.report.ungraspable)
-        print(quality_table(result.report))
-        if result.report.finger_sets is not None:
-            print(pick_plan_text(result.report.finger_sets))
-        for warning in result.report.warnings:
-            print(f"warning: {warning}")
-        print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
-    if args.verify or args.verify_top:
-        return verify_design_outputs(result, args, ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
-    return 0
+    return _report_sets(job, args)
 
 
 def _print_parts(parts, scenarios, ungraspable) -> None:
@@ -216,17 +243,28 @@ def _print_parts(parts, scenarios, ungraspable) -> None:
 
 
 def _report_sets(job: SetsResult, args) -> int:
-    """Print a job of several finger sets (and verify each set's finger when asked)."""
-    sets = job.report
+    """Print what a job's finger sets (one or several) made, and verify each set's finger when asked."""
+    report, sets = job.job(), job.report
     if not args.quiet:
-        _print_parts(job.job_report.parts, [s for d in job.designs for s in d.report.scenarios], sets.ungraspable)
-        print(pick_plan_text(sets))
-        for warning in job.job_report.warnings:
+        _print_parts(report.parts, [s for d in job.designs for s in d.report.scenarios], (sets or report).ungraspable)
+        if not job.several:
+            print(quality_table(report))
+        if sets is not None:
+            print(pick_plan_text(sets))
+        for warning in report.warnings:
             print(f"warning: {warning}")
-        print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
+        if job.several:
+            print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
+        else:
+            print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
     if args.verify or args.verify_top:
-        for entry, result in zip(sets.sets, job.designs):
-            code = verify_design_outputs(result, argparse.Namespace(**{**vars(args), "out": args.out / entry.folder}), ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
+        for number, result in enumerate(job.designs, start=1):
+            out = args.out / set_folder(number, job.several)
+            code = verify_design_outputs(
+                result,
+                argparse.Namespace(**{**vars(args), "out": out}),
+                ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()),
+            )
             if code:
                 return code
     return 0

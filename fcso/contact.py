@@ -59,7 +59,11 @@ def sample_surface(vertices: np.ndarray, faces: np.ndarray, density_per_mm2: flo
     flip = r1 + r2 > 1.0
     r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
     triangles = vertices[faces[chosen]]
-    points = triangles[:, 0] + r1[:, None] * (triangles[:, 1] - triangles[:, 0]) + r2[:, None] * (triangles[:, 2] - triangles[:, 0])
+    points = (
+        triangles[:, 0]
+        + r1[:, None] * (triangles[:, 1] - triangles[:, 0])
+        + r2[:, None] * (triangles[:, 2] - triangles[:, 0])
+    )
     return SurfaceSamples(points, normals[chosen], total / count)
 
 
@@ -158,7 +162,9 @@ def seat(
     everything = np.vstack([s.points for s in samples]) if sum(counts) else np.zeros((0, 3))
     # one distance query for all geometries at t = 0: most never move
     initial = np.split(_signed_distance(everything, pad_vertices, pad_faces), np.cumsum(counts)[:-1])
-    return [_seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm) for s, d in zip(samples, initial)]
+    return [
+        _seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm) for s, d in zip(samples, initial)
+    ]
 
 
 def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm=0.0) -> PadContact:
@@ -201,13 +207,17 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
                 low = middle
         offset, distances = high, feasible
     if travel_mm > 0:
-        offset, distances = _close_gap(samples.points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations)
+        offset, distances = _close_gap(
+            samples.points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations
+        )
     contact = np.abs(distances) <= eps_mm
     return PadContact(offset, float(contact.sum()) * samples.area_per_point_mm2, contact)
 
 
 def _close_gap(points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations):
-    """Advance the pad toward the part (``t`` decreasing) until contact or ``travel_mm``; returns the offset and distances."""
+    """Advance the pad toward the part (``t`` decreasing) until contact or ``travel_mm``; returns the offset and
+    distances.
+    """
     limit = offset - travel_mm
     for _ in range(max_iterations):
         gap = float(distances.min())

@@ -9,7 +9,6 @@ from igl.embree import EmbreeIntersector
 
 from .errors import GeometryError
 
-
 #: Vertices this close to a clipping plane count as on it (mm): parts and
 #: sample positions are built from round numbers and float32 files, so
 #: faces meant to lie in a box face otherwise fall out by one rounding step.
@@ -73,7 +72,9 @@ def _half_space_sides(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: 
     return distance, inside_count, whole, (inside_count == 1) | (inside_count == 2)
 
 
-def half_space_area(vertices: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, axis: int, sign: float, level: float) -> float:
+def half_space_area(
+    vertices: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, axis: int, sign: float, level: float
+) -> float:
     """Area of the surface where ``sign * x[axis] >= level``, mm²: the area :func:`clip_to_box` keeps, without cutting.
 
     Parameters
@@ -102,7 +103,9 @@ def half_space_area(vertices: np.ndarray, faces: np.ndarray, face_areas: np.ndar
 
 
 def _odd_corner_first(cut_distance: np.ndarray, cut_count: np.ndarray) -> np.ndarray:
-    """Corner order of each cut triangle that puts its odd corner (the lone inside or lone outside one) first, (m, 3)."""
+    """Corner order of each cut triangle that puts its odd corner (the lone inside or lone outside one) first, (m,
+    3).
+    """
     cut_inside = cut_distance >= -PLANE_TOLERANCE_MM
     odd = np.where(cut_count == 1, np.argmax(cut_inside, axis=1), np.argmax(~cut_inside, axis=1))
     return (odd[:, None] + np.arange(3)) % 3
@@ -134,7 +137,11 @@ def _clip_half_space(
     cut, cut_distance = cut[rows, order], cut_distance[rows, order]
     first = vertices[cut[:, 0]]
     # points where the edges from the odd vertex cross the plane
-    crossings = [first + (vertices[cut[:, k]] - first) * (cut_distance[:, 0] / (cut_distance[:, 0] - cut_distance[:, k]))[:, None] for k in (1, 2)]
+    crossings = [
+        first
+        + (vertices[cut[:, k]] - first) * (cut_distance[:, 0] / (cut_distance[:, 0] - cut_distance[:, k]))[:, None]
+        for k in (1, 2)
+    ]
     count = len(cut)
     start = len(vertices)
     near_1, near_2 = start + np.arange(count), start + count + np.arange(count)
@@ -149,7 +156,9 @@ def _clip_half_space(
     return np.vstack([vertices, *crossings]), np.vstack([kept, *triangles]), np.concatenate(sources)
 
 
-def cut_at_levels(vertices: np.ndarray, faces: np.ndarray, axis: int, levels: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+def cut_at_levels(
+    vertices: np.ndarray, faces: np.ndarray, axis: int, levels: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """A surface cut at every level along an axis, as :func:`clip_to_box` would cut it between each two.
 
     Parameters
@@ -223,7 +232,9 @@ def triangle_areas_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.
     return doubled / 2.0, normals
 
 
-def ray_hits(vertices: np.ndarray, faces: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def ray_hits(
+    vertices: np.ndarray, faces: np.ndarray, origins: np.ndarray, directions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Every crossing of rays with a triangle mesh, by Embree (through libigl).
 
     Parameters

@@ -12,8 +12,9 @@ import ctypes
 import multiprocessing
 import os
 import signal
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any, Callable, Sequence
+from typing import Any
 
 # The shared data of the pool being forked: set by WorkerPool just before
 # its workers fork, read only inside them.
@@ -78,13 +79,16 @@ class WorkerPool:
         self.jobs = jobs
         self._pool: ProcessPoolExecutor | None = None
 
-    def __enter__(self) -> "WorkerPool":
+    def __enter__(self) -> WorkerPool:
         global _WORKER_CONTEXT
         if self.jobs > 1:
             _WORKER_CONTEXT = self.context
             try:
                 self._pool = ProcessPoolExecutor(
-                    self.jobs, mp_context=multiprocessing.get_context("fork"), initializer=die_with_parent, initargs=(os.getpid(),)
+                    self.jobs,
+                    mp_context=multiprocessing.get_context("fork"),
+                    initializer=die_with_parent,
+                    initargs=(os.getpid(),),
                 )
                 # fork every worker now, while the context is the one to share
                 list(self._pool.map(_started, [None] * self.jobs))

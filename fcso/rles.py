@@ -249,8 +249,9 @@ def _hull_candidates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         centre = -sums[keep] / lengths[keep, None]
         v_f, v_g = vertices[facet[keep]], vertices[other[keep]]
         span = np.cross(v_f, v_g)
-        inside = ((np.einsum("ij,ij->i", np.cross(v_f, centre), span) >= -_CONE_TOLERANCE)
-                  & (np.einsum("ij,ij->i", np.cross(centre, v_g), span) >= -_CONE_TOLERANCE))
+        inside = (np.einsum("ij,ij->i", np.cross(v_f, centre), span) >= -_CONE_TOLERANCE) & (
+            np.einsum("ij,ij->i", np.cross(centre, v_g), span) >= -_CONE_TOLERANCE
+        )
         candidates = np.vstack((vertices, centre[inside]))
         anchors = np.concatenate((anchors, first[keep][inside]))
     finite = np.isfinite(candidates).all(axis=1)

@@ -125,7 +125,11 @@ class SamplerResult:
 
 
 def sample_grasps(
-    mesh: trimesh.Trimesh, sampler: SamplerConfig, gripper: GripperConfig, plate: FingerPlate, centres: tuple[int, int] = (0, 1)
+    mesh: trimesh.Trimesh,
+    sampler: SamplerConfig,
+    gripper: GripperConfig,
+    plate: FingerPlate,
+    centres: tuple[int, int] = (0, 1),
 ) -> SamplerResult:
     """Slide a pair of pad boxes over a part resting on the table.
 
@@ -189,11 +193,12 @@ def sample_grasps(
                 -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
             }
             plate_slabs = {
-                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF))) for side, (low, high) in plate_b.items()
+                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)))
+                for side, (low, high) in plate_b.items()
             }
             stride_heights = np.arange(clearance, top, stride)
             heights = _merge_positions(stride_heights, feature_heights)
-            bands = _Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
+            bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
             for h in heights:
                 prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
                 if len(prism_f) == 0:
@@ -213,7 +218,9 @@ def sample_grasps(
                     continue
                 closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
                 if any(
-                    plate_slabs[side].meets_box(*_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height))
+                    plate_slabs[side].meets_box(
+                        *_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height)
+                    )
                     for side in SIDES
                 ):
                     rejected["collision_finger"] += 1
@@ -221,8 +228,13 @@ def sample_grasps(
                 centre = (a_max + a_min) / 2.0
                 column = bands.above(h)
                 open_back = {1: centre + open_half, -1: centre - open_half}
-                if (column is not None and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)) or any(
-                    plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
+                if (
+                    column is not None
+                    and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)
+                ) or any(
+                    plate_slabs[side].meets_box(
+                        *_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF)
+                    )
                     for side in SIDES
                 ):
                     rejected["collision_descent"] += 1
@@ -370,7 +382,7 @@ def _inside(triangles: np.ndarray, point: np.ndarray) -> bool:
     return bool(np.count_nonzero(hit & (crossing > point[0])) % 2)
 
 
-class _Bands:
+class Bands:
     """A slab's surface cut once into height bands, so every window of heights is a union of bands.
 
     The sampler's windows ``[h, h + W]`` and columns ``z >= h`` all start and
@@ -394,7 +406,9 @@ class _Bands:
         vertices, self.bands = cut_at_levels(vertices, faces, 2, self.levels)
         self.vertices = vertices
         self.band_areas = [triangle_areas_normals(vertices, band)[0] for band in self.bands]
-        extent = np.array([(vertices[band, 0].min(), vertices[band, 0].max()) if len(band) else (_INF, -_INF) for band in self.bands])
+        extent = np.array(
+            [(vertices[band, 0].min(), vertices[band, 0].max()) if len(band) else (_INF, -_INF) for band in self.bands]
+        )
         self.extent = extent
         # everything above each band's bottom, for the descent column
         self.above_min = np.minimum.accumulate(extent[::-1, 0])[::-1]
@@ -405,7 +419,9 @@ class _Bands:
         return int(np.searchsorted(self.levels, level)) + 1
 
     def between(self, z_low: float, z_high: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float]]:
-        """Surface between two levels: vertices, faces, face areas (mm²) and its extent ``(a_min, a_max)`` along ``a``."""
+        """Surface between two levels: vertices, faces, face areas (mm²) and its extent ``(a_min, a_max)`` along
+        ``a``.
+        """
         first, last = self._first_band_above(z_low), self._first_band_above(z_high)
         extent = self.extent[first:last]
         faces = np.vstack(self.bands[first:last])

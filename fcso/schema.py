@@ -8,8 +8,7 @@ from pathlib import Path
 from pydantic import BaseModel
 
 from .config import DesignConfig
-from .report import DesignReport
-from .sets_report import JobReport
+from .report.models import DesignReport, JobReport
 from .sim.report import VerificationReport
 
 #: fcso's documents: file name -> model.

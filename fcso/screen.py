@@ -76,10 +76,14 @@ class ScreenGrid:
     count_w: int
 
     @classmethod
-    def for_config(cls, config: DesignConfig) -> "ScreenGrid":
+    def for_config(cls, config: DesignConfig) -> ScreenGrid:
         """The grid for a design's pad size and contact tolerance (cell = 4 eps)."""
         cell = CELL_PER_EPS * config.contact.eps_mm
-        return cls(cell, max(1, int(np.ceil(config.sampler.length_mm / cell))), max(1, int(np.ceil(config.sampler.width_mm / cell))))
+        return cls(
+            cell,
+            max(1, int(np.ceil(config.sampler.length_mm / cell))),
+            max(1, int(np.ceil(config.sampler.width_mm / cell))),
+        )
 
     def cells(self, v: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Flat cell index of points at ``(v, w)`` (mm), clipped to the grid."""
@@ -249,7 +253,9 @@ def _hull_rles(directions: np.ndarray) -> float:
     return rles(directions)
 
 
-def prepare_geometry(heights_mm, good, depth_mm, points, normals_grasp, area_per_point_mm2, grid: ScreenGrid, lattice: NormalLattice) -> ScreenGeometry:
+def prepare_geometry(
+    heights_mm, good, depth_mm, points, normals_grasp, area_per_point_mm2, grid: ScreenGrid, lattice: NormalLattice
+) -> ScreenGeometry:
     """Bundle one geometry's screening data.
 
     Parameters
@@ -370,7 +376,12 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
         top_high = np.full(cells, -np.inf, dtype=np.float32)
         done = frozenset()
     else:
-        top, owner, second, top_high = base.top_mm.copy(), base.owner.copy(), base.second_mm.copy(), base.top_high_mm.copy()
+        top, owner, second, top_high = (
+            base.top_mm.copy(),
+            base.owner.copy(),
+            base.second_mm.copy(),
+            base.top_high_mm.copy(),
+        )
         done = base.pairs
     for pair in pairs:
         for side, g in enumerate(chosen[pair]):
@@ -401,7 +412,12 @@ def pad_case(geometries: list[ScreenGeometry], config: DesignConfig) -> tuple[st
     return "mixed", max(depth - min(g.depth_mm for g in good) * config.filter.block_factor, 0.0)
 
 
-def screen(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], config: DesignConfig, lattice: NormalLattice, carved: Carving | None = None) -> ScreenedCandidate:
+def screen(
+    chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
+    config: DesignConfig,
+    lattice: NormalLattice,
+    carved: Carving | None = None,
+) -> ScreenedCandidate:
     """Screen one candidate: one sample's two geometries per scenario.
 
     Parameters

@@ -10,8 +10,8 @@ exactly by the caller.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -148,7 +148,11 @@ def search(
 def _branch_and_bound(counts, upper_bounds, run, results, budget: int) -> bool:
     """Best-first branch and bound; True when it proved its best optimal within ``budget``."""
     order = sorted(
-        ((float(bound), scenario, sample) for scenario, bounds in enumerate(upper_bounds) for sample, bound in enumerate(bounds)),
+        (
+            (float(bound), scenario, sample)
+            for scenario, bounds in enumerate(upper_bounds)
+            for sample, bound in enumerate(bounds)
+        ),
         key=lambda item: (-item[0], item[1], item[2]),
     )
     admitted: list[list[int]] = [[] for _ in counts]

@@ -6,7 +6,7 @@ records each job to MCAP.
 
 A cell controller checks every message it receives with
 ``fcsod.verify_message(key_expr, payload, attachment, fcsod.load_verify_key("signing.pub"))``
-(see :mod:`fcsod.signing`).
+(see :mod:`fcsod.bus.signing`).
 """
 
 __version__ = "0.1.0"
@@ -17,7 +17,7 @@ __all__ = ["SignatureError", "load_verify_key", "verify_message"]
 def __getattr__(name: str):
     # imported on first use: workers and the CLI do not pay for the crypto imports they do not need
     if name in __all__:
-        from . import signing
+        from .bus import signing
 
         return getattr(signing, name)
     raise AttributeError(f"module 'fcsod' has no attribute {name!r}")

@@ -27,7 +27,9 @@ EXIT_BAD_INPUT = 2
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fcsod", description="Print-server daemon: fcso on every complete print-job folder.")
+    parser = argparse.ArgumentParser(
+        prog="fcsod", description="Print-server daemon: fcso on every complete print-job folder."
+    )
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="run the daemon")
@@ -36,51 +38,119 @@ def _parser() -> argparse.ArgumentParser:
 
     audit = commands.add_parser("audit", help="print a job's story from its job.mcap and check its hashes")
     audit.add_argument("record", type=Path, metavar="FILE.mcap")
-    audit.add_argument("--verify", type=Path, metavar="DIR", help="the job's output folder: check every output file's sha256")
+    audit.add_argument(
+        "--verify", type=Path, metavar="DIR", help="the job's output folder: check every output file's sha256"
+    )
     audit.add_argument("--inputs", type=Path, metavar="DIR", help="the job folder: check every input file's sha256")
 
     replay = commands.add_parser("replay", help="publish the zenoh messages recorded in a job.mcap again")
     replay.add_argument("record", type=Path, metavar="FILE.mcap")
     replay.add_argument("--config", required=True, type=Path, help="daemon settings (zenoh session)")
-    replay.add_argument("--listen", action="append", metavar="ENDPOINT", help="listen here instead of the config's endpoints")
-    replay.add_argument("--connect", action="append", metavar="ENDPOINT", help="connect here instead of the config's endpoints")
-    replay.add_argument("--wait", type=float, default=10.0, metavar="S", help="wait up to S seconds for a subscriber before publishing")
+    replay.add_argument(
+        "--listen", action="append", metavar="ENDPOINT", help="listen here instead of the config's endpoints"
+    )
+    replay.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="connect here instead of the config's endpoints"
+    )
+    replay.add_argument(
+        "--wait", type=float, default=10.0, metavar="S", help="wait up to S seconds for a subscriber before publishing"
+    )
 
-    subscribe = commands.add_parser("subscribe", help="print what the daemon publishes (a small cell-controller client)")
+    subscribe = commands.add_parser(
+        "subscribe", help="print what the daemon publishes (a small cell-controller client)"
+    )
     subscribe.add_argument("--config", required=True, type=Path, help="daemon settings (prefix, cell, zenoh)")
-    subscribe.add_argument("--connect", action="append", metavar="ENDPOINT", help="daemon endpoint (default: the config's connect, else its listen endpoints)")
+    subscribe.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="daemon endpoint (default: the config's connect, else its listen endpoints)",
+    )
     subscribe.add_argument("--save", type=Path, metavar="DIR", help="save each received design as DIR/<job_id>.stl")
-    subscribe.add_argument("--no-query", action="store_true", help="do not ask the daemon for results it published earlier (asked at start and whenever the daemon reappears)")
+    subscribe.add_argument(
+        "--no-query",
+        action="store_true",
+        help="do not ask the daemon for results it published earlier (asked at start and whenever the daemon "
+        "reappears)",
+    )
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
-    subscribe.add_argument("--zenoh-config", type=Path, metavar="FILE", help="the client's zenoh config (from fcsod pki init) instead of the daemon's")
-    subscribe.add_argument("--verify-key", type=Path, metavar="FILE", help="the daemon's public key, signing.pub (default: [bus] verify_key, else signing.pub next to the signing key)")
+    subscribe.add_argument(
+        "--zenoh-config",
+        type=Path,
+        metavar="FILE",
+        help="the client's zenoh config (from fcsod pki init) instead of the daemon's",
+    )
+    subscribe.add_argument(
+        "--verify-key",
+        type=Path,
+        metavar="FILE",
+        help="the daemon's public key, signing.pub (default: [bus] verify_key, else signing.pub next to the signing "
+        "key)",
+    )
 
     pki = commands.add_parser("pki", help="certificates, keys and zenoh configs for the secure set-up")
     pki_commands = pki.add_subparsers(dest="pki_command", required=True)
-    init = pki_commands.add_parser("init", help="create a local CA, the daemon's and each cell controller's certificates and configs")
+    init = pki_commands.add_parser(
+        "init", help="create a local CA, the daemon's and each cell controller's certificates and configs"
+    )
     init.add_argument("directory", type=Path, metavar="DIR")
     init.add_argument("--cell", required=True, help="the [bus] cell")
-    init.add_argument("--client", action="append", required=True, metavar="NAME", help="a cell controller (repeat for each)")
+    init.add_argument(
+        "--client", action="append", required=True, metavar="NAME", help="a cell controller (repeat for each)"
+    )
     init.add_argument("--prefix", default="fcso", help="the [bus] prefix (default fcso)")
-    init.add_argument("--host", action="append", metavar="NAME", help="name or address clients reach the daemon at (repeat; default this machine's)")
+    init.add_argument(
+        "--host",
+        action="append",
+        metavar="NAME",
+        help="name or address clients reach the daemon at (repeat; default this machine's)",
+    )
     init.add_argument("--port", type=int, default=7447, help="the daemon's TLS port (default 7447)")
-    init.add_argument("--ros2-domain-id", type=int, metavar="N", help="the [ros2] domain_id when [ros2] is enabled: let its ROS 2 key expressions through")
-    init.add_argument("--runtime-dir", type=Path, metavar="DIR", help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service")
-    add = pki_commands.add_parser("add-client", help="issue one more certificate from the CA (a controller or a zenoh router); not added to the access control")
+    init.add_argument(
+        "--ros2-domain-id",
+        type=int,
+        metavar="N",
+        help="the [ros2] domain_id when [ros2] is enabled: let its ROS 2 key expressions through",
+    )
+    init.add_argument(
+        "--runtime-dir",
+        type=Path,
+        metavar="DIR",
+        help="where the daemon reads its keys when running, e.g. /run/credentials/fcsod.service",
+    )
+    add = pki_commands.add_parser(
+        "add-client",
+        help="issue one more certificate from the CA (a controller or a zenoh router); not added to the access control",
+    )
     add.add_argument("directory", type=Path, metavar="DIR")
     add.add_argument("name", metavar="NAME", help="the certificate's common name")
-    add.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the daemon's endpoint as this client reaches it, e.g. tls/printserver:7447")
-    add.add_argument("--host", action="append", metavar="NAME", help="name or address this subject is reached at (a router; repeat)")
+    add.add_argument(
+        "--connect",
+        action="append",
+        required=True,
+        metavar="ENDPOINT",
+        help="the daemon's endpoint as this client reaches it, e.g. tls/printserver:7447",
+    )
+    add.add_argument(
+        "--host", action="append", metavar="NAME", help="name or address this subject is reached at (a router; repeat)"
+    )
 
     journal = commands.add_parser("journal", help="check the job journal, or rebuild it from the job records")
     journal_commands = journal.add_subparsers(dest="journal_command", required=True)
-    for name, text in (("check", "exit 0 when the journal is sound, 1 with the defect when not"),
-                       ("rebuild", "move the journal aside and rebuild it from <output>/<job_id>/job.mcap (the daemon must be stopped)")):
+    for name, text in (
+        ("check", "exit 0 when the journal is sound, 1 with the defect when not"),
+        (
+            "rebuild",
+            "move the journal aside and rebuild it from <output>/<job_id>/job.mcap (the daemon must be stopped)",
+        ),
+    ):
         command = journal_commands.add_parser(name, help=text)
         command.add_argument("--config", required=True, type=Path, help="daemon settings (state and output folders)")
 
-    schema = commands.add_parser("schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels")
+    schema = commands.add_parser(
+        "schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels"
+    )
     schema.add_argument("--out", required=True, type=Path)
     return parser
 
@@ -110,9 +180,9 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .journal import JournalCorrupt
     from .logs import setup_logging
-    from .service import Daemon, StateDirBusy
+    from .service.daemon import Daemon, StateDirBusy
+    from .service.journal import JournalCorrupt
 
     config = load_daemon_config(args.config)
     setup_logging(logging.getLevelName(args.log_level.upper()))
@@ -128,7 +198,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _audit(args: argparse.Namespace) -> int:
-    from .audit import audit
+    from .record.audit import audit
 
     if not args.record.is_file():
         print(f"fcsod: {args.record}: file not found", file=sys.stderr)
@@ -144,10 +214,10 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .bus import open_session, put
-    from .messages import BusMessage, BusRecord, jobs_key
-    from .recorder import TOPIC_BUS, read_record
-    from .signing import Signer, signing_key_path
+    from .bus.messages import BusMessage, BusRecord, jobs_key
+    from .bus.session import open_session, put
+    from .bus.signing import Signer, signing_key_path
+    from .record.recorder import TOPIC_BUS, read_record
 
     config = load_daemon_config(args.config)
     signer = Signer.from_file(signing_key_path(config))
@@ -181,7 +251,9 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _subscriber_endpoints(config: DaemonConfig, override: list[str] | None) -> list[str]:
-    """Where the subscriber connects: the override, the config's connect endpoints, or its listen endpoints on this host."""
+    """Where the subscriber connects: the override, the config's connect endpoints, or its listen endpoints on this
+    host.
+    """
     if override:
         return override
     if config.zenoh.connect:
@@ -192,10 +264,10 @@ def _subscriber_endpoints(config: DaemonConfig, override: list[str] | None) -> l
 def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .bus import open_session
+    from .bus.messages import ENCODING_JSON, daemon_key, jobs_key
+    from .bus.session import open_session
+    from .bus.signing import SignatureError, load_verify_key, verify_key_path, verify_message
     from .config import ZenohConfig
-    from .messages import ENCODING_JSON, daemon_key, jobs_key
-    from .signing import SignatureError, load_verify_key, verify_key_path, verify_message
 
     config = load_daemon_config(args.config)
     prefix, cell = config.bus.prefix, config.bus.cell
@@ -230,8 +302,18 @@ def _subscribe(args: argparse.Namespace) -> int:
                 print(json.dumps({"source": source, "key": key, "rejected": str(exc)}), flush=True)
             return
         # <prefix>/<cell>/jobs/<job_id>/<topic>, where a finger set's design is the topic design/<set>
-        job_id, _, topic = key.removeprefix(jobs_prefix).partition("/") if key.startswith(jobs_prefix) else (None, "", key.rsplit("/", 1)[-1])
-        line: dict = {"source": source, "key": key, "topic": topic, "encoding": str(sample.encoding), "bytes": len(payload)}
+        job_id, _, topic = (
+            key.removeprefix(jobs_prefix).partition("/")
+            if key.startswith(jobs_prefix)
+            else (None, "", key.rsplit("/", 1)[-1])
+        )
+        line: dict = {
+            "source": source,
+            "key": key,
+            "topic": topic,
+            "encoding": str(sample.encoding),
+            "bytes": len(payload),
+        }
         line["job_id"] = job_id
         if str(sample.encoding).startswith(ENCODING_JSON):
             line["body"] = json.loads(payload)
@@ -243,7 +325,9 @@ def _subscribe(args: argparse.Namespace) -> int:
             line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
         if args.save is not None and topic.partition("/")[0] == "design":
             args.save.mkdir(parents=True, exist_ok=True)
-            target = args.save / (f"{job_id}.stl" if topic == "design" else f"{job_id}-set-{topic.partition('/')[2]}.stl")
+            target = args.save / (
+                f"{job_id}.stl" if topic == "design" else f"{job_id}-set-{topic.partition('/')[2]}.stl"
+            )
             target.write_bytes(payload)
             line["saved"] = str(target)
         with lock:
@@ -295,15 +379,23 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _pki(args: argparse.Namespace) -> int:
-    from .pki import add_client, config_lines, init_pki
+    from .bus.pki import add_client, config_lines, init_pki
 
     if args.pki_command == "add-client":
         folder = add_client(args.directory, args.name, args.connect, args.host)
-        print(f"{folder}: certificate, key and zenoh.json5 of {args.name!r}; allow it in by adding {args.name!r} to the "
-              f"cert_common_names of {Path(args.directory) / 'daemon' / 'zenoh.json5'}")
+        print(
+            f"{folder}: certificate, key and zenoh.json5 of {args.name!r}; allow it in by adding {args.name!r} to the "
+            f"cert_common_names of {Path(args.directory) / 'daemon' / 'zenoh.json5'}"
+        )
         return EXIT_OK
     files = init_pki(
-        args.directory, args.cell, args.client, prefix=args.prefix, hosts=args.host, port=args.port, runtime_dir=args.runtime_dir,
+        args.directory,
+        args.cell,
+        args.client,
+        prefix=args.prefix,
+        hosts=args.host,
+        port=args.port,
+        runtime_dir=args.runtime_dir,
         ros2_domain_id=args.ros2_domain_id,
     )
     for line in config_lines(files):
@@ -312,10 +404,10 @@ def _pki(args: argparse.Namespace) -> int:
 
 
 def _journal(args: argparse.Namespace) -> int:
-    from .journal import journal_problem
-    from .journal_repair import rebuild_journal
-    from .service import StateDirBusy, lock_state_dir
-    from .signing import daemon_signer
+    from .bus.signing import daemon_signer
+    from .service.daemon import StateDirBusy, lock_state_dir
+    from .service.journal import journal_problem
+    from .service.journal_repair import rebuild_journal
 
     config = load_daemon_config(args.config)
     path = config.state.dir / "journal.sqlite3"
@@ -340,7 +432,10 @@ def _journal(args: argparse.Namespace) -> int:
     if result.moved_aside is not None:
         print(f"old journal moved to {result.moved_aside}")
     states = sorted(result.jobs.values())
-    print(f"rebuilt {path} from {len(result.jobs)} job records: " + ", ".join(f"{states.count(s)} {s}" for s in sorted(set(states))))
+    print(
+        f"rebuilt {path} from {len(result.jobs)} job records: "
+        + ", ".join(f"{states.count(s)} {s}" for s in sorted(set(states)))
+    )
     for job_id, why in result.skipped.items():
         print(f"skipped {job_id}: {why}")
     return EXIT_OK

@@ -11,6 +11,8 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+
 from fcso.config import (
     ContactConfig,
     DesignConfig,
@@ -25,11 +27,9 @@ from fcso.config import (
     read_toml,
 )
 from fcso.errors import ConfigError, MeshError
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from .build3mf import parse_transform
-from .placement import BuildConfig
-from .ros2 import Ros2Config
+from .build.models import BuildConfig, parse_transform
+from .bus.ros2_config import Ros2Config
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"
@@ -47,7 +47,8 @@ class WatchConfig(_Section):
         5.0, ge=0, description="How long the job's files must stay unchanged (size and mtime) before the job starts, s"
     )
     polling: bool = Field(
-        False, description="Poll the roots instead of using inotify (needed on network shares written by other machines)"
+        False,
+        description="Poll the roots instead of using inotify (needed on network shares written by other machines)",
     )
     poll_interval_seconds: float = Field(1.0, gt=0, description="Interval of the polling observer, s")
     rescan_seconds: float = Field(
@@ -97,21 +98,30 @@ class BusConfig(_Section):
     cell: str = Field("cell1", pattern=r"^[A-Za-z0-9_\-]+$", description="Cell id, one key chunk")
     signing_key: Path | None = Field(
         None,
-        description="The daemon's Ed25519 private key (PEM) that signs every message; default <state.dir>/signing.key, created at first start",
+        description="The daemon's Ed25519 private key (PEM) that signs every message; default "
+        "<state.dir>/signing.key, created at first start",
     )
     verify_key: Path | None = Field(
-        None, description="The daemon's public key (PEM) fcsod subscribe checks messages with; default signing.pub next to signing_key"
+        None,
+        description="The daemon's public key (PEM) fcsod subscribe checks messages with; default signing.pub next to "
+        "signing_key",
     )
 
 
 class ZenohConfig(_Section):
     """Zenoh session settings: a zenoh config file (JSON5) and/or inline endpoints (inline wins)."""
 
-    config_file: Path | None = Field(None, description="Zenoh configuration file (JSON5): mode, endpoints, TLS, access control")
-    mode: Literal["peer", "client", "router"] | None = Field(None, description="Session mode; default: the config file's or peer")
+    config_file: Path | None = Field(
+        None, description="Zenoh configuration file (JSON5): mode, endpoints, TLS, access control"
+    )
+    mode: Literal["peer", "client", "router"] | None = Field(
+        None, description="Session mode; default: the config file's or peer"
+    )
     listen: list[str] | None = Field(None, description="Listen endpoints, e.g. tcp/127.0.0.1:7447")
     connect: list[str] | None = Field(None, description="Endpoints to connect to, e.g. tcp/192.168.1.10:7447")
-    multicast_scouting: bool | None = Field(None, description="UDP multicast scouting; default: the config file's or zenoh's")
+    multicast_scouting: bool | None = Field(
+        None, description="UDP multicast scouting; default: the config file's or zenoh's"
+    )
 
 
 class McapConfig(_Section):
@@ -119,14 +129,18 @@ class McapConfig(_Section):
 
     compression: Literal["zstd", "lz4", "none"] = Field("zstd", description="Chunk compression")
     chunk_size_bytes: int = Field(
-        65536, ge=1024, description="Chunk size, bytes: small chunks keep a crashed job's record readable up to the crash"
+        65536,
+        ge=1024,
+        description="Chunk size, bytes: small chunks keep a crashed job's record readable up to the crash",
     )
 
 
 class VerifySettings(_Section):
-    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""
+    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""  # noqa: E501
 
-    enabled: bool = Field(False, description="Verify every done job's design in simulation (MuJoCo), after it is published")
+    enabled: bool = Field(
+        False, description="Verify every done job's design in simulation (MuJoCo), after it is published"
+    )
     trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
     top_k: int = Field(0, ge=0, description="Verify the K best candidates by Q and take the best that passes (0: off)")
 
@@ -144,23 +158,31 @@ class DaemonConfig(_Section):
     mcap: McapConfig = Field(default_factory=McapConfig)
     design: DesignConfig = Field(default_factory=DesignConfig, description="Default fcso settings for every job")
     build: BuildConfig = Field(
-        default_factory=BuildConfig, description="Default build volume, spacing and finger copies of every job's build.3mf"
+        default_factory=BuildConfig,
+        description="Default build volume, spacing and finger copies of every job's build.3mf",
     )
-    ros2: Ros2Config = Field(default_factory=Ros2Config, description="The daemon as a ROS 2 node over zenoh (rmw_zenoh's wire format)")
-    verify: VerifySettings = Field(default_factory=VerifySettings, description="Grasp verification of every job's design")
+    ros2: Ros2Config = Field(
+        default_factory=Ros2Config, description="The daemon as a ROS 2 node over zenoh (rmw_zenoh's wire format)"
+    )
+    verify: VerifySettings = Field(
+        default_factory=VerifySettings, description="Grasp verification of every job's design"
+    )
 
     @model_validator(mode="after")
-    def _output_outside_watch_roots(self) -> "DaemonConfig":
+    def _output_outside_watch_roots(self) -> DaemonConfig:
         output = self.output.root.resolve()
         for root in self.watch.roots:
             resolved = root.resolve()
             if output == resolved or resolved in output.parents or output in resolved.parents:
-                raise ValueError(f"output.root {self.output.root} overlaps watch root {root}: results never go into watched folders")
+                raise ValueError(
+                    f"output.root {self.output.root} overlaps watch root {root}: results never go into watched folders"
+                )
         return self
 
 
 def _resolve_paths(data: dict, base: Path) -> None:
     """Make the config's relative paths relative to the config file's folder (not the cwd), in place."""
+
     def fix(section: str, key: str) -> None:
         values = data.get(section)
         if isinstance(values, dict) and isinstance(values.get(key), str) and not Path(values[key]).is_absolute():
@@ -168,7 +190,9 @@ def _resolve_paths(data: dict, base: Path) -> None:
 
     watch = data.get("watch")
     if isinstance(watch, dict) and isinstance(watch.get("roots"), list):
-        watch["roots"] = [str(base / r) if isinstance(r, str) and not Path(r).is_absolute() else r for r in watch["roots"]]
+        watch["roots"] = [
+            str(base / r) if isinstance(r, str) and not Path(r).is_absolute() else r for r in watch["roots"]
+        ]
     fix("output", "root")
     fix("state", "dir")
     fix("zenoh", "config_file")
@@ -177,7 +201,11 @@ def _resolve_paths(data: dict, base: Path) -> None:
     design = data.get("design")
     if isinstance(design, dict):
         fix_finger = design.get("finger")
-        if isinstance(fix_finger, dict) and isinstance(fix_finger.get("mesh"), str) and not Path(fix_finger["mesh"]).is_absolute():
+        if (
+            isinstance(fix_finger, dict)
+            and isinstance(fix_finger.get("mesh"), str)
+            and not Path(fix_finger["mesh"]).is_absolute()
+        ):
             fix_finger["mesh"] = str(base / fix_finger["mesh"])
 
 
@@ -221,13 +249,16 @@ class PartEntry(_Section):
     """One part of the batch."""
 
     file: str = Field(min_length=1, description="Mesh file, relative to the job folder (STL, 3MF, OBJ, PLY)")
-    units: Literal["mm", "inch", "m"] | float = Field("mm", description="Unit of the file's coordinates, or a factor to mm")
+    units: Literal["mm", "inch", "m"] | float = Field(
+        "mm", description="Unit of the file's coordinates, or a factor to mm"
+    )
     quantity: int = Field(1, ge=1, description="Copies of this part in the print job")
     scale_to_mm: float | None = Field(None, gt=0, description="Scale so the longest bounding-box side is this long, mm")
     transform: list[float] | list[list[float]] | None = Field(
         None,
         description=(
-            "Where the part sits in the build volume: 4x4 from the part's frame (after units and scaling) to the build's, "
+            "Where the part sits in the build volume: 4x4 from the part's frame (after units and scaling) to the "
+            "build's, "
             "16 numbers row-major or 4 rows of 4, mm; without it the part is packed with the fingers"
         ),
     )
@@ -250,7 +281,7 @@ class PartEntry(_Section):
             raise ValueError(exc.defect) from None
 
     @model_validator(mode="after")
-    def _one_placement_per_entry(self) -> "PartEntry":
+    def _one_placement_per_entry(self) -> PartEntry:
         if self.file.lower().endswith(".3mf"):
             # a 3MF is a placed build: its items are the copies, in the file's own unit, where the file puts them
             given = [key for key in ("units", "scale_to_mm", "transform") if key in self.model_fields_set]
@@ -258,7 +289,9 @@ class PartEntry(_Section):
             if given:
                 raise ValueError(f"a 3MF build carries its own items, unit and transforms: remove {', '.join(given)}")
         elif self.transform is not None and self.quantity > 1:
-            raise ValueError("a transform places one copy: give each placed copy its own [[parts]] entry with quantity 1")
+            raise ValueError(
+                "a transform places one copy: give each placed copy its own [[parts]] entry with quantity 1"
+            )
         return self
 
 
@@ -295,8 +328,12 @@ class JobManifest(_Section):
     poses: PosesConfig | None = None
     contact: ContactConfig | None = None
     search: SearchConfig | None = None
-    print: PrintConfig | None = Field(None, description="Printer profile, clearance, lead-in and minimum wall (fcso [print])")
-    finger_sets: FingerSetsConfig | None = Field(None, description="How many finger sets the job may use and what every part keeps (fcso [finger_sets])")
+    print: PrintConfig | None = Field(
+        None, description="Printer profile, clearance, lead-in and minimum wall (fcso [print])"
+    )
+    finger_sets: FingerSetsConfig | None = Field(
+        None, description="How many finger sets the job may use and what every part keeps (fcso [finger_sets])"
+    )
     build: BuildConfig | None = Field(None, description="Overrides of the daemon's [build] settings, key by key")
     verify: VerifySettings | None = Field(None, description="The job's own [verify] settings (replace the daemon's)")
 

@@ -4,14 +4,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fcso.schema import write_schemas
 from pydantic import BaseModel
 
+from fcso.schema import write_schemas
+from fcso.sim.report import VerificationReport
+
+from .build.models import PlacementReport
+from .bus.messages import (
+    DesignAttachment,
+    GraspsMessage,
+    PlacementMessage,
+    PlanMessage,
+    QualityMessage,
+    SignedAttachment,
+    StatusMessage,
+    VerificationMessage,
+)
 from .config import DaemonConfig, JobManifest
-from .messages import DesignAttachment, GraspsMessage, PlacementMessage, PlanMessage, QualityMessage, SignedAttachment, StatusMessage
-from .placement import PlacementReport
-from .recorder import CHANNELS
-from .verification import TOPIC_VERIFICATION, VerificationMessage, VerificationReport
+from .record.recorder import CHANNELS, TOPIC_VERIFICATION
 
 
 def _channel_file(topic: str) -> str:

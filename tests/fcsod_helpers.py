@@ -202,7 +202,9 @@ def start_subscriber(config: Path, save: Path | None = None, extra: list[str] | 
     return subscriber
 
 
-def drop_job(folder: Path, files: dict[str, Path | str | bytes], pause_s: float = 0.0, hidden_first: bool = False) -> None:
+def drop_job(
+    folder: Path, files: dict[str, Path | str | bytes], pause_s: float = 0.0, hidden_first: bool = False
+) -> None:
     """Create a job folder file by file.
 
     Parameters
@@ -220,7 +222,9 @@ def drop_job(folder: Path, files: dict[str, Path | str | bytes], pause_s: float 
     target = folder.parent / f".{folder.name}.partial" if hidden_first else folder
     target.mkdir(parents=True)
     for name, source in files.items():
-        data = source.read_bytes() if isinstance(source, Path) else source.encode() if isinstance(source, str) else source
+        data = (
+            source.read_bytes() if isinstance(source, Path) else source.encode() if isinstance(source, str) else source
+        )
         path = target / name
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "wb") as stream:
@@ -240,9 +244,11 @@ def copy_tree(source: Path, target: Path) -> None:
 def finished(subscriber, folder_name: str, timeout: float = 90) -> dict:
     """The done/failed status line the subscriber printed for the job of ``folder_name``."""
     return subscriber.wait_for(
-        lambda v: isinstance(v, dict)
-        and v.get("topic") == "status"
-        and v["body"]["folder"].endswith("/" + folder_name)
-        and v["body"]["state"] in ("done", "failed"),
+        lambda v: (
+            isinstance(v, dict)
+            and v.get("topic") == "status"
+            and v["body"]["folder"].endswith("/" + folder_name)
+            and v["body"]["state"] in ("done", "failed")
+        ),
         timeout,
     )

@@ -32,7 +32,13 @@ def _emit(**fields) -> None:
 
 def _sample(sample: zenoh.Sample, source: str) -> None:
     attachment = sample.attachment.to_bytes().hex() if sample.attachment is not None else None
-    _emit(event="sample", source=source, key_expr=str(sample.key_expr), payload=sample.payload.to_bytes().hex(), attachment=attachment)
+    _emit(
+        event="sample",
+        source=source,
+        key_expr=str(sample.key_expr),
+        payload=sample.payload.to_bytes().hex(),
+        attachment=attachment,
+    )
 
 
 def main() -> None:
@@ -58,8 +64,11 @@ def main() -> None:
     keep = []
     if args.late:
         history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=10)
-        keep.append(zenoh.ext.declare_advanced_subscriber(session, args.late, lambda s: _sample(s, "history"), history=history))
+        keep.append(
+            zenoh.ext.declare_advanced_subscriber(session, args.late, lambda s: _sample(s, "history"), history=history)
+        )
     else:
+
         def token(sample: zenoh.Sample) -> None:
             _emit(event="token", key_expr=str(sample.key_expr), kind=str(sample.kind))
 

@@ -46,34 +46,49 @@ def main() -> int:
     attachment = args.attachment.encode() if args.attachment else None
     keep = []
     if args.subscribe:
+
         def received(sample) -> None:
             raw = sample.attachment.to_bytes() if sample.attachment is not None else None
-            _print(event="received", key=str(sample.key_expr), payload=sample.payload.to_bytes().decode(errors="replace"),
-                   attachment=raw.decode() if raw else None)
+            _print(
+                event="received",
+                key=str(sample.key_expr),
+                payload=sample.payload.to_bytes().decode(errors="replace"),
+                attachment=raw.decode() if raw else None,
+            )
+
         keep.append(session.declare_subscriber(args.subscribe, received))
     if args.queryable:
+
         def answer(query) -> None:
             _print(event="queried_by", key=str(query.key_expr))
             query.reply(args.queryable.replace("**", "forged/grasps"), args.payload.encode(), attachment=attachment)
+
         keep.append(session.declare_queryable(args.queryable, answer))
     if args.token:
         keep.append(session.liveliness().declare_token(args.token))
     if args.liveliness:
-        holders = [str(r.ok.key_expr) for r in session.liveliness().get(args.liveliness, timeout=3.0) if r.ok is not None]
+        holders = [
+            str(r.ok.key_expr) for r in session.liveliness().get(args.liveliness, timeout=3.0) if r.ok is not None
+        ]
         _print(event="liveliness", holders=holders)
     if args.query:
         for reply in session.get(args.query, timeout=3.0):
             if reply.ok is not None:
                 raw = reply.ok.attachment.to_bytes() if reply.ok.attachment is not None else None
-                _print(event="reply", key=str(reply.ok.key_expr), payload_base64=base64.b64encode(reply.ok.payload.to_bytes()).decode(),
-                       attachment=raw.decode() if raw else None)
+                _print(
+                    event="reply",
+                    key=str(reply.ok.key_expr),
+                    payload_base64=base64.b64encode(reply.ok.payload.to_bytes()).decode(),
+                    attachment=raw.decode() if raw else None,
+                )
             else:
                 _print(event="reply_error", error=reply.err.payload.to_bytes().decode(errors="replace"))
         _print(event="query_done")
     if args.put:
-        publisher = session.declare_publisher(args.put, reliability=zenoh.Reliability.RELIABLE,
-                                              congestion_control=zenoh.CongestionControl.BLOCK)
-        for number in range(args.count):
+        publisher = session.declare_publisher(
+            args.put, reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        for _ in range(args.count):
             publisher.put(args.payload.encode(), attachment=attachment)
             time.sleep(0.05)
         _print(event="put", count=args.count)

@@ -9,8 +9,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from fcso.html_report import load_report_inputs
-from fcso.render import gripper_picture
+from fcso.output.design_page import load_report_inputs
+from fcso.output.render import gripper_picture
 
 
 def main(directory: str, target: str) -> None:

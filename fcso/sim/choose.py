@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from ..design import CandidateEvaluation, DesignResult, finish_candidate
+from ..design import DesignResult, finish_candidate
+from ..evaluate import CandidateEvaluation
 from ..finger import fuse
 from ..geometry import to_trimesh
-from ..report import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport
-from ..table import ranked_candidates
+from ..progress import Progress
+from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
-from .verify import DesignUnderTest, Progress, design_under_test, finger_hull, grasp_case, verify
+from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify
 
 
 def candidate_design(
@@ -32,7 +33,9 @@ def candidate_design(
     warnings : list of str
         The print fit's warnings.
     """
-    evaluation, grasps, print_fit, warnings = finish_candidate(result.scenarios, candidate.samples, result.report.settings)
+    evaluation, grasps, print_fit, warnings = finish_candidate(
+        result.scenarios, candidate.samples, result.report.settings
+    )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
     report = result.report.model_copy(update={"grasps": grasps})
     cases = [grasp_case(report, g, parts[g.part]) for g in grasps]
@@ -92,15 +95,25 @@ def verify_top(
         )
         result = _with_candidate(result, candidate, *built[1:], why)
     elif not passing:
-        verification.warnings.append(f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q")
+        verification.warnings.append(
+            f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q"
+        )
     verification = verification.model_copy(update={"ranking": ranking})
     return result, verification, design, ranking
 
 
 def _with_candidate(
-    result: DesignResult, candidate: CandidateReport, evaluation: CandidateEvaluation, grasps, print_fit, fit_warnings, why: str
+    result: DesignResult,
+    candidate: CandidateReport,
+    evaluation: CandidateEvaluation,
+    grasps,
+    print_fit,
+    fit_warnings,
+    why: str,
 ) -> DesignResult:
-    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit in the report."""
+    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit
+    in the report.
+    """
     config = result.report.settings
     fused = fuse(result.flat_finger, evaluation.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     report: DesignReport = result.report.model_copy(
@@ -128,26 +141,3 @@ def _with_candidate(
         flat_finger=result.flat_finger,
         pad_to_finger=result.pad_to_finger,
     )
-
-
-CHOSEN = ' class="chosen"'
-
-
-def ranking_html(ranking: list[RankedCandidate]) -> str:
-    """The ranking before (by Q) and after verification, and why, as an HTML fragment."""
-    if not ranking:
-        return ""
-    rows = "".join(
-        f"<tr{CHOSEN if r.chosen else ''}><td>{r.rank_by_quality}</td><td>{r.index}</td><td>{r.quality:.1f}</td>"
-        f"<td>{' / '.join(f'{x:.0%}' for x in r.success_rates)}</td><td>{' / '.join(f'{x:.0%}' for x in r.flat_success_rates)}</td>"
-        f"<td>{'yes' if r.passed else 'no'}</td><td>{'&#9733;' if r.chosen else ''}</td></tr>"
-        for r in ranking
-    )
-    return (
-        "<h3>Choice by verification (--verify-top)</h3>"
-        "<p>The best candidates by Q, in Q order, each verified; the chosen one is the best by Q whose every scenario "
-        "reached the success threshold (or the best by Q when none did).</p>"
-        "<table><tr><th>rank by Q</th><th>candidate</th><th>Q</th><th>designed success per scenario</th>"
-        "<th>flat success</th><th>passed</th><th>chosen</th></tr>" + rows + "</table>"
-    )
-

@@ -48,7 +48,8 @@ def settings(args) -> VerifyConfig:
 
 def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
-    from .verify import load_design, verify, write_verification
+    from ..output.verification_page import load_design, write_verification
+    from .verify import verify
 
     report, design = load_design(args.directory)
     config = with_print_density(settings(args), report.settings)
@@ -71,9 +72,7 @@ def summary(verification: VerificationReport) -> str:
         for name, r in (("designed", s.fcso), ("flat", s.flat)):
             holding = " ".join(f"{d} {'held' if v is None else f'{v:.1f}'}" for d, v in r.holding_n.items())
             median = "-" if r.median_error_mm is None else f"{r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg"
-            lines.append(
-                f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}"
-            )
+            lines.append(f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}")
     lines.append(f"verification {'passed' if verification.passed else 'did not pass'}")
     lines.extend(f"warning: {w}" for w in verification.warnings)
     return "\n".join(lines)
@@ -81,10 +80,11 @@ def summary(verification: VerificationReport) -> str:
 
 def verify_design_outputs(result, args, progress) -> int:
     """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
-    from ..html_report import rebuild_report
-    from ..output import write_outputs
-    from .choose import ranking_html, verify_top
-    from .verify import design_under_test, verify, write_verification
+    from ..output.design_page import rebuild_report
+    from ..output.files import write_outputs
+    from ..output.verification_page import ranking_html, write_verification
+    from .choose import verify_top
+    from .verify import design_under_test, verify
 
     config = with_print_density(settings(args), result.report.settings)
     try:
@@ -112,13 +112,20 @@ def verify_design_outputs(result, args, progress) -> int:
 
 def restore_section(directory: Path) -> None:
     """After ``fcso report`` rebuilt report.html: put the verification section back when verification.json exists."""
-    from .choose import ranking_html
-    from .html import section_html, write_section
-    from .verify import load_design, read_verification, verification_pictures
+    from ..output.verification_page import (
+        load_design,
+        ranking_html,
+        read_verification,
+        section_html,
+        verification_pictures,
+        write_section,
+    )
 
     verification = read_verification(directory)
     if verification is None:
         return
     _, design = load_design(directory)
     extra = ranking_html(verification.ranking or [])
-    write_section(Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra))
+    write_section(
+        Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra)
+    )

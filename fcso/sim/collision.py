@@ -32,6 +32,7 @@ import numpy as np
 import trimesh
 
 from ..geometry import box, to_manifold, to_trimesh
+from ..output.layout import write_atomic
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "coacd-4"
@@ -149,7 +150,9 @@ def zoned_pieces(
         f"zoned {float(fine_threshold)!r} {float(coarse_threshold)!r} "
         f"{np.round(to_zones, 6).tolist()} {np.round(fine_boxes, 4).tolist()}"
     )
-    return _cached_pieces(mesh, settings, lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold), cache_dir)
+    return _cached_pieces(
+        mesh, settings, lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold), cache_dir
+    )
 
 
 def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -159,7 +162,11 @@ def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list
     lower, upper = moved.bounds[0] - 1.0, moved.bounds[1] + 1.0
     # the grid's planes: the boxes' faces inside the part's bounds
     planes = [
-        np.unique(np.clip(np.concatenate([[lower[axis], upper[axis]], fine_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]))
+        np.unique(
+            np.clip(
+                np.concatenate([[lower[axis], upper[axis]], fine_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]
+            )
+        )
         for axis in range(3)
     ]
     back = np.linalg.inv(to_zones)
@@ -191,10 +198,7 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
         pieces = decompose()
         cached = False
         if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            temporary = path.with_suffix(".tmp")
-            temporary.write_bytes(_write_pieces(pieces))
-            temporary.replace(path)
+            write_atomic(path, _write_pieces(pieces))
     excess, missing = union_volume_errors(mesh, pieces)
     return ConvexPieces(pieces=pieces, volume_error=excess - missing, missing_fraction=missing, cached=cached)
 

@@ -18,8 +18,12 @@ class VerifyConfig(BaseModel):
 
     trials: int = Field(10, ge=0, description="Perturbed precision trials per scenario and finger")
     seed: int = Field(0, description="Seed of the trial perturbations")
-    position_error_mm: float = Field(2.0, ge=0, description="Start position error, uniform in -x..x along each table axis, mm")
-    yaw_error_deg: float = Field(3.0, ge=0, description="Start rotation error about the vertical, uniform in -x..x, degrees")
+    position_error_mm: float = Field(
+        2.0, ge=0, description="Start position error, uniform in -x..x along each table axis, mm"
+    )
+    yaw_error_deg: float = Field(
+        3.0, ge=0, description="Start rotation error about the vertical, uniform in -x..x, degrees"
+    )
     closing_speed_mm_s: float = Field(20.0, gt=0, description="Finger closing speed, mm/s")
     force_limit_n: float = Field(60.0, gt=0, description="Grip force limit per finger, N")
     friction: float = Field(0.4, ge=0, description="Coulomb friction coefficient of every contact")
@@ -29,30 +33,46 @@ class VerifyConfig(BaseModel):
     lift_speed_mm_s: float = Field(100.0, gt=0, description="Lift speed, mm/s")
     hold_force_n: float = Field(30.0, gt=0, description="Largest push of the holding test, N")
     hold_ramp_n_s: float = Field(60.0, gt=0, description="Rate of the holding push, N/s")
-    slip_mm: float = Field(1.0, gt=0, description="Holding test: the part slipped when it moved this far in the gripper, mm")
+    slip_mm: float = Field(
+        1.0, gt=0, description="Holding test: the part slipped when it moved this far in the gripper, mm"
+    )
     slip_deg: float = Field(2.0, gt=0, description="... or turned this far, degrees")
     success_mm: float = Field(0.3, gt=0, description="Precision trial succeeds within this position error, mm")
     success_deg: float = Field(1.0, gt=0, description="... and this rotation error, degrees")
     pass_success_rate: float = Field(
-        1.0, ge=0, le=1, description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10)"
+        1.0,
+        ge=0,
+        le=1,
+        description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10)",
     )
     timestep_s: float = Field(0.0005, gt=0, description="Physics time step, s")
     open_margin_mm: float = Field(
-        5.0, gt=0, description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm"
+        5.0,
+        gt=0,
+        description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm",
     )
     decomposition_threshold: float = Field(
-        0.05, gt=0, description="CoACD concavity threshold of the pad and of the part near the pads (fraction of each decomposed cell's size)"
+        0.05,
+        gt=0,
+        description="CoACD concavity threshold of the pad and of the part near the pads (fraction of each decomposed "
+        "cell's size)",
     )
     coarse_decomposition_threshold: float = Field(
-        0.1, gt=0, description="CoACD concavity threshold of the part away from the pads (see pad_reach_boxes; fraction of each cell's size)"
+        0.1,
+        gt=0,
+        description="CoACD concavity threshold of the part away from the pads (see pad_reach_boxes; fraction of each "
+        "cell's size)",
     )
     max_seated_penetration_mm: float = Field(
         0.2,
         gt=0,
-        description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are refined, mm",
+        description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are "
+        "refined, mm",
     )
     min_decomposition_threshold: float = Field(
-        0.01, gt=0, description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this"
+        0.01,
+        gt=0,
+        description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this",
     )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"

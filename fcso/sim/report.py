@@ -18,7 +18,9 @@ class TrialResult(_Model):
     dy_mm: float = Field(description="Start error along the table's y axis, mm")
     yaw_deg: float = Field(description="Start error about the vertical, degrees")
     held: bool = Field(description="The part rose with the gripper")
-    error_mm: float = Field(description="Centre-of-mass distance from the nominal seated pose in the gripper after the lift, mm")
+    error_mm: float = Field(
+        description="Centre-of-mass distance from the nominal seated pose in the gripper after the lift, mm"
+    )
     error_deg: float = Field(description="Rotation from the nominal seated pose in the gripper after the lift, degrees")
     success: bool = Field(description="Held, and within success_mm and success_deg")
 
@@ -38,7 +40,8 @@ class FingerResult(_Model):
     kind: str = Field(description="fcso (the designed pad) or flat (plain pad of thickness T - D)")
     nominal_held: bool = Field(description="The unperturbed grasp held the part after the lift")
     nominal_offset_mm: float = Field(
-        description="Simulated seated pose of the unperturbed grasp against the design's nominal one (centre of mass), mm"
+        description="Simulated seated pose of the unperturbed grasp against the design's nominal one (centre of "
+        "mass), mm"
     )
     nominal_offset_deg: float = Field(description="The same rotation, degrees")
     trials: list[TrialResult]
@@ -78,7 +81,9 @@ class ScenarioVerification(_Model):
     fcso: FingerResult
     flat: FingerResult
     passed: bool = Field(description="The designed finger's success rate reaches pass_success_rate")
-    frames: list[PoseSnapshot] = Field(description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)")
+    frames: list[PoseSnapshot] = Field(
+        description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)"
+    )
 
 
 class RankedCandidate(_Model):

@@ -26,6 +26,7 @@ import numpy as np
 import trimesh
 
 from .config import VerifyConfig
+from .report import PoseSnapshot
 
 #: mm to MuJoCo's metres.
 M = 1e-3
@@ -163,7 +164,8 @@ def build_scene(
         geoms = finger_geoms[side]
         if pad_pieces is not None:
             geoms.extend(
-                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact"/>' for k in range(len(pad_pieces))
+                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact"/>'
+                for k in range(len(pad_pieces))
             )
         else:
             geoms.append(
@@ -176,11 +178,12 @@ def build_scene(
     fingers = []
     for side, name in ((1, "plus"), (-1, "minus")):
         fingers.append(
-            f'<body name="finger_{name}" gravcomp="1" pos="{_vec(case.pad_origin(side) * M)}" quat="{_quat(PAD_AXES[side])}">'
-            f'<inertial pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" mass="{FINGER_MASS_KG}" diaginertia="1e-5 1e-5 1e-5"/>'
-            f'<joint name="{name}" type="slide" axis="1 0 0" range="{q_min * M:.9g} {q_max * M:.9g}" damping="100" armature="0.01"/>'
-            + "".join(finger_geoms[side])
-            + "</body>"
+            f'<body name="finger_{name}" gravcomp="1" pos="{_vec(case.pad_origin(side) * M)}" '
+            f'quat="{_quat(PAD_AXES[side])}">'
+            f'<inertial pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" mass="{FINGER_MASS_KG}" '
+            f'diaginertia="1e-5 1e-5 1e-5"/>'
+            f'<joint name="{name}" type="slide" axis="1 0 0" range="{q_min * M:.9g} {q_max * M:.9g}" damping="100" '
+            f'armature="0.01"/>' + "".join(finger_geoms[side]) + "</body>"
         )
     kp = GAIN_N_PER_MM / M
     force = config.force_limit_n
@@ -194,18 +197,18 @@ def build_scene(
       <geom condim="4" friction="{config.friction} 0.002 0.0001" solref="{CONTACT_SOLREF}" solimp="{CONTACT_SOLIMP}"/>
     </default>
   </default>
-  <asset>{''.join(assets)}</asset>
+  <asset>{"".join(assets)}</asset>
   <worldbody>
     <geom name="table" type="plane" size="1 1 0.01" class="contact"/>
     <body name="part">
       <freejoint name="part"/>
       <inertial pos="{_vec(com * M)}" mass="{mass_kg:.9g}" fullinertia="{full_inertia}"/>
-      {''.join(part_geoms)}
+      {"".join(part_geoms)}
     </body>
     <body name="gripper" gravcomp="1" pos="{_vec(tcp[:3, 3] * M)}" quat="{_quat(tcp[:3, :3])}">
       <inertial pos="0 0 0" mass="{GRIPPER_MASS_KG}" diaginertia="1e-3 1e-3 1e-3"/>
       <joint name="lift" type="slide" axis="0 0 -1"/>
-      {''.join(fingers)}
+      {"".join(fingers)}
     </body>
   </worldbody>
   <equality>
@@ -229,3 +232,14 @@ def build_scene(
         part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
         pad_geoms=pad_geoms,
     )
+
+
+def pad_in_world(snapshot: PoseSnapshot, side: int, pad_gap_mm: float, pad_size_mm) -> np.ndarray:
+    """4x4 pad frame -> world of one finger at a snapshot, mm."""
+    thickness, length, width = pad_size_mm
+    in_tcp = np.eye(4)
+    in_tcp[:3, :3] = PAD_AXES[side]
+    in_tcp[:3, 3] = [-side * length / 2.0, side * pad_gap_mm / 2.0, width / 2.0]
+    opened = np.eye(4)
+    opened[0, 3] = snapshot.opening_mm
+    return np.asarray(snapshot.gripper_pose) @ in_tcp @ opened

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from .config import VerifyConfig
-from .scene import M, GraspCase, Scene
+from .scene import GraspCase, M, Scene
 
 #: Six push directions of the holding test, gripper frame.
 HOLD_DIRECTIONS = {
@@ -98,7 +98,9 @@ def start_pose(case: GraspCase, error: np.ndarray) -> np.ndarray:
     return shift @ about @ turn @ np.linalg.inv(about)
 
 
-def run_grasp(scene: Scene, case: GraspCase, part_pose: np.ndarray, config: VerifyConfig, record: bool = False) -> GraspRun:
+def run_grasp(
+    scene: Scene, case: GraspCase, part_pose: np.ndarray, config: VerifyConfig, record: bool = False
+) -> GraspRun:
     """Descend to the nominal grasp, close, lift (METHOD §12).
 
     Parameters
@@ -135,7 +137,9 @@ def run_grasp(scene: Scene, case: GraspCase, part_pose: np.ndarray, config: Veri
     def step(raise_now: float, speed_mm_s: float = 0.0) -> None:
         prescribed_step(scene, data, raise_now, speed_mm_s)
         if record and data.time >= next_frame[0]:
-            frames.append(Frame(data.time, part_world(scene, data), gripper_world(tcp, raise_now), _opening(scene, data)))
+            frames.append(
+                Frame(data.time, part_world(scene, data), gripper_world(tcp, raise_now), _opening(scene, data))
+            )
             next_frame[0] += 1.0 / FRAME_RATE_HZ
 
     data.qpos[model.jnt_qposadr[scene.lift_joint]] = raise_mm * M
@@ -175,7 +179,9 @@ def run_grasp(scene: Scene, case: GraspCase, part_pose: np.ndarray, config: Veri
 def pose_error(pose: np.ndarray, reference: np.ndarray, com_mm: np.ndarray) -> tuple[float, float]:
     """Distance between the centres of mass (mm) and rotation angle (degrees) of two part poses."""
     com = np.asarray(com_mm, dtype=float)
-    translation = float(np.linalg.norm((pose[:3, :3] @ com + pose[:3, 3]) - (reference[:3, :3] @ com + reference[:3, 3])))
+    translation = float(
+        np.linalg.norm((pose[:3, :3] @ com + pose[:3, 3]) - (reference[:3, :3] @ com + reference[:3, 3]))
+    )
     relative = pose[:3, :3].T @ reference[:3, :3]
     angle = float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0))))
     return translation, angle
@@ -225,7 +231,9 @@ def hold_forces(scene: Scene, case: GraspCase, run: GraspRun, config: VerifyConf
 
 
 def seated_penetration_mm(scene: Scene, case: GraspCase) -> float:
-    """Deepest overlap between the part's collision pieces and the pads with the part at its nominal seated grasp, mm."""
+    """Deepest overlap between the part's collision pieces and the pads with the part at its nominal seated grasp,
+    mm.
+    """
     model = scene.model
     data = mujoco.MjData(model)
     _set_part(model, data, np.eye(4))

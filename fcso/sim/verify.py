@@ -3,28 +3,23 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Callable
 
 import mujoco
 import numpy as np
 import trimesh
 
 from .. import __version__
-from ..design import DesignResult
-from ..finger import load_finger, pad_to_finger, parametric_finger
-from ..html_report import read_report, read_stl, reload_parts
-from ..report import DesignReport, GraspReport
+from ..design import DesignResult, flat_finger
+from ..finger import pad_to_finger
+from ..progress import Progress
+from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, convex_pieces, finger_body_hull, zoned_pieces
 from .config import VerifyConfig
-from .html import error_picture, holding_picture, section_html, trial_picture, write_section
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
 from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
-
-#: ``progress(stage, done, total)``.
-Progress = Callable[[str, int, int], None]
 
 
 @dataclass
@@ -81,23 +76,6 @@ def grasp_case(report: DesignReport, grasp: GraspReport, part_mesh_mm: trimesh.T
     )
 
 
-def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
-    """Read a design's output folder (``report.json``, ``finger.stl``, ``fingerpad.stl`` and the part files it names).
-
-    Raises
-    ------
-    MeshError
-        A file is missing or unreadable (named in the message).
-    """
-    directory = Path(directory)
-    report = read_report(directory)
-    parts = {entry.name: part.mesh for entry, part in zip(report.parts, reload_parts(report, directory))}
-    cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
-    fingerpad = read_stl(directory / "fingerpad.stl")
-    finger = read_stl(directory / "finger.stl")
-    return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
-
-
 def design_under_test(result: DesignResult) -> DesignUnderTest:
     """The simulation's inputs from a design that was just run (no files needed)."""
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
@@ -108,7 +86,7 @@ def design_under_test(result: DesignResult) -> DesignUnderTest:
 def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
     """Hull of a design's finger body behind its pad (pad frame, mm)."""
     config = report.settings
-    flat = load_finger(config.finger) if config.finger.mesh else parametric_finger(config.sampler, config.gripper)
+    flat = flat_finger(config)
     return finger_body_hull(finger, pad_to_finger(flat, config.sampler), config.sampler.thickness_mm)
 
 
@@ -162,7 +140,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     )
 
 
-def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
+def fitted_pieces(
+    case: GraspCase, design: DesignUnderTest, config: VerifyConfig
+) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
     """The part's and the pad's convex pieces, refined until they overlap little at the nominal seated grasp.
 
     A convex piece that bridges a pad pocket, or fills a notch of the part
@@ -204,15 +184,21 @@ def fitted_pieces(case: GraspCase, design: DesignUnderTest, config: VerifyConfig
         if refined is not None:
             penetration, part, pad = refined
         else:
-            return part, pad, [
-                f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
-                f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not resolved"
-            ]
+            return (
+                part,
+                pad,
+                [
+                    f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
+                    f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not "
+                    f"resolved"
+                ],
+            )
     return part, pad, []
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig, threshold: float | None = None) -> ConvexPieces:
-    """The part's convex pieces in its resting frame: fine where the pads can reach, coarse elsewhere (:func:`pad_reach_boxes`).
+    """The part's convex pieces in its resting frame: fine where the pads can reach, coarse elsewhere
+    (:func:`pad_reach_boxes`).
 
     ``threshold`` is the CoACD threshold near the pads (default ``decomposition_threshold``).
     """
@@ -248,12 +234,20 @@ def pad_reach_boxes(case: GraspCase, config: VerifyConfig) -> np.ndarray:
     com = to_tcp[:3, :3] @ np.asarray(case.part.center_mass, dtype=float) + to_tcp[:3, 3]
     radius = float(np.hypot(np.abs(com[0]) + reach[0], np.abs(com[1]) + reach[1]))
     turn = np.radians(config.yaw_error_deg + config.slip_deg)
-    margin = float(np.hypot(config.position_error_mm, config.position_error_mm) + radius * np.sin(turn) + config.slip_mm)
+    margin = float(
+        np.hypot(config.position_error_mm, config.position_error_mm) + radius * np.sin(turn) + config.slip_mm
+    )
     top = float((np.asarray(case.part.vertices) @ to_tcp[2, :3] + to_tcp[2, 3]).min()) - margin
     return np.array(
         [
-            [[-length / 2.0 - margin, half_gap - margin, top], [length / 2.0 + margin, half_gap + thickness + opening + margin, width / 2.0 + margin]],
-            [[-length / 2.0 - margin, -half_gap - thickness - opening - margin, top], [length / 2.0 + margin, -half_gap + margin, width / 2.0 + margin]],
+            [
+                [-length / 2.0 - margin, half_gap - margin, top],
+                [length / 2.0 + margin, half_gap + thickness + opening + margin, width / 2.0 + margin],
+            ],
+            [
+                [-length / 2.0 - margin, -half_gap - thickness - opening - margin, top],
+                [length / 2.0 + margin, -half_gap + margin, width / 2.0 + margin],
+            ],
         ]
     )
 
@@ -314,7 +308,9 @@ def verify_case(
                 pictured = run.frames
         if kind == "fcso":
             frames = nominal.frames
-        results[kind] = _finger_result(kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured)
+        results[kind] = _finger_result(
+            kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured
+        )
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
         part_volume_error=round(pieces.volume_error, 6),
@@ -336,7 +332,9 @@ def verify_case(
     )
 
 
-def _finger_result(kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None) -> FingerResult:
+def _finger_result(
+    kind, held, offset, trials: list[TrialResult], holding, pictured: list[Frame] | None
+) -> FingerResult:
     moved = np.array([t.error_mm for t in trials])
     turned = np.array([t.error_deg for t in trials])
     any_trials = len(trials) > 0
@@ -371,41 +369,3 @@ def flat_pad(pad_size_mm, penetration_mm: float) -> trimesh.Trimesh:
     thickness, length, width = pad_size_mm
     pad = trimesh.creation.box(bounds=[[penetration_mm, 0.0, 0.0], [thickness, length, width]])
     return pad
-
-
-def verification_pictures(verification: VerificationReport, design: DesignUnderTest) -> dict[str, bytes]:
-    """The section's pictures: per scenario k, ``trial k``, ``errors k`` and ``holding k`` (PNG)."""
-    settings = verification.settings
-    images = {}
-    for k, (scenario, case) in enumerate(zip(verification.scenarios, design.cases)):
-        pads = {"fcso": design.fingerpad, "flat": flat_pad(case.pad_size_mm, case.penetration_mm)}
-        images[f"trial {k}"] = trial_picture(case.part, pads, scenario, case.pad_gap_mm, case.pad_size_mm)
-        images[f"errors {k}"] = error_picture(scenario, settings.success_mm, settings.success_deg)
-        images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
-    return images
-
-
-def write_verification(directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = "") -> list[Path]:
-    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
-
-    Returns
-    -------
-    list of Path
-        The files written.
-    """
-    directory = Path(directory)
-    target = directory / "verification.json"
-    temporary = directory / ".verification.json.tmp"
-    temporary.write_text(verification.model_dump_json(indent=2) + "\n", encoding="utf-8")
-    temporary.replace(target)
-    page = directory / "report.html"
-    write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
-    return [target, page]
-
-
-def read_verification(directory: str | Path) -> VerificationReport | None:
-    """``verification.json`` of a design's folder, or None when there is none."""
-    path = Path(directory) / "verification.json"
-    if not path.is_file():
-        return None
-    return VerificationReport.model_validate_json(path.read_text(encoding="utf-8"))

@@ -1,0 +1,400 @@
+"""Exact evaluation of a candidate (METHOD §4-7): its pads carved, the parts seated, the quality scored.
+
+Also the data every stage after sampling shares: a scenario (a part in a
+stable pose) with its valid samples, each sample's pad geometries and
+contact samples, and a candidate's evaluation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import manifold3d
+import numpy as np
+import trimesh
+
+from .capture import CaptureLandscape, pad_landscapes
+from .config import DesignConfig
+from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
+from .geometry import to_manifold
+from .holding import holding_forces_n
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
+from .parts import Part
+from .printfit import carve, closing_travel_mm, open_thin_walls
+from .report.models import DesignReport, chosen_candidate
+from .rles import largest_empty_cap, rles
+from .sampler import SIDES, GraspSample, SamplerResult
+from .screen import NormalLattice, ScreenGeometry, ScreenGrid, column_heights, prepare_geometry, screened_bound
+
+
+@dataclass
+class SampleGeometry:
+    """A valid sample with everything candidate evaluation needs from it."""
+
+    sample: GraspSample
+    frames: tuple[np.ndarray, np.ndarray]
+    geometries: tuple[PadGeometry, PadGeometry]
+    surfaces: tuple[SurfaceSamples, SurfaceSamples]
+    effective_area_bound: float
+    screen: tuple[ScreenGeometry, ScreenGeometry]
+    screened_bound: float
+    centres_uv_mm: tuple[np.ndarray, np.ndarray]
+    flat_capture: float | None
+
+
+@dataclass
+class Scenario:
+    """A part in one chosen stable pose, with its valid samples."""
+
+    part_index: int
+    part: Part
+    pose_index: int
+    probability: float
+    rest_transform: np.ndarray
+    mesh: trimesh.Trimesh
+    sampler_result: SamplerResult
+    samples: list[SampleGeometry] = field(default_factory=list)
+
+
+@dataclass
+class ScenarioEvaluation:
+    """One candidate in one scenario: seating of both pads and the quality.
+
+    ``capture`` (the pad as printed), ``holding_n`` (the six pushes) and
+    ``measure`` follow METHOD §7b; under the paper's measure the first two
+    are None and ``measure`` is E.
+    """
+
+    contacts: tuple[PadContact, PadContact]
+    contact_normals: np.ndarray
+    rles: float
+    contact_area_mm2: float
+    effective_area: float
+    measure: float
+    capture: CaptureLandscape | None = None
+    holding_n: np.ndarray | None = None
+
+
+@dataclass
+class CandidateEvaluation:
+    """A candidate evaluated exactly (METHOD §6-7); ``fingerpad`` only when asked to keep it.
+
+    ``quality`` is the worst scenario's measure and ``mean_effective_area``
+    the mean measure: Q and the mean E under the paper's measure.
+    """
+
+    choice: tuple[int, ...]
+    scenarios: list[ScenarioEvaluation]
+    quality: float
+    mean_effective_area: float
+    case: str
+    block_depth_mm: float | None
+    fingerpad: Fingerpad | None = None
+
+
+def sample_geometry(
+    part_manifold: manifold3d.Manifold,
+    mesh: trimesh.Trimesh,
+    sample: GraspSample,
+    config: DesignConfig,
+    seed,
+    grid: ScreenGrid,
+    lattice: NormalLattice,
+) -> SampleGeometry:
+    """A valid sample's pad geometries, contact samples, screening geometry and bounds (METHOD §4-5, §8b).
+
+    ``seed`` is ``(scenario_number, sample_index)`` (see :func:`contact_samples`).
+    """
+    frames = tuple(sample.pad_frame(side, config.sampler) for side in SIDES)
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
+    surfaces = tuple(
+        contact_samples(g.surface_vertices, g.surface_faces, config, *seed, side_number)
+        for side_number, g in enumerate(geometries)
+    )
+    # contact points and normals are subsets of these samples, so A <= the sampled
+    # area and RLES >= the RLES of all sampled normals: E can never exceed this
+    area = sum(len(s.points) * s.area_per_point_mm2 for s in surfaces)
+    normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, frames)])
+    bound = area / rles(normals) if len(normals) else 0.0
+    centres = tuple((f @ np.append(mesh.center_mass, 1.0))[:2] for f in frames)
+    screens = tuple(
+        prepare_geometry(
+            column_heights(g.surface_vertices, g.surface_faces, grid),
+            g.good,
+            g.depth_mm,
+            s.points,
+            s.normals @ f[:3, :3],
+            s.area_per_point_mm2,
+            grid,
+            lattice,
+        )
+        for g, s, f in zip(geometries, surfaces, frames)
+    )
+    flat_capture = None
+    if config.quality.measure == "capture":
+        # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
+        capture = pad_landscapes([screens], [centres], grid, config)[0].fraction
+        flat_capture = pad_landscapes([screens], [centres], grid, config, flat=True)[0].fraction
+        screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
+    return SampleGeometry(
+        sample=sample,
+        frames=frames,
+        geometries=geometries,
+        surfaces=surfaces,
+        effective_area_bound=float(bound),
+        screen=screens,
+        screened_bound=screened_bound(screens, lattice) * screens[0].capture,
+        centres_uv_mm=centres,
+        flat_capture=flat_capture,
+    )
+
+
+def contact_samples(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    config: DesignConfig,
+    scenario_number: int,
+    sample_index: int,
+    side_number: int,
+) -> SurfaceSamples:
+    """The design's surface samples of one pad geometry.
+
+    The seed is ``[contact.seed, scenario, sample, side]`` so a report can be
+    rebuilt with exactly the samples the design used.
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
+    config : DesignConfig
+    scenario_number, sample_index, side_number : int
+        Position of the scenario in the design, of the sample in the scenario,
+        and the side (0: "+", 1: "-").
+    """
+    seed = [config.contact.seed, scenario_number, sample_index, side_number]
+    return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
+
+
+def evaluate_candidate(
+    scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool, fitted: bool = False
+) -> CandidateEvaluation:
+    """Carve, seat and score one candidate (METHOD §4-7).
+
+    ``fitted`` (the chosen candidate) carves with the clearance and lead-in
+    of ``[print]``, removes thin walls and lets the pads close the clearance
+    (:mod:`fcso.printfit`); the search ranks candidates on exact pockets.
+    """
+    chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
+    geometries = [g for sample in chosen for g in sample.geometries]
+    fit = config.print.resolved()
+    if fitted:
+        geometries = fitted_geometries(scenarios, chosen, config)
+    fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
+    if fitted:
+        sampler = config.sampler
+        opened = open_thin_walls(
+            fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, fit["min_wall_mm"]
+        )
+        fingerpad = Fingerpad(opened, fingerpad.case, fingerpad.block_depth_mm)
+    pad_mesh = fingerpad.pad.to_mesh()
+    vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
+    faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
+    travel = closing_travel_mm(fit["clearance_mm"]) if fitted else 0.0
+    surfaces = [surface for sample in chosen for surface in sample.surfaces]
+    seated = iter(seat(surfaces, vertices, faces, config.contact.eps_mm, travel_mm=travel))
+    by_capture = config.quality.measure == "capture"
+    if by_capture:
+        landscapes = pad_landscapes(
+            [s.screen for s in chosen], [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config
+        )
+    results = []
+    for number, (scenario, sample) in enumerate(zip(scenarios, chosen)):
+        contacts = (next(seated), next(seated))
+        normals = np.vstack(
+            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
+        )
+        area = float(sum(c.contact_area_mm2 for c in contacts))
+        radius = rles(normals) if len(normals) else 2.0
+        effective = area / radius if area > 0 else 0.0
+        if not by_capture:
+            results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
+            continue
+        holding = _holding(scenario, sample, contacts, normals, config)
+        measure = landscapes[number].fraction * min(1.0, float(holding.min()) / config.quality.hold_force_n) * effective
+        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding))
+    measures = [r.measure for r in results]
+    return CandidateEvaluation(
+        choice=choice,
+        scenarios=results,
+        quality=float(min(measures)),
+        mean_effective_area=float(np.mean(measures)),
+        case=fingerpad.case,
+        block_depth_mm=fingerpad.block_depth_mm,
+        fingerpad=fingerpad if keep_pad else None,
+    )
+
+
+def _holding(scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig) -> np.ndarray:
+    """The six holding forces of one seated grasp (METHOD §7b), N."""
+    points = np.vstack(
+        [
+            (np.linalg.inv(f) @ np.column_stack([s.points[c.contact], np.ones(int(c.contact.sum()))]).T).T[:, :3]
+            for s, c, f in zip(sample.surfaces, contacts, sample.frames)
+        ]
+    )
+    pads = np.concatenate([np.full(int(c.contact.sum()), side) for side, c in enumerate(contacts)])
+    density = config.print.resolved()["density_g_cm3"]
+    quality = config.quality
+    return holding_forces_n(
+        points,
+        -normals_rest,
+        pads,
+        sample.sample.closing_axis,
+        np.asarray(scenario.mesh.center_mass),
+        float(scenario.mesh.volume) * density * 1e-6,
+        quality.friction,
+        quality.grip_force_n,
+        quality.hold_force_n,
+    )
+
+
+#: How much more of the start errors a pad must capture than flat pads to count as better (2 of 20 starts).
+FLAT_MARGIN = 0.1
+
+
+def versus_flat(scenarios: list[Scenario], best: CandidateEvaluation, finalists) -> list[tuple[float | None, float | None, bool]]:
+    """Per scenario: the chosen pad's capture, flat pads' capture, and whether any pad tried beats flat (METHOD §7b, §12).
+
+    A scenario is served better than by flat pads when some pad screened or
+    evaluated captures more than flat pads by :data:`FLAT_MARGIN`; when none
+    does, the design says so. Under the paper's measure nothing is compared:
+    ``(None, None, True)``.
+    """
+    if best.scenarios[0].capture is None:
+        return [(None, None, True)] * len(scenarios)
+    compared = []
+    for number, scenario in enumerate(scenarios):
+        chosen = best.scenarios[number].capture.fraction
+        flat = scenario.samples[best.choice[number]].flat_capture
+        tried = max(
+            [chosen]
+            + [e.scenarios[number].capture.fraction for e in finalists]
+            + [g.screen[0].capture for g in scenario.samples]
+        )
+        compared.append((chosen, flat, tried > flat + FLAT_MARGIN))
+    return compared
+
+
+def fitted_geometries(
+    scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
+) -> list[PadGeometry]:
+    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving."""
+    fit = config.print.resolved()
+    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+        return [g for sample in chosen for g in sample.geometries]
+    sampler = config.sampler
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    fitted = []
+    for scenario, sample in zip(scenarios, chosen):
+        part = to_manifold(scenario.mesh)
+        for geometry, frame in zip(sample.geometries, sample.frames):
+            if geometry.good:
+                carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
+                geometry = dataclasses.replace(geometry, intersection=carved)
+            fitted.append(geometry)
+    return fitted
+
+
+@dataclass
+class GraspScene:
+    """What the page shows of one grasp scenario of the chosen candidate.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        The part in its resting frame (mm).
+    sample : GraspSample
+        The chosen sample.
+    placements : list of PadPlacement
+        The seated "+" and "-" pads with their contact masks.
+    normals : (n, 3) float
+        Contact normals, resting frame.
+    rles : float
+        Chord radius of the largest empty cap of ``normals``.
+    cap_centre : (3,) float
+        Its centre.
+    """
+
+    mesh: trimesh.Trimesh
+    sample: GraspSample
+    placements: list[PadPlacement]
+    normals: np.ndarray
+    rles: float
+    cap_centre: np.ndarray
+
+
+def chosen_grasp_scenes(scenarios: list[Scenario], best: CandidateEvaluation) -> list[GraspScene]:
+    """The grasps of a design's chosen candidate, one per scenario, from the design just run."""
+    grasps = []
+    for scenario, index, evaluation in zip(scenarios, best.choice, best.scenarios):
+        chosen = scenario.samples[index]
+        placements = [
+            PadPlacement(frame, contact.offset_mm, surface, contact.contact)
+            for frame, contact, surface in zip(chosen.frames, evaluation.contacts, chosen.surfaces)
+        ]
+        radius, centre = largest_empty_cap(evaluation.contact_normals)
+        grasps.append(GraspScene(scenario.mesh, chosen.sample, placements, evaluation.contact_normals, radius, centre))
+    return grasps
+
+
+def reseat_grasps(report: DesignReport, parts: list[Part], fingerpad: trimesh.Trimesh) -> list[GraspScene]:
+    """The grasps of a reported design's chosen candidate, re-seated (METHOD §6).
+
+    The parts are moved into their recorded resting poses; each chosen
+    sample's pad frames are rebuilt, the part surface inside each pad box is
+    sampled with the design's seeds and seated against ``fingerpad``.
+
+    Parameters
+    ----------
+    report : DesignReport
+    parts : list of Part
+        The report's parts, in its order, mm.
+    fingerpad : trimesh.Trimesh
+        The chosen pad, pad frame (mm), with merged vertices.
+    """
+    config = report.settings
+    pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
+    part_number = 0
+    grasps = []
+    for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
+        # scenarios come part by part, in the order of the parts
+        while parts[part_number].name != scenario.part:
+            part_number += 1
+        mesh = parts[part_number].mesh.copy()
+        mesh.apply_transform(np.asarray(scenario.rest_transform, dtype=float))
+        reported = scenario.samples[index]
+        sample = GraspSample(
+            yaw_deg=reported.yaw_deg,
+            s_mm=reported.s_mm,
+            h_mm=reported.h_mm,
+            a_max_mm=reported.a_max_mm,
+            a_min_mm=reported.a_min_mm,
+            area_plus_mm2=reported.surface_area_mm2[0],
+            area_minus_mm2=reported.surface_area_mm2[1],
+        )
+        frames = [sample.pad_frame(side, config.sampler) for side in SIDES]
+        surfaces = [
+            contact_samples(
+                *surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number
+            )
+            for side_number, frame in enumerate(frames)
+        ]
+        travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
+        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
+        placements = [PadPlacement(f, c.offset_mm, s, c.contact) for f, c, s in zip(frames, contacts, surfaces)]
+        normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for f, c, s in zip(frames, contacts, surfaces)])
+        radius, centre = largest_empty_cap(normals)
+        grasps.append(GraspScene(mesh, sample, placements, normals, radius, centre))
+    return grasps

@@ -1,0 +1,469 @@
+"""``report.html``: one self-contained page of pictures and tables per design.
+
+The page is built from :class:`ReportInputs`, which come either from a
+fresh :class:`~fcso.design.DesignResult` (:func:`report_inputs`) or from an
+output folder (:func:`load_report_inputs`: ``report.json``, the part files it
+names, ``finger.stl`` and ``fingerpad.stl``), so ``fcso report DIR`` redraws
+the same page without designing again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ..design import DesignResult, flat_finger
+from ..evaluate import GraspScene, chosen_grasp_scenes, reseat_grasps
+from ..finger import pad_to_finger
+from ..parallel import WorkerPool, resolve_jobs
+from ..progress import Progress
+from ..report.models import DesignReport, chosen_candidate, ranked_candidates
+from ..sampler import REJECTION_REASONS
+from .html import closing_sections, html_page, image, key_value_table, text
+from .layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, write_atomic
+from .read import read_report, read_stl, reload_parts
+from .sets_page import finger_sets_section
+from .table import SCENARIO_GROUPS, quality_columns, scenario_labels
+
+#: ``draw(inputs, progress)``: a page's pictures, name -> PNG bytes (:func:`pictures`).
+DrawPictures = Callable[["ReportInputs", "Progress | None"], dict[str, bytes]]
+
+
+#: Headers of the quality table's column groups (keys: :data:`fcso.output.table.SCENARIO_GROUPS`).
+GROUP_TITLES = {"RLES": "RLES", "A mm2": "contact area A (mm²)", "E": "effective area E (mm²)"}
+
+
+#: Index-ordered tables longer than this start folded.
+FOLDED_ROWS = 40
+
+
+#: Kinds of picture, longest to draw first (the bunny: grasp 0.2 s, pose 0.05 s).
+_DRAWING_ORDER = ("grasp", "gripper", "normals", "fingerpad", "finger", "pose")
+
+
+@dataclass
+class ReportInputs:
+    """Everything ``report.html`` is drawn from.
+
+    Attributes
+    ----------
+    report : DesignReport
+    finger : trimesh.Trimesh
+        The fused finger, finger frame (mm).
+    fingerpad : trimesh.Trimesh
+        The chosen pad, pad frame (mm).
+    pad_to_finger : (4, 4) float
+        Pad frame to finger frame.
+    grasps : list of GraspScene
+        One per scenario, in the report's scenario order.
+    """
+
+    report: DesignReport
+    finger: trimesh.Trimesh
+    fingerpad: trimesh.Trimesh
+    pad_to_finger: np.ndarray
+    grasps: list[GraspScene]
+
+
+def report_inputs(result: DesignResult) -> ReportInputs:
+    """The page's inputs from a design that was just run."""
+    return ReportInputs(
+        result.report,
+        result.finger,
+        result.fingerpad,
+        result.pad_to_finger,
+        chosen_grasp_scenes(result.scenarios, result.best),
+    )
+
+
+def load_report_inputs(directory: str | Path) -> ReportInputs:
+    """The page's inputs from an output folder, re-seating the chosen grasps.
+
+    The parts are reloaded with the recorded scale and moved into their
+    recorded resting poses; each chosen sample's pad frames are rebuilt, the
+    part surface inside each pad box is sampled with the design's seeds and
+    seated against ``fingerpad.stl`` (METHOD §6).
+
+    Parameters
+    ----------
+    directory : str or Path
+        Holds ``report.json``, ``finger.stl`` and ``fingerpad.stl``.
+
+    Returns
+    -------
+    ReportInputs
+
+    Raises
+    ------
+    MeshError
+        A file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    report = read_report(directory)
+    finger = read_stl(directory / FINGER_STL)
+    fingerpad = read_stl(directory / FINGERPAD_STL)
+    grasps = reseat_grasps(report, reload_parts(report, directory), fingerpad)
+    flat = flat_finger(report.settings)
+    return ReportInputs(report, finger, fingerpad, pad_to_finger(flat, report.settings.sampler), grasps)
+
+
+def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str, bytes]:
+    """Render every picture of the page.
+
+    Returns
+    -------
+    dict
+        ``"gripper"`` (both fingers on the first scenario's part), ``"finger"``,
+        ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``, ``"pose <m>"``
+        for each scenario ``m``: PNG bytes.
+    """
+    # matplotlib loads only where pictures are drawn (0.4 s): a command that
+    # has them drawn by a picture process (fcso.output.picture_process) never loads it
+    from .render import finger_picture, fingerpad_picture, grasp_picture, gripper_picture, normals_picture, pose_picture
+
+    report = inputs.report
+    settings = report.settings.sampler
+    pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
+    labels = _scenario_titles(report)
+    first = inputs.grasps[0]
+
+    def gripper() -> bytes:
+        closing = first.sample.closing_axis
+        return gripper_picture(
+            first.mesh, inputs.finger, inputs.pad_to_finger, first.placements, pad_size, closing, labels[0]
+        )
+
+    jobs: list[tuple[str, Callable[[], bytes]]] = [
+        ("gripper", gripper),
+        (
+            "finger",
+            lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)"),
+        ),
+        (
+            "fingerpad",
+            lambda: fingerpad_picture(
+                inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)"
+            ),
+        ),
+    ]
+    for m, grasp in enumerate(inputs.grasps):
+        jobs += [
+            (
+                f"grasp {m}",
+                lambda g=grasp, t=labels[m]: grasp_picture(
+                    g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t
+                ),
+            ),
+            (
+                f"normals {m}",
+                lambda g=grasp, t=labels[m]: normals_picture(
+                    g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}"
+                ),
+            ),
+            (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
+        ]
+    # longest drawings first, so no worker is left with a long one at the end
+    jobs.sort(key=lambda job: _DRAWING_ORDER.index(job[0].split()[0]))
+    report_progress = progress or (lambda stage, done, total: None)
+    report_progress("pictures", 0, len(jobs))
+    # the drawings are closures: forked workers inherit them, only PNG bytes come back
+    with WorkerPool([draw for _, draw in jobs], resolve_jobs(report.settings.search.jobs)) as pool:
+        images = pool.map(_draw, list(range(len(jobs))))
+    report_progress("pictures", len(jobs), len(jobs))
+    return {name: image for (name, _), image in zip(jobs, images)}
+
+
+def picture_inputs(inputs: ReportInputs) -> ReportInputs:
+    """``inputs`` cut to what :func:`pictures` reads: the report keeps only its chosen candidate.
+
+    A report lists up to ``report_candidates`` candidates as pydantic models;
+    sending them to a picture process cost more than a picture.
+    """
+    return replace(inputs, report=inputs.report.model_copy(update={"candidates": [chosen_candidate(inputs.report)]}))
+
+
+def _draw(drawings: list[Callable[[], bytes]], index: int) -> bytes:
+    return drawings[index]()
+
+
+def _scenario_titles(report: DesignReport) -> list[str]:
+    return [f"{s.part} / pose {s.pose_index} (p = {s.pose_probability:.3f})" for s in report.scenarios]
+
+
+def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: DrawPictures | None = None) -> str:
+    """The whole page, images embedded as base64 PNG; ``draw`` draws them (:func:`pictures` when None)."""
+    report = inputs.report
+    images = (draw or pictures)(inputs, progress)
+    chosen = chosen_candidate(report)
+    titles = _scenario_titles(report)
+    body = [
+        "<h1>FCSO design report</h1>",
+        _summary(report, chosen),
+        image(images["gripper"], "gripper", "both fingers closed on the first part"),
+        "<h2>Finger and fingerpad</h2>",
+        image(images["finger"], "finger", "the finger with its fingerpad"),
+        image(images["fingerpad"], "fingerpad", "the fingerpad coloured by depth"),
+        "<h2>Grasps of the chosen candidate</h2>",
+        "<p>Each part in its resting pose with the two seated pads (translucent orange); "
+        "the part surface touching a pad is red. Below, the contact normals on the unit sphere "
+        "and the largest empty cap (orange), whose chord radius is the RLES.</p>",
+    ]
+    for m, grasp in enumerate(inputs.grasps):
+        body += [
+            f"<h3>{text(titles[m])}</h3>",
+            _grasp_table(report, m, grasp),
+            image(images[f"grasp {m}"], "grasp", f"grasp of {titles[m]}"),
+            image(images[f"normals {m}"], "normals", f"contact normals of {titles[m]}"),
+        ]
+    body += [
+        "<h2>Stable poses used</h2>",
+        _poses_table(report),
+        '<div class="poses">'
+        + "".join(image(images[f"pose {m}"], "pose", titles[m]) for m in range(len(inputs.grasps)))
+        + "</div>",
+        "<h2>Quality of all evaluated candidates</h2>",
+        "<p>Best first (Q, then mean E, then index); the chosen candidate is marked &#9733;. "
+        "RLES: radius of the largest empty sphere of contact normals (smaller is better); "
+        "A: contact area of both pads (mm&sup2;); E = A / RLES (mm&sup2;); Q = min E over scenarios.</p>",
+        quality_table_html(report, ranked_candidates(report), "sorted"),
+    ]
+    if len(report.scenarios) == 2:
+        table = quality_table_html(report, report.candidates, "table-i")
+        body += [
+            "<h3>The paper's Table I layout (index order)</h3>",
+            f"<details><summary>{len(report.candidates)} candidates</summary>{table}</details>"
+            if len(report.candidates) > FOLDED_ROWS
+            else table,
+        ]
+    if report.print_fit is not None:
+        body += _print_fit_section(report)
+    if report.placement is not None:
+        body += _placement_section(report.placement)
+    if report.finger_sets is not None:
+        body += finger_sets_section(report.finger_sets)
+    body += [
+        "<h2>Grasp sampler</h2>",
+        _sampler_table(report),
+        *closing_sections(report.warnings, report.settings.model_dump_json(indent=2), report.timings_s),
+    ]
+    return html_page(f"FCSO report: {', '.join(p.name for p in report.parts)}", body)
+
+
+def _placement_section(placement: dict) -> list[str]:
+    """Where the finger copies go in the job's build (set by fcsod): a summary and one row per item."""
+    summary = [(key, value) for key, value in placement.items() if not isinstance(value, (list, dict))]
+    header = "".join(
+        f"<th>{name}</th>" for name in ("item", "kind", "placed by", "bounds (mm)", "nearest gap (mm)", "nearest item")
+    )
+    rows = []
+    for item in placement.get("items", []):
+        bounds = item.get("bounds_mm")
+        bounds_text = (
+            " – ".join("(" + ", ".join(f"{x:.1f}" for x in corner) + ")" for corner in bounds) if bounds else ""
+        )
+        gap = item.get("nearest_distance_mm")
+        cells = (
+            item.get("name"),
+            item.get("kind"),
+            item.get("placed_by"),
+            bounds_text,
+            "" if gap is None else f"{gap:.2f}",
+            item.get("nearest_item") or "",
+        )
+        rows.append("<tr>" + "".join(f'<td class="text">{text(c)}</td>' for c in cells) + "</tr>")
+    return [
+        "<h2>Build placement</h2>",
+        key_value_table(summary),
+        f"<table><tr>{header}</tr>{''.join(rows)}</table>",
+    ]
+
+
+def _print_fit_section(report: DesignReport) -> list[str]:
+    """[print] as used and the chosen candidate carved exactly (METHOD §4-6) and as printed."""
+    fit = report.print_fit
+    settings = [
+        ("profile", fit.profile),
+        ("clearance", f"{fit.clearance_mm:g} mm"),
+        ("lead-in", f"{fit.lead_in_deg:g}°"),
+        ("minimum wall", f"{fit.min_wall_mm:g} mm"),
+        ("material density", f"{fit.density_g_cm3:g} g/cm³"),
+        ("thinnest pad wall", "none" if fit.thinnest_wall_mm is None else f"{fit.thinnest_wall_mm:.2f} mm"),
+    ]
+    titles = _scenario_titles(report)
+    header = (
+        '<tr><th class="text">chosen candidate</th><th>pocket volume (mm³)</th><th>Q (mm²)</th>'
+        + "".join(f"<th>A {text(t)} (mm²)</th><th>seat offsets {text(t)} (mm)</th>" for t in titles)
+        + "</tr>"
+    )
+    rows = []
+    for label, effect in (
+        ("exact pocket (METHOD §4-6)", fit.exact),
+        ("as printed (clearance, lead-in, walls)", fit.fitted),
+    ):
+        cells = "".join(
+            f"<td>{a:.1f}</td><td>{', '.join(f'{t:+.3f}' for t in offsets)}</td>"
+            for a, offsets in zip(effect.contact_area_mm2, effect.seat_offsets_mm)
+        )
+        rows.append(
+            f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td>'
+            f"<td>{effect.quality:.1f}</td>{cells}</tr>"
+        )
+    return [
+        "<h2>Printed fit</h2>",
+        "<p>The finger is carved with the clearance and lead-in of <code>[print]</code>, and pad walls thinner than "
+        "the "
+        "minimum are removed; as the gripper closes, the pads travel on toward the part until contact (negative seat "
+        "offsets), so a clearance costs quality only where it changes how the part seats.</p>",
+        key_value_table(settings),
+        f"<table>{header}{''.join(rows)}</table>",
+    ]
+
+
+def _summary(report: DesignReport, chosen) -> str:
+    rows = [
+        ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
+        ("scenarios", len(report.scenarios)),
+        (
+            "search",
+            f"{report.search.kind}: {report.search.screened} of C = {report.search.candidates_total} candidates "
+            f"screened, "
+            f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
+            f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
+            f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is "
+            f"{report.search.gap or 0:.0%} of it",
+        ),
+        (
+            "chosen candidate",
+            f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad",
+        ),
+        (
+            "finger",
+            f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
+            f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}",
+        ),
+        ("fcso", report.fcso_version),
+    ]
+    return key_value_table(rows)
+
+
+def _grasp_table(report: DesignReport, m: int, grasp: GraspScene) -> str:
+    chosen = chosen_candidate(report)
+    quality = chosen.per_scenario[m]
+    sample = report.scenarios[m].samples[chosen.samples[m]]
+    robot = report.grasps[m]
+    rows = [
+        ("sample", f"{chosen.samples[m]}: yaw {sample.yaw_deg:g}°, s = {sample.s_mm:.2f} mm, h = {sample.h_mm:.2f} mm"),
+        (
+            "filter labels (+, -)",
+            ", ".join(
+                f"{label} (R = {r:.3f}, d = {d:.2f} mm)"
+                for label, r, d in zip(sample.labels, sample.ratio, sample.depth_mm)
+            ),
+        ),
+        ("seat offsets t (+, -)", ", ".join(f"{t:.3f} mm" for t in quality.seat_offsets_mm)),
+        ("contact area A", f"{quality.contact_area_mm2:.1f} mm²"),
+        ("RLES", f"{quality.rles:.4f} (drawn: {grasp.rles:.4f}, {len(grasp.normals)} contact normals)"),
+        ("effective area E", f"{quality.effective_area:.1f} mm²"),
+        (
+            "TCP (resting frame)",
+            f"position {robot.position_mm} mm, quaternion wxyz {robot.quaternion_wxyz}, "
+            f"closing width {robot.closing_width_mm:.2f} mm",
+        ),
+    ]
+    return key_value_table(rows)
+
+
+def _poses_table(report: DesignReport) -> str:
+    header = '<tr><th class="text">part</th><th>pose index</th><th>probability</th><th>valid samples</th></tr>'
+    rows = "".join(
+        f'<tr><td class="text">{text(s.part)}</td><td>{s.pose_index}</td>'
+        f"<td>{s.pose_probability:.4f}</td><td>{s.valid_samples}</td></tr>"
+        for s in report.scenarios
+    )
+    return f"<table>{header}{rows}</table>"
+
+
+def _sampler_table(report: DesignReport) -> str:
+    reasons = list(REJECTION_REASONS) + sorted(
+        {r for s in report.scenarios for r in s.rejected} - set(REJECTION_REASONS)
+    )
+    header = (
+        '<tr><th class="text">scenario</th><th>tried</th><th>valid</th>'
+        + "".join(f"<th>rejected: {text(r)}</th>" for r in reasons)
+        + "</tr>"
+    )
+    rows = "".join(
+        f'<tr><td class="text">{text(label)}</td><td>{s.tried_samples}</td><td>{s.valid_samples}</td>'
+        + "".join(f"<td>{s.rejected.get(r, 0)}</td>" for r in reasons)
+        + "</tr>"
+        for label, s in zip(_scenario_titles(report), report.scenarios)
+    )
+    return f"<table>{header}{rows}</table>"
+
+
+def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
+    """The quality table as HTML, headers grouped as in the paper's Table I.
+
+    Parameters
+    ----------
+    report : DesignReport
+    rows : list of CandidateReport
+        In the order to show.
+    table_id : str
+        ``id`` of the table element.
+
+    Returns
+    -------
+    str
+        A ``<table>``; the chosen candidate's row has class ``chosen`` and a star.
+    """
+    columns = quality_columns(report)
+    count = len(scenario_labels(report))
+    top = (
+        '<tr><th rowspan="2">i</th>'
+        + "".join(f'<th colspan="{count}">{text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS)
+        + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
+    )
+    second = "<tr>" + "".join(f"<th>{text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
+    lines = [f'<table id="{table_id}" class="quality">', top, second]
+    for row in rows:
+        chosen = row.index == report.best
+        cells = [f"{'&#9733; ' if chosen else ''}{row.index}"] + [f"{c.value(row):.{c.decimals}f}" for c in columns]
+        attributes = ' class="chosen"' if chosen else ""
+        lines.append(
+            f"<tr{attributes}>"
+            + "".join(f"<td>{cell}</td>" for cell in cells)
+            + f'<td class="text">{text(row.pad_case)}</td></tr>'
+        )
+    lines.append("</table>")
+    return "\n".join(lines)
+
+
+def report_html(result: DesignResult, progress: Progress | None = None, draw: DrawPictures | None = None) -> bytes:
+    """``report.html`` of a design that was just run, UTF-8 (``draw`` as for :func:`render_html`)."""
+    return render_html(report_inputs(result), progress, draw).encode("utf-8")
+
+
+def rebuild_report(directory: str | Path, progress: Progress | None = None) -> Path:
+    """Rebuild ``report.html`` in an output folder from its other files.
+
+    Parameters
+    ----------
+    directory : str or Path
+        Output folder of ``fcso design`` (``report.json``, ``finger.stl``,
+        ``fingerpad.stl``); the part files named in the report must exist.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    Path
+        The written ``report.html``.
+    """
+    directory = Path(directory)
+    page = render_html(load_report_inputs(directory), progress).encode("utf-8")
+    return write_atomic(directory / REPORT_HTML, page)

@@ -1,0 +1,168 @@
+"""A job's finger sets for people: the sections of the report pages, the job's own page, and the pick plan for a
+terminal.
+"""
+
+from __future__ import annotations
+
+import trimesh
+
+from ..design import flat_finger
+from ..finger import pad_to_finger
+from ..report.models import FingerSetsReport, JobReport
+from .html import closing_sections, html_page, image, text
+
+
+def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
+    """``report.html`` of a job with several finger sets: the sets with their fingers, the scenarios and the pick plan.
+
+    Parameters
+    ----------
+    report : JobReport
+    fingers : list of trimesh.Trimesh
+        Every set's finger (mm), set order.
+    """
+    from .render import finger_picture  # matplotlib loads only where pictures are drawn
+
+    sets = report.finger_sets
+    config = report.settings
+    pad_size = (config.sampler.thickness_mm, config.sampler.length_mm, config.sampler.width_mm)
+    flat = flat_finger(config)
+    transform = pad_to_finger(flat, config.sampler)
+    body = ["<h1>FCSO job report: finger sets</h1>", *finger_sets_section(sets), "<h2>The fingers</h2>"]
+    for entry, finger in zip(sets.sets, fingers):
+        body += [
+            f'<h3>Set {entry.set}: {text(", ".join(entry.parts))} (<a href="{entry.folder}/report.html">design '
+            f"report</a>)</h3>",
+            image(
+                finger_picture(finger, transform, pad_size, f"set {entry.set}: finger with its fingerpad (orange)"),
+                "finger",
+                f"finger of set {entry.set}",
+            ),
+        ]
+    body += closing_sections(report.warnings, config.model_dump_json(indent=2), report.timings_s)
+    return html_page(f"FCSO job: {len(sets.sets)} finger sets", body)
+
+
+def finger_sets_section(sets: FingerSetsReport) -> list[str]:
+    """HTML of the finger sets, the pick plan, every scenario's E, E* and retained, and how the split was found."""
+    reached = "reached" if sets.min_retained_reached else "<b>not reached</b>"
+    rows = "".join(
+        f'<tr><td>{s.set}</td><td class="text">{text(", ".join(s.parts))}</td><td>{s.quality:.1f}</td>'
+        f'<td>{s.worst_retained:.3f}</td><td>{s.mean_retained:.3f}</td><td class="text">{s.pad_case}</td><td '
+        f'class="text">{text(s.folder)}</td></tr>'
+        for s in sets.sets
+    )
+    plan = "".join(
+        f'<tr><td>{step.set}</td><td class="text">{text(step.finger)}</td><td class="text">{text(part.part)}</td>'
+        f'<td class="text">{text(", ".join(part.copies))}</td><td>{part.quantity}</td>'
+        f'<td class="text">{text("; ".join(_grasp_text(g) for g in part.grasps))}</td></tr>'
+        for step in sets.pick_plan
+        for part in step.parts
+    )
+    scenarios = "".join(
+        f'<tr><td class="text">{text(s.part)}</td><td>{s.pose_index}</td><td>{s.set if s.set is not None else "-"}</td>'
+        f"<td>{s.effective_area:.1f}</td><td>{s.solo_effective_area:.1f}</td><td>{_number(s.retained)}</td><td>{_number(s.screened_retained)}</td></tr>"
+        for s in sets.scenarios
+    )
+    search = sets.search
+    section = [
+        "<h2>Finger sets</h2>",
+        f"<p>{len(sets.sets)} finger set(s) of at most {sets.max_sets}. Every graspable scenario should keep "
+        f"retained = E / E* &ge; {sets.min_retained:g} of its solo quality E* (the best E of a finger designed for it "
+        f"alone): "
+        f"{reached}; worst retained {_number(sets.worst_retained)}, median {_number(sets.median_retained)}.</p>",
+        '<table><tr><th>set</th><th class="text">parts</th><th>Q (mm&sup2;)</th><th>worst retained</th><th>mean '
+        "retained</th>"
+        f'<th class="text">pad</th><th class="text">folder</th></tr>{rows}</table>',
+        "<h2>Pick plan</h2>",
+        "<p>Mount the sets in this order; with each, pick its parts (all their copies). Grasps are in the part's "
+        "resting frame.</p>",
+        '<table><tr><th>set</th><th class="text">finger</th><th class="text">part</th><th '
+        'class="text">copies</th><th>quantity</th>'
+        f'<th class="text">grasps</th></tr>{plan}</table>',
+        "<h2>Scenarios</h2>",
+        '<table><tr><th class="text">part</th><th>pose</th><th>set</th><th>E (mm&sup2;)</th><th>E* (mm&sup2;)</th>'
+        f"<th>retained</th><th>screened retained</th></tr>{scenarios}</table>",
+        "<h2>How the sets were found</h2>",
+        f"<p>{text(search.description)}.</p>",
+        f"<p>Lower bound: {search.lower_bound_sets} set(s)"
+        + (
+            f" (pairwise conflicting: {text(', '.join(search.conflict_clique))})"
+            if len(search.conflict_clique) > 1
+            else ""
+        )
+        + (
+            f"; no partition into {sets.max_sets} sets keeps a worst retained above {search.worst_retained_bound:.3f}"
+            if search.worst_retained_bound is not None
+            else ""
+        )
+        + ".</p>",
+    ]
+    if search.explanation:
+        section.append(f"<p><b>Why min_retained is not reached:</b> {text(search.explanation)}.</p>")
+    if search.blocking_pairs:
+        pairs = "".join(
+            f'<tr><td class="text">{text(p.parts[0])}</td><td '
+            f'class="text">{text(p.parts[1])}</td><td>{p.retained[0]:.3f}</td><td>{p.retained[1]:.3f}</td></tr>'
+            for p in search.blocking_pairs
+        )
+        section.append(
+            "<h3>Parts that cannot share a finger</h3>"
+            '<table><tr><th class="text">part a</th><th class="text">part b</th><th>retained a</th><th>retained '
+            "b</th></tr>"
+            f"{pairs}</table>"
+        )
+    if sets.identical_parts:
+        section.append(
+            "<h3>Identical parts, designed once</h3><ul>"
+            + "".join(
+                f"<li>{text(g.part)}: {text(', '.join(g.copies))} ({g.quantity} pieces)</li>"
+                for g in sets.identical_parts
+            )
+            + "</ul>"
+        )
+    if sets.ungraspable_parts:
+        section.append(
+            "<h3>Parts no set can grasp</h3><ul>"
+            + "".join(
+                f"<li>{text(u.part)} in stable pose {u.pose_index}: {text(u.reason)}</li>"
+                for u in sets.ungraspable
+                if u.part in sets.ungraspable_parts
+            )
+            + "</ul>"
+        )
+    return section
+
+
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _grasp_text(grasp) -> str:
+    return f"pose {grasp.pose_index}: TCP {_vector(grasp.position_mm)} mm, width {grasp.closing_width_mm:.2f} mm"
+
+
+def _vector(values) -> str:
+    return "(" + ", ".join(f"{v:.1f}" for v in values) + ")"
+
+
+def pick_plan_text(sets: FingerSetsReport) -> str:
+    """The finger sets and the pick plan as lines for a terminal."""
+    lines = [
+        f"{len(sets.sets)} finger set(s) of at most {sets.max_sets} ({sets.search.method}); worst retained E/E* "
+        f"{_number(sets.worst_retained)}, median {_number(sets.median_retained)}, min_retained {sets.min_retained:g} "
+        + ("reached" if sets.min_retained_reached else "NOT reached")
+    ]
+    for entry, step in zip(sets.sets, sets.pick_plan):
+        lines.append(
+            f"set {entry.set}: mount {step.finger} (Q = {entry.quality:.1f} mm², worst retained "
+            f"{entry.worst_retained:.3f})"
+        )
+        for part in step.parts:
+            poses = ", ".join(str(g.pose_index) for g in part.grasps)
+            lines.append(f"  pick {part.quantity} x {part.part} (poses {poses})")
+    if sets.ungraspable_parts:
+        lines.append("not picked (no set can grasp them): " + ", ".join(sets.ungraspable_parts))
+    if sets.search.explanation:
+        lines.append(f"min_retained not reached: {sets.search.explanation}")
+    return "\n".join(lines)

@@ -1,0 +1,380 @@
+"""The reports: pydantic models of ``report.json``.
+
+A design's ``report.json`` is a :class:`DesignReport`. A job served by
+several finger sets (METHOD §11) writes a :class:`JobReport`, and every set's
+own design report beside it; with one finger set the design report's
+``finger_sets`` holds :class:`FingerSetsReport`.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..config import DesignConfig
+
+
+class ReportModel(BaseModel):
+    # the base of every report model: a field the model does not know is an error
+    model_config = ConfigDict(extra="forbid")
+
+
+class PartReport(ReportModel):
+    """A part as it was used."""
+
+    name: str
+    file: str
+    scale_to_mm: float = Field(description="Factor applied to the file's coordinates to get mm")
+    extents_mm: list[float] = Field(description="Bounding-box size in the file frame after scaling, mm")
+    volume_mm3: float
+    faces: int
+    repairs: list[str] = Field(description="What --repair changed; empty when nothing was repaired")
+    shells: int = Field(1, description="Closed shells of the file that make up this part")
+    solid_index: int | None = Field(
+        None, description="k of the name <file>#<k> when the file held several separate solids (1 = largest), else null"
+    )
+    shell_handling: str | None = Field(
+        None, description="How the file's shells were made one solid; null for a single shell"
+    )
+
+
+class UngraspableReport(ReportModel):
+    """A part in a stable pose that no sample can grasp, left out of the design."""
+
+    part: str
+    pose_index: int
+    pose_probability: float = Field(description="Probability of the stable pose (METHOD §2)")
+    tried_samples: int
+    rejected: dict[str, int] = Field(description="Rejected samples per reason (METHOD §3)")
+    reason: str = Field(description="Why, in one sentence")
+
+
+class SampleReport(ReportModel):
+    """One valid sample pair of a scenario and the filter labels of its two pads."""
+
+    yaw_deg: float
+    s_mm: float = Field(description="Footprint centre along the sliding axis, mm")
+    h_mm: float = Field(description="Footprint bottom above the table, mm")
+    a_max_mm: float = Field(description="Part's largest coordinate along the closing axis inside the footprint, mm")
+    a_min_mm: float = Field(description="Part's smallest coordinate along the closing axis inside the footprint, mm")
+    surface_area_mm2: list[float] = Field(description="Part surface inside the + and - pad boxes, mm²")
+    labels: list[str] = Field(description="Filter label of the + and - geometries: good or bad")
+    ratio: list[float] = Field(description="R = (V_B - V_I) / V_B of the + and - geometries")
+    depth_mm: list[float] = Field(description="d_n of the + and - geometries, mm")
+    effective_area_bound: float = Field(description="Upper bound of E for any candidate using this sample, mm²")
+    on_feature: bool = Field(False, description="Its position or height was centred on a feature of the part (METHOD §3b), not taken from the stride")
+
+
+class ScenarioReport(ReportModel):
+    """One grasp scenario: a part in one stable pose."""
+
+    part: str
+    pose_index: int = Field(description="Index among the part's stable poses, 0 = most probable")
+    pose_probability: float
+    rest_transform: list[list[float]] = Field(description="4x4, part file frame (mm) to resting frame (mm)")
+    tried_samples: int = Field(description="Sample pairs whose footprint met the part")
+    valid_samples: int
+    rejected: dict[str, int] = Field(description="Rejection reason -> count")
+    samples: list[SampleReport]
+    capture: float | None = Field(
+        None, description="Share of the start errors the chosen pad seats (METHOD §7b), 0..1; null under the paper's measure"
+    )
+    flat_capture: float | None = Field(None, description="The same for flat pads on the chosen grasp, 0..1")
+    beats_flat: bool = Field(
+        True, description="Some pad tried captures this scenario better than flat pads; false: the design says flat is as good here"
+    )
+
+
+class ScenarioQuality(ReportModel):
+    """Quality of one candidate in one scenario."""
+
+    rles: float = Field(description="Radius of the largest empty sphere of contact normals (chord, 0..2)")
+    contact_area_mm2: float = Field(description="A: contact area of both pads, mm²")
+    effective_area: float = Field(description="E = A / RLES, mm²")
+    seat_offsets_mm: list[float] = Field(description="Seating offset t of the + and - pads, mm")
+    capture: float | None = Field(
+        None,
+        description="Share of the start errors that closing the jaws seats (METHOD §7b), 0..1; screened: the sample's pads alone; "
+        "null under the paper's measure",
+    )
+    holding_n: list[float] | None = Field(
+        None,
+        description="Largest push at the centre of mass held, in the test's six directions (+b, -b, +a, -a, +z, -z), N; "
+        "exact candidates under the capture measure only",
+    )
+    measure: float = Field(
+        0.0, description="What ranks the scenario: E (paper), or capture x min(1, worst holding / hold force) x E (capture; screened: capture x E), mm²"
+    )
+
+
+class CandidateReport(ReportModel):
+    """One evaluated candidate fingerpad."""
+
+    index: int = Field(description="Position in the lexicographic enumeration of sample choices")
+    samples: list[int] = Field(description="Chosen sample per scenario (same order as scenarios)")
+    evaluation: Literal["exact", "screened"] = Field(
+        "exact", description="exact: METHOD §6-7 (re-evaluated finalists); screened: the fast ranking of METHOD §8b"
+    )
+    per_scenario: list[ScenarioQuality]
+    quality: float = Field(description="The worst scenario's measure: Q = min E under the paper's measure, mm²")
+    mean_effective_area: float = Field(description="Mean measure over scenarios (first tie-break; mean E under the paper's measure), mm²")
+    pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
+    block_depth_mm: float | None = Field(None, description="d_B in the mixed case, mm")
+
+
+class SearchReport(ReportModel):
+    """How the candidates were searched (METHOD §8, §8b)."""
+
+    kind: str = Field(
+        description="exhaustive, branch_and_bound or branch_and_bound+coordinate_ascent (over screened quality)"
+    )
+    evaluated: int = Field(description="Candidates evaluated (screened)")
+    screened: int = Field(0, description="Candidates screened")
+    exact: int = Field(0, description="Best screened candidates re-evaluated exactly; the design is the best of these")
+    candidates_total: int = Field(description="C = product of valid samples per scenario")
+    proven_optimal: bool = Field(
+        description="Every candidate was screened, or branch and bound proved the screened best"
+    )
+    jobs: int = Field(1, description="Worker processes used")
+    quality_upper_bound: float | None = Field(
+        None, description="No candidate's exact Q exceeds this (per-sample bounds), mm²"
+    )
+    gap: float | None = Field(None, description="Chosen Q over quality_upper_bound (1 = provably optimal)")
+
+
+class GraspReport(ReportModel):
+    """What the robot runs for one part in one pose."""
+
+    part: str
+    pose_index: int
+    sample: int
+    rest_transform: list[list[float]] = Field(description="4x4, part file frame to resting frame (mm)")
+    position_mm: list[float] = Field(description="TCP position in the resting frame, mm")
+    quaternion_wxyz: list[float] = Field(
+        description="TCP orientation in the resting frame (z: approach, y: closing axis)"
+    )
+    approach_direction: list[float]
+    closing_axis: list[float]
+    pad_gap_mm: float = Field(description="Distance between the two pad faces at contact, mm")
+    closing_width_mm: float = Field(description="Distance between the flat fingers' contact faces at contact, mm")
+    finger_set: int | None = Field(
+        None, description="Finger set making this grasp (METHOD §11), 1 = first; null with [finger_sets] max = 1"
+    )
+
+
+class FingerReport(ReportModel):
+    source: str = Field(description="built-in or the finger mesh file")
+    repairs: list[str]
+    volume_mm3: float
+    bodies: int
+    watertight: bool
+    min_pad_thickness_mm: float
+
+
+class PrintFitEffect(ReportModel):
+    """The chosen candidate carved one way (exact or with clearance and lead-in), both after thin-wall removal."""
+
+    pocket_volume_mm3: float = Field(description="Pad box volume minus pad volume, mm³")
+    contact_area_mm2: list[float] = Field(description="A per scenario (same order as scenarios), mm²")
+    effective_area: list[float] = Field(description="E per scenario, mm²")
+    seat_offsets_mm: list[list[float]] = Field(
+        description="Seating offset t of the + and - pads per scenario (negative: the pad closed a clearance), mm"
+    )
+    quality: float = Field(description="Q = min E, mm²")
+
+
+class PrintFitReport(ReportModel):
+    """``[print]`` as used and what clearance and lead-in changed on the chosen candidate."""
+
+    profile: str
+    clearance_mm: float = Field(description="Effective clearance (profile or explicit), mm")
+    lead_in_deg: float = Field(description="Effective lead-in draft, degrees")
+    min_wall_mm: float = Field(description="Effective minimum wall, mm")
+    density_g_cm3: float = Field(description="Effective part material density, g/cm³")
+    thinnest_wall_mm: float | None = Field(
+        description="Thinnest wall of the chosen pad (fused side excluded), mm; null for an empty pad"
+    )
+    exact: PrintFitEffect = Field(
+        description="The chosen candidate with the exact pocket of METHOD §4 (no clearance, no lead-in)"
+    )
+    fitted: PrintFitEffect = Field(description="The chosen candidate as designed, with clearance and lead-in")
+
+
+# the finger sets of a job (METHOD §11)
+
+
+class SetScenarioReport(ReportModel):
+    """One scenario (a part in one stable pose) in the finger set that serves it."""
+
+    part: str
+    pose_index: int
+    set: int | None = Field(description="Finger set serving it (1 = first); null when the scenario is ungraspable")
+    effective_area: float = Field(
+        description="E of the scenario with its set's finger (exact pocket, METHOD §6-7), mm²"
+    )
+    solo_effective_area: float = Field(
+        description="E*: best E of a design for this scenario alone (0: ungraspable), mm²"
+    )
+    retained: float | None = Field(description="E / E*; null when E* = 0")
+    screened_retained: float | None = Field(
+        description="E / E* under screening, as the partition search saw it; null when not screened"
+    )
+
+
+class FingerSetReport(ReportModel):
+    """One finger set: a finger designed for some of the job's parts."""
+
+    set: int = Field(description="Set number, 1 = first (sets numbered by their first part in job order)")
+    folder: str = Field(
+        description="Folder of its finger.stl, fingerpad.stl and report, relative to the job's report ('.' with one "
+        "set)"
+    )
+    parts: list[str] = Field(description="Distinct parts it serves, job order")
+    quality: float = Field(description="Q = min E over its scenarios (exact, as printed), mm²")
+    worst_retained: float = Field(description="Least E / E* over its scenarios")
+    mean_retained: float = Field(description="Mean E / E* over its scenarios")
+    pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
+
+
+class IdenticalPartsReport(ReportModel):
+    """Parts with the same geometry (after units and shell union), designed once."""
+
+    part: str = Field(description="The one designed (first in job order)")
+    copies: list[str] = Field(description="Every part of the job with this geometry, itself included, job order")
+    quantity: int = Field(description="Pieces to pick: build items over all the copies")
+
+
+class PairConflictReport(ReportModel):
+    """Two parts screened as one finger set."""
+
+    parts: list[str] = Field(description="The two parts")
+    retained: list[float] = Field(description="Worst screened E / E* of each when they share a finger")
+
+
+class PartitionSearchReport(ReportModel):
+    """How the parts were split into sets and what bounds the split."""
+
+    method: Literal["single_set", "single_part", "exhaustive", "conflict_graph_colouring+local_moves"] = Field(
+        description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
+        "exhaustive: every partition screened; conflict_graph_colouring+local_moves: greedy sets from pair conflicts, "
+        "improved by moving parts"
+    )
+    description: str = Field(description="The same in words, with what it proves")
+    proven: bool = Field(
+        description="The partition is the best under screening (every partition into at most max sets screened)"
+    )
+    sets_tried: list[int] = Field(description="Numbers of sets the search tried")
+    set_screenings: int = Field(description="Distinct candidate sets screened")
+    lower_bound_sets: int = Field(
+        description="Largest group of pairwise conflicting parts: no partition reaching min_retained has fewer sets"
+    )
+    conflict_clique: list[str] = Field(description="That group of parts")
+    worst_retained_bound: float | None = Field(
+        description="When that group is larger than max, two of its parts share a set: no partition keeps a larger "
+        "worst E / E* (screened)"
+    )
+    blocking_pairs: list[PairConflictReport] = Field(
+        description="Pairs of parts that keep less than min_retained when they share a finger"
+    )
+    explanation: str | None = Field(description="Why min_retained is not reached, when it is not")
+
+
+class PickPart(ReportModel):
+    """A part the cell picks with the mounted finger set."""
+
+    part: str = Field(description="Part designed (its copies are listed in copies)")
+    copies: list[str] = Field(description="Every job part with this geometry")
+    quantity: int = Field(description="Pieces to pick")
+    grasps: list[GraspReport] = Field(description="Grasp per stable pose the part may lie in")
+
+
+class PickStep(ReportModel):
+    """Mount one finger set, then pick its parts."""
+
+    set: int
+    finger: str = Field(description="The finger to mount: its STL, relative to the job's report")
+    parts: list[PickPart]
+
+
+class FingerSetsReport(ReportModel):
+    """The job's finger sets (METHOD §11) and the pick plan for the cell."""
+
+    max_sets: int = Field(description="[finger_sets] max")
+    min_retained: float = Field(description="[finger_sets] min_retained")
+    sets: list[FingerSetReport]
+    scenarios: list[SetScenarioReport] = Field(
+        description="Every scenario of every distinct part: those with samples in job order, then those without"
+    )
+    worst_retained: float | None = Field(description="Least E / E* over graspable scenarios")
+    median_retained: float | None = Field(description="Median E / E* over graspable scenarios")
+    min_retained_reached: bool = Field(description="Every graspable scenario keeps at least min_retained (exact)")
+    identical_parts: list[IdenticalPartsReport] = Field(
+        description="Groups of identical parts designed once (only groups of two or more)"
+    )
+    ungraspable_parts: list[str] = Field(description="Parts no set can grasp in any chosen pose: not in the pick plan")
+    ungraspable: list[UngraspableReport] = Field(description="Every ungraspable scenario")
+    pick_plan: list[PickStep] = Field(description="Finger sets in the order to mount them, each with the parts to pick")
+    search: PartitionSearchReport
+
+
+class DesignReport(ReportModel):
+    """Everything ``fcso design`` decided and why (``report.json``)."""
+
+    fcso_version: str
+    parts: list[PartReport]
+    scenarios: list[ScenarioReport]
+    candidates: list[CandidateReport]
+    best: int = Field(description="Index of the chosen candidate (argmax Q, ties: larger mean E, then smaller index)")
+    search: SearchReport
+    grasps: list[GraspReport]
+    ungraspable: list[UngraspableReport] = Field(
+        default_factory=list, description="Parts in stable poses that no sample can grasp; the design serves the others"
+    )
+    finger: FingerReport
+    timings_s: dict[str, float] = Field(
+        description="Wall time per stage, s (the only field that varies between identical runs)"
+    )
+    warnings: list[str]
+    settings: DesignConfig
+    print_fit: PrintFitReport | None = Field(None, description="[print] as used and what clearance and lead-in changed")
+    placement: dict | None = Field(
+        None,
+        description="Where the finger copies go in the job's build volume, added by fcsod (schema: "
+        "schemas/placement-report.json)",
+    )
+    finger_sets: FingerSetsReport | None = Field(
+        None,
+        description="The job's finger sets and pick plan when it ran with [finger_sets] max > 1 and one set serves it "
+        "(METHOD §11)",
+    )
+
+
+class JobReport(ReportModel):
+    """``report.json`` of a job served by two or more finger sets."""
+
+    fcso_version: str
+    parts: list[PartReport]
+    finger_sets: FingerSetsReport
+    timings_s: dict[str, float] = Field(description="Wall time per stage, s")
+    warnings: list[str]
+    settings: DesignConfig
+    placement: dict | None = Field(
+        None,
+        description="Where every set's finger copies go in the job's build volume, added by fcsod (schema: "
+        "schemas/placement-report.json)",
+    )
+
+
+def chosen_candidate(report: DesignReport) -> CandidateReport:
+    """The candidate the design chose."""
+    return next(c for c in report.candidates if c.index == report.best)
+
+
+def ranked_candidates(report: DesignReport, limit: int | None = None) -> list[CandidateReport]:
+    """Candidates best first, at most ``limit``: the exactly evaluated ones, then the screened ones,
+    each by larger Q, then larger mean E, then smaller index."""
+    rows = sorted(
+        report.candidates, key=lambda c: (c.evaluation != "exact", -c.quality, -c.mean_effective_area, c.index)
+    )
+    return rows if limit is None else rows[:limit]

@@ -1,0 +1,201 @@
+"""A job's finger sets report assembled from the partition and the sets' designs (:class:`FingerSetsReport`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..evaluate import Scenario
+from ..output.layout import set_finger_path, set_folder
+from .models import (
+    FingerSetReport,
+    FingerSetsReport,
+    IdenticalPartsReport,
+    PairConflictReport,
+    PartitionSearchReport,
+    PickPart,
+    PickStep,
+    SetScenarioReport,
+    UngraspableReport,
+)
+
+if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
+    from ..sets.partition import PartitionOutcome
+
+
+def zero_quality_report(scenario: Scenario) -> UngraspableReport:
+    """The entry of a scenario whose every sample loses all contact once carved and seated (E* = 0)."""
+    result = scenario.sampler_result
+    return UngraspableReport(
+        part=scenario.part.name,
+        pose_index=scenario.pose_index,
+        pose_probability=round(float(scenario.probability), 6),
+        tried_samples=result.tried,
+        rejected=dict(result.rejected),
+        reason="every valid sample loses all contact when its pad is carved and the part seated (E* = 0)",
+    )
+
+
+def _ratio(value: float, reference: float) -> float:
+    return round(float(value) / float(reference), 6)
+
+
+def sets_report(
+    prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+) -> FingerSetsReport:
+    """The report of the sets, their scenarios, identical parts and the pick plan."""
+    settings = config.finger_sets
+    several = len(designs) > 1
+    exact: dict[int, tuple[int, float]] = {}
+    sets, pick_plan = [], []
+    for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
+        areas = design_result.report.print_fit.exact.effective_area
+        for m, area in zip(numbers, areas):
+            exact[m] = (label, area)
+        retained = [area / solos[m].exact_mm2 for m, area in zip(numbers, areas)]
+        folder = set_folder(label, several)
+        sets.append(
+            FingerSetReport(
+                set=label,
+                folder=folder,
+                parts=[prepared.parts[u].name for u in chosen],
+                quality=round(design_result.best.quality, 6),
+                worst_retained=round(min(retained), 6),
+                mean_retained=round(float(np.mean(retained)), 6),
+                pad_case=design_result.best.case,
+            )
+        )
+        grasps = dict(zip(numbers, design_result.report.grasps))
+        pick_plan.append(
+            PickStep(
+                set=label,
+                finger=set_finger_path(label, several),
+                parts=[
+                    PickPart(
+                        part=prepared.parts[u].name,
+                        copies=[loaded[i].name for i in groups[u]],
+                        quantity=sum(len(loaded[i].instances) for i in groups[u]),
+                        grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
+                    )
+                    for u in chosen
+                ],
+            )
+        )
+    scenarios = []
+    for m, scenario in enumerate(prepared.scenarios):
+        label, area = exact.get(m, (None, 0.0))
+        star = solos[m].exact_mm2
+        scenarios.append(
+            SetScenarioReport(
+                part=scenario.part.name,
+                pose_index=scenario.pose_index,
+                set=label,
+                effective_area=round(float(area), 6),
+                solo_effective_area=round(star, 6),
+                retained=_ratio(area, star) if star > 0 else None,
+                screened_retained=round(float(screened[m]), 6) if m in screened else None,
+            )
+        )
+    for entry in prepared.ungraspable:
+        scenarios.append(
+            SetScenarioReport(
+                part=entry.part,
+                pose_index=entry.pose_index,
+                set=None,
+                effective_area=0.0,
+                solo_effective_area=0.0,
+                retained=None,
+                screened_retained=None,
+            )
+        )
+    kept = [s.retained for s in scenarios if s.retained is not None]
+    served = {prepared.parts[u].name for u in graspable}
+    names = [prepared.parts[u].name for u in graspable]
+    pairs = sorted(outcome.pair_retained.items())
+    blocking = [
+        PairConflictReport(parts=[names[i], names[j]], retained=[round(a, 6), round(b, 6)])
+        for (i, j), (a, b) in pairs
+        if min(a, b) < settings.min_retained
+    ]
+    reached = min(kept) >= settings.min_retained
+    return FingerSetsReport(
+        max_sets=settings.max,
+        min_retained=settings.min_retained,
+        sets=sets,
+        scenarios=scenarios,
+        worst_retained=round(min(kept), 6),
+        median_retained=round(float(np.median(kept)), 6),
+        min_retained_reached=reached,
+        identical_parts=[
+            IdenticalPartsReport(
+                part=loaded[g[0]].name,
+                copies=[loaded[i].name for i in g],
+                quantity=sum(len(loaded[i].instances) for i in g),
+            )
+            for g in groups
+            if len(g) > 1
+        ],
+        ungraspable_parts=[p.name for p in prepared.parts if p.name not in served],
+        ungraspable=ungraspable,
+        pick_plan=pick_plan,
+        search=PartitionSearchReport(
+            method=outcome.method,
+            description=_search_description(outcome, len(graspable), settings),
+            proven=outcome.proven,
+            sets_tried=outcome.sets_tried,
+            set_screenings=outcome.set_screenings,
+            lower_bound_sets=outcome.lower_bound_sets,
+            conflict_clique=[names[i] for i in outcome.conflict_clique],
+            worst_retained_bound=None
+            if outcome.worst_retained_bound is None
+            else round(outcome.worst_retained_bound, 6),
+            blocking_pairs=blocking,
+            explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
+        ),
+    )
+
+
+def _search_description(outcome: PartitionOutcome, parts: int, settings) -> str:
+    if outcome.method == "single_part":
+        return "one distinct graspable part: one finger set"
+    if outcome.method == "exhaustive":
+        return (
+            f"every partition of the {parts} distinct parts into at most {settings.max} sets was screened "
+            f"({outcome.set_screenings} distinct sets): the chosen one is the best under screening; its sets were "
+            f"then designed exactly"
+        )
+    clique = len(outcome.conflict_clique)
+    return (
+        f"the {parts * (parts - 1) // 2} pairs of parts were screened as sets; the largest group of pairwise "
+        f"conflicting parts "
+        f"has {clique} parts, so no partition reaching min_retained = {settings.min_retained:g} has fewer than "
+        f"{outcome.lower_bound_sets} sets "
+        f"(if a part never keeps more of its quality in a larger set); for {', '.join(map(str, outcome.sets_tried))} "
+        f"sets, parts were "
+        f"placed greedily (most conflicted first, with the parts they conflict with least) and the worst set's parts "
+        f"moved while the "
+        f"objective improved ({outcome.set_screenings} distinct sets screened); not proven optimal"
+    )
+
+
+def _explanation(scenarios, blocking, outcome: PartitionOutcome, names, settings) -> str:
+    worst = min((s for s in scenarios if s.retained is not None), key=lambda s: s.retained)
+    words = [
+        f"{worst.part} in stable pose {worst.pose_index} keeps {worst.retained:.2f} of its solo quality in set "
+        f"{worst.set}"
+    ]
+    if len(outcome.conflict_clique) > settings.max:
+        group = ", ".join(names[i] for i in outcome.conflict_clique)
+        words.append(
+            f"parts {group} conflict pairwise: they need {len(outcome.conflict_clique)} sets, more than max = "
+            f"{settings.max}"
+        )
+    if blocking:
+        pairs = "; ".join(
+            f"{b.parts[0]} + {b.parts[1]} ({b.retained[0]:.2f}, {b.retained[1]:.2f})" for b in blocking[:8]
+        )
+        words.append(f"pairs that cannot share a finger (screened retained of each): {pairs}")
+    if worst.screened_retained is not None and worst.screened_retained >= settings.min_retained:
+        words.append(f"under screening it kept {worst.screened_retained:.2f}: the exact design keeps less")
+    return "; ".join(words)

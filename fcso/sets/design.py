@@ -1,0 +1,194 @@
+"""Designing a job's finger sets: identical parts once, solo qualities, the partition, every set's finger (METHOD
+§11).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from .. import __version__
+from ..config import DesignConfig
+from ..design import DesignResult, design, design_prepared, prepare, subset
+from ..errors import NoGraspError
+from ..parallel import WorkerPool
+from ..parts import Part, load_parts
+from ..progress import Progress
+from ..report.design import part_report
+from ..report.models import DesignReport, FingerSetsReport, JobReport
+from ..report.sets import sets_report, zero_quality_report
+from .identity import identical_groups
+from .partition import search_partition
+from .screening import SetScreener, SoloQuality, screening_pools, solo_quality
+
+
+@dataclass
+class SetsResult:
+    """What :func:`design_sets` returns.
+
+    Attributes
+    ----------
+    designs : list of DesignResult
+        One finger design per set, set order.
+    report : FingerSetsReport or None
+        The sets and the pick plan; None with ``[finger_sets] max = 1``.
+    job_report : JobReport or None
+        The job's ``report.json`` with two or more sets; with one, the
+        design's own report (``designs[0].report``, whose ``finger_sets`` is ``report``).
+    """
+
+    designs: list[DesignResult]
+    report: FingerSetsReport | None
+    job_report: JobReport | None
+
+    @property
+    def several(self) -> bool:
+        """Whether two or more finger sets serve the job: its outputs then go into ``set-<k>`` folders."""
+        return self.job_report is not None
+
+    def job(self) -> DesignReport | JobReport:
+        """The job's ``report.json``: the job report with several sets, the one design's report with one."""
+        return self.job_report if self.several else self.designs[0].report
+
+
+def design_sets(
+    parts: Sequence[Part | str | Path],
+    config: DesignConfig | None = None,
+    progress: Progress | None = None,
+    repair: bool = False,
+) -> SetsResult:
+    """Design the finger sets of a job (METHOD §11): at most ``[finger_sets] max`` fingers for its parts.
+
+    Identical parts are designed once. Every scenario's solo quality ``E*``
+    is found (:func:`solo_quality`), the distinct parts are partitioned
+    (:func:`search_partition`, under screening), and every set's finger is
+    designed exactly by METHOD §1-9 for that set alone
+    (:func:`fcso.design.design_prepared`).
+
+    Parameters
+    ----------
+    parts, config, progress, repair
+        As for :func:`fcso.design.design`.
+
+    Returns
+    -------
+    SetsResult
+        With ``[finger_sets] max = 1``, exactly :func:`fcso.design.design` of every part.
+
+    Raises
+    ------
+    MeshError, ConfigError, NoGraspError
+        As :func:`fcso.design.design`; NoGraspError also when no scenario keeps any contact.
+    """
+    config = config or DesignConfig()
+    if config.finger_sets.max == 1:
+        return SetsResult([design(parts, config, progress=progress, repair=repair)], None, None)
+    report_progress = progress or (lambda stage, done, total, note="": None)
+    clock = time.perf_counter()
+    loaded = [
+        one
+        for p in parts
+        for one in (
+            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
+        )
+    ]
+    groups = identical_groups([p.mesh for p in loaded])
+    unique = [loaded[g[0]] for g in groups]
+    dedup_s = time.perf_counter() - clock
+    prepared = prepare(unique, config, progress=progress, repair=repair)
+    warnings = list(prepared.warnings)
+    timings = dict(prepared.timings_s, identical_parts=dedup_s)
+    for group in groups:
+        if len(group) > 1:
+            names = ", ".join(loaded[i].name for i in group)
+            warnings.append(f"{names} have the same geometry: designed once as {loaded[group[0]].name}")
+
+    clock = time.perf_counter()
+    report_progress("solo quality", 0, len(prepared.scenarios), "")
+    # no more workers than tasks: forking costs more than one small task
+    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios))) as pool:
+        solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
+    report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
+    timings["solo_quality"] = time.perf_counter() - clock
+    ungraspable = list(prepared.ungraspable)
+    for scenario, solo in zip(prepared.scenarios, solos):
+        if solo.exact_mm2 <= 0:
+            ungraspable.append(zero_quality_report(scenario))
+            warnings.append(
+                f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left "
+                f"out"
+            )
+    part_scenarios = [
+        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact_mm2 > 0]
+        for u in range(len(unique))
+    ]
+    graspable = [u for u in range(len(unique)) if part_scenarios[u]]
+    if not graspable:
+        raise NoGraspError(
+            "no scenario of the job keeps any contact with a pad: "
+            + "; ".join(f"{u.part} pose {u.pose_index}" for u in ungraspable)
+        )
+
+    clock = time.perf_counter()
+    pools = screening_pools(solos, config.finger_sets.screen_samples)
+    # one part has one partition: nothing to screen in parallel
+    with WorkerPool((prepared, pools, config), prepared.jobs if len(graspable) > 1 else 1) as pool:
+        screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, config, pool)
+        outcome = search_partition(
+            screener,
+            len(graspable),
+            config,
+            lambda stage, done, total, note="": report_progress(stage, done, total, note),
+        )
+    timings["partition"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    labels = max(outcome.assignment) + 1
+    designs, members = [], []
+    for label in range(labels):
+        chosen = [graspable[p] for p, a in enumerate(outcome.assignment) if a == label]
+        numbers = sorted(m for u in chosen for m in part_scenarios[u])
+        report_progress("finger sets", label, labels, f"set {label + 1} of {labels}")
+        made = design_prepared(subset(prepared, numbers), config, progress)
+        # every grasp says which finger set makes it
+        made.report = made.report.model_copy(
+            update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+        )
+        designs.append(made)
+        members.append((chosen, numbers))
+    report_progress("finger sets", labels, labels, "")
+    timings["finger_sets"] = time.perf_counter() - clock
+    screened = dict(zip([m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]], outcome.retained))
+    finger_sets = sets_report(
+        prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+    )
+    timings = {k: round(v, 3) for k, v in timings.items()}
+    if labels == 1:
+        design_report = designs[0].report
+        designs[0].report = design_report.model_copy(
+            update={
+                "parts": [part_report(p) for p in unique],
+                "ungraspable": ungraspable,
+                "warnings": warnings + design_report.warnings,
+                "timings_s": dict(timings, **design_report.timings_s),
+                "finger_sets": finger_sets,
+            }
+        )
+        return SetsResult(designs, finger_sets, None)
+    set_warnings = [f"set {k}: {w}" for k, d in enumerate(designs, start=1) for w in d.report.warnings]
+    job = JobReport(
+        fcso_version=__version__,
+        parts=[part_report(p) for p in unique],
+        finger_sets=finger_sets,
+        timings_s=timings,
+        warnings=warnings + set_warnings,
+        settings=config,
+    )
+    return SetsResult(designs, finger_sets, job)
+
+
+def _solo_task(context, number: int) -> SoloQuality:
+    prepared, config = context
+    return solo_quality(prepared, number, config)

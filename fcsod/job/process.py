@@ -1,0 +1,51 @@
+"""The worker process: started by the daemon with the spawn method, it takes one job, runs it and exits.
+
+The daemon imports this module to start workers, so it imports only what
+that needs; the job's code loads in the worker.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from multiprocessing.connection import Connection
+
+from fcso.parallel import die_with_parent
+
+from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, Withdrawn
+
+
+def _time_limit(signum, frame) -> None:
+    raise TimeLimitExceeded()
+
+
+def _withdrawn(signum, frame) -> None:
+    raise Withdrawn()
+
+
+def worker_main(connection: Connection, parent_pid: int) -> None:
+    """Entry point of a worker process: announce readiness, take one job, run it, report, exit.
+
+    Parameters
+    ----------
+    connection : Connection
+        Duplex pipe to the daemon.
+    parent_pid : int
+        The daemon's pid.
+    """
+    die_with_parent(parent_pid)
+    # Ctrl-C in a terminal reaches the whole process group: the daemon decides what happens to jobs
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(SIGNAL_TIME_LIMIT, _time_limit)
+    signal.signal(SIGNAL_WITHDRAWN, _withdrawn)
+    # the job's code (fcso's design, MuJoCo, matplotlib) loads here, before the worker says it is ready, not in the
+    # daemon
+    from .running import run_job
+
+    connection.send(("ready", os.getpid()))
+    task = connection.recv()
+    if task is None:
+        return
+    run_job(task, connection.send)
+    connection.close()

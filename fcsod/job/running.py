@@ -1,0 +1,180 @@
+"""Running one job start to end, and what happens when it fails: the record always finishes, the folder always moves
+into place.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+
+from fcso import FcsoError
+
+from ..bus.messages import BusMessage, StateChangeRecord, utc_now
+from ..record.failure import record_failure
+from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder
+from .steps import STEPS
+from .task import JobFolderDeleted, JobRun, JobTask, TimeLimitExceeded, Withdrawn, status_message, time_limit_error
+from .verification import verify_done_job
+
+
+def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
+    """Run one job start to end; always leaves a finished ``job.mcap`` in the job's output folder.
+
+    Parameters
+    ----------
+    task : JobTask
+    emit : callable
+        Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``
+        and finally ``("finished", state, error, [BusMessage, ...])``.
+    """
+    config = task.config
+    output_root = config.output.root
+    work_dir = output_root / f".tmp-{task.job_id}"
+    final_dir = output_root / task.job_id
+    shutil.rmtree(work_dir, ignore_errors=True)
+    try:
+        work_dir.mkdir(parents=True)
+        recorder = Recorder(work_dir / JOB_RECORD_NAME, config.mcap.compression, config.mcap.chunk_size_bytes)
+    except OSError as exc:
+        # not even the record can start (a full disk): the journal and the bus still say why
+        error = io_failure(exc, Path(task.folder), output_root) or f"internal error: {type(exc).__name__}: {exc}"
+        shutil.rmtree(work_dir, ignore_errors=True)
+        emit(("log", "error", error, {}))
+        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)]))
+        return
+    run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
+    recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
+    emit(("publish", run.status("running")))
+    error = None
+    try:
+        recorder.flush()
+        for step in STEPS:
+            started = time.perf_counter()
+            step(run)
+            run.log(
+                "info",
+                f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s",
+                stage=step.__name__.removeprefix("step_"),
+            )
+            recorder.flush()
+    except FcsoError as exc:
+        # a part that vanished is the symptom; a deleted folder is the cause
+        error = str(exc) if run.folder.is_dir() else str(JobFolderDeleted(run.folder))
+    except TimeLimitExceeded:
+        error = time_limit_error(config.jobs.time_limit_seconds)
+    except JobFolderDeleted as exc:
+        error = str(exc)
+    except Withdrawn:
+        error = str(JobFolderDeleted(run.folder))
+    except OSError as exc:
+        error = io_failure(exc, run.folder, output_root)
+        if error is None:
+            error = f"internal error: {type(exc).__name__}: {exc}"
+            run.log("error", traceback.format_exc())
+    except Exception as exc:  # a bug or an unexpected library error: the job fails, the daemon goes on
+        error = f"internal error: {type(exc).__name__}: {exc}"
+        run.log("error", traceback.format_exc())
+    if error is None:
+        try:
+            outputs = sorted([*run.files, JOB_RECORD_NAME])
+            final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
+            recorder.finish()
+            _fsync_files(work_dir)
+            publish = [*run.outgoing, final]
+        except OSError as exc:
+            # the disk filled up at the very end: the job fails like any other write failure
+            error = io_failure(exc, run.folder, output_root) or f"internal error: {type(exc).__name__}: {exc}"
+    if error is not None:
+        final = finish_failed(run, error)
+        publish = [final]
+    if work_dir.is_dir():
+        os.replace(work_dir, final_dir)
+        _fsync_dir(output_root)
+    emit(("finished", "done" if error is None else "failed", error, publish))
+    if error is None:
+        verify_done_job(run, final_dir)
+
+
+def io_failure(exc: OSError, folder: Path, output_root: Path) -> str | None:
+    """The job's error for an OS error it cannot go on after, naming the folder at fault; None for any other OS error.
+
+    Parameters
+    ----------
+    exc : OSError
+    folder : Path
+        The job folder (its inputs).
+    output_root : Path
+        Where the job writes.
+    """
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        written = f" ({exc.filename})" if exc.filename else ""
+        return (
+            f"{output_root}: no space left on device while writing the job's output{written}: "
+            "the partial output was removed; free space, then change or rename the job folder to run it again"
+        )
+    if not folder.is_dir():
+        return str(JobFolderDeleted(folder))
+    return None
+
+
+def finish_failed(run: JobRun, error: str) -> BusMessage:
+    """End a failed job: remove its outputs, record the failure and finish the record; the ``failed`` status.
+
+    The outputs go first, so on a full disk their space is free for the
+    record's end. When even that cannot be written, the cut-off record is
+    salvaged into a new one; when that fails too, nothing of the job stays
+    on disk and only the journal and the bus carry the failure.
+    """
+    for path in run.work_dir.iterdir():
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.name != JOB_RECORD_NAME:
+            path.unlink()
+    try:
+        run.log("error", error)
+        final = run.status("failed", finished_at=utc_now(), error=error)
+        run.recorder.finish()
+        _fsync_files(run.work_dir)
+        return final
+    except Exception:  # the record's writer may be broken by the write that failed: salvage what it holds
+        run.recorder.close_unfinished()
+    final = run.status("failed", finished_at=utc_now(), error=error, record=False)
+    try:
+        record_failure(
+            run.work_dir, run.task.job_id, error, final, utc_now(), run.task.config.mcap, run.task.config.ros2
+        )
+        _fsync_files(run.work_dir)
+    except OSError:
+        shutil.rmtree(run.work_dir, ignore_errors=True)
+        run.emit(
+            (
+                "log",
+                "error",
+                "no space even for the job's record: nothing of the job is kept on disk",
+                {"path": str(run.work_dir)},
+            )
+        )
+    return final
+
+
+def _fsync_files(folder: Path) -> None:
+    """Push every file of ``folder`` and its set folders to disk."""
+    for path in folder.rglob("*"):
+        if path.is_dir():
+            continue
+        with open(path, "rb") as stream:
+            os.fsync(stream.fileno())
+
+
+def _fsync_dir(path: Path) -> None:
+    """Make a rename in ``path`` durable."""
+    descriptor = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)

@@ -1,0 +1,418 @@
+"""The job's steps in order (:data:`STEPS`): inputs, loading, design, its record, build placement, output files.
+
+Each step takes the :class:`~fcsod.job.task.JobRun` and records what it made.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+import fcso
+from fcso import DesignResult, MeshError, load_parts
+from fcso.output.files import sets_output_files
+from fcso.output.layout import FINGER_STL, FINGERPAD_STL, set_folder
+from fcso.sets import design_sets
+
+from .. import __version__
+from ..build.build3mf import Build, BuildItem, export_build_3mf, make_names_unique
+from ..bus.messages import (
+    ENCODING_STL,
+    BusMessage,
+    CandidateRecord,
+    DesignAttachment,
+    DesignRecord,
+    GraspsMessage,
+    InputFile,
+    InputHashesRecord,
+    JobSpecRecord,
+    OutputFilesRecord,
+    PlacementMessage,
+    PoseRecord,
+    QualityMessage,
+    SamplesRecord,
+    ScenarioSummary,
+    job_key,
+    utc_now,
+)
+from ..record.recorder import (
+    TOPIC_CANDIDATES,
+    TOPIC_DESIGN,
+    TOPIC_GRASPS,
+    TOPIC_INPUTS,
+    TOPIC_OUTPUTS,
+    TOPIC_PLACEMENT,
+    TOPIC_POSES,
+    TOPIC_SAMPLES,
+    TOPIC_SCENE,
+    TOPIC_SPEC,
+)
+from ..record.scene import base64_text, build_scene_update, scene_update
+from .finger_sets import design_messages, place_sets, plan_message
+from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
+from .task import BUILD_NAME, FINGER_SET, PROGRESS_INTERVAL_S, JobFolderDeleted, JobRun
+from .verification import choose_by_verification, job_settings
+
+
+def step_inputs(run: JobRun) -> None:
+    """Hash the inputs, read and validate the manifest, check the part files against the limits."""
+    config = run.task.config
+    run.inputs = hash_inputs(run.folder, job_inputs(run.folder), config.limits.max_file_bytes)
+    run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
+    try:
+        run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
+        run.settings = run.manifest.design_config(config.design)
+        run.build_settings = run.manifest.build_config(config.build)
+        run.parts = check_parts(run.folder, run.manifest, config.limits)
+    finally:
+        run.recorder.write(
+            TOPIC_SPEC,
+            JobSpecRecord(
+                job_id=run.task.job_id,
+                folder=run.task.folder,
+                manifest=run.manifest_text,
+                parts=[{**p.entry.model_dump(), "file": p.entry.file} for p in run.parts],
+                settings=(run.settings or config.design).model_dump(mode="json"),
+                build=(run.build_settings or config.build).model_dump(mode="json"),
+                fcsod_version=__version__,
+                fcso_version=fcso.__version__,
+            ),
+        )
+
+
+def step_load(run: JobRun) -> None:
+    """Load and validate every part (closed volume, units, shells, face limit) and assemble the job's build.
+
+    Parts come from :func:`fcso.load_parts`, the loader ``fcso design`` uses:
+    overlapping shells are one solid, separate solids are separate parts,
+    a 3MF gives one part per distinct object. A loose part is designed once
+    and is ``quantity`` build items, placed when its manifest entry has a
+    transform; a 3MF part keeps the transform of every build item holding it.
+    """
+    max_faces = run.task.config.limits.max_faces
+    items: list[BuildItem] = []
+    for part in run.parts:
+        loaded = load_parts(
+            part.path,
+            units=part.entry.units,
+            scale_to_mm=part.entry.scale_to_mm,
+            repair=run.manifest.repair,
+            split_bodies=run.settings.parts.split_bodies,
+            max_uncompressed_bytes=run.task.config.limits.max_3mf_uncompressed_bytes,
+        )
+        for one in loaded:
+            if len(one.mesh.faces) > max_faces:
+                raise MeshError(
+                    part.path, f"{one.name}: {len(one.mesh.faces)} triangles, more than limits.max_faces ({max_faces})"
+                )
+            if part.path.suffix.lower() == ".3mf":
+                items.extend(
+                    BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for transform in one.instances
+                )
+            else:
+                transform = None if part.entry.transform is None else np.asarray(part.entry.transform, dtype=float)
+                items.extend(
+                    BuildItem(one.name, one.mesh, transform, "part", part.path.stem) for _ in range(part.entry.quantity)
+                )
+                # the pieces to pick (fcso counts a part's build items)
+                one.instances = [transform] * part.entry.quantity
+            run.loaded.append(one)
+            shells = f", {one.shell_note}" if one.shell_note else ""
+            run.log(
+                "info",
+                f"loaded {part.entry.file} as {one.name}: {len(one.mesh.faces)} triangles, extents "
+                f"{np.round(one.mesh.extents, 2).tolist()} mm{shells}",
+            )
+            for warning in one.warnings:
+                run.log("warning", warning)
+    if len(run.loaded) > run.task.config.limits.max_parts:
+        raise MeshError(
+            run.folder,
+            f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})",
+        )
+    make_names_unique(items)
+    run.build = Build(items=items, source=str(run.folder))
+    placed = sum(1 for item in items if item.transform is not None)
+    run.log("info", f"build: {len(items)} part items, {placed} placed by the job, {len(items) - placed} to pack")
+
+
+def step_design(run: JobRun) -> None:
+    """Run fcso's design, logging progress per stage."""
+    last: dict[str, float] = {}
+
+    def progress(stage: str, done: int, total: int, note: str = "") -> None:
+        now = time.monotonic()
+        if stage in last and done < total and now - last[stage] < PROGRESS_INTERVAL_S:
+            return
+        last[stage] = now
+        run.log("info", f"{stage} {done}/{total}" + (f": {note}" if note else ""), stage=stage, done=done, total=total)
+
+    run.sets = design_sets(run.loaded, run.settings, progress=progress)
+    job = run.sets.job_report or run.result.report
+    # what the design warns of (parts left out as ungraspable, files split into
+    # several solids) travels with the job's done status
+    run.warnings.extend(job.warnings)
+    for entry in run.sets.report.ungraspable if run.sets.report else run.result.report.ungraspable:
+        run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
+    if run.sets.report is not None:
+        for line in (
+            run.sets.report.search.description,
+            *(
+                f"set {s.set}: {', '.join(s.parts)} (Q = {s.quality:.1f} mm², worst retained {s.worst_retained:.3f})"
+                for s in run.sets.report.sets
+            ),
+        ):
+            run.log("info", f"finger sets: {line}")
+
+
+def step_choose_by_verification(run: JobRun) -> None:
+    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is
+    verified when done).
+    """
+    if run.sets.several:
+        settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
+        if settings.top_k > 0:
+            run.log(
+                "warning",
+                "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
+                "verified as it is",
+            )
+        return
+    choose_by_verification(run)
+
+
+def step_record_design(run: JobRun) -> None:
+    """Record poses, samples with rejections, every candidate row, the design, the grasps and the 3D scene."""
+    recorder = run.recorder
+    designs = run.sets.designs
+    run.files = {}
+    for number, result in enumerate(designs, start=1):
+        _record_one_design(run, result, number)
+    recorder.write(
+        TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=[g for d in designs for g in d.report.grasps])
+    )
+
+
+def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
+    """Record one finger set's poses, samples, candidates, design and scene; keep its meshes for the outputs."""
+    recorder, report = run.recorder, result.report
+    for scenario in report.scenarios:
+        recorder.write(
+            TOPIC_POSES,
+            PoseRecord(
+                part=scenario.part,
+                pose_index=scenario.pose_index,
+                probability=scenario.pose_probability,
+                rest_transform=scenario.rest_transform,
+            ),
+        )
+        recorder.write(
+            TOPIC_SAMPLES,
+            SamplesRecord(
+                part=scenario.part,
+                pose_index=scenario.pose_index,
+                tried_samples=scenario.tried_samples,
+                valid_samples=scenario.valid_samples,
+                rejected=scenario.rejected,
+                samples=[s.model_dump() for s in scenario.samples],
+            ),
+        )
+    for candidate in report.candidates:
+        recorder.write(
+            TOPIC_CANDIDATES,
+            CandidateRecord(
+                candidate=candidate, best=candidate.index == report.best, per_scenario=candidate.per_scenario
+            ),
+        )
+    # report.json and report.html wait for the placement section (step_outputs)
+    folder = f"{set_folder(number)}/" if run.sets.several else ""
+    finger = run.files[f"{folder}{FINGER_STL}"] = result.finger.export(file_type="stl")
+    pad = run.files[f"{folder}{FINGERPAD_STL}"] = result.fingerpad.export(file_type="stl")
+    recorder.write(
+        TOPIC_DESIGN,
+        DesignRecord(
+            finger_stl_base64=base64_text(finger),
+            finger_sha256=hashlib.sha256(finger).hexdigest(),
+            fingerpad_sha256=hashlib.sha256(pad).hexdigest(),
+            finger_volume_mm3=report.finger.volume_mm3,
+            finger_watertight=report.finger.watertight,
+            finger_set=number,
+        ),
+    )
+    recorder.write(TOPIC_SCENE, scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""))
+
+
+def step_placement(run: JobRun) -> None:
+    """Place every finger set's copies into the job's build volume (:func:`fcsod.job.finger_sets.place_sets`, one set or
+    several):
+    ``build.3mf``, the report's placement section, record, scene, bus message.
+
+    Fingers that do not fit leave the job done with its design, a warning
+    and the free build height that was missing.
+    """
+    several = run.sets.several
+    placements = place_sets(run.build, run.sets, run.build_settings)
+    report = placements[-1].report
+    for placed in placements:
+        run.recorder.write(TOPIC_PLACEMENT, placed.report)
+    run.files[BUILD_NAME] = export_build_3mf(
+        placements[-1].items,
+        job_id=run.task.job_id,
+        application=f"fcsod {__version__}",
+        creation_date=utc_now(),
+        finger_set=FINGER_SET,
+    )
+    # the job's report: the job report with several sets, the design's with one (the one verification may have chosen)
+    job = run.sets.job_report if several else run.result.report
+    placement = report.model_dump(mode="json")
+    warnings = list(job.warnings)
+    for number, placed in enumerate(placements, start=1):
+        label, prefix = (f"placement of set {number}", f"set {number}: ") if several else ("placement", "")
+        run.log("info" if placed.report.fingers_fit else "warning", f"{label}: {placed.report.message}")
+        if not placed.report.fingers_fit:
+            run.warnings.append(f"{prefix}{placed.report.message}")
+            warnings.append(f"{prefix}{placed.report.message}")
+        if not several:
+            for warning in placed.report.warnings:
+                run.log("warning", f"placement: {warning}")
+    if several:
+        placement["finger_sets"] = [
+            {
+                "set": k,
+                "finger_copies_placed": p.report.finger_copies_placed,
+                "fingers_fit": p.report.fingers_fit,
+                "message": p.report.message,
+            }
+            for k, p in enumerate(placements, start=1)
+        ]
+    update: dict = {"placement": placement}
+    if len(warnings) > len(job.warnings):
+        update["warnings"] = warnings
+    if several:
+        run.sets.job_report = job.model_copy(update=update)
+    else:
+        run.result.report = job.model_copy(update=update)
+    run.recorder.write(TOPIC_SCENE, build_scene_update(placements[-1].items, report, run.build_settings))
+    bus = run.task.config.bus
+    summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
+    summary.update(
+        fingers_fit=all(p.report.fingers_fit for p in placements),
+        finger_copies_placed=sum(p.report.finger_copies_placed for p in placements),
+        finger_copies_requested=sum(p.report.finger_copies_requested for p in placements),
+    )
+    body = PlacementMessage(job_id=run.task.job_id, file=BUILD_NAME, **summary)
+    # published after the design's messages (step_outputs puts them first)
+    run.outgoing.append(BusMessage.json_body(bus.prefix, bus.cell, "placement", body))
+
+
+def step_outputs(run: JobRun) -> None:
+    """Write every output file into the work folder and record their hashes; record the bus messages.
+
+    ``report.json`` and ``report.html`` are made here, after every step that
+    adds to the report; the meshes are those the design record holds.
+    """
+    run.files = {**sets_output_files(run.sets), **run.files}
+    for name, data in run.files.items():
+        path = run.work_dir / name
+        try:
+            path.parent.mkdir(exist_ok=True)
+            path.write_bytes(data)
+        except OSError as exc:
+            # a failed write() does not say which file it was writing
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+    run.recorder.write(
+        TOPIC_OUTPUTS,
+        OutputFilesRecord(
+            job_id=run.task.job_id,
+            files=[
+                InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in run.files.items()
+            ],
+        ),
+    )
+    bus, report = run.task.config.bus, run.result.report
+    if run.sets is not None and run.sets.report is not None:
+        copies = [
+            int(p.get("finger_copies_placed", 0))
+            for p in (run.sets.job_report or report).placement.get("finger_sets", [])
+        ] or [report.placement["finger_copies_placed"]]
+        plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files, copies)
+    if run.sets.several:
+        grasps = [g for d in run.sets.designs for g in d.report.grasps]
+        run.outgoing = [
+            BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=grasps)),
+            *design_messages(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files),
+            plan,
+            *run.outgoing,
+        ]
+        for message in run.outgoing:
+            run.record_published(message)
+        return
+    best = next(c for c in report.candidates if c.index == report.best)
+    quality = QualityMessage(
+        job_id=run.task.job_id,
+        quality_mm2=best.quality,
+        mean_effective_area_mm2=best.mean_effective_area,
+        pad_case=best.pad_case,
+        candidates_evaluated=report.search.evaluated,
+        candidates_total=report.search.candidates_total,
+        proven_optimal=report.search.proven_optimal,
+        scenarios=[
+            ScenarioSummary(
+                part=s.part,
+                pose_index=s.pose_index,
+                rles=q.rles,
+                contact_area_mm2=q.contact_area_mm2,
+                effective_area_mm2=q.effective_area,
+            )
+            for s, q in zip(report.scenarios, best.per_scenario)
+        ],
+        finger_volume_mm3=report.finger.volume_mm3,
+        finger_watertight=report.finger.watertight,
+        min_pad_thickness_mm=report.finger.min_pad_thickness_mm,
+        warnings=report.warnings,
+        timings_s=report.timings_s,
+    )
+    finger = run.files[FINGER_STL]
+    attachment = DesignAttachment(
+        job_id=run.task.job_id, sha256=hashlib.sha256(finger).hexdigest(), size_bytes=len(finger)
+    )
+    run.outgoing = [
+        BusMessage.json_body(bus.prefix, bus.cell, "quality", quality),
+        BusMessage.json_body(
+            bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=report.grasps)
+        ),
+        BusMessage(
+            run.task.job_id,
+            "design",
+            job_key(bus.prefix, bus.cell, run.task.job_id, "design"),
+            ENCODING_STL,
+            finger,
+            attachment.model_dump_json().encode(),
+        ),
+        *([plan] if run.sets is not None and run.sets.report is not None else []),
+        *run.outgoing,
+    ]
+    for message in run.outgoing:
+        run.record_published(message)
+
+
+def step_folder_kept(run: JobRun) -> None:
+    """Fail the job when its folder was deleted while it ran: a withdrawn print job gets no fingers."""
+    if not run.folder.is_dir():
+        raise JobFolderDeleted(run.folder)
+
+
+#: The job's steps in order; each is logged and flushed to the record when it ends.
+STEPS: list[Callable[[JobRun], None]] = [
+    step_inputs,
+    step_load,
+    step_design,
+    step_choose_by_verification,
+    step_record_design,
+    step_placement,
+    step_outputs,
+    step_folder_kept,
+]

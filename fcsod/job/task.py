@@ -1,0 +1,187 @@
+"""A job as the worker runs it: the task the daemon hands over, the state its steps share, its status message.
+
+The worker (:mod:`fcsod.job.process`) checks the job's inputs, runs
+:func:`fcso.design_sets`, writes the results into
+``<output_root>/.tmp-<job_id>/`` and records ``job.mcap`` as it goes (flushed
+after every stage), then renames the folder to ``<output_root>/<job_id>/``.
+A failed job's folder holds ``job.mcap`` only. The worker never touches
+zenoh: the messages to publish go back to the daemon over a pipe, after they
+are in the record. The job runs as a list of steps (:mod:`fcsod.job.steps`);
+each takes the :class:`JobRun` and records what it made.
+"""
+
+from __future__ import annotations
+
+import signal
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import fcso
+from fcso import DesignConfig, DesignResult
+from fcso.sets import SetsResult
+
+from ..build.build3mf import Build
+from ..build.models import BuildConfig
+from ..bus.messages import BusMessage, InputFile, LogRecord, StateChangeRecord, StatusMessage, utc_now
+from ..bus.ros2 import record_ros2
+from ..config import DaemonConfig, JobManifest
+from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, Recorder
+from .inputs import PartInput
+
+#: Shortest interval between two progress lines of the same stage, s.
+PROGRESS_INTERVAL_S = 1.0
+
+#: The placed build in every done job's output folder.
+BUILD_NAME = "build.3mf"
+
+#: Number of the finger set of a job served by one finger, in ``build.3mf``.
+FINGER_SET = 1
+
+
+class JobFolderDeleted(Exception):
+    """The job folder disappeared while its job ran: the print job was withdrawn."""
+
+    def __init__(self, folder: Path):
+        super().__init__(
+            f"{folder}: the job folder was deleted while its job ran: the job is withdrawn, nothing of it is published"
+        )
+
+
+class TimeLimitExceeded(BaseException):
+    """Raised in the worker when the daemon signals that the job ran out of time.
+
+    A BaseException so that libraries catching ``Exception`` cannot swallow it.
+    """
+
+
+class Withdrawn(BaseException):
+    """Raised in the worker when the daemon signals that the job's folder was deleted (a BaseException, as above)."""
+
+
+#: The signals by which the daemon stops a running job: out of time, or withdrawn.
+SIGNAL_TIME_LIMIT = signal.SIGUSR1
+SIGNAL_WITHDRAWN = signal.SIGUSR2
+
+
+def time_limit_error(limit_seconds: float) -> str:
+    """The error of a job stopped by its time limit."""
+    return f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({limit_seconds:g} s)"
+
+
+@dataclass
+class JobTask:
+    """What the daemon hands a worker.
+
+    Attributes
+    ----------
+    job_id, folder : str
+        The job and its watched folder.
+    attempt : int
+        Run number (more than 1 after a restart re-queued the job).
+    queued_at, started_at : str
+        UTC ISO 8601 times from the journal.
+    config : DaemonConfig
+        The daemon's settings.
+    """
+
+    job_id: str
+    folder: str
+    attempt: int
+    queued_at: str
+    started_at: str
+    config: DaemonConfig
+
+
+@dataclass
+class JobRun:
+    """The state of a running job that steps read and extend."""
+
+    task: JobTask
+    folder: Path
+    work_dir: Path
+    recorder: Recorder
+    emit: Callable[[tuple], None]
+    manifest: JobManifest | None = None
+    manifest_text: str | None = None
+    inputs: list[InputFile] = field(default_factory=list)
+    parts: list[PartInput] = field(default_factory=list)
+    settings: DesignConfig | None = None
+    build_settings: BuildConfig | None = None
+    loaded: list[fcso.Part] = field(default_factory=list)
+    build: Build = field(default_factory=Build)
+    sets: SetsResult | None = None
+    files: dict[str, bytes] = field(default_factory=dict)
+    outgoing: list[BusMessage] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    verified: tuple | None = None
+
+    @property
+    def result(self) -> DesignResult:
+        """The first finger set's design: the job's design when one set serves it."""
+        return self.sets.designs[0]
+
+    def log(self, level: str, message: str, **fields) -> None:
+        """Record a log line and send it to the daemon's log."""
+        self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
+        self.emit(("log", level, message, fields))
+
+    def record_published(self, message: BusMessage) -> None:
+        """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""
+        self.recorder.write(TOPIC_BUS, message.record())
+        record_ros2(self.recorder, message, self.task.config.ros2)
+
+    def status(
+        self,
+        state: str,
+        finished_at: str | None = None,
+        error: str | None = None,
+        outputs: list[str] | None = None,
+        warnings: list[str] | None = None,
+        record: bool = True,
+    ) -> BusMessage:
+        """The job's status message, recorded on the bus and ROS 2 channels and as a state change (unless ``record`` is
+        false).
+        """
+        message = status_message(self.task, state, finished_at, error, outputs, warnings)
+        if record:
+            self.record_published(message)
+            self.recorder.write(
+                TOPIC_STATE,
+                StateChangeRecord(job_id=self.task.job_id, state=state, at=finished_at or utc_now(), error=error),
+            )
+        return message
+
+
+def status_message(
+    task: JobTask,
+    state: str,
+    finished_at: str | None = None,
+    error: str | None = None,
+    outputs: list[str] | None = None,
+    warnings: list[str] | None = None,
+) -> BusMessage:
+    """The status message of ``task`` in ``state`` (times UTC ISO 8601)."""
+    body = StatusMessage(
+        job_id=task.job_id,
+        state=state,
+        folder=task.folder,
+        attempt=task.attempt,
+        queued_at=task.queued_at,
+        started_at=task.started_at,
+        finished_at=finished_at,
+        error=error,
+        outputs=outputs or [],
+        warnings=warnings or [],
+    )
+    return BusMessage.json_body(task.config.bus.prefix, task.config.bus.cell, "status", body)
+
+
+# ------------------------------------------------------------------------ steps
+
+
+# ------------------------------------------------------------------------ scene
+
+
+# ------------------------------------------------------------------------ running

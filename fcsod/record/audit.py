@@ -1,0 +1,186 @@
+"""``fcsod audit``: a job's story from its MCAP record, and a check of the recorded hashes against files."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..job.finger_sets import plan_lines
+from ..job.inputs import file_sha256
+from .recorder import (
+    TOPIC_BUS,
+    TOPIC_CANDIDATES,
+    TOPIC_DESIGN,
+    TOPIC_INPUTS,
+    TOPIC_LOG,
+    TOPIC_OUTPUTS,
+    TOPIC_PLACEMENT,
+    TOPIC_POSES,
+    TOPIC_SAMPLES,
+    TOPIC_SPEC,
+    TOPIC_STATE,
+    read_record,
+)
+
+
+@dataclass
+class AuditResult:
+    """What the audit found.
+
+    Attributes
+    ----------
+    lines : list of str
+        The job's story, for a person.
+    problems : list of str
+        Failed checks (hash mismatches, missing files, a cut-off record when verifying).
+    truncated : bool
+        The record ends before its footer.
+    """
+
+    lines: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    truncated: bool = False
+
+
+def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: str | Path | None = None) -> AuditResult:
+    """Tell a job's story from ``job.mcap`` and, if asked, verify recorded hashes.
+
+    Parameters
+    ----------
+    path : Path
+        The record (may be cut off by a crash).
+    verify_dir : Path, optional
+        The job's output folder: each recorded output file's SHA-256 is checked.
+    inputs_dir : Path, optional
+        The job folder: each recorded input file's SHA-256 is checked.
+
+    Returns
+    -------
+    AuditResult
+    """
+    content = read_record(path)
+    result = AuditResult(truncated=content.truncated)
+    say = result.lines.append
+    say(f"record {path}: {len(content.messages)} messages on {len(content.channels)} channels")
+    if content.truncated:
+        say(f"TRUNCATED: the record was cut off ({content.problem}); everything up to the cut is shown")
+    for spec in content.of(TOPIC_SPEC):
+        say(
+            f"job {spec['job_id']} from folder {spec['folder']} (fcsod {spec['fcsod_version']}, fcso "
+            f"{spec['fcso_version']})"
+        )
+        for part in spec["parts"]:
+            say(
+                f"  part {part['file']}: units {part['units']}, quantity {part['quantity']}"
+                + (f", scaled to {part['scale_to_mm']} mm" if part.get("scale_to_mm") else "")
+            )
+        say(
+            "  manifest: "
+            + (
+                "none (every mesh file, mm)"
+                if spec["manifest"] is None
+                else f"{len(spec['manifest'].splitlines())} lines"
+            )
+        )
+    for inputs in content.of(TOPIC_INPUTS):
+        for item in inputs["files"]:
+            say(f"  input {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}")
+    for message in content.messages:
+        if message.message_encoding != "json":
+            continue
+        body = message.json()
+        if message.topic == TOPIC_STATE:
+            say(f"{body['at']} state {body['state']}" + (f": {body['error']}" if body.get("error") else ""))
+        elif message.topic == TOPIC_LOG and (
+            body["level"] != "info" or body.get("stage") is None or body.get("done") is None
+        ):
+            say(f"  {body['level']}: {body['message']}")
+    poses = content.of(TOPIC_POSES)
+    if poses:
+        say("poses: " + ", ".join(f"{p['part']} #{p['pose_index']} (p={p['probability']:.3f})" for p in poses))
+    for samples in content.of(TOPIC_SAMPLES):
+        rejected = ", ".join(f"{k} {v}" for k, v in samples["rejected"].items() if v) or "none"
+        say(
+            f"samples {samples['part']} #{samples['pose_index']}: {samples['valid_samples']} valid of "
+            f"{samples['tried_samples']} (rejected: {rejected})"
+        )
+    candidates = content.of(TOPIC_CANDIDATES)
+    if candidates:
+        best = [c for c in candidates if c["best"]]
+        say(
+            f"candidates: {len(candidates)} evaluated"
+            + (f", best #{best[0]['candidate']['index']} Q = {best[0]['candidate']['quality']:.3f} mm²" if best else "")
+        )
+    for design in content.of(TOPIC_DESIGN):
+        data = base64.b64decode(design["finger_stl_base64"])
+        actual = hashlib.sha256(data).hexdigest()
+        say(
+            f"design: finger set {design.get('finger_set', 1)}: {len(data)} bytes sha256 {design['finger_sha256']}, "
+            f"volume {design['finger_volume_mm3']:.1f} mm³"
+        )
+        if actual != design["finger_sha256"]:
+            result.problems.append(
+                f"{TOPIC_DESIGN}: recorded finger bytes hash to {actual}, record says {design['finger_sha256']}"
+            )
+    for placement in content.of(TOPIC_PLACEMENT):
+        volume = " x ".join(f"{size:g}" for size in placement["volume_mm"])
+        say(
+            f"placement ({placement['mode']}, volume {volume} mm): "
+            + ("fingers fit" if placement["fingers_fit"] else "FINGERS DO NOT FIT")
+            + f", {placement['finger_copies_placed']} of {placement['finger_copies_requested']} finger copies placed, "
+            f"{len(placement['items'])} items, build height {placement['build_height_mm']:.1f} mm, "
+            f"packing density {placement['packing_density']:.4f}: {placement['message']}"
+        )
+        for warning in placement["warnings"]:
+            say(f"  placement warning: {warning}")
+    for body in content.of(TOPIC_BUS):
+        size = (
+            len(body["payload_text"] or "")
+            if body["payload_base64"] is None
+            else len(base64.b64decode(body["payload_base64"]))
+        )
+        line = f"published {body['key_expr']} ({body['encoding']}, {size} bytes)"
+        if body["payload_text"] is not None and body["key_expr"].endswith("/status"):
+            status = json.loads(body["payload_text"])
+            line += f": {status['state']}" + "".join(f" (warning: {w})" for w in status.get("warnings", []))
+        say(line)
+        if body["payload_text"] is not None and body["key_expr"].endswith("/plan"):
+            for text in plan_lines(json.loads(body["payload_text"])):
+                say(text)
+        if body["attachment"] and body["payload_base64"] is not None:
+            announced = json.loads(body["attachment"]).get("sha256")
+            actual = hashlib.sha256(base64.b64decode(body["payload_base64"])).hexdigest()
+            if announced != actual:
+                result.problems.append(
+                    f"{body['key_expr']}: payload hashes to {actual}, attachment announces {announced}"
+                )
+    ros2 = Counter((m.topic, m.schema_name) for m in content.messages if m.message_encoding == "cdr")
+    for (topic, type_name), count in ros2.items():
+        say(f"ROS 2 {topic} ({type_name}, cdr): {count} messages, for ros2 bag play")
+    outputs = [f for o in content.of(TOPIC_OUTPUTS) for f in o["files"]]
+    for item in outputs:
+        say(f"  output {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}")
+    if verify_dir is not None:
+        _verify(result, Path(verify_dir), outputs, "output")
+        if content.truncated:
+            result.problems.append("the record is truncated: it cannot vouch for the whole job")
+    if inputs_dir is not None:
+        _verify(result, Path(inputs_dir), [f for i in content.of(TOPIC_INPUTS) for f in i["files"]], "input")
+    return result
+
+
+def _verify(result: AuditResult, folder: Path, files: list[dict], kind: str) -> None:
+    for item in files:
+        path = folder / item["path"]
+        if not path.is_file():
+            result.problems.append(f"{kind} {path}: missing")
+            continue
+        actual = file_sha256(path)
+        if actual != item["sha256"]:
+            result.problems.append(f"{kind} {path}: sha256 {actual}, recorded {item['sha256']}")
+        else:
+            result.lines.append(f"verified {kind} {path}")

@@ -1,0 +1,430 @@
+"""The daemon's main loop: watch, queue, run jobs in worker processes, publish, journal.
+
+One process owns the zenoh session, the journal and the watcher; jobs run
+in worker processes started with the spawn method (``concurrency`` of them
+at most, each for one job, so a crashing job cannot take the daemon down).
+Workers are started ahead of need so a job does not wait for the imports.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import logging
+import multiprocessing
+import os
+import shutil
+import signal
+import time
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from pathlib import Path
+
+from .. import __version__
+from ..bus.messages import BusMessage, BusRecord, StatusMessage, utc_now
+from ..bus.pki import link_weaknesses
+from ..bus.ros2 import Ros2Node, node_fqn
+from ..bus.session import Bus, session_config
+from ..bus.signing import daemon_signer, signing_key_path
+from ..config import DaemonConfig
+from ..job.inputs import hash_inputs, job_id, job_inputs
+from ..job.process import worker_main
+from ..job.task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, JobFolderDeleted, JobTask, time_limit_error
+from ..record.failure import record_failure
+from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
+from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
+from .systemd import notify, watchdog_interval
+from .watcher import FolderWatcher, Readiness, signature_of
+
+log = logging.getLogger("fcsod")
+
+#: Longest wait of the main loop for an event, s.
+TICK_S = 0.2
+
+
+class StateDirBusy(Exception):
+    """Another daemon holds the state folder's lock."""
+
+
+def lock_state_dir(state_dir: Path):
+    """Take the state folder's lock (held while the returned file stays open).
+
+    Raises
+    ------
+    StateDirBusy
+        Another fcsod (daemon or journal repair) holds it.
+    """
+    lock_file = open(state_dir / "fcsod.lock", "w")
+    try:
+        fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock_file.close()
+        raise StateDirBusy(f"{state_dir}: another fcsod is running with this state folder") from None
+    return lock_file
+
+
+@dataclass
+class WorkerSlot:
+    """A worker process and the job it runs, if any."""
+
+    process: multiprocessing.process.BaseProcess
+    connection: Connection
+    ready: bool = False
+    job: JobRow | None = None
+    started: float = 0.0
+    #: why and when the worker was told to stop: the job's error if it then dies
+    stop_error: str | None = None
+    stop_signalled_at: float | None = None
+    finished: bool = False
+    open: bool = True
+    events: list = field(default_factory=list)
+
+
+class Daemon:
+    """``fcsod run``.
+
+    Parameters
+    ----------
+    config : DaemonConfig
+        Validated settings.
+    """
+
+    def __init__(self, config: DaemonConfig):
+        self.config = config
+        self.output_root = config.output.root
+        self.state_dir = config.state.dir
+        self.journal_path = self.state_dir / "journal.sqlite3"
+        self.stopping = False
+        self.slots: list[WorkerSlot] = []
+        self.known: dict[Path, tuple] = {}
+        self._context = multiprocessing.get_context("spawn")
+        self._lock_file = None
+
+    # ---------------------------------------------------------------- lifecycle
+
+    def run(self) -> int:
+        """Run until SIGTERM or SIGINT; returns the process exit code."""
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        self.output_root.mkdir(parents=True, exist_ok=True)
+        self._lock_file = lock_state_dir(self.state_dir)
+        problem = journal_problem(self.journal_path)
+        if problem is not None:
+            raise JournalCorrupt(
+                f"{self.journal_path}: the journal is corrupt ({problem}); fcsod does not start on it. "
+                "Run `fcsod journal rebuild --config FILE` to rebuild it from the job records (job.mcap) in the "
+                "output folder"
+            )
+        self.journal = Journal(self.journal_path)
+        self._clean_work_dirs()
+        for job in self.journal.requeue_running():
+            log.info("re-queued job left running by the previous run", extra={"job_id": job})
+        signal.signal(signal.SIGTERM, self._on_stop_signal)
+        signal.signal(signal.SIGINT, self._on_stop_signal)
+        signer, created = daemon_signer(self.config)
+        if created:
+            log.info(
+                "created the message-signing key: give signing.pub to the cell controllers",
+                extra={"path": str(signing_key_path(self.config))},
+            )
+        for weakness in link_weaknesses(session_config(self.config.zenoh)):
+            log.warning(f"insecure bus: {weakness}")
+        self.signer = signer
+        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
+        if self.ros2 is not None:
+            log.info(
+                "ROS 2 node " + node_fqn(self.config.ros2),
+                extra={"ros2_key_exprs": [p.key_expr for p in self.ros2.publishers.values()]},
+            )
+        watch = self.config.watch
+        self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
+        self.readiness = Readiness(watch.settle_seconds)
+        self.watcher.start()
+        self._rescan()
+        self._fill_workers()
+        log.info(
+            "fcsod started",
+            extra={
+                "version": __version__,
+                "roots": [str(r) for r in watch.roots],
+                "output": str(self.output_root),
+                "observer": "polling" if watch.polling else "inotify",
+                "key_prefix": f"{self.config.bus.prefix}/{self.config.bus.cell}",
+                "signing_key_id": signer.key_id,
+            },
+        )
+        notify("READY=1")
+        try:
+            self._loop()
+        finally:
+            self._shutdown()
+        return 0
+
+    def _on_stop_signal(self, signum, frame) -> None:
+        self.stopping = True
+
+    def _clean_work_dirs(self) -> None:
+        """Remove work folders of runs cut off by a crash: a partial result is never left behind."""
+        for path in self.output_root.glob(".tmp-*"):
+            shutil.rmtree(path, ignore_errors=True)
+            log.info("removed partial output of an interrupted run", extra={"path": str(path)})
+
+    def _shutdown(self) -> None:
+        """Stop watching, re-queue running jobs (their workers are killed), close the bus and the journal."""
+        notify("STOPPING=1")
+        self.watcher.stop()
+        for slot in self.slots:
+            if slot.process.is_alive():
+                slot.process.kill()
+            slot.process.join(timeout=10)
+            if slot.job is not None and not slot.finished:
+                self._drain(slot)
+            if slot.job is not None and not slot.finished:
+                shutil.rmtree(self.output_root / f".tmp-{slot.job.job_id}", ignore_errors=True)
+                self.journal.requeue_running()
+                log.info(
+                    "stopped a running job; it will run again at the next start", extra={"job_id": slot.job.job_id}
+                )
+        if self.ros2 is not None:
+            self.ros2.close()
+        self.bus.close()
+        self.journal.close()
+        log.info("fcsod stopped")
+        if self._lock_file is not None:
+            self._lock_file.close()
+
+    # ---------------------------------------------------------------- loop
+
+    def _loop(self) -> None:
+        watch = self.config.watch
+        next_rescan = time.monotonic() + watch.rescan_seconds
+        ping_interval = watchdog_interval()
+        next_ping = time.monotonic()
+        while not self.stopping:
+            waitables = [s.connection for s in self.slots if s.open] + [s.process.sentinel for s in self.slots]
+            wait(waitables, timeout=TICK_S)
+            for slot in list(self.slots):
+                self._drain(slot)
+                if not slot.process.is_alive():
+                    if slot.open:
+                        # what a dead worker sent is drained above; processes it forked may
+                        # still hold its end of the pipe open, so the end of file may never come
+                        slot.open = False
+                        slot.connection.close()
+                    self._reap(slot)
+            for folder in self.watcher.take_changed():
+                self.readiness.touch(folder)
+            now = time.monotonic()
+            if now >= next_rescan or self.watcher.rescan_requested.is_set():
+                self.watcher.rescan_requested.clear()
+                self._rescan()
+                next_rescan = now + watch.rescan_seconds
+            for ready in self.readiness.poll():
+                self._enqueue(ready.folder, ready.inputs, ready.signature)
+            self._stop_overdue_and_withdrawn_jobs()
+            self._dispatch()
+            self._fill_workers()
+            if ping_interval is not None and time.monotonic() >= next_ping:
+                notify("WATCHDOG=1")
+                next_ping = time.monotonic() + ping_interval
+
+    def _rescan(self) -> None:
+        """Reconsider every job folder whose inputs differ from when it was last queued."""
+        for folder in self.watcher.all_folders():
+            if self.known.get(folder) != signature_of(folder, job_inputs(folder)):
+                self.readiness.touch(folder)
+
+    # ---------------------------------------------------------------- queue
+
+    def _enqueue(self, folder: Path, inputs, signature: tuple) -> None:
+        if self.known.get(folder) == signature:
+            # touched, not changed: same inputs as when it was last queued
+            return
+        hashed = hash_inputs(folder, inputs, self.config.limits.max_file_bytes)
+        identity = job_id(folder.name, hashed)
+        self.known[folder] = signature
+        if not self.journal.add(identity, str(folder), utc_now()):
+            row = self.journal.get(identity)
+            log.info(
+                "job already known: not run again",
+                extra={"job_id": identity, "folder": str(folder), "state": row.state},
+            )
+            return
+        row = self.journal.get(identity)
+        log.info("job queued", extra={"job_id": identity, "folder": str(folder), "inputs": len(hashed)})
+        self._publish(self._status(row))
+
+    def _dispatch(self) -> None:
+        idle = [s for s in self.slots if s.ready and s.job is None and s.process.is_alive()]
+        free = self.config.jobs.concurrency - sum(1 for s in self.slots if s.job is not None)
+        if not idle or free <= 0:
+            return
+        for row in self.journal.jobs("queued"):
+            if not idle or free <= 0:
+                break
+            if (self.output_root / row.job_id / JOB_RECORD_NAME).is_file():
+                self._adopt(row)
+                continue
+            row = self.journal.mark_running(row.job_id, utc_now())
+            slot = idle.pop(0)
+            slot.job, slot.started = row, time.monotonic()
+            task = JobTask(row.job_id, row.folder, row.attempt, row.queued_at, row.started_at, self.config)
+            slot.connection.send(task)
+            free -= 1
+            log.info(
+                "job started", extra={"job_id": row.job_id, "attempt": row.attempt, "worker_pid": slot.process.pid}
+            )
+
+    def _adopt(self, row: JobRow) -> None:
+        """Finish the journal of a job whose output folder is complete (the daemon stopped between rename and
+        journal).
+        """
+        content = read_record(self.output_root / row.job_id / JOB_RECORD_NAME)
+        states = content.of(TOPIC_STATE)
+        final = states[-1] if states else {"state": "failed", "error": "record holds no state"}
+        state = final["state"] if final["state"] in ("done", "failed") else "failed"
+        self.journal.mark_running(row.job_id, row.started_at or utc_now())
+        self.journal.mark_finished(row.job_id, state, final.get("at") or utc_now(), final.get("error"))
+        log.info(
+            "job output already complete: journal updated from its record", extra={"job_id": row.job_id, "state": state}
+        )
+        for body in content.of(TOPIC_BUS):
+            self._publish(BusMessage.from_record(BusRecord.model_validate(body)))
+
+    # ---------------------------------------------------------------- workers
+
+    def _fill_workers(self) -> None:
+        """Keep one idle worker process beyond ``concurrency``, started ahead of the job that will use it.
+
+        A worker runs one job and exits (a job cannot leave anything behind
+        for the next); the spare one has done its imports by the time it is needed.
+        """
+        while not self.stopping and len(self.slots) < self.config.jobs.concurrency + 1:
+            ours, theirs = self._context.Pipe(duplex=True)
+            process = self._context.Process(target=worker_main, args=(theirs, os.getpid()), name="fcsod-worker")
+            process.start()
+            theirs.close()
+            self.slots.append(WorkerSlot(process, ours))
+
+    def _drain(self, slot: WorkerSlot) -> None:
+        """Handle every event the worker has sent."""
+        while slot.open:
+            try:
+                if not slot.connection.poll():
+                    return
+                event = slot.connection.recv()
+            except (EOFError, OSError):
+                slot.open = False
+                slot.connection.close()
+                return
+            kind = event[0]
+            if kind == "ready":
+                slot.ready = True
+            elif kind == "log":
+                _, level, message, fields = event
+                log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
+            elif kind == "publish":
+                self._publish(event[1])
+            elif kind == "finished":
+                self._finished(slot, *event[1:])
+
+    def _finished(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
+        status = StatusMessage.model_validate_json(messages[-1].payload)
+        row = self.journal.mark_finished(slot.job.job_id, state, status.finished_at, error)
+        slot.finished = True
+        extra = {"job_id": row.job_id, "state": state, "seconds": round(time.monotonic() - slot.started, 3)}
+        if error:
+            log.error(f"job failed: {error}", extra=extra)
+        else:
+            log.info("job done", extra={**extra, "output": str(self.output_root / row.job_id)})
+        for message in messages:
+            self._publish(message)
+
+    def _reap(self, slot: WorkerSlot) -> None:
+        """Remove an exited worker; fail its job if it died before reporting."""
+        slot.process.join()
+        self.slots.remove(slot)
+        if slot.job is None or slot.finished:
+            if slot.job is None and not self.stopping:
+                log.error("worker process exited before taking a job", extra={"exit_code": slot.process.exitcode})
+            return
+        if slot.stop_error is not None:
+            error = slot.stop_error
+        else:
+            code = slot.process.exitcode
+            how = (
+                f"killed by signal {signal.Signals(-code).name}"
+                if code is not None and code < 0
+                else f"exit code {code}"
+            )
+            error = f"worker process died while running the job ({how})"
+        self._fail_dead_job(slot.job, error)
+
+    def _fail_dead_job(self, row: JobRow, error: str) -> None:
+        """Record the failure of a job whose worker died: salvage its record, finish it, publish ``failed``."""
+        final_dir = self.output_root / row.job_id
+        if (final_dir / JOB_RECORD_NAME).is_file():
+            self._adopt(row)
+            return
+        work_dir = self.output_root / f".tmp-{row.job_id}"
+        finished_at = utc_now()
+        row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
+        status = self._status(row)
+        try:
+            work_dir.mkdir(parents=True, exist_ok=True)
+            for path in work_dir.iterdir():
+                if path.name != JOB_RECORD_NAME:
+                    shutil.rmtree(path) if path.is_dir() else path.unlink()
+            record_failure(work_dir, row.job_id, error, status, finished_at, self.config.mcap, self.config.ros2)
+            os.replace(work_dir, final_dir)
+        except OSError as exc:
+            # e.g. the output disk is full: the journal and the bus still say why the job failed
+            shutil.rmtree(work_dir, ignore_errors=True)
+            log.error(
+                f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)}
+            )
+        log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
+        self._publish(status)
+
+    def _stop_overdue_and_withdrawn_jobs(self) -> None:
+        """Stop a job over its time limit, or whose folder was deleted (the print job withdrawn), and kill its worker after the grace time."""
+        jobs = self.config.jobs
+        now = time.monotonic()
+        for slot in self.slots:
+            if slot.job is None or slot.finished or not slot.process.is_alive():
+                continue
+            if slot.stop_signalled_at is None:
+                if now - slot.started > jobs.time_limit_seconds:
+                    log.warning("job over its time limit: stopping it", extra={"job_id": slot.job.job_id})
+                    slot.stop_error, stop_signal = time_limit_error(jobs.time_limit_seconds), SIGNAL_TIME_LIMIT
+                elif not Path(slot.job.folder).is_dir():
+                    log.warning("job folder deleted: withdrawing its job", extra={"job_id": slot.job.job_id})
+                    slot.stop_error, stop_signal = str(JobFolderDeleted(Path(slot.job.folder))), SIGNAL_WITHDRAWN
+                else:
+                    continue
+                os.kill(slot.process.pid, stop_signal)
+                slot.stop_signalled_at = now
+            elif now - slot.stop_signalled_at > jobs.stop_grace_seconds:
+                slot.process.kill()
+
+    # ---------------------------------------------------------------- bus
+
+    def _status(self, row: JobRow) -> BusMessage:
+        body = StatusMessage(
+            job_id=row.job_id,
+            state=row.state,
+            folder=row.folder,
+            attempt=max(row.attempt, 1),
+            queued_at=row.queued_at,
+            started_at=row.started_at,
+            finished_at=row.finished_at,
+            error=row.error,
+        )
+        return BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", body)
+
+    def _publish(self, message: BusMessage) -> None:
+        """Sign the message, keep it for the queryable, then publish it."""
+        message = self.signer.sign(message)
+        self.journal.store_message(stored_message(message, self.output_root))
+        self.bus.publish(message)
+        if self.ros2 is not None:
+            self.ros2.publish(message)

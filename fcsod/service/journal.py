@@ -1,0 +1,226 @@
+"""The job journal (SQLite): job states with times and errors, and the latest bus messages of each job.
+
+queued -> running -> done | failed. The job id is the primary key, so a
+job (same folder, same content) is recorded, and therefore run, once.
+Writes commit at once (WAL, synchronous=FULL): after ``kill -9`` the
+journal holds every state change made before it.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..bus.messages import BusMessage, JobState
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    job_id      TEXT PRIMARY KEY,
+    folder      TEXT NOT NULL,
+    state       TEXT NOT NULL CHECK (state IN ('queued', 'running', 'done', 'failed')),
+    attempt     INTEGER NOT NULL DEFAULT 0,
+    queued_at   TEXT,
+    started_at  TEXT,
+    finished_at TEXT,
+    error       TEXT
+);
+CREATE TABLE IF NOT EXISTS messages (
+    job_id     TEXT NOT NULL REFERENCES jobs (job_id),
+    topic      TEXT NOT NULL,
+    key_expr   TEXT NOT NULL,
+    encoding   TEXT NOT NULL,
+    payload    BLOB,
+    attachment TEXT,
+    file       TEXT,
+    PRIMARY KEY (job_id, topic)
+);
+"""
+
+
+@dataclass
+class JobRow:
+    """One job as the journal has it (times are UTC ISO 8601)."""
+
+    job_id: str
+    folder: str
+    state: JobState
+    attempt: int
+    queued_at: str | None
+    started_at: str | None
+    finished_at: str | None
+    error: str | None
+
+
+@dataclass
+class StoredMessage:
+    """The latest message of one topic of one job; a design's payload is read from ``file``."""
+
+    job_id: str
+    topic: str
+    key_expr: str
+    encoding: str
+    payload: bytes | None
+    attachment: str | None
+    file: str | None
+
+
+def stored_message(message: BusMessage, output_root: Path) -> StoredMessage:
+    """How the journal keeps a published message: a design by the path of its ``finger.stl``, anything else whole."""
+    design_file = str(output_root / message.job_id / "finger.stl") if message.topic == "design" else None
+    return StoredMessage(
+        message.job_id,
+        message.topic,
+        message.key_expr,
+        message.encoding,
+        None if design_file else message.payload,
+        message.attachment.decode() if message.attachment is not None else None,
+        design_file,
+    )
+
+
+class JournalCorrupt(Exception):
+    """The journal file cannot be trusted; the message names the file and the defect."""
+
+
+def journal_problem(path: str | Path) -> str | None:
+    """What is wrong with a journal file (SQLite's own check and fcsod's tables), None when it is sound or absent."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        db = sqlite3.connect(path, timeout=30.0)
+        try:
+            found = [row[0] for row in db.execute("PRAGMA quick_check").fetchall()]
+            tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            if found == ["ok"] and {"jobs", "messages"} <= tables:
+                db.execute(
+                    "SELECT job_id, folder, state, attempt, queued_at, started_at, finished_at, error FROM jobs"
+                ).fetchall()
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as exc:
+        return f"SQLite: {exc}"
+    if found != ["ok"]:
+        return "SQLite integrity check: " + "; ".join(found[:3])
+    if not {"jobs", "messages"} <= tables:
+        return "not an fcsod journal (no jobs and messages tables)"
+    return None
+
+
+class Journal:
+    """The journal in ``<state_dir>/journal.sqlite3``.
+
+    Parameters
+    ----------
+    path : Path
+        The database file (created if missing).
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._db = _connect(self.path)
+        self._db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def add(self, job_id: str, folder: str, queued_at: str) -> bool:
+        """Queue a new job; False (and no change) when the job id is already known."""
+        with self._db:
+            cursor = self._db.execute(
+                "INSERT OR IGNORE INTO jobs (job_id, folder, state, queued_at) VALUES (?, ?, 'queued', ?)",
+                (job_id, folder, queued_at),
+            )
+        return cursor.rowcount == 1
+
+    def get(self, job_id: str) -> JobRow | None:
+        row = self._db.execute("SELECT * FROM jobs WHERE job_id = ?", (job_id,)).fetchone()
+        return JobRow(*row) if row else None
+
+    def jobs(self, state: JobState | None = None) -> list[JobRow]:
+        """Jobs in queue order, optionally only those in ``state``."""
+        if state is None:
+            rows = self._db.execute("SELECT * FROM jobs ORDER BY rowid").fetchall()
+        else:
+            rows = self._db.execute("SELECT * FROM jobs WHERE state = ? ORDER BY rowid", (state,)).fetchall()
+        return [JobRow(*r) for r in rows]
+
+    def mark_running(self, job_id: str, started_at: str) -> JobRow:
+        """Start a run of the job (counts the attempt)."""
+        with self._db:
+            self._db.execute(
+                "UPDATE jobs SET state = 'running', attempt = attempt + 1, started_at = ?, finished_at = NULL, error "
+                "= NULL "
+                "WHERE job_id = ?",
+                (started_at, job_id),
+            )
+        return self.get(job_id)
+
+    def mark_finished(self, job_id: str, state: JobState, finished_at: str, error: str | None = None) -> JobRow:
+        """End the job as ``done`` or ``failed``."""
+        with self._db:
+            self._db.execute(
+                "UPDATE jobs SET state = ?, finished_at = ?, error = ? WHERE job_id = ?",
+                (state, finished_at, error, job_id),
+            )
+        return self.get(job_id)
+
+    def restore(self, row: JobRow) -> None:
+        """Put a job back as it was (rebuilding the journal from the job records)."""
+        with self._db:
+            self._db.execute(
+                "INSERT OR REPLACE INTO jobs VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    row.job_id,
+                    row.folder,
+                    row.state,
+                    row.attempt,
+                    row.queued_at,
+                    row.started_at,
+                    row.finished_at,
+                    row.error,
+                ),
+            )
+
+    def requeue_running(self) -> list[str]:
+        """Put jobs left ``running`` by a stop or a crash back into the queue; their ids."""
+        ids = [r.job_id for r in self.jobs("running")]
+        with self._db:
+            self._db.execute("UPDATE jobs SET state = 'queued', started_at = NULL WHERE state = 'running'")
+        return ids
+
+    def store_message(self, message: StoredMessage) -> None:
+        """Keep the latest message of a topic of a job (what the queryable serves)."""
+        with self._db:
+            self._db.execute(
+                "INSERT OR REPLACE INTO messages VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (
+                    message.job_id,
+                    message.topic,
+                    message.key_expr,
+                    message.encoding,
+                    message.payload,
+                    message.attachment,
+                    message.file,
+                ),
+            )
+
+
+def stored_messages(path: str | Path) -> list[StoredMessage]:
+    """Every stored message, read on a connection of its own (safe from any thread)."""
+    db = _connect(Path(path))
+    try:
+        rows = db.execute(
+            "SELECT job_id, topic, key_expr, encoding, payload, attachment, file FROM messages ORDER BY rowid"
+        ).fetchall()
+    finally:
+        db.close()
+    return [StoredMessage(*r) for r in rows]
+
+
+def _connect(path: Path) -> sqlite3.Connection:
+    db = sqlite3.connect(path, timeout=30.0, isolation_level="DEFERRED")
+    db.execute("PRAGMA journal_mode = WAL")
+    db.execute("PRAGMA synchronous = FULL")
+    return db

@@ -1,0 +1,1 @@
+"""End-to-end tests: the daemon runs (marker ``e2e``)."""

@@ -1,0 +1,109 @@
+"""A job served by two finger sets through the real daemon: zenoh plan and designs, build.3mf, MCAP, audit.
+
+The parts are the knob parts of ``tests/fcso/test_sets.py``: a knob narrowing
+upwards and one widening upwards conflict (each keeps about half its contact
+on a shared finger), so with ``[finger_sets] min_retained = 0.7`` in the
+job's ``job.toml`` the job needs two fingers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import zipfile
+from pathlib import Path
+
+from fcsod.cli import main
+from fcsod.record.recorder import TOPIC_BUS, TOPIC_DESIGN, TOPIC_GRASPS, read_record
+from tests.fcso.test_sets import NARROWING, WIDENING
+from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+
+MANIFEST = """
+[[parts]]
+file = "narrowing.stl"
+quantity = 2
+
+[[parts]]
+file = "widening.stl"
+
+[finger_sets]
+min_retained = 0.7
+"""
+
+
+def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, capsys):
+    port = free_port()
+    config = write_config(tmp_path, port)
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config, save=tmp_path / "received")
+    try:
+        meshes = {}
+        for part in (NARROWING, WIDENING):
+            meshes[f"{part.name}.stl"] = tmp_path / f"{part.name}.stl"
+            part.mesh.export(meshes[f"{part.name}.stl"])
+        drop_job(tmp_path / "watch" / "two-sets", {"job.toml": MANIFEST, **meshes})
+        done = finished(subscriber, "two-sets", timeout=180)
+        assert done["body"]["state"] == "done", done["body"]["error"]
+        job_id = done["job_id"]
+        lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
+        # a cell that connects later gets the plan and every set's finger from the daemon's queryable
+        late = start_subscriber(config, save=tmp_path / "late")
+        try:
+
+            def replies() -> dict:
+                return {
+                    v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id
+                }
+
+            late.wait_for(lambda v: {"plan", "design/1", "design/2"} <= set(replies()), 30)
+            got = replies()
+        finally:
+            late.stop()
+    finally:
+        subscriber.stop()
+        assert daemon.stop() == 0
+    assert got["design/1"]["sha256_ok"] is True and got["design/2"]["sha256_ok"] is True
+    assert got["plan"]["body"] == next(v for v in lines if v["topic"] == "plan")["body"]
+    topics = [v["topic"] for v in lines]
+    assert topics == ["status", "status", "grasps", "design/1", "design/2", "plan", "placement", "status"]
+    out = tmp_path / "out" / job_id
+
+    # each set's finger on design/<set>, with its sha256, equal to the file in its folder
+    for number in (1, 2):
+        design = next(v for v in lines if v["topic"] == f"design/{number}")
+        assert design["sha256_ok"] is True and design["attachment"]["finger_set"] == number
+        assert design["attachment"]["file"] == f"set-{number}/finger.stl"
+        assert Path(design["saved"]).read_bytes() == (out / f"set-{number}" / "finger.stl").read_bytes()
+
+    # the pick plan as the cell receives it
+    plan = next(v for v in lines if v["topic"] == "plan")["body"]
+    assert plan["min_retained"] == 0.7 and plan["min_retained_reached"] is True and plan["ungraspable_parts"] == []
+    assert [(s["set"], [(p["part"], p["quantity"]) for p in s["parts"]]) for s in plan["sets"]] == [
+        (1, [("narrowing", 2)]),
+        (2, [("widening", 1)]),
+    ]
+    for entry in plan["sets"]:
+        assert entry["finger_key"] == f"fcso/test/jobs/{job_id}/design/{entry['set']}"
+        assert entry["finger_sha256"] == hashlib.sha256((out / entry["finger_file"]).read_bytes()).hexdigest()
+        assert entry["finger_copies"] == 2
+        assert all(g["finger_set"] == entry["set"] for p in entry["parts"] for g in p["grasps"])
+    grasps = next(v for v in lines if v["topic"] == "grasps")["body"]["grasps"]
+    assert [(g["part"], g["finger_set"]) for g in grasps] == [("narrowing", 1), ("widening", 2)]
+
+    # build.3mf: two copies of each set's finger, each item saying its set
+    with zipfile.ZipFile(out / "build.3mf") as archive:
+        model = archive.read("3D/3dmodel.model").decode()
+    assert sorted(re.findall(r'name="fcso:finger_set"[^>]*>(\d+)<', model)) == ["1", "1", "2", "2"]
+    assert model.count('partnumber="fcso-finger-1-') == 2 and model.count('partnumber="fcso-finger-2-') == 2
+
+    # the record holds both designs, the grasps with their sets and the published plan
+    record = read_record(out / "job.mcap")
+    assert [d["finger_set"] for d in record.of(TOPIC_DESIGN)] == [1, 2]
+    assert {g["finger_set"] for g in record.of(TOPIC_GRASPS)[0]["grasps"]} == {1, 2}
+    published = [b["key_expr"].split(f"/{job_id}/", 1)[1] for b in record.of(TOPIC_BUS)]
+    assert published == ["status", "grasps", "design/1", "design/2", "plan", "placement", "status"]
+
+    assert main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "pick plan: 2 finger set(s)" in text and "set 2: mount set-2/finger.stl (2 copies in build.3mf" in text
+    assert "pick 2 x narrowing" in text and "verified output " + str(out / "set-2" / "finger.stl") in text

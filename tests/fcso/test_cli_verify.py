@@ -1,0 +1,51 @@
+"""``fcso verify DIR``, ``fcso design --verify-top K`` and ``fcso report`` with a verification, as a user runs them."""
+
+import json
+import subprocess
+import sys
+
+from examples.sim_parts import ridged_block
+from fcso.sim.report import VerificationReport
+
+
+def fcso(*args, env=None):
+    return subprocess.run(
+        [sys.executable, "-m", "fcso.cli", *map(str, args)], capture_output=True, text=True, timeout=900, env=env
+    )
+
+
+def test_verify_top_then_verify_then_report(tmp_path, monkeypatch):
+    part = tmp_path / "ridged.stl"
+    ridged_block().export(part)
+    config = tmp_path / "design.toml"
+    config.write_text(
+        '[poses]\ncount = 1\nselect = "most_probable"\n\n[sampler]\nyaw_deg = [0]\n\n[verify]\ntrials = 2\n'
+    )
+    out = tmp_path / "out"
+    env = {**__import__("os").environ, "FCSO_CACHE_DIR": str(tmp_path / "cache")}
+    run = fcso("design", part, "--out", out, "--config", config, "--verify-top", "2", "--quiet", env=env)
+    assert run.returncode == 0, run.stderr
+    verification = VerificationReport.model_validate_json((out / "verification.json").read_text())
+    assert [r.rank_by_quality for r in verification.ranking] == [1, 2]
+    assert sum(r.chosen for r in verification.ranking) == 1
+    chosen = next(r for r in verification.ranking if r.chosen)
+    assert json.loads((out / "report.json").read_text())["best"] == chosen.index
+    page = (out / "report.html").read_text()
+    assert "Choice by verification" in page and page.count('data-kind="verification"') == 3
+
+    run = fcso("verify", out, "--config", config, env=env)
+    assert run.returncode == 0, run.stderr
+    assert "designed" in run.stdout and "flat" in run.stdout
+    again = VerificationReport.model_validate_json((out / "verification.json").read_text())
+    scenario = again.scenarios[0]
+    assert len(scenario.fcso.trials) == 2 and scenario.fcso.success_rate == 1.0
+    assert scenario.fidelity.part_pieces >= 1 and scenario.fidelity.decomposition_cached
+    # rebuilding the page keeps the verification section, once
+    assert fcso("report", out, "--quiet", env=env).returncode == 0
+    assert (out / "report.html").read_text().count("<!-- fcso verify -->") == 1
+
+
+def test_verify_without_a_design_is_one_line(tmp_path):
+    run = fcso("verify", tmp_path)
+    assert run.returncode == 2
+    assert len(run.stderr.strip().splitlines()) == 1 and "report.json" in run.stderr and "Traceback" not in run.stderr

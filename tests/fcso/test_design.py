@@ -1,0 +1,161 @@
+"""The whole pipeline on fixture meshes: report consistency, determinism, finger and grasps."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+import fcso
+from fcso.config import DesignConfig
+from fcso.finger import parametric_finger
+from fcso.grasps import tcp_pose
+from fcso.sampler import GraspSample
+from tests.conftest import data_path, small_config
+
+TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
+
+
+@pytest.fixture(scope="module")
+def two_part_design():
+    config = small_config(sampler={"stride_mm": 6.0})
+    return fcso.design([data_path(name) for name in TWO_PARTS], config)
+
+
+def test_counts_qualities_and_best_are_consistent(two_part_design):
+    report = two_part_design.report
+    assert [s.part for s in report.scenarios] == ["20mm-xyz-cube", "solar_tracker"]
+    counts = [s.valid_samples for s in report.scenarios]
+    assert all(s.valid_samples == len(s.samples) for s in report.scenarios)
+    assert report.search.candidates_total == int(np.prod(counts)) == len(report.candidates)
+    assert report.search.kind == "exhaustive" and report.search.evaluated == len(report.candidates)
+    assert [c.index for c in report.candidates] == list(range(len(report.candidates)))
+    for candidate in report.candidates:
+        assert len(candidate.samples) == len(candidate.per_scenario) == len(report.scenarios)
+        assert candidate.index == candidate.samples[0] * counts[1] + candidate.samples[1]
+        for quality in candidate.per_scenario:
+            assert 0.0 < quality.rles <= 2.0
+            assert quality.effective_area == pytest.approx(quality.contact_area_mm2 / quality.rles, rel=1e-5, abs=1e-5)
+        assert candidate.quality == min(q.effective_area for q in candidate.per_scenario)
+    # the design is the best exactly re-evaluated candidate (METHOD §8b)
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    assert len(exact) == report.search.exact == report.settings.search.exact_top_k
+    best = max(exact, key=lambda c: (c.quality, c.mean_effective_area, -c.index))
+    assert report.best == best.index
+    assert {c.pad_case for c in report.candidates} == {"good", "bad", "mixed"}
+    for scenario in report.scenarios:
+        assert set(scenario.rejected) == {"contact", "fit", "collision_finger", "collision_descent"}
+        assert scenario.tried_samples == scenario.valid_samples + sum(scenario.rejected.values())
+    assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "screening", "exact", "finger"}
+    assert report.settings.sampler.length_mm == 10.0
+
+
+def test_finger_is_one_watertight_body_with_the_pad(two_part_design):
+    finger = two_part_design.finger
+    assert finger.is_watertight and finger.volume > 0
+    assert len(finger.split(only_watertight=False)) == 1
+    flat = parametric_finger(two_part_design.report.settings.sampler, two_part_design.report.settings.gripper).mesh
+    assert finger.volume > flat.volume
+    assert two_part_design.report.finger.bodies == 1
+    sampler = two_part_design.report.settings.sampler
+    assert two_part_design.report.finger.min_pad_thickness_mm >= sampler.thickness_mm - sampler.penetration_mm - 0.05
+
+
+def test_grasps_follow_the_chosen_samples(two_part_design):
+    report = two_part_design.report
+    best = next(c for c in report.candidates if c.index == report.best)
+    thickness, depth = report.settings.sampler.thickness_mm, report.settings.sampler.penetration_mm
+    assert len(report.grasps) == len(report.scenarios)
+    for grasp, scenario, sample_index, quality in zip(report.grasps, report.scenarios, best.samples, best.per_scenario):
+        sample = scenario.samples[sample_index]
+        assert grasp.sample == sample_index and grasp.pose_index == scenario.pose_index
+        gap = sample.a_max_mm - sample.a_min_mm - 2 * depth + sum(quality.seat_offsets_mm)
+        assert grasp.pad_gap_mm == pytest.approx(gap, abs=1e-5)
+        assert grasp.closing_width_mm == pytest.approx(gap + 2 * thickness, abs=1e-5)
+        rotation = trimesh.transformations.quaternion_matrix(grasp.quaternion_wxyz)[:3, :3]
+        assert rotation[:, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-6)
+        assert rotation[:, 1] == pytest.approx(grasp.closing_axis, abs=1e-6)
+        assert grasp.position_mm[2] == pytest.approx(sample.h_mm + report.settings.sampler.width_mm / 2, abs=1e-5)
+
+
+def test_tcp_pose_on_a_known_sample():
+    sampler = DesignConfig().sampler
+    sample = GraspSample(
+        yaw_deg=90.0, s_mm=3.0, h_mm=6.0, a_max_mm=15.0, a_min_mm=-13.0, area_plus_mm2=1.0, area_minus_mm2=1.0
+    )
+    pose = tcp_pose(sample, 0.5, 0.25, sampler)
+    # a = +y, b = z x a = -x; centre along a: (15 - 13) / 2 + (0.5 - 0.25) / 2
+    assert pose["position_mm"] == pytest.approx([-3.0, 1.125, 16.0])
+    assert pose["pad_gap_mm"] == pytest.approx(28.0 - 8.0 + 0.75)
+    assert pose["closing_width_mm"] == pytest.approx(28.0 - 8.0 + 0.75 + 10.0)
+    rotation = trimesh.transformations.quaternion_matrix(pose["quaternion_wxyz"])[:3, :3]
+    assert rotation @ [0, 1, 0] == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)
+    assert rotation @ [0, 0, 1] == pytest.approx([0.0, 0.0, -1.0], abs=1e-9)
+
+
+def test_same_inputs_and_seed_give_identical_reports(two_part_design):
+    config = small_config(sampler={"stride_mm": 6.0})
+    again = fcso.design([data_path(name) for name in TWO_PARTS], config).report
+    first = json.loads(two_part_design.report.model_dump_json())
+    second = json.loads(again.model_dump_json())
+    first.pop("timings_s"), second.pop("timings_s")
+    assert first == second
+
+
+def test_user_finger_mesh_with_its_frame(tmp_path):
+    config = small_config(sampler={"stride_mm": 8.0})
+    built_in = fcso.design([data_path("20mm-xyz-cube.stl")], config)
+    # the same flat finger as a user's file, turned so its frame is not the identity
+    flat = parametric_finger(config.sampler, config.gripper).mesh.copy()
+    turn = trimesh.transformations.rotation_matrix(np.radians(90.0), [0, 0, 1])
+    flat.apply_transform(turn)
+    path = tmp_path / "flat_finger.stl"
+    flat.export(path)
+    origin = trimesh.transform_points([[0.0, 0.0, config.sampler.width_mm / 2]], turn)[0]
+    normal = turn[:3, :3] @ [-1.0, 0.0, 0.0]
+    user = config.updated(
+        {
+            "finger": {
+                "mesh": path,
+                "contact_origin_mm": origin.tolist(),
+                "contact_normal": normal.tolist(),
+                "up": [0, 0, 1],
+            }
+        }
+    )
+    result = fcso.design([data_path("20mm-xyz-cube.stl")], user)
+    assert result.report.finger.source == str(path)
+    assert result.finger.is_watertight and len(result.finger.split(only_watertight=False)) == 1
+    assert result.finger.volume == pytest.approx(built_in.finger.volume, rel=1e-4)
+
+
+def test_part_too_wide_for_the_gripper_has_no_grasp():
+    with pytest.raises(fcso.NoGraspError, match="capsela200_plug.stl: no valid grasp"):
+        fcso.design([data_path("capsela200_plug.stl")], small_config(poses={"select": [0]}))
+
+
+def test_ungraspable_part_is_listed_and_the_rest_designed():
+    # the plug is too wide for the gripper in its first pose; the cube is not
+    config = small_config(poses={"select": [0]})
+    report = fcso.design([data_path("20mm-xyz-cube.stl"), data_path("capsela200_plug.stl")], config).report
+    assert [s.part for s in report.scenarios] == ["20mm-xyz-cube"]
+    assert [g.part for g in report.grasps] == ["20mm-xyz-cube"]
+    assert len(report.ungraspable) == 1
+    entry = report.ungraspable[0]
+    assert (entry.part, entry.pose_index) == ("capsela200_plug", 0)
+    assert entry.rejected["fit"] > 0 and entry.tried_samples == sum(entry.rejected.values())
+    assert "too wide for the open gripper" in entry.reason
+    assert any("capsela200_plug in stable pose 0 cannot be grasped" in w for w in report.warnings)
+
+
+def test_separate_solids_of_one_file_are_designed_as_separate_parts():
+    config = small_config(sampler={"stride_mm": 8.0}, search={"max_exhaustive": 1, "max_evaluations": 8})
+    report = fcso.design([data_path("DC-DC_case.stl")], config).report
+    assert [p.name for p in report.parts] == ["DC-DC_case#1", "DC-DC_case#2"]
+    assert [p.solid_index for p in report.parts] == [1, 2]
+    assert all(p.shell_handling.startswith(f"solid {k} of 2") for k, p in zip((1, 2), report.parts))
+    assert [s.part for s in report.scenarios] == ["DC-DC_case#1", "DC-DC_case#2"]
+    assert any("holds 2 separate solids" in w for w in report.warnings)
+    refused = config.updated({"parts": {"split_bodies": False}})
+    with pytest.raises(fcso.MeshError, match="DC-DC_case.stl: holds 2 separate solids"):
+        fcso.design([data_path("DC-DC_case.stl")], refused)

@@ -1,0 +1,233 @@
+"""Finger sets (METHOD §11) on parts built with manifold3d and on the paper experiment.
+
+The parts: a 60 x 60 mm plate, too wide for the 50 mm gripper, carrying a
+square knob 16 mm tall, the only place a finger can grasp. A knob that
+narrows upwards and one that widens upwards have the same slope with
+opposite sign: in every pad frame one part's carving is deeper than the
+other's over about half the pad, so designed together each keeps about half
+its contact. Two knobs of the same shape on different plates are compatible.
+"""
+
+import json
+import subprocess
+import sys
+
+import manifold3d
+import numpy as np
+import pytest
+
+import fcso
+from fcso.geometry import to_trimesh
+from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
+from tests.conftest import REPO, small_config
+
+MIN_RETAINED = 0.7
+
+
+def knob_part(name: str, base_mm: float, top_scale: float, plate_mm: float = 60.0) -> fcso.Part:
+    """A plate ``plate_mm`` square, 6 mm thick, with a square knob of side ``base_mm`` scaled by ``top_scale`` at its
+    top.
+    """
+    plate = manifold3d.Manifold.cube([plate_mm, plate_mm, 6.0]).translate([-plate_mm / 2, -plate_mm / 2, 0.0])
+    square = manifold3d.CrossSection.square([base_mm, base_mm], center=True)
+    knob = manifold3d.Manifold.extrude(square, 16.0, scale_top=[top_scale, top_scale]).translate([0.0, 0.0, 5.99])
+    return fcso.Part(name=name, path=f"{name}.stl", mesh=to_trimesh(plate + knob))
+
+
+NARROWING = knob_part("narrowing", 14.0, 0.7)
+WIDENING = knob_part("widening", 9.8, 1 / 0.7)
+# one sampling stride (5 mm) wider on each side: the pads meet the knob at the same places
+NARROWING_BIG_PLATE = knob_part("narrowing-big-plate", 14.0, 0.7, plate_mm=70.0)
+
+
+def config(**sections):
+    return small_config(finger_sets={"min_retained": MIN_RETAINED}, **sections)
+
+
+def test_partition_objective_and_helpers():
+    # feasible partitions beat infeasible ones; among feasible, fewer sets first
+    assert partition_key((0, 1), [0.9, 0.9], 0.5) < partition_key((0, 0), [0.6, 0.6], 0.5)
+    # infeasible: larger worst retained, then larger mean, then fewer sets
+    assert partition_key((0, 0), [0.3, 0.9], 0.5) < partition_key((0, 1), [0.4, 0.4], 0.5)
+    assert partition_key((0, 1), [0.4, 0.4], 0.5) < partition_key((0, 0), [0.4, 0.4], 0.5)
+    # last, the lexicographically smallest assignment
+    assert partition_key((0, 1, 1), [1, 1, 1], 0.5) > partition_key((0, 1, 2), [1, 1, 1], 0.5)
+    assert partition_key((0, 0, 1), [1, 1, 1], 0.5) > partition_key((0, 1, 0), [1, 1, 1], 0.5)
+    assert canonical_assignment((2, 0, 2, 1)) == (0, 1, 0, 2)
+    # partitions of 4 items into at most 2 sets: 2^3 = 8, into any number: Bell(4) = 15
+    assert len(list(restricted_growth(4, 2))) == 8 and len(set(restricted_growth(4, 4))) == 15
+    path = np.zeros((4, 4), dtype=bool)
+    for a, b in [(0, 1), (1, 2), (0, 2), (2, 3)]:
+        path[a, b] = path[b, a] = True
+    assert max_clique(path) == [0, 1, 2]
+
+
+def test_same_geometry_ignores_translation_and_vertex_order():
+    mesh = NARROWING.mesh
+    moved = mesh.copy()
+    moved.apply_translation([3.0, -7.0, 1.5])
+    reordered = moved.copy()
+    order = np.random.default_rng(0).permutation(len(reordered.vertices))
+    inverse = np.argsort(order)
+    reordered = type(mesh)(vertices=reordered.vertices[order], faces=inverse[reordered.faces], process=False)
+    assert same_geometry(mesh, moved) and same_geometry(mesh, reordered)
+    assert not same_geometry(mesh, NARROWING_BIG_PLATE.mesh)
+    mirrored = mesh.copy()
+    mirrored.apply_transform(np.diag([1.0, -1.0, 1.0, 1.0]))
+    assert same_geometry(mesh, mirrored)  # the knob part is symmetric
+    assert not same_geometry(mesh, WIDENING.mesh)
+
+
+@pytest.fixture(scope="module")
+def conflicting_together():
+    """The two knobs designed as one finger by main's single-design path, and each alone."""
+    cfg = config()
+    return fcso.design([NARROWING, WIDENING], cfg), fcso.design([NARROWING], cfg), fcso.design([WIDENING], cfg)
+
+
+def test_a_provably_conflicting_pair_goes_to_two_sets(conflicting_together):
+    together, narrowing_alone, widening_alone = conflicting_together
+    solo = [narrowing_alone.best.quality, widening_alone.best.quality]
+    shared = [s.effective_area for s in together.best.scenarios]
+    # the single finger (exhaustive search, exact finalists) cannot keep both at MIN_RETAINED
+    assert min(e / s for e, s in zip(shared, solo)) < MIN_RETAINED
+
+    result = design_sets([NARROWING, WIDENING], config())
+    sets = result.report
+    assert [s.parts for s in sets.sets] == [["narrowing"], ["widening"]]
+    assert sets.search.method == "exhaustive" and sets.search.proven
+    assert sets.search.lower_bound_sets == 2
+    assert [p.parts for p in sets.search.blocking_pairs] == [["narrowing", "widening"]]
+    assert min(sets.search.blocking_pairs[0].retained) < MIN_RETAINED
+    assert sets.min_retained_reached and sets.worst_retained >= MIN_RETAINED
+    # E* is the solo design's quality (the widening knob's contact samples have other seeds in the job)
+    assert [s.solo_effective_area for s in sets.scenarios] == pytest.approx(solo, rel=0.03)
+    assert [len(d.report.scenarios) for d in result.designs] == [1, 1]
+    assert [step.set for step in sets.pick_plan] == [1, 2]
+    assert [step.finger for step in sets.pick_plan] == ["set-1/finger.stl", "set-2/finger.stl"]
+    assert result.job_report is not None and result.job_report.finger_sets is sets
+
+
+def test_compatible_parts_share_one_set():
+    result = design_sets([NARROWING, NARROWING_BIG_PLATE], config())
+    sets = result.report
+    assert [s.parts for s in sets.sets] == [["narrowing", "narrowing-big-plate"]]
+    assert sets.search.blocking_pairs == [] and sets.search.lower_bound_sets == 1
+    assert all(s.retained >= MIN_RETAINED for s in sets.scenarios)
+    # one set: today's single-design report, carrying the sets
+    assert result.job_report is None and result.designs[0].report.finger_sets is sets
+    assert [p.part for p in sets.pick_plan[0].parts] == ["narrowing", "narrowing-big-plate"]
+
+
+def test_cli_identical_parts_once_ungraspable_listed_and_one_folder_per_set(tmp_path):
+    files = {}
+    for part, names in [(NARROWING, ["narrowing", "narrowing-copy"]), (WIDENING, ["widening"])]:
+        for number, name in enumerate(names):
+            mesh = part.mesh.copy()
+            mesh.apply_translation([40.0 * number, 0.0, 0.0])
+            files[name] = tmp_path / f"{name}.stl"
+            mesh.export(files[name])
+    # a bare plate: too wide for the gripper in every pose, nothing to grasp
+    files["plate"] = tmp_path / "plate.stl"
+    to_trimesh(manifold3d.Manifold.cube([60.0, 60.0, 6.0])).export(files["plate"])
+    settings = tmp_path / "sets.toml"
+    settings.write_text(
+        "[sampler]\nlength_mm = 10.0\nwidth_mm = 10.0\nthickness_mm = 4.0\npenetration_mm = 3.0\nstride_mm = 5.0\n"
+        '[poses]\ncount = 1\nselect = "most_probable"\n'
+    )
+    out = tmp_path / "out"
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fcso.cli",
+            "design",
+            *files.values(),
+            "--config",
+            settings,
+            "--finger-sets",
+            "3",
+            "--min-retained",
+            str(MIN_RETAINED),
+            "--out",
+            out,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
+    assert run.returncode == 0, run.stderr
+    assert "pick 2 x narrowing" in run.stdout and "not picked (no set can grasp them): plate" in run.stdout
+    report = json.loads((out / "report.json").read_text())
+    sets = report["finger_sets"]
+    assert report["settings"]["finger_sets"]["max"] == 3
+    assert sets["identical_parts"] == [{"part": "narrowing", "copies": ["narrowing", "narrowing-copy"], "quantity": 2}]
+    assert sets["ungraspable_parts"] == ["plate"]
+    assert [s["parts"] for s in sets["sets"]] == [["narrowing"], ["widening"]]
+    plan = [
+        (step["set"], step["finger"], [(p["part"], p["quantity"], len(p["grasps"])) for p in step["parts"]])
+        for step in sets["pick_plan"]
+    ]
+    assert plan == [(1, "set-1/finger.stl", [("narrowing", 2, 1)]), (2, "set-2/finger.stl", [("widening", 1, 1)])]
+    for folder in ("set-1", "set-2"):
+        for name in ("finger.stl", "fingerpad.stl", "report.json", "report.html"):
+            assert (out / folder / name).is_file()
+        finger = fcso.load_part(out / folder / "finger.stl")
+        assert finger.mesh.is_watertight
+        set_report = json.loads((out / folder / "report.json").read_text())
+        assert len(set_report["scenarios"]) == 1
+    assert not (out / "finger.stl").exists()
+    page = (out / "report.html").read_text()
+    assert "Pick plan" in page and page.count('data-kind="finger"') == 2
+    (out / "report.html").unlink()
+    rebuilt = subprocess.run(
+        [sys.executable, "-m", "fcso.cli", "report", out], capture_output=True, text=True, timeout=600, cwd=REPO
+    )
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert rebuilt.stdout.split() == [
+        "wrote",
+        str(out / "set-1" / "report.html"),
+        "wrote",
+        str(out / "set-2" / "report.html"),
+        "wrote",
+        str(out / "report.html"),
+    ]
+    assert (out / "report.html").read_text().count('data-kind="finger"') == 2
+
+
+def test_one_finger_set_is_the_single_design_of_the_paper_experiment(tmp_path):
+    bunny = REPO / "examples" / "parts" / "stanford_bunny_closed.ply"
+    paper = fcso.load_config(REPO / "examples" / "paper.toml")
+    expected = fcso.design(fcso.load_parts(bunny, scale_to_mm=65.0), paper).report
+    out = tmp_path / "paper"
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fcso.cli",
+            "design",
+            bunny,
+            "--scale-to",
+            "65",
+            "--config",
+            REPO / "examples" / "paper.toml",
+            "--finger-sets",
+            "1",
+            "--out",
+            out,
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
+    assert run.returncode == 0, run.stderr
+    written = json.loads((out / "report.json").read_text())
+    assert sorted(p.name for p in out.iterdir()) == ["finger.stl", "fingerpad.stl", "report.html", "report.json"]
+    assert written["finger_sets"] is None and written["settings"]["finger_sets"]["max"] == 1
+    assert written["best"] == expected.best
+    assert written["candidates"] == [c.model_dump() for c in expected.candidates]
+    assert written["grasps"] == [g.model_dump() for g in expected.grasps]
+    assert written["finger"] == expected.finger.model_dump()

@@ -1,0 +1,153 @@
+"""Sanity cases of the grasp simulation (METHOD §12): each fails when the physics or the collision geometry is wrong."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from examples.sim_parts import featured_cube, ridged_block
+from fcso import DesignConfig, design
+from fcso.parts import Part
+from fcso.sim.collision import convex_pieces, zoned_pieces
+from fcso.sim.config import VerifyConfig
+from fcso.sim.scene import GraspCase, build_scene
+from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
+from fcso.sim.verify import finger_hull, grasp_case, part_pieces
+
+#: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
+CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _config(tmp_path, **values) -> VerifyConfig:
+    return VerifyConfig(cache_dir=tmp_path / "cache", **values)
+
+
+def _cube_case(size_mm: float = 20.0) -> GraspCase:
+    """A cube on the table held across x by flat pads (T = 5, D = 4) at mid-height."""
+    cube = trimesh.creation.box([size_mm] * 3)
+    cube.apply_translation([0.0, 0.0, size_mm / 2.0])
+    tcp = np.eye(4)
+    tcp[:3, :3] = CLOSING_ALONG_X
+    tcp[:3, 3] = [0.0, 0.0, size_mm / 2.0 + 1.0]
+    # the flat pads' faces (u = D) touch the cube's faces at q = 0
+    return GraspCase("cube", cube, tcp, size_mm - 8.0, (5.0, 20.0, 20.0), 4.0, (0.0, 50.0))
+
+
+@pytest.fixture(scope="module")
+def ridged(tmp_path_factory):
+    """The ridged block designed across its ridges: the case, its pieces, the carved pad's pieces, the finger hull, the
+    pad.
+    """
+    mesh = ridged_block()
+    part = Part(name="ridged", path="ridged_block", mesh=mesh, scale=1.0, repairs=[])
+    config = DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}, "sampler": {"yaw_deg": [0.0]}})
+    result = design([part], config)
+    assert result.report.candidates[0].pad_case != "bad"
+    cache = tmp_path_factory.mktemp("cache")
+    case = grasp_case(result.report, result.report.grasps[0], mesh)
+    pieces = part_pieces(case, VerifyConfig(cache_dir=cache)).pieces
+    pad = convex_pieces(result.fingerpad, VerifyConfig().decomposition_threshold, cache).pieces
+    return case, pieces, pad, finger_hull(result.report, result.finger), result.fingerpad
+
+
+def test_cube_between_flat_pads_stays_put(tmp_path):
+    case = _cube_case()
+    config = _config(tmp_path)
+    scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), config)
+    run = run_grasp(scene, case, np.eye(4), config)
+    assert run.held
+    moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
+    assert moved <= 0.05 and turned <= 0.05
+
+
+def test_part_seated_in_its_pad_does_not_move(ridged, tmp_path):
+    case, pieces, pad, hull, _ = ridged
+    config = _config(tmp_path)
+    run = run_grasp(build_scene(case, pieces, pad, hull, config), case, np.eye(4), config)
+    assert run.held
+    # the pads close onto their designed seat (q = 0), less the soft contacts' give
+    assert abs(run.q_mm) <= 0.25
+    moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
+    assert moved <= 0.05 and turned <= 0.1
+
+
+def test_carved_pad_centres_a_displaced_part_and_flat_pad_does_not(ridged, tmp_path):
+    case, pieces, pad, hull, _ = ridged
+    config = _config(tmp_path)
+    # 2 mm along the pads (the TCP's x axis): only the V-grooves of the carved pad can push it back
+    along = case.tcp[:3, 0] * 2.0
+    displaced = start_pose(case, np.array([along[0], along[1], 0.0]))
+    errors = {}
+    for kind, pad_pieces in (("carved", pad), ("flat", None)):
+        run = run_grasp(build_scene(case, pieces, pad_pieces, hull, config), case, displaced, config)
+        assert run.held
+        errors[kind] = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
+    assert errors["carved"][0] <= 0.1
+    assert errors["flat"][0] >= 1.8
+
+
+def test_flat_pad_holding_force_rises_with_friction(tmp_path):
+    case = _cube_case()
+    slips = {}
+    for friction in (0.1, 0.2):
+        config = _config(tmp_path, friction=friction, hold_force_n=40.0, hold_ramp_n_s=200.0, lift_mm=10.0)
+        scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), config)
+        run = run_grasp(scene, case, np.eye(4), config)
+        slips[friction] = hold_forces(scene, case, run, config)["+x"]
+    # Coulomb: two contacts, each 60 N normal, slip along the pads at 2 mu N
+    for friction, force in slips.items():
+        assert force == pytest.approx(2.0 * friction * 60.0, rel=0.2)
+    assert slips[0.2] > 1.6 * slips[0.1]
+
+
+def _stands_out_mm(vertices: np.ndarray, target: trimesh.Trimesh) -> float:
+    """How far a convex piece's surface stands out of a mesh, mm."""
+    import igl
+
+    surface = trimesh.convex.convex_hull(vertices).sample(2000, seed=0)
+    return float(
+        igl.signed_distance(
+            surface, np.asarray(target.vertices, dtype=float), np.asarray(target.faces, dtype=np.int64)
+        )[0].max()
+    )
+
+
+def test_collision_pieces_hug_the_part_and_the_pad(ridged):
+    """No convex piece may stand out of its mesh: a bulge fills the pad's pockets and stalls the fingers early."""
+    case, pieces, pad, _, fingerpad = ridged
+    for meshes, target in ((pieces, case.part), (pad, fingerpad)):
+        for vertices, _ in meshes:
+            # CoACD's pieces stand out up to ~0.12 mm here; its voxel preprocessing made it 0.3-0.8 mm
+            assert _stands_out_mm(vertices, target) <= 0.15
+
+
+def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
+    """The part is decomposed finely where the pads act and coarsely elsewhere; no coarse piece may reach into the fine
+    zone.
+    """
+    cube = featured_cube()
+    # the zone of the notch in the face x = 0 (the cube spans 0..30 mm)
+    zone = np.array([[[-1.0, -1.0, -1.0], [8.0, 31.0, 31.0]]])
+    zoned = zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path)
+    inside = [v for v, _ in zoned.pieces if v[:, 0].max() <= 8.0 + 1e-4]
+    outside = [v for v, _ in zoned.pieces if v[:, 0].min() >= 8.0 - 1e-4]
+    assert len(inside) + len(outside) == len(zoned.pieces) and inside and outside
+    # fine in the zone: the notch stays open (its hull would fill it by 8 mm)
+    assert max(_stands_out_mm(v, cube) for v in inside) <= 0.15
+    # coarse outside: the far notch and the hole are bridged, which a fine decomposition would not do
+    assert max(_stands_out_mm(v, cube) for v in outside) > 1.0
+    assert -0.001 < zoned.volume_error and zoned.missing_fraction < 0.001
+    assert zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path).cached
+
+
+def test_verification_takes_the_part_density_from_the_print_profile():
+    from fcso.config import DesignConfig
+    from fcso.sim.config import VerifyConfig, with_print_density
+
+    fdm = DesignConfig().updated({"print": {"profile": "fdm-pla"}})
+    # PLA, 1.24-1.25 g/cm³ (the profile's cited sheet), unless [verify] sets a density itself
+    assert with_print_density(VerifyConfig(trials=3), fdm).density_g_cm3 == pytest.approx(1.25)
+    assert with_print_density(VerifyConfig(trials=3, density_g_cm3=1.1), fdm).density_g_cm3 == pytest.approx(1.1)
+    explicit = DesignConfig().updated({"print": {"profile": "fdm-pla", "density_g_cm3": 1.3}})
+    assert with_print_density(VerifyConfig(), explicit).density_g_cm3 == pytest.approx(1.3)

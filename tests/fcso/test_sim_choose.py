@@ -1,0 +1,56 @@
+"""``--verify-top``: choosing by simulation changes the choice, and the chosen finger is the one that would be
+printed.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import fcso
+from examples.sim_parts import two_ridge_block, upright_grasp_settings
+from fcso.design import finish_candidate
+from fcso.finger import fuse
+from fcso.geometry import to_manifold
+from fcso.parts import Part
+from fcso.report.models import chosen_candidate
+from fcso.sim.choose import verify_top
+from fcso.sim.config import VerifyConfig
+
+
+def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):
+    mesh = two_ridge_block()
+    settings = upright_grasp_settings(mesh)
+    settings["print"] = {"profile": "mjf-pa12"}
+    config = fcso.DesignConfig().updated(settings)
+    result = fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
+    designed_best, designed_grasp = result.report.best, result.report.grasps[0]
+
+    chosen, verification, _, ranking = verify_top(result, 2, VerifyConfig(trials=2, cache_dir=tmp_path))
+
+    # the best by Q sits on the horizontal ridges and lets a displaced part slide; the second, on the vertical ridge,
+    # centres it
+    assert [r.rank_by_quality for r in ranking] == [1, 2]
+    assert [r.passed for r in ranking] == [False, True]
+    assert ranking[0].index == designed_best and ranking[0].success_rates == [0.0]
+    assert chosen.report.best == ranking[1].index and verification.passed
+    # the TCP is at the pad's mid-height: the chosen pad reaches down onto the vertical ridge (z < 20 mm), the designed
+    # one does not
+    half_pad = config.sampler.width_mm / 2.0
+    assert chosen.report.grasps[0].position_mm[2] - half_pad < 20.0 <= designed_grasp.position_mm[2] - half_pad
+    # what the daemon draws and the report shows follow the chosen candidate
+    candidate = chosen_candidate(chosen.report)
+    assert chosen.best.choice == tuple(candidate.samples)
+    assert chosen.report.print_fit.exact.quality == pytest.approx(candidate.quality, rel=1e-6)
+
+    # the chosen pad is the printed one: the exact pocket of the same candidate, grown by the profile's clearance
+    clearance = config.print.resolved()["clearance_mm"]
+    assert clearance > 0
+    exact, *_ = finish_candidate(result.scenarios, candidate.samples, config.updated({"print": {"profile": "custom"}}))
+    printed, exact_pad = to_manifold(chosen.fingerpad), exact.fingerpad.pad
+    contact_area = sum(e.contact_area_mm2 for e in exact.scenarios)
+    assert (exact_pad - printed).volume() >= 0.5 * clearance * contact_area
+    # and the finger fuses that pad
+    sampler = config.sampler
+    exact_finger = fuse(result.flat_finger, exact_pad, sampler, config.finger.overlap_mm).mesh
+    assert exact_finger.volume - chosen.finger.volume >= 0.5 * clearance * contact_area
+    assert chosen.report.finger.volume_mm3 == pytest.approx(chosen.finger.volume, rel=1e-4)

@@ -1,0 +1,1 @@
+"""Tests of the daemon's parts (fcsod) without running the daemon."""

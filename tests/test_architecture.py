@@ -1,0 +1,206 @@
+"""The layout the code keeps: no import cycles, the method free of presentation, no private name used across modules,
+and a daemon whose supervisor loads neither MuJoCo nor matplotlib.
+
+The imports are read from the source files with :mod:`ast` (every import, at
+the top of a module or inside a function, except those under
+``if TYPE_CHECKING:``), so a cycle hidden in a function is found too.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("fcso", "fcsod")
+
+#: Presentation: writing folders, pages and pictures. The method must not import it.
+PRESENTATION = ("fcso.output", "fcso.cli", "fcso.sim.cli", "matplotlib")
+#: What the method may take from the output package: the names of the folder layout, which the reports record.
+LAYOUT = "fcso.output.layout"
+#: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
+#: ``fcso``).
+NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.sim.cli", "fcso.output")
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def source_modules(packages=PACKAGES) -> dict[str, Path]:
+    """Every module of ``packages``: dotted name -> file."""
+    return {module_name(path): path for package in packages for path in sorted((REPO / package).rglob("*.py"))}
+
+
+def _type_checking_block(node: ast.AST) -> bool:
+    test = getattr(node, "test", None)
+    return isinstance(node, ast.If) and (
+        (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING")
+        or (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+    )
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> list[tuple[str, list[str], int]]:
+    """What module ``name`` imports: (module, names taken from it, line), relative imports resolved.
+
+    ``from package import module`` counts as importing ``package.module``.
+    """
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = []
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if _type_checking_block(child):
+                continue
+            if isinstance(child, ast.Import):
+                found.extend((alias.name, [], child.lineno) for alias in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                base = child.module or ""
+                if child.level:
+                    anchor = package.split(".")
+                    anchor = anchor[: len(anchor) - (child.level - 1)]
+                    base = ".".join(anchor + ([base] if base else []))
+                names = [alias.name for alias in child.names]
+                submodules = [f"{base}.{n}" for n in names if f"{base}.{n}" in known]
+                found.extend((module, [], child.lineno) for module in submodules)
+                rest = [n for n in names if f"{base}.{n}" not in known]
+                if rest or not submodules:
+                    found.append((base, rest, child.lineno))
+            visit(child)
+
+    visit(ast.parse(path.read_text(encoding="utf-8"), str(path)))
+    return found
+
+
+def import_graph(packages=PACKAGES) -> dict[str, set[str]]:
+    """Module -> the modules of ``packages`` it imports, with the subpackages' ``__init__`` its imports run.
+
+    The top-level packages' ``__init__`` files are facades that import the
+    public API; every module runs them, so they are left out of the graph.
+    """
+    modules = source_modules(packages)
+    known = set(modules)
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, path in modules.items():
+        for module, _, _ in imports_of(name, path, known):
+            if module not in known:
+                continue
+            # importing a.b.c runs a.b's __init__ (not a's: a facade, see above), unless the
+            # importer is inside a.b: then that __init__ is what runs it, or has run
+            parts = module.split(".")
+            targets = {".".join(parts[:k]) for k in range(2, len(parts) + 1)} & known
+            graph[name] |= {t for t in targets if t != name and t not in PACKAGES and not within(name, (t,))}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def connect(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in sorted(graph[node]):
+            if target not in index:
+                connect(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            connect(node)
+    return found
+
+
+def within(module: str, prefixes) -> bool:
+    return any(module == p or module.startswith(p + ".") for p in prefixes)
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_cycle(package):
+    assert cycles(import_graph((package,))) == []
+
+
+def test_the_cycle_finder_finds_a_cycle_hidden_in_a_function(tmp_path, monkeypatch):
+    """The check above can fail: two modules that import each other, one inside a function, are a cycle."""
+    package = tmp_path / "loop"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("from .b import g\n\ndef f():\n    return g()\n")
+    (package / "b.py").write_text("def g():\n    from .a import f\n    return f\n")
+    (package / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import f\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert cycles(import_graph(("loop",))) == [["loop.a", "loop.b"]]
+
+
+def test_the_method_does_not_import_presentation():
+    """fcso's method (everything but the command line, the schemas and fcso.output) imports no page, picture or folder
+    code.
+    """
+    modules = source_modules(("fcso",))
+    known = set(modules)
+    offending = [
+        f"{name} (line {line}) imports {module}"
+        for name, path in modules.items()
+        if name != "fcso" and not within(name, NOT_METHOD)
+        for module, _, line in imports_of(name, path, known)
+        if within(module, PRESENTATION) and module != LAYOUT
+    ]
+    assert offending == []
+
+
+def test_no_private_name_is_used_outside_its_module():
+    """``from x import _name`` across modules of fcso, fcsod, the tests and the benchmarks."""
+    files = {
+        **source_modules(),
+        **{module_name(p): p for folder in ("tests", "benchmarks") for p in (REPO / folder).rglob("*.py")},
+    }
+    known = set(files)
+    offending = [
+        f"{name} (line {line}) takes {', '.join(private)} from {module}"
+        for name, path in files.items()
+        for module, names, line in imports_of(name, path, known)
+        if within(module, PACKAGES)
+        for private in [[n for n in names if n.startswith("_") and not n.startswith("__")]]
+        if private
+    ]
+    assert offending == []
+
+
+def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tmp_path):
+    """The supervisor (its loop, the worker's entry point, the journal's repair) and ``fcsod schema`` run without a
+    physics engine or a plotter.
+    """
+    script = (
+        "import sys\n"
+        "import fcsod.service.daemon, fcsod.service.journal_repair, fcsod.job.process\n"
+        "from fcsod.cli import main\n"
+        f"assert main(['schema', '--out', {str(tmp_path)!r}]) == 0\n"
+        "print(sorted(m for m in ('mujoco', 'matplotlib') if m in sys.modules))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=True)
+    assert result.stdout.strip().splitlines()[-1] == "[]"
+    assert any(tmp_path.glob("*.json"))
