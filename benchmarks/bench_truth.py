@@ -1,4 +1,6 @@
-"""Do designed fingers beat flat ones? The product's defaults on a suite of parts, judged by simulation (METHOD §7b, §12).
+"""Do designed fingers beat flat ones? The product's defaults on a suite of parts, judged by simulation.
+
+METHOD §7b and §12.
 
 Run from the repository root::
 
@@ -32,8 +34,8 @@ from scipy.stats import spearmanr
 import fcso
 from examples.sim_parts import (
     featured_cube,
-    holed_notched_cube,
     hex_prism,
+    holed_notched_cube,
     knurled_knob,
     plain_box,
     plain_cylinder,
@@ -68,7 +70,9 @@ def suite(bunny: bool) -> list[SuitePart]:
         SuitePart("paper cube (V-notches, hole)", lambda: cube, True, upright_grasp_settings(cube)),
         SuitePart("cube, holes and corner notches", holed_notched_cube, True, {"poses": {"count": 1}}),
         SuitePart("ribbed block", lambda: ribbed, True, upright_grasp_settings(ribbed)),
-        SuitePart("two-ridge block (10 mm pads)", lambda: ridges, True, {**upright_grasp_settings(ridges), **SMALL_PADS}),
+        SuitePart(
+            "two-ridge block (10 mm pads)", lambda: ridges, True, {**upright_grasp_settings(ridges), **SMALL_PADS}
+        ),
         SuitePart("L-part, zig-zag edge (10 mm pads)", zigzag_l_part, True, {"poses": {"count": 1}, **SMALL_PADS}),
         SuitePart("knurled knob", knurled_knob, True, {"poses": {"count": 1}}),
         SuitePart("spur gear, lying flat", spur_gear, True, {"poses": {"count": 1}}),
@@ -98,14 +102,24 @@ def _weakest(holding: dict) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=10)
-    parser.add_argument("--candidates", type=int, default=2, help="more candidates per part verified for the correlation")
+    parser.add_argument(
+        "--candidates", type=int, default=2, help="more candidates per part verified for the correlation"
+    )
     parser.add_argument("--parts", help="comma-separated name prefixes to run")
     parser.add_argument("--bunny", action="store_true", help="add the paper's bunny")
     args = parser.parse_args()
     config = VerifyConfig(trials=args.trials)
-    chosen_parts = [p for p in suite(args.bunny) if not args.parts or any(p.name.startswith(x) for x in args.parts.split(","))]
-    print(f"product defaults; simulation: {args.trials} trials, +-2 mm +-3 deg, friction 0.4, 60 N; success within 0.3 mm and 1 deg")
-    header = f"{'part':<36} {'pose':>4} {'pad':>6} {'capture':>7} {'flat':>5} | {'designed':>8} {'median':>8} {'hold N':>6} | {'flat':>5} {'median':>8} {'hold N':>6} | note"
+    chosen_parts = [
+        p for p in suite(args.bunny) if not args.parts or any(p.name.startswith(x) for x in args.parts.split(","))
+    ]
+    print(
+        f"product defaults; simulation: {args.trials} trials, +-2 mm +-3 deg, friction 0.4, 60 N; "
+        "success within 0.3 mm and 1 deg"
+    )
+    header = (
+        f"{'part':<36} {'pose':>4} {'pad':>6} {'capture':>7} {'flat':>5} | "
+        f"{'designed':>8} {'median':>8} {'hold N':>6} | {'flat':>5} {'median':>8} {'hold N':>6} | note"
+    )
     print(header)
     rows, correlation = [], []
     for entry in chosen_parts:
@@ -122,8 +136,10 @@ def main() -> None:
             row = (entry, scenario, best, designed, flat)
             rows.append(row)
             print(
-                f"{entry.name:<36} {scenario.pose_index:>4} {best.pad_case:>6} {scenario.capture:>7.2f} {scenario.flat_capture:>5.2f} | "
-                f"{designed.success_rate:>8.0%} {designed.median_error_mm:>6.3f}mm {_weakest(designed.holding_n):>6.1f} | "
+                f"{entry.name:<36} {scenario.pose_index:>4} {best.pad_case:>6} "
+                f"{scenario.capture:>7.2f} {scenario.flat_capture:>5.2f} | "
+                f"{designed.success_rate:>8.0%} {designed.median_error_mm:>6.3f}mm "
+                f"{_weakest(designed.holding_n):>6.1f} | "
                 f"{flat.success_rate:>5.0%} {flat.median_error_mm:>6.3f}mm {_weakest(flat.holding_n):>6.1f} | {note}",
                 flush=True,
             )
@@ -134,7 +150,12 @@ def main() -> None:
         others = [c for c in report.candidates if c.index != best.index]
         by_q = max(others, key=lambda c: min(s.effective_area for s in c.per_scenario), default=None)
         spread = sorted(others, key=lambda c: c.quality)
-        picks = [c for c in [by_q] + [spread[int(k * (len(spread) - 1) / max(args.candidates - 1, 1))] for k in range(args.candidates - 1)] if c is not None]
+        picks = [
+            c
+            for c in [by_q]
+            + [spread[int(k * (len(spread) - 1) / max(args.candidates - 1, 1))] for k in range(args.candidates - 1)]
+            if c is not None
+        ]
         for candidate in list({c.index: c for c in picks}.values())[: args.candidates]:
             design, evaluation, _, _, _ = candidate_design(result, candidate)
             checked = verify(design, config)
@@ -147,18 +168,29 @@ def main() -> None:
     plain = [r for r in rows if not r[0].caging]
     good = sum(1 for r in caging if r[3].success_rate >= 0.9)
     flat_low = sum(1 for r in caging if r[4].success_rate <= 0.3)
-    print(f"\ncaging scenarios: designed >= 9/10 in {good} of {len(caging)} ({good / max(len(caging), 1):.0%}; target 80 %), flat <= 3/10 in {flat_low} of {len(caging)}")
+    print(
+        f"\ncaging scenarios: designed >= 9/10 in {good} of {len(caging)} ({good / max(len(caging), 1):.0%}; "
+        f"target 80 %), flat <= 3/10 in {flat_low} of {len(caging)}"
+    )
     worse = [r for r in rows if r[3].success_rate < r[4].success_rate]
-    print(f"scenarios where designed succeeds less often than flat: {len(worse)} " + ", ".join(r[0].name for r in worse))
+    print(
+        f"scenarios where designed succeeds less often than flat: {len(worse)} " + ", ".join(r[0].name for r in worse)
+    )
     weaker = [r for r in rows if _weakest(r[3].holding_n) < _weakest(r[4].holding_n) - 1e-6]
-    print(f"scenarios where designed holds less than flat (weakest direction): {len(weaker)} " + ", ".join(r[0].name for r in weaker))
+    print(
+        f"scenarios where designed holds less than flat (weakest direction): {len(weaker)} "
+        + ", ".join(r[0].name for r in weaker)
+    )
     told = sum(1 for r in plain if not r[1].beats_flat)
     print(f"featureless scenarios where the design says flat is as good: {told} of {len(plain)}")
     if len(correlation) >= 3:
         measures, qs, successes = (np.array([c[k] for c in correlation]) for k in (2, 3, 4))
         rho_measure = spearmanr(measures, successes).statistic
         rho_q = spearmanr(qs, successes).statistic
-        print(f"Spearman over {len(correlation)} verified candidates: capture measure {rho_measure:.2f}, paper Q {rho_q:.2f} (target >= 0.6 and above Q's)")
+        print(
+            f"Spearman over {len(correlation)} verified candidates: capture measure {rho_measure:.2f}, "
+            f"paper Q {rho_q:.2f} (target >= 0.6 and above Q's)"
+        )
         for name, index, measure, q, success in correlation:
             print(f"  {name:<36} candidate {index:>6}: measure {measure:8.1f}  Q {q:8.1f}  success {success:.0%}")
 

@@ -166,7 +166,9 @@ def upright_grasp_settings(mesh: trimesh.Trimesh, closing_axis_in_file=(1.0, 0.0
     return {"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [round(yaw, 6)]}}
 
 
-def zigzag_l_part(length_mm: float = 60.0, width_mm: float = 40.0, thickness_mm: float = 12.0, teeth: int = 5, tooth_mm: float = 3.0) -> trimesh.Trimesh:
+def zigzag_l_part(
+    length_mm: float = 60.0, width_mm: float = 40.0, thickness_mm: float = 12.0, teeth: int = 5, tooth_mm: float = 3.0
+) -> trimesh.Trimesh:
     """An L-shaped plate lying flat whose long outer edge is a zig-zag (the paper's surgical object, simplified).
 
     The L is ``length_mm`` along x and ``width_mm`` along y, its arms half as
@@ -174,7 +176,9 @@ def zigzag_l_part(length_mm: float = 60.0, width_mm: float = 40.0, thickness_mm:
     ``tooth_mm`` over its middle, the opposite edge of the long arm is straight.
     """
     arm = width_mm / 2.0
-    plate = manifold3d.Manifold.cube([length_mm, arm, thickness_mm]) + manifold3d.Manifold.cube([arm, width_mm, thickness_mm])
+    plate = manifold3d.Manifold.cube([length_mm, arm, thickness_mm]) + manifold3d.Manifold.cube(
+        [arm, width_mm, thickness_mm]
+    )
     pitch = 2.0 * tooth_mm
     start = (length_mm - teeth * pitch) / 2.0
     # 90-degree grooves, apex tooth_mm inside the edge, touching at the edge: a saw-tooth edge
@@ -184,15 +188,21 @@ def zigzag_l_part(length_mm: float = 60.0, width_mm: float = 40.0, thickness_mm:
     return _mesh(plate)
 
 
-def knurled_knob(radius_mm: float = 12.0, height_mm: float = 20.0, ridges: int = 24, ridge_mm: float = 1.2) -> trimesh.Trimesh:
+def knurled_knob(
+    radius_mm: float = 12.0, height_mm: float = 20.0, ridges: int = 24, ridge_mm: float = 1.2
+) -> trimesh.Trimesh:
     """A cylinder standing on its base with ``ridges`` axial square ridges round its side (a knurled knob)."""
     body = manifold3d.Manifold.cylinder(height_mm, radius_mm, circular_segments=96)
-    ridge = manifold3d.Manifold.cube([ridge_mm * 2.0, ridge_mm, height_mm]).translate([radius_mm - ridge_mm, -ridge_mm / 2.0, 0.0])
+    ridge = manifold3d.Manifold.cube([ridge_mm * 2.0, ridge_mm, height_mm]).translate(
+        [radius_mm - ridge_mm, -ridge_mm / 2.0, 0.0]
+    )
     parts = [body] + [ridge.rotate([0.0, 0.0, 360.0 * k / ridges]) for k in range(ridges)]
     return _mesh(manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add))
 
 
-def spur_gear(teeth: int = 16, module_mm: float = 2.0, thickness_mm: float = 10.0, bore_mm: float = 8.0) -> trimesh.Trimesh:
+def spur_gear(
+    teeth: int = 16, module_mm: float = 2.0, thickness_mm: float = 10.0, bore_mm: float = 8.0
+) -> trimesh.Trimesh:
     """A spur gear lying flat: trapezoidal teeth (module ``module_mm``) and a central bore."""
     pitch_r = module_mm * teeth / 2.0
     root_r, tip_r = pitch_r - 1.25 * module_mm, pitch_r + module_mm
@@ -200,10 +210,18 @@ def spur_gear(teeth: int = 16, module_mm: float = 2.0, thickness_mm: float = 10.
     for k in range(teeth):
         centre = 2.0 * np.pi * k / teeth
         half = np.pi / teeth
-        for angle, radius in ((centre - half, root_r), (centre - 0.45 * half, root_r), (centre - 0.25 * half, tip_r), (centre + 0.25 * half, tip_r), (centre + 0.45 * half, root_r)):
+        for angle, radius in (
+            (centre - half, root_r),
+            (centre - 0.45 * half, root_r),
+            (centre - 0.25 * half, tip_r),
+            (centre + 0.25 * half, tip_r),
+            (centre + 0.45 * half, root_r),
+        ):
             outline.append([radius * np.cos(angle), radius * np.sin(angle)])
     gear = manifold3d.Manifold.extrude(manifold3d.CrossSection([outline]), thickness_mm)
-    bore = manifold3d.Manifold.cylinder(thickness_mm + 2.0, bore_mm / 2.0, circular_segments=48).translate([0.0, 0.0, -1.0])
+    bore = manifold3d.Manifold.cylinder(thickness_mm + 2.0, bore_mm / 2.0, circular_segments=48).translate(
+        [0.0, 0.0, -1.0]
+    )
     return _mesh(gear - bore)
 
 

@@ -78,7 +78,9 @@ class CaptureLandscape:
     fraction: float
 
 
-def fitted_pad_heights(carved_mm: np.ndarray, floor_mm: float, cell_mm: float, clearance_mm: float, lead_in_deg: float) -> np.ndarray:
+def fitted_pad_heights(
+    carved_mm: np.ndarray, floor_mm: float, cell_mm: float, clearance_mm: float, lead_in_deg: float
+) -> np.ndarray:
     """The pad's face heights ``P = {u >= H}`` as printed.
 
     Parameters
@@ -116,8 +118,12 @@ def fitted_pad_heights(carved_mm: np.ndarray, floor_mm: float, cell_mm: float, c
         drop = cell_mm / np.tan(np.radians(lead_in_deg))
         diagonal = drop * np.sqrt(2.0)
         for _ in range(heights.shape[0] + heights.shape[1]):
-            straight = maximum_filter(heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf)
-            corner = maximum_filter(heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf)
+            straight = maximum_filter(
+                heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf
+            )
+            corner = maximum_filter(
+                heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf
+            )
             grown = np.maximum(heights, np.maximum(straight - drop, corner - diagonal))
             if np.array_equal(grown, heights):
                 break
@@ -192,9 +198,13 @@ def capture_landscape(
     separation[~np.isfinite(separation)] = np.inf
     lever_mm = max(float(np.mean(levers)), cell_mm)
     successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * lever_mm, config.friction)
-    seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9)
+    seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (
+        np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
+    )
     captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
-    in_box = (np.abs(offsets)[:, None] <= config.position_error_mm + 1e-9) & (np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + 1e-9)
+    in_box = (np.abs(offsets)[:, None] <= config.position_error_mm + 1e-9) & (
+        np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + 1e-9
+    )
     return CaptureLandscape(
         offsets_mm=offsets,
         yaws_deg=yaws_deg,
@@ -276,9 +286,18 @@ def pad_landscapes(
         geometries = [g for pair in chosen for g in pair]
         fit = config.print.resolved()
         _, floor = pad_case(geometries, config)
-        pad = fitted_pad_heights(carved_heights(geometries, grid), floor, grid.cell_mm, fit["clearance_mm"], fit["lead_in_deg"])
+        pad = fitted_pad_heights(
+            carved_heights(geometries, grid), floor, grid.cell_mm, fit["clearance_mm"], fit["lead_in_deg"]
+        )
     shape = (grid.count_v, grid.count_w)
     return [
-        capture_landscape(pad, (pair[0].heights_mm.reshape(shape), pair[1].heights_mm.reshape(shape)), centres, grid.cell_mm, depth, config.quality)
+        capture_landscape(
+            pad,
+            (pair[0].heights_mm.reshape(shape), pair[1].heights_mm.reshape(shape)),
+            centres,
+            grid.cell_mm,
+            depth,
+            config.quality,
+        )
         for pair, centres in zip(chosen, centres_uv_mm)
     ]

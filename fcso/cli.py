@@ -230,13 +230,18 @@ def _design(args) -> int:
 
 
 def _print_parts(parts, scenarios, ungraspable) -> None:
-    """A line per part (volume, shell handling, the stable poses designed for with their probabilities), then the ungraspable poses."""
+    """A line per part (volume, shell handling, the stable poses designed for with their probabilities).
+
+    Then a line per ungraspable pose.
+    """
     poses: dict[str, dict[int, float]] = {}
     for entry in [*scenarios, *ungraspable]:
         poses.setdefault(entry.part, {})[entry.pose_index] = entry.pose_probability
     for entry in parts:
         handling = f" ({entry.shell_handling})" if entry.shell_handling else ""
-        chosen = ", ".join(f"{index} (p = {probability:.3f})" for index, probability in sorted(poses.get(entry.name, {}).items()))
+        chosen = ", ".join(
+            f"{index} (p = {probability:.3f})" for index, probability in sorted(poses.get(entry.name, {}).items())
+        )
         print(f"part {entry.name}: {entry.volume_mm3:.1f} mm³{handling}; stable poses {chosen}")
     for entry in ungraspable:
         print(f"ungraspable: {entry.part} in stable pose {entry.pose_index}: {entry.reason}")

@@ -223,7 +223,9 @@ def evaluate_candidate(
             continue
         holding = _holding(scenario, sample, contacts, normals, config)
         measure = landscapes[number].fraction * min(1.0, float(holding.min()) / config.quality.hold_force_n) * effective
-        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding))
+        results.append(
+            ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)
+        )
     measures = [r.measure for r in results]
     return CandidateEvaluation(
         choice=choice,
@@ -236,7 +238,9 @@ def evaluate_candidate(
     )
 
 
-def _holding(scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig) -> np.ndarray:
+def _holding(
+    scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig
+) -> np.ndarray:
     """The six holding forces of one seated grasp (METHOD §7b), N."""
     points = np.vstack(
         [
@@ -264,8 +268,10 @@ def _holding(scenario: Scenario, sample: SampleGeometry, contacts, normals_rest:
 FLAT_MARGIN = 0.1
 
 
-def versus_flat(scenarios: list[Scenario], best: CandidateEvaluation, finalists) -> list[tuple[float | None, float | None, bool]]:
-    """Per scenario: the chosen pad's capture, flat pads' capture, and whether any pad tried beats flat (METHOD §7b, §12).
+def versus_flat(
+    scenarios: list[Scenario], best: CandidateEvaluation, finalists
+) -> list[tuple[float | None, float | None, bool]]:
+    """Per scenario: the chosen pad's capture, flat pads', and whether any pad tried beats flat (METHOD §7b, §12).
 
     A scenario is served better than by flat pads when some pad screened or
     evaluated captures more than flat pads by :data:`FLAT_MARGIN`; when none

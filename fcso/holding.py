@@ -34,7 +34,9 @@ def push_directions(closing_axis: np.ndarray) -> np.ndarray:
     return np.array([b, -b, a, -a, [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
 
 
-def merge_contacts(points: np.ndarray, normals: np.ndarray, pads: np.ndarray, merge_mm: float = MERGE_MM) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def merge_contacts(
+    points: np.ndarray, normals: np.ndarray, pads: np.ndarray, merge_mm: float = MERGE_MM
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Merge contact samples per pad, grid cell and normal direction (mean point, mean normal).
 
     Parameters

@@ -288,7 +288,9 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     dips = np.zeros((count_b, count_z), dtype=bool)
     for side in (1.0, -1.0):
         # u = outward distance along this side's a, shifted positive: 0 stays "no surface"
-        seen = np.column_stack([side * local[:, 0] - (side * local[:, 0]).min() + 1.0, local[:, 1] - low[1], local[:, 2] - low[2]])
+        seen = np.column_stack(
+            [side * local[:, 0] - (side * local[:, 0]).min() + 1.0, local[:, 1] - low[1], local[:, 2] - low[2]]
+        )
         outermost = column_heights(seen, faces, grid).reshape(count_b, count_z)
         outermost = np.where(outermost > 0, outermost, -np.inf)
         # concave intervals (notches, holes, gaps between teeth) and convex ones (ribs, teeth, ridges)

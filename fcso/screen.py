@@ -466,6 +466,8 @@ def screen(
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
         capture = geometries[2 * pair_number].capture
-        results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, capture * effective))
+        results.append(
+            ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, capture * effective)
+        )
     measures = [r.measure for r in results]
     return ScreenedCandidate(float(min(measures)), float(np.mean(measures)), results, case)

@@ -49,7 +49,9 @@ SLOW_DESIGN = "\n".join(f"[design.{name}]\n{body}\n" for name, body in SLOW_SECT
 
 def slow_manifest(part_file: str) -> str:
     """A job.toml of one part designed with :data:`SLOW_SECTIONS`."""
-    return f'[[parts]]\nfile = "{part_file}"\n\n' + "\n".join(f"[{name}]\n{body}\n" for name, body in SLOW_SECTIONS.items())
+    return f'[[parts]]\nfile = "{part_file}"\n\n' + "\n".join(
+        f"[{name}]\n{body}\n" for name, body in SLOW_SECTIONS.items()
+    )
 
 
 def free_port() -> int:

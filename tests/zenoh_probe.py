@@ -35,7 +35,9 @@ def main() -> int:
     parser.add_argument("--count", type=int, default=20)
     parser.add_argument("--queryable", metavar="KEY", help="answer queries on KEY with the forged payload")
     parser.add_argument("--token", metavar="KEY", help="declare a liveliness token on KEY")
-    parser.add_argument("--hold", action="store_true", help="after the actions print 'ready' and stay until standard input closes")
+    parser.add_argument(
+        "--hold", action="store_true", help="after the actions print 'ready' and stay until standard input closes"
+    )
     args = parser.parse_args()
     try:
         session = zenoh.open(zenoh.Config.from_file(args.config))

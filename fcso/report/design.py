@@ -106,7 +106,9 @@ def part_report(part: Part) -> PartReport:
     )
 
 
-def scenario_report(scenario: Scenario, capture: float | None, flat_capture: float | None, beats_flat: bool) -> ScenarioReport:
+def scenario_report(
+    scenario: Scenario, capture: float | None, flat_capture: float | None, beats_flat: bool
+) -> ScenarioReport:
     """A scenario's entry, with the chosen pad's capture and flat pads' (:func:`fcso.evaluate.versus_flat`)."""
     result = scenario.sampler_result
     return ScenarioReport(
@@ -196,7 +198,7 @@ def _screened_report(choice: tuple[int, ...], screened: ScreenedCandidate, index
 
 
 def _candidate_entry(choice, index, evaluation, per_scenario, quality, mean, case, block_depth) -> CandidateReport:
-    """A report entry; ``per_scenario`` holds (RLES, A, E, seat offsets, capture, holding forces, measure) per scenario."""
+    """A report entry; ``per_scenario`` holds (RLES, A, E, seat offsets, capture, holding, measure) per scenario."""
     return CandidateReport(
         index=index,
         samples=list(choice),

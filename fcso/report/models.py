@@ -63,7 +63,11 @@ class SampleReport(ReportModel):
     ratio: list[float] = Field(description="R = (V_B - V_I) / V_B of the + and - geometries")
     depth_mm: list[float] = Field(description="d_n of the + and - geometries, mm")
     effective_area_bound: float = Field(description="Upper bound of E for any candidate using this sample, mm²")
-    on_feature: bool = Field(False, description="Its position or height was centred on a feature of the part (METHOD §3b), not taken from the stride")
+    on_feature: bool = Field(
+        False,
+        description="Its position or height was centred on a feature of the part (METHOD §3b), "
+        "not taken from the stride",
+    )
 
 
 class ScenarioReport(ReportModel):
@@ -78,11 +82,14 @@ class ScenarioReport(ReportModel):
     rejected: dict[str, int] = Field(description="Rejection reason -> count")
     samples: list[SampleReport]
     capture: float | None = Field(
-        None, description="Share of the start errors the chosen pad seats (METHOD §7b), 0..1; null under the paper's measure"
+        None,
+        description="Share of the start errors the chosen pad seats (METHOD §7b), 0..1; null under the paper's measure",
     )
     flat_capture: float | None = Field(None, description="The same for flat pads on the chosen grasp, 0..1")
     beats_flat: bool = Field(
-        True, description="Some pad tried captures this scenario better than flat pads; false: the design says flat is as good here"
+        True,
+        description="Some pad tried captures this scenario better than flat pads; "
+        "false: the design says flat is as good here",
     )
 
 
@@ -95,16 +102,20 @@ class ScenarioQuality(ReportModel):
     seat_offsets_mm: list[float] = Field(description="Seating offset t of the + and - pads, mm")
     capture: float | None = Field(
         None,
-        description="Share of the start errors that closing the jaws seats (METHOD §7b), 0..1; screened: the sample's pads alone; "
+        description="Share of the start errors that closing the jaws seats (METHOD §7b), 0..1; "
+        "screened: the sample's pads alone; "
         "null under the paper's measure",
     )
     holding_n: list[float] | None = Field(
         None,
-        description="Largest push at the centre of mass held, in the test's six directions (+b, -b, +a, -a, +z, -z), N; "
+        description="Largest push at the centre of mass held, in the test's six directions "
+        "(+b, -b, +a, -a, +z, -z), N; "
         "exact candidates under the capture measure only",
     )
     measure: float = Field(
-        0.0, description="What ranks the scenario: E (paper), or capture x min(1, worst holding / hold force) x E (capture; screened: capture x E), mm²"
+        0.0,
+        description="What ranks the scenario: E (paper), or capture x min(1, worst holding / hold force) x E "
+        "(capture; screened: capture x E), mm²",
     )
 
 
@@ -118,7 +129,9 @@ class CandidateReport(ReportModel):
     )
     per_scenario: list[ScenarioQuality]
     quality: float = Field(description="The worst scenario's measure: Q = min E under the paper's measure, mm²")
-    mean_effective_area: float = Field(description="Mean measure over scenarios (first tie-break; mean E under the paper's measure), mm²")
+    mean_effective_area: float = Field(
+        description="Mean measure over scenarios (first tie-break; mean E under the paper's measure), mm²"
+    )
     pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
     block_depth_mm: float | None = Field(None, description="d_B in the mixed case, mm")
 

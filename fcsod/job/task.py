@@ -13,7 +13,6 @@ each takes the :class:`JobRun` and records what it made.
 from __future__ import annotations
 
 import signal
-
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path

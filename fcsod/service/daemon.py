@@ -386,7 +386,10 @@ class Daemon:
         self._publish(status)
 
     def _stop_overdue_and_withdrawn_jobs(self) -> None:
-        """Stop a job over its time limit, or whose folder was deleted (the print job withdrawn), and kill its worker after the grace time."""
+        """Stop a job over its time limit or whose folder was deleted (the print job withdrawn).
+
+        Its worker is killed when it has not stopped after the grace time.
+        """
         jobs = self.config.jobs
         now = time.monotonic()
         for slot in self.slots:

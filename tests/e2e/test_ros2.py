@@ -73,11 +73,17 @@ def ros2_job(tmp_path_factory):
         return json.loads(message.data)["state"] in ("done", "failed")
 
     def done_natively(value) -> bool:
-        if not (isinstance(value, dict) and value.get("event") == "sample" and value["key_expr"].endswith("/status") and value["source"] == "native"):
+        if not (
+            isinstance(value, dict)
+            and value.get("event") == "sample"
+            and value["key_expr"].endswith("/status")
+            and value["source"] == "native"
+        ):
             return False
         return json.loads(bytes.fromhex(value["payload"]))["state"] in ("done", "failed")
 
-    # the daemon publishes each message natively, then on ROS 2: the last of both forms of the final status closes the job
+    # the daemon publishes each message natively, then on ROS 2:
+    # the last of both forms of the final status closes the job
     cell.wait_for(done_on_ros2, timeout=120)
     cell.wait_for(done_natively, timeout=120)
     finished_ns = time.time_ns()

@@ -58,7 +58,10 @@ def probe(config: Path, *args: str, timeout: float = 60) -> list[dict]:
 
 
 def start_probe(config: Path, *args: str) -> tuple[subprocess.Popen, list[dict]]:
-    """Start ``tests/zenoh_probe.py --hold`` in the background; return it once every action is done, with its lines so far."""
+    """Start ``tests/zenoh_probe.py --hold`` in the background.
+
+    Returns it once every action is done, with its lines so far.
+    """
     process = subprocess.Popen(
         [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args, "--hold"],
         cwd=REPO,

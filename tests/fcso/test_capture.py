@@ -15,7 +15,9 @@ from fcso.screen import ScreenGrid
 
 
 def _prepared(mesh, name: str, **sections):
-    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"stride_mm": 2.0}, **sections})
+    config = (
+        fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"stride_mm": 2.0}, **sections})
+    )
     return prepare([Part(name=name, path=name, mesh=mesh)], config), config
 
 
@@ -63,7 +65,11 @@ def test_a_pocket_without_lead_in_jams_where_the_same_pocket_with_one_does_not()
 def test_capture_chooses_the_ridge_that_centres_where_q_chooses_the_larger_area():
     mesh = two_ridge_block()
     part = Part(name="two-ridge", path="two-ridge", mesh=mesh)
-    settings = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"length_mm": 10.0, "width_mm": 10.0, "stride_mm": 2.0}})
+    settings = (
+        fcso.DesignConfig()
+        .updated(upright_grasp_settings(mesh))
+        .updated({"sampler": {"length_mm": 10.0, "width_mm": 10.0, "stride_mm": 2.0}})
+    )
     by_q = fcso.design([part], settings.updated({"quality": {"measure": "paper"}}))
     by_capture = fcso.design([part], settings)
     # the vertical ridge runs up to 20 mm, the horizontal ones from 24 mm: a pad from h to h + 10 mm
@@ -85,10 +91,13 @@ def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():
     at_centre = holding_forces_n(points, normals, pads, np.array([1.0, 0.0, 0.0]), np.zeros(3), 0.05, 0.4, 60.0, 30.0)
     # friction alone resists 2 x 0.4 x 60 = 48 N in any direction along the pads: the 30 N test is held
     assert at_centre == pytest.approx(np.full(6, 30.0), abs=1e-6)
-    below = holding_forces_n(points, normals, pads, np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -25.0]), 0.05, 0.4, 60.0, 30.0)
+    below = holding_forces_n(
+        points, normals, pads, np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -25.0]), 0.05, 0.4, 60.0, 30.0
+    )
     # a push 25 mm below the patches turns the part about x, which only friction over the patches resists:
     # at most 0.4 x 120 N at the corners, 6.36 mm from the centre, 0.305 N m, so F <= 0.305 / 0.025 = 12.2 N;
-    # spread evenly (mean distance 3.83 mm) the same friction gives 7.4 N, 6.8 N inside the eight-edged cones (x cos 22.5°)
+    # spread evenly (mean distance 3.83 mm) the same friction gives 7.4 N,
+    # 6.8 N inside the eight-edged cones (x cos 22.5°)
     sideways = below[:2]
     assert np.all(sideways >= 6.8) and np.all(sideways <= 12.2)
     # along the closing axis the coupled fingers hold the part whatever the lever

@@ -60,7 +60,9 @@ def test_selection_random_seeded_most_probable_and_explicit():
     first, _ = select_poses(probabilities, PosesConfig(count=2, select="random", seed=5), 0, "p")
     again, _ = select_poses(probabilities, PosesConfig(count=2, select="random", seed=5), 0, "p")
     assert first == again and len(set(first)) == 2
-    seen = {tuple(select_poses(probabilities, PosesConfig(count=2, select="random", seed=s), 0, "p")[0]) for s in range(20)}
+    seen = {
+        tuple(select_poses(probabilities, PosesConfig(count=2, select="random", seed=s), 0, "p")[0]) for s in range(20)
+    }
     assert len(seen) > 1
     # the default: the most probable poses, whatever the seed
     assert {tuple(select_poses(probabilities, PosesConfig(count=2, seed=s), 0, "p")[0]) for s in range(20)} == {(0, 1)}
