@@ -16,7 +16,7 @@ from . import __version__
 from .config import DesignConfig
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .errors import NoGraspError
-from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger
+from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
 from .geometry import to_manifold, to_trimesh
 from .grasps import tcp_pose
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
@@ -438,7 +438,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             repairs=finger.repairs,
             volume_mm3=_round(fused.volume_mm3),
             bodies=fused.bodies,
-            watertight=bool(fused.mesh.is_watertight),
+            watertight=fused.watertight,
             min_pad_thickness_mm=_round(fused.min_pad_thickness_mm),
         ),
         timings_s={k: round(v, 3) for k, v in timings.items()},
@@ -449,7 +449,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     return DesignResult(
         report=report,
         finger=fused.mesh,
-        fingerpad=to_trimesh(best.fingerpad.pad),
+        fingerpad=print_ready(best.fingerpad.pad, "fingerpad").mesh,
         scenarios=scenarios,
         best=best,
         flat_finger=finger,
