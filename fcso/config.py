@@ -215,12 +215,15 @@ class PrintConfig(_Section):
     """How the finger is printed: clearance, lead-in and minimum wall of the pocket (``[print]``).
 
     ``profile`` gives every key a default (:data:`PRINT_PROFILES`); a key set
-    explicitly overrides the profile. ``custom`` (the default) is the exact
-    pocket of METHOD §4. Read the effective values with :meth:`resolved`.
+    explicitly overrides the profile. The default, ``mjf-pa12``, is the
+    paper's printer and material (METHOD §9b); ``custom`` is the exact pocket
+    of METHOD §4 (the paper's Table I, ``examples/paper.toml``). Read the
+    effective values with :meth:`resolved`.
     """
 
     profile: Literal["mjf-pa12", "fdm-pla", "sla-resin", "custom"] = Field(
-        "custom", description="Printer profile giving the defaults; custom: zero clearance, lead-in and minimum wall"
+        "mjf-pa12",
+        description="Printer profile giving the defaults; mjf-pa12: the paper's HP Multi Jet Fusion in PA12; custom: zero clearance, lead-in and minimum wall (the exact pocket)",
     )
     clearance_mm: float | None = Field(
         None, ge=0, description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm"

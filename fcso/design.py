@@ -15,8 +15,8 @@ from . import __version__
 from .config import DesignConfig
 from .errors import NoGraspError
 from .evaluate import CandidateEvaluation, SampleGeometry, Scenario, evaluate_candidate, sample_geometry, versus_flat
-from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger
-from .geometry import to_manifold, to_trimesh
+from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
+from .geometry import to_manifold
 from .parallel import WorkerPool, resolve_jobs
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
@@ -439,7 +439,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             repairs=finger.repairs,
             volume_mm3=rounded(fused.volume_mm3),
             bodies=fused.bodies,
-            watertight=bool(fused.mesh.is_watertight),
+            watertight=fused.watertight,
             min_pad_thickness_mm=rounded(fused.min_pad_thickness_mm),
         ),
         timings_s={k: round(v, 3) for k, v in timings.items()},
@@ -450,7 +450,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     return DesignResult(
         report=report,
         finger=fused.mesh,
-        fingerpad=to_trimesh(best.fingerpad.pad),
+        fingerpad=print_ready(best.fingerpad.pad, "fingerpad").mesh,
         scenarios=scenarios,
         best=best,
         flat_finger=finger,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 
 import manifold3d
@@ -172,12 +173,99 @@ def finger_plate(finger: FlatFinger, sampler: SamplerConfig, gripper: GripperCon
     )
 
 
+#: Faces of a written mesh with less area than this are zero-area faces, mm².
+ZERO_AREA_MM2 = 1e-12
+
+
+@dataclass
+class WrittenMesh:
+    """A solid as its STL file holds it: float32 coordinates, coincident vertices merged (METHOD §9b).
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        The file read back (mm); exporting it writes the same solid.
+    watertight : bool
+        Every edge shared by exactly two faces.
+    zero_area_faces : int
+        Faces with area under :data:`ZERO_AREA_MM2`.
+    bodies : int
+        Connected components.
+    volume_mm3 : float
+    """
+
+    mesh: trimesh.Trimesh
+    watertight: bool
+    zero_area_faces: int
+    bodies: int
+    volume_mm3: float
+
+    def defects(self) -> list[str]:
+        """What keeps the written mesh from being one print-ready body, in words (empty when it is)."""
+        found = []
+        if not self.watertight:
+            found.append("not watertight")
+        if self.zero_area_faces:
+            found.append(f"{self.zero_area_faces} zero-area faces")
+        if self.bodies != 1:
+            found.append(f"{self.bodies} bodies")
+        if not self.volume_mm3 > 0:
+            found.append(f"volume {self.volume_mm3:.3f} mm³")
+        return found
+
+
+def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
+    """The solid as a binary STL stores it, snapped to float32 by manifold3d first, and measured.
+
+    manifold3d computes in double precision; an STL holds float32. Vertices
+    that Booleans left closer together than float32 resolution (slivers of
+    near-coincident faces, :mod:`fcso.printfit`) would merge when the file is
+    read, leaving zero-area faces and a surface in pieces. So the solid is
+    rebuilt by manifold3d from its float32 mesh, which collapses the faces
+    that rounding made degenerate; its coordinates are then exactly the
+    file's. The result is the written file read back with trimesh.
+    """
+    mesh = solid.to_mesh()
+    snapped = manifold3d.Manifold(
+        manifold3d.Mesh(
+            vert_properties=np.array(np.asarray(mesh.vert_properties)[:, :3], dtype=np.float32, order="C"),
+            tri_verts=np.array(np.asarray(mesh.tri_verts), dtype=np.uint32, order="C"),
+        )
+    )
+    if snapped.status() != manifold3d.Error.NoError:
+        raise GeometryError(f"manifold3d refused the solid snapped to float32: {snapped.status()}")
+    data = to_trimesh(snapped).export(file_type="stl")
+    written = trimesh.load(io.BytesIO(data), file_type="stl", process=True)
+    return WrittenMesh(
+        mesh=written,
+        watertight=bool(written.is_watertight),
+        zero_area_faces=int((written.area_faces < ZERO_AREA_MM2).sum()),
+        bodies=len(written.split(only_watertight=False)) if len(written.faces) else 0,
+        volume_mm3=float(written.volume),
+    )
+
+
+def print_ready(solid: manifold3d.Manifold, what: str) -> WrittenMesh:
+    """:func:`as_written`, refused unless it is one watertight body without zero-area faces.
+
+    Raises
+    ------
+    GeometryError
+        Naming ``what`` and the defects.
+    """
+    written = as_written(solid)
+    if written.defects():
+        raise GeometryError(f"{what} is not one watertight body as written to STL: {', '.join(written.defects())}")
+    return written
+
+
 @dataclass
 class FusedFinger:
-    """The print-ready finger: the flat finger with the fingerpad fused on."""
+    """The print-ready finger: the flat finger with the fingerpad fused on, measured as written (:func:`as_written`)."""
 
     mesh: trimesh.Trimesh
     bodies: int
+    watertight: bool
     volume_mm3: float
     min_pad_thickness_mm: float
 
@@ -192,7 +280,7 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
     Raises
     ------
     GeometryError
-        When the result is not one watertight body of positive volume.
+        When the result, as written to STL, is not one watertight body of positive volume.
     """
     thickness, length, width = sampler.thickness_mm, sampler.length_mm, sampler.width_mm
     backing = box((thickness - 0.5 * overlap_mm, 0.0, 0.0), (thickness + overlap_mm, length, width))
@@ -200,14 +288,19 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
     fused = to_manifold(finger.mesh) + pad_in_finger
     if fused.status() != manifold3d.Error.NoError:
         raise GeometryError(f"{finger.source}: finger union failed: {fused.status()}")
-    mesh = to_trimesh(fused)
     bodies = len(fused.decompose())
-    if not mesh.is_watertight or bodies != 1 or not fused.volume() > 0:
+    if bodies != 1:
         raise GeometryError(
-            f"{finger.source}: fused finger is not one watertight body (bodies: {bodies}, watertight: {mesh.is_watertight}); "
-            "check the finger's contact_origin_mm and contact_normal"
+            f"{finger.source}: fused finger is not one body (bodies: {bodies}); check the finger's contact_origin_mm and contact_normal"
         )
-    return FusedFinger(mesh=mesh, bodies=bodies, volume_mm3=float(fused.volume()), min_pad_thickness_mm=pad_thickness(pad, sampler))
+    written = print_ready(fused, f"{finger.source}: fused finger")
+    return FusedFinger(
+        mesh=written.mesh,
+        bodies=written.bodies,
+        watertight=written.watertight,
+        volume_mm3=written.volume_mm3,
+        min_pad_thickness_mm=pad_thickness(pad, sampler),
+    )
 
 
 def pad_thickness(pad: manifold3d.Manifold, sampler: SamplerConfig, samples_per_side: int = 40) -> float:

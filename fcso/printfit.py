@@ -17,10 +17,22 @@ seats: walls that face the pad get back into contact after the advance;
 walls parallel to the closing axis keep their gap ``c`` and drop out of
 contact, as they do in a real clearance fit.
 
-All Minkowski sums are with convex kernels and done exactly as unions of
-convex hulls, one per triangle (``X ⊕ K = X ∪ ⋃_t hull(t ⊕ K)`` for a solid
-``X`` and convex ``K``), with manifold3d. Round kernels are polyhedra that
-contain the round shape, so grown pockets are never smaller than asked.
+All Minkowski sums and differences are with convex kernels and done by
+manifold3d's own ``minkowski_sum`` / ``minkowski_difference`` (exact). Round
+kernels are polyhedra that contain the round shape, so grown pockets are
+never smaller than asked.
+
+Why not our own union of hulls (``X ∪ ⋃_t hull(t ⊕ K)``, one per triangle
+``t``): adjacent hulls share faces (``e ⊕ K`` for each shared edge, whole
+planes for coplanar triangles) that each hull triangulates on its own, so in
+double precision they coincide only to 1e-16..1e-7 mm. manifold3d's exact
+Booleans keep every such near-coincidence as a sliver narrower than float32
+resolution; written as a float32 STL, the slivers collapse into zero-area
+triangles and the surface falls apart into pieces (a knurled knob's
+``finger.stl``: 5 627 zero-area triangles, 1 688 pieces). The opening of
+:func:`open_thin_walls` sums a kernel over an eroded pad whose every facet
+carries such slivers, so it multiplied them (a 450-triangle pad opened into
+53 000 triangles), so its erosion and its result are simplified.
 """
 
 from __future__ import annotations
@@ -37,6 +49,9 @@ from .geometry import affine_3x4, box, ray_hits, to_trimesh
 BALL_SEGMENTS = 12
 #: Facets of the lead-in cone's base circle (circumscribed: the draft is never under the angle).
 CONE_SEGMENTS = 32
+#: Features smaller than this are merged when a thin-wall opening is simplified, mm (a
+#: thousandth of the finest printer's resolution, a hundred float32 steps at 100 mm).
+SIMPLIFY_TOLERANCE_MM = 1e-4
 
 
 @lru_cache(maxsize=8)
@@ -81,10 +96,7 @@ def cone_points(height_mm: float, angle_deg: float, segments: int = CONE_SEGMENT
 
 
 def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
-    """Minkowski sum of a solid with the convex hull of ``kernel`` points.
-
-    ``X ⊕ K = X ∪ (∂X ⊕ K)`` (exact for any solid ``X`` and convex ``K``
-    containing the origin; :func:`surface_sweep`).
+    """Minkowski sum of a solid with the convex hull of ``kernel`` points (manifold3d's, exact).
 
     Parameters
     ----------
@@ -98,25 +110,7 @@ def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold
     """
     if solid.is_empty():
         return solid
-    return solid + surface_sweep(solid, kernel)
-
-
-def surface_sweep(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
-    """``∂X ⊕ K``: the solid's surface swept by a convex kernel, ``⋃_t hull(t ⊕ K)`` over its triangles ``t``.
-
-    A point ``x + k`` outside ``X`` lies in ``b + K`` for the last point ``b``
-    where the segment from ``x`` to ``x + k`` leaves ``X``, and the outward
-    normal ``n`` there has ``n · k >= 0``: triangles with ``n · k < 0`` for
-    every kernel point add nothing and are skipped.
-    """
-    mesh = solid.to_mesh()
-    vertices = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
-    triangles = vertices[np.asarray(mesh.tri_verts)]
-    kernel = np.asarray(kernel, dtype=np.float64)
-    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    triangles = triangles[(normals @ kernel.T).max(axis=1) >= 0]
-    hulls = [manifold3d.Manifold.hull_points((t[:, None, :] + kernel[None]).reshape(-1, 3)) for t in triangles]
-    return manifold3d.Manifold.batch_boolean(hulls, manifold3d.OpType.Add) if hulls else manifold3d.Manifold()
+    return solid.minkowski_sum(manifold3d.Manifold.hull_points(np.asarray(kernel, dtype=np.float64)))
 
 
 def grow(part: manifold3d.Manifold, clearance_mm: float) -> manifold3d.Manifold:
@@ -225,10 +219,11 @@ def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: fl
     """Remove pad walls and slivers thinner than ``min_wall_mm``: a morphological opening.
 
     ``P ∘ B = (P ⊖ B) ⊕ B`` with ``B`` a ball of diameter ``min_wall_mm``:
-    what no such ball inside the pad can reach goes. The erosion is
-    ``P − (∂P ⊕ B)``. The pad is opened with a slab behind its back face
+    what no such ball inside the pad can reach goes. The erosion and the
+    result are simplified to :data:`SIMPLIFY_TOLERANCE_MM` (see the module's
+    note on slivers). The pad is opened with a slab behind its back face
     (it is fused to the finger there), then clipped back to the pad box. An
-    opening never adds material, so a clearance stays a clearance. Convex
+    opening never adds material (beyond that tolerance), so a clearance stays a clearance. Convex
     edges of the pad are rounded to radius ``min_wall_mm / 2``; a pad whose
     thinnest wall (:func:`thinnest_wall_mm`) already meets the minimum is
     returned unchanged.
@@ -250,10 +245,13 @@ def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: fl
     # no wall under the minimum: the opening would only round convex edges, so skip it
     if min_wall_mm <= 0 or thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
         return pad
-    kernel = ball_points(min_wall_mm / 2.0)
+    kernel = manifold3d.Manifold.hull_points(ball_points(min_wall_mm / 2.0))
     backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm)
-    eroded = backed - surface_sweep(backed, kernel)
-    opened = minkowski_convex(eroded, kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm))
+    # the erosion's facets carry slivers far below any printer's resolution, and the
+    # dilation sums the kernel over every one of them: merge them first
+    eroded = backed.minkowski_difference(kernel).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
+    # so does the dilation's (sliver faces where the kernel's copies meet)
+    opened = (eroded.minkowski_sum(kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm))).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
     pieces = [p for p in opened.decompose() if p.bounding_box()[3] >= thickness_mm - 1e-4]
     return manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add) if len(pieces) > 1 else (pieces[0] if pieces else opened)
 
