@@ -407,18 +407,19 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         )
     warnings.extend(fit_warnings)
     timings["finger"] = time.perf_counter() - clock
-    compared = versus_flat(scenarios, best, exact.values())
-    for scenario, (capture, flat, beats) in zip(scenarios, compared):
-        if not beats:
+    compared = versus_flat(scenarios, best, exact.values(), config)
+    for scenario, versus in zip(scenarios, compared):
+        if versus is not None and not versus.beats_flat:
             warnings.append(
                 f"{scenario.part.name} in stable pose {scenario.pose_index}: no pad captures it better than flat pads "
-                f"(capture {capture:.2f} against {flat:.2f} for flat ones): the carved pad is no improvement there"
+                f"(capture {versus.capture.fraction:.2f} against {versus.flat.fraction:.2f} for flat ones): "
+                "the carved pad is no improvement there"
             )
 
     report = DesignReport(
         fcso_version=__version__,
         parts=[part_report(p) for p in loaded],
-        scenarios=[scenario_report(s, *v) for s, v in zip(scenarios, compared)],
+        scenarios=[scenario_report(s, v) for s, v in zip(scenarios, compared)],
         candidates=candidate_reports(ranked[: config.search.report_candidates], exact, listed_screens, indices),
         best=indices[best_choice],
         search=SearchReport(

@@ -40,7 +40,6 @@ class SampleGeometry:
     screen: tuple[ScreenGeometry, ScreenGeometry]
     screened_bound: float
     centres_uv_mm: tuple[np.ndarray, np.ndarray]
-    flat_capture: float | None
 
 
 @dataclass
@@ -132,11 +131,9 @@ def sample_geometry(
         )
         for g, s, f in zip(geometries, surfaces, frames)
     )
-    flat_capture = None
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
         capture = pad_landscapes([screens], [centres], grid, config)[0].fraction
-        flat_capture = pad_landscapes([screens], [centres], grid, config, flat=True)[0].fraction
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -147,7 +144,6 @@ def sample_geometry(
         screen=screens,
         screened_bound=screened_bound(screens, lattice) * screens[0].capture,
         centres_uv_mm=centres,
-        flat_capture=flat_capture,
     )
 
 
@@ -268,28 +264,41 @@ def _holding(
 FLAT_MARGIN = 0.1
 
 
-def versus_flat(
-    scenarios: list[Scenario], best: CandidateEvaluation, finalists
-) -> list[tuple[float | None, float | None, bool]]:
-    """Per scenario: the chosen pad's capture, flat pads', and whether any pad tried beats flat (METHOD §7b, §12).
+@dataclass
+class VersusFlat:
+    """One scenario's chosen pad against flat pads on the same grasp (METHOD §7b, §12).
 
-    A scenario is served better than by flat pads when some pad screened or
-    evaluated captures more than flat pads by :data:`FLAT_MARGIN`; when none
-    does, the design says so. Under the paper's measure nothing is compared:
-    ``(None, None, True)``.
+    Attributes
+    ----------
+    capture, flat : CaptureLandscape
+        The chosen pad's landscape as printed, and flat pads'.
+    beats_flat : bool
+        Some pad screened or evaluated captures more than flat pads by :data:`FLAT_MARGIN`.
     """
+
+    capture: CaptureLandscape
+    flat: CaptureLandscape
+    beats_flat: bool
+
+
+def versus_flat(
+    scenarios: list[Scenario], best: CandidateEvaluation, finalists, config: DesignConfig
+) -> list[VersusFlat | None]:
+    """Every scenario's chosen pad against flat pads; None each under the paper's measure."""
     if best.scenarios[0].capture is None:
-        return [(None, None, True)] * len(scenarios)
+        return [None] * len(scenarios)
+    grid = ScreenGrid.for_config(config)
     compared = []
     for number, scenario in enumerate(scenarios):
-        chosen = best.scenarios[number].capture.fraction
-        flat = scenario.samples[best.choice[number]].flat_capture
+        chosen = best.scenarios[number].capture
+        sample = scenario.samples[best.choice[number]]
+        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], grid, config, flat=True)[0]
         tried = max(
-            [chosen]
+            [chosen.fraction]
             + [e.scenarios[number].capture.fraction for e in finalists]
             + [g.screen[0].capture for g in scenario.samples]
         )
-        compared.append((chosen, flat, tried > flat + FLAT_MARGIN))
+        compared.append(VersusFlat(chosen, flat, tried > flat.fraction + FLAT_MARGIN))
     return compared
 
 

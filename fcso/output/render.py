@@ -42,6 +42,7 @@ PICTURE_SIZES = {
     "normals": (900, 460),
     "pose": (420, 340),
     "gripper": (900, 560),
+    "capture": (900, 420),
 }
 #: Most triangles drawn per mesh; more are decimated for drawing.
 MAX_DRAWN_FACES = 6000
@@ -614,6 +615,51 @@ def pose_picture(part: trimesh.Trimesh, title: str = "") -> bytes:
         background=[_table(vertices)],
     )
     _caption(axes, title)
+    return png_bytes(figure)
+
+
+def capture_picture(landscape, title: str = "") -> bytes:
+    """The capture landscape of one scenario (METHOD §7b): jaw separation over start errors, and what is seated.
+
+    Parameters
+    ----------
+    landscape : CaptureLandscapeReport
+        From a scenario of ``report.json``.
+    title : str
+
+    Returns
+    -------
+    bytes
+        PNG of ``PICTURE_SIZES["capture"]``: the separation as colour (yaw
+        across, offset along the pads up), the starts the chosen pad seats
+        hatched, those flat pads seat outlined in black dashes, the test's
+        error box in grey.
+    """
+    offsets, yaws = np.asarray(landscape.offsets_mm), np.asarray(landscape.yaws_deg)
+    separation = np.array([[np.nan if x is None else x for x in row] for row in landscape.separation_mm])
+    figure = new_figure("capture")
+    axes = figure.add_axes((0.08, 0.12, 0.72, 0.76))
+    extent = (yaws[0], yaws[-1], offsets[0], offsets[-1])
+    shown = axes.imshow(
+        separation, origin="lower", aspect="auto", extent=extent, cmap="viridis", interpolation="nearest"
+    )
+    colourbar = figure.colorbar(shown, ax=axes, fraction=0.05, pad=0.02)
+    colourbar.set_label("jaw separation at first contact - seat's, mm", fontsize=8)
+    grid_yaw, grid_offset = np.meshgrid(yaws, offsets)
+    captured = np.asarray(landscape.captured, dtype=float)
+    axes.contourf(grid_yaw, grid_offset, captured, levels=[0.5, 1.5], colors="none", hatches=["///"])
+    axes.contour(grid_yaw, grid_offset, captured, levels=[0.5], colors="white", linewidths=1.5)
+    flat = np.asarray(landscape.flat_captured, dtype=float)
+    if flat.any():
+        axes.contour(grid_yaw, grid_offset, flat, levels=[0.5], colors="black", linewidths=1.2, linestyles="dashed")
+    box_mm, box_deg = landscape.position_error_mm, landscape.yaw_error_deg
+    axes.plot(
+        [-box_deg, box_deg, box_deg, -box_deg, -box_deg], [-box_mm, -box_mm, box_mm, box_mm, -box_mm], color="0.6"
+    )
+    axes.set_xlabel("start error about the vertical, degrees", fontsize=8)
+    axes.set_ylabel("start error along the pads, mm", fontsize=8)
+    axes.tick_params(labelsize=7)
+    axes.set_title(title, fontsize=9)
     return png_bytes(figure)
 
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import DesignConfig
-from ..evaluate import CandidateEvaluation, Scenario, ScenarioEvaluation
+from ..evaluate import CandidateEvaluation, Scenario, ScenarioEvaluation, VersusFlat
 from ..grasps import tcp_pose
 from ..parts import Part
 from ..screen import ScreenedCandidate
 from .models import (
     CandidateReport,
+    CaptureLandscapeReport,
     GraspReport,
     PartReport,
     PrintFitEffect,
@@ -106,15 +107,14 @@ def part_report(part: Part) -> PartReport:
     )
 
 
-def scenario_report(
-    scenario: Scenario, capture: float | None, flat_capture: float | None, beats_flat: bool
-) -> ScenarioReport:
-    """A scenario's entry, with the chosen pad's capture and flat pads' (:func:`fcso.evaluate.versus_flat`)."""
+def scenario_report(scenario: Scenario, versus: VersusFlat | None) -> ScenarioReport:
+    """A scenario's entry, with the chosen pad's capture against flat pads' (:func:`fcso.evaluate.versus_flat`)."""
     result = scenario.sampler_result
     return ScenarioReport(
-        capture=None if capture is None else rounded(capture),
-        flat_capture=None if flat_capture is None else rounded(flat_capture),
-        beats_flat=beats_flat,
+        capture=None if versus is None else rounded(versus.capture.fraction),
+        flat_capture=None if versus is None else rounded(versus.flat.fraction),
+        beats_flat=True if versus is None else versus.beats_flat,
+        capture_landscape=None if versus is None else capture_landscape_report(versus),
         part=scenario.part.name,
         pose_index=scenario.pose_index,
         pose_probability=rounded(scenario.probability),
@@ -138,6 +138,21 @@ def scenario_report(
             )
             for g in scenario.samples
         ],
+    )
+
+
+def capture_landscape_report(versus: VersusFlat) -> CaptureLandscapeReport:
+    """The chosen pad's landscape of one scenario as the report keeps it."""
+    landscape = versus.capture
+    box = landscape.in_box
+    return CaptureLandscapeReport(
+        offsets_mm=[rounded(x) for x in landscape.offsets_mm],
+        yaws_deg=[rounded(x) for x in landscape.yaws_deg],
+        separation_mm=[[rounded(x) if np.isfinite(x) else None for x in row] for row in landscape.separation_mm],
+        captured=landscape.captured.tolist(),
+        flat_captured=versus.flat.captured.tolist(),
+        position_error_mm=rounded(np.abs(landscape.offsets_mm[box.any(axis=1)]).max()),
+        yaw_error_deg=rounded(np.abs(landscape.yaws_deg[box.any(axis=0)]).max()),
     )
 
 

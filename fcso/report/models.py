@@ -70,6 +70,20 @@ class SampleReport(ReportModel):
     )
 
 
+class CaptureLandscapeReport(ReportModel):
+    """The squeeze of METHOD §7b over a grid of start errors, for a picture."""
+
+    offsets_mm: list[float] = Field(description="Start errors along the sliding axis, mm (rows)")
+    yaws_deg: list[float] = Field(description="Start errors about the vertical, degrees (columns)")
+    separation_mm: list[list[float | None]] = Field(
+        description="Jaw separation at first contact minus the seat's, mm; null where a pad loses the part"
+    )
+    captured: list[list[bool]] = Field(description="The start's squeeze ends at the seat")
+    flat_captured: list[list[bool]] = Field(description="The same with flat pads")
+    position_error_mm: float = Field(description="The test's start error box: -x..x along the sliding axis, mm")
+    yaw_error_deg: float = Field(description="... and -x..x about the vertical, degrees")
+
+
 class ScenarioReport(ReportModel):
     """One grasp scenario: a part in one stable pose."""
 
@@ -84,6 +98,9 @@ class ScenarioReport(ReportModel):
     capture: float | None = Field(
         None,
         description="Share of the start errors the chosen pad seats (METHOD §7b), 0..1; null under the paper's measure",
+    )
+    capture_landscape: CaptureLandscapeReport | None = Field(
+        None, description="The chosen pad's jaw separation over start errors and the starts it seats (METHOD §7b)"
     )
     flat_capture: float | None = Field(None, description="The same for flat pads on the chosen grasp, 0..1")
     beats_flat: bool = Field(

@@ -7,9 +7,11 @@ import pytest
 import trimesh
 
 import fcso
+from examples.sim_parts import featured_cube, upright_grasp_settings
 from fcso.config import DesignConfig
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
+from fcso.parts import Part
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
 
@@ -18,8 +20,33 @@ TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 @pytest.fixture(scope="module")
 def two_part_design():
-    config = small_config(sampler={"stride_mm": 6.0})
+    # the paper's sampler and measure: every candidate is listed, Q = min E (the capture measure: below)
+    config = small_config(sampler={"stride_mm": 6.0, "feature_positions": False}, quality={"measure": "paper"})
     return fcso.design([data_path(name) for name in TWO_PARTS], config)
+
+
+def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
+    mesh = featured_cube(notch_mm=8.0)
+    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh))
+    report = fcso.design([Part(name="cube", path="featured_cube", mesh=mesh)], config).report
+    hold = config.quality.hold_force_n
+    for candidate in report.candidates:
+        for quality in candidate.per_scenario:
+            assert 0.0 <= quality.capture <= 1.0
+            if candidate.evaluation == "exact":
+                assert len(quality.holding_n) == 6 and all(0.0 <= f <= hold for f in quality.holding_n)
+                factor = quality.capture * min(1.0, min(quality.holding_n) / hold)
+            else:
+                assert quality.holding_n is None
+                factor = quality.capture
+            assert quality.measure == pytest.approx(factor * quality.effective_area, rel=1e-4, abs=1e-4)
+        assert candidate.quality == pytest.approx(min(q.measure for q in candidate.per_scenario), abs=1e-6)
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    assert report.best == max(exact, key=lambda c: (c.quality, c.mean_effective_area, -c.index)).index
+    # the 8 mm notch is centred on: a pad there captures most start errors, flat pads few
+    (scenario,) = report.scenarios
+    assert scenario.capture >= 0.8 and scenario.flat_capture <= 0.2 and scenario.beats_flat
+    assert any(sample.on_feature for sample in scenario.samples)
 
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):
@@ -48,6 +75,7 @@ def test_counts_qualities_and_best_are_consistent(two_part_design):
         assert scenario.tried_samples == scenario.valid_samples + sum(scenario.rejected.values())
     assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "screening", "exact", "finger"}
     assert report.settings.sampler.length_mm == 10.0
+    assert all(s.capture is None and s.beats_flat for s in report.scenarios)
 
 
 def test_finger_is_one_watertight_body_with_the_pad(two_part_design):
