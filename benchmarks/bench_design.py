@@ -2,10 +2,14 @@
 
 Run from the repository root::
 
-    python -m benchmarks.bench_design [--runs N] [--baseline COMMIT] [--skip-budget] [--paper-only]
+    python -m benchmarks.bench_design [--runs N] [--baseline COMMIT] [--skip-budget] [--paper-only] [--one-part-only]
 
 Prints, as medians over N runs (the machine is shared and noisy):
 
+- the default ``fcso design`` command on one part in two poses (the holed,
+  notched 30 mm cube: capture and holding, pads on features, the MJF print
+  fit) and, with ``--baseline``, the same command on that commit's code in
+  turns (METHOD §7b's target: within 2x of the code before it);
 - the paper experiment as a user runs it: the whole ``fcso design`` command
   in a subprocess, imports and report.html included (target <= 3 s), and,
   with ``--baseline``, the same command on the code of that commit, the two
@@ -35,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import fcso
+from examples.sim_parts import holed_notched_cube
 from fcso.design import prepare, screen_choice
 from fcso.parallel import WorkerPool, resolve_jobs
 
@@ -72,6 +77,11 @@ def paper_command(python: str, source: Path, out: Path) -> list[str]:
         str(out),
         "--quiet",
     ]
+
+
+def one_part_command(python: str, part: Path, config: Path, out: Path) -> list[str]:
+    """The default ``fcso design`` of one part in its two most probable poses (``[poses] select = [0, 1]``)."""
+    return [python, "-m", "fcso.cli", "design", str(part), "--config", str(config), "--out", str(out), "--quiet"]
 
 
 def timed_commands(commands: list[tuple[list[str], Path]], runs: int) -> list[list[float]]:
@@ -167,12 +177,35 @@ def summary(seconds: list[float]) -> str:
     )
 
 
+def one_part_figures(scratch: Path, old_tree: Path | None, baseline: str | None, runs: int) -> None:
+    """Time the default design of one part in two poses (the holed, notched 30 mm cube), and on ``old_tree``'s code."""
+    part = scratch / "notched_cube.stl"
+    holed_notched_cube().export(part)
+    config = scratch / "two_poses.toml"
+    config.write_text("[poses]\nselect = [0, 1]\n")
+    commands = [(one_part_command(sys.executable, part, config, scratch / "one-new"), REPO)]
+    if old_tree is not None:
+        commands.append((one_part_command(sys.executable, part, config, scratch / "one-old"), old_tree))
+    new, *old = timed_commands(commands, runs)
+    print(f"one part, two poses, default fcso design command (holed notched cube): {summary(new)}")
+    if old:
+        print(
+            f"  same command on {baseline}, in turns with it: {summary(old[0])}; ratio new/old "
+            f"{statistics.median(new) / statistics.median(old[0]):.2f}x  (target <= 2x)"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--baseline", metavar="COMMIT", help="also time the paper command on this commit's code")
     parser.add_argument("--skip-budget", action="store_true", help="skip the 10x-budget run of the 16-scenario case")
     parser.add_argument("--paper-only", action="store_true", help="time the paper command only")
+    parser.add_argument(
+        "--one-part-only",
+        action="store_true",
+        help="time the one-part, two-pose default command only (with --baseline)",
+    )
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.memory_child:
@@ -182,9 +215,13 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
+        old_tree = baseline_tree(args.baseline, scratch / "old") if args.baseline else None
+        if not args.paper_only:
+            one_part_figures(scratch, old_tree, args.baseline, args.runs)
+        if args.one_part_only:
+            return
         commands = [(paper_command(sys.executable, REPO, scratch / "new"), REPO)]
-        if args.baseline:
-            old_tree = baseline_tree(args.baseline, scratch / "old")
+        if old_tree is not None:
             commands.append((paper_command(sys.executable, old_tree, scratch / "old-out"), old_tree))
         new, *old = timed_commands(commands, args.runs)
         print(f"paper experiment, whole fcso design command: {summary(new)}  (target <= 3 s)")
