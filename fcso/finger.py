@@ -162,7 +162,9 @@ def finger_plate(finger: FlatFinger, sampler: SamplerConfig, gripper: GripperCon
     vertices = transform_points(to_pad, np.asarray(finger.mesh.vertices, dtype=np.float64))
     # just below the top so a flange starting at that height is not counted
     top = sampler.width_mm + gripper.finger_height_mm - 1e-6
-    inside_v, inside_f = clip_to_box(vertices, finger.mesh.faces, (sampler.thickness_mm, -np.inf, 0.0), (np.inf, np.inf, top))
+    inside_v, inside_f = clip_to_box(
+        vertices, finger.mesh.faces, (sampler.thickness_mm, -np.inf, 0.0), (np.inf, np.inf, top)
+    )
     if len(inside_f) == 0:
         return FingerPlate(thickness_mm=0.0, v_min_mm=0.0, v_max_mm=sampler.length_mm)
     used = inside_v[inside_f].reshape(-1, 3)
@@ -223,8 +225,25 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
     read, leaving zero-area faces and a surface in pieces. So the solid is
     rebuilt by manifold3d from its float32 mesh, which collapses the faces
     that rounding made degenerate; its coordinates are then exactly the
-    file's. The result is the written file read back with trimesh.
+    file's. Where that is not enough (distinct vertices that round to one
+    point), the solid is simplified by manifold3d to :data:`SNAP_TOLERANCES_MM`
+    in turn, each moving the surface by less than itself, until the file
+    read back is one watertight body. The result is the written file read
+    back with trimesh.
     """
+    written = _written(solid)
+    for tolerance in SNAP_TOLERANCES_MM:
+        if not written.defects():
+            break
+        written = _written(solid.simplify(tolerance))
+    return written
+
+
+#: Tolerances (mm) a solid is simplified to, in turn, when its float32 file is not one watertight body.
+SNAP_TOLERANCES_MM = (1e-5, 1e-4, 1e-3)
+
+
+def _written(solid: manifold3d.Manifold) -> WrittenMesh:
     mesh = solid.to_mesh()
     snapped = manifold3d.Manifold(
         manifold3d.Mesh(
