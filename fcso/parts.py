@@ -21,6 +21,7 @@ import trimesh
 
 from .errors import MeshError
 from .geometry import to_manifold, to_trimesh
+from .repair import RepairSummary, repair_shells
 
 #: Length of one unit in millimetres.
 UNIT_MM = {"mm": 1.0, "inch": 25.4, "m": 1000.0}
@@ -62,6 +63,8 @@ class Part:
         Factor applied to the file's coordinates to get mm.
     repairs : list of str
         What ``repair=True`` changed, empty when nothing was repaired.
+    repair : RepairSummary or None
+        The counts behind ``repairs`` (file units; ``scale`` converts), None without ``repair=True``.
     shells : int
         Closed shells of the file's mesh that make up this part.
     solid_index : int or None
@@ -81,6 +84,7 @@ class Part:
     mesh: trimesh.Trimesh
     scale: float = 1.0
     repairs: list[str] = field(default_factory=list)
+    repair: RepairSummary | None = None
     shells: int = 1
     solid_index: int | None = None
     shell_note: str | None = None
@@ -196,49 +200,22 @@ def mesh_defects(mesh: trimesh.Trimesh) -> list[str]:
 
 
 def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[str]]:
-    """Repair what can be repaired without changing the shape.
+    """Repair a mesh the way a slicer takes it (see :mod:`fcso.repair`).
 
-    Merges duplicate vertices, drops degenerate and duplicate triangles,
-    makes winding consistent and outward, fills simple holes.
+    Merges duplicate vertices, drops degenerate and duplicated triangles,
+    makes each shell's winding consistent, closes open shells' holes
+    (MeshFix) and turns inside-out shells outward. Overlapping shells are
+    left for :func:`mesh_solids` to unite.
 
     Returns
     -------
     mesh : trimesh.Trimesh
         The repaired copy.
     changes : list of str
-        One line per change made.
+        One line per kind of change made.
     """
-    mesh = mesh.copy()
-    changes = []
-    finite = np.isfinite(mesh.vertices).all(axis=1)
-    if not finite.all():
-        keep = finite[mesh.faces].all(axis=1)
-        changes.append(f"removed {int((~keep).sum())} triangles with non-finite vertices")
-        mesh.update_faces(keep)
-        mesh.remove_unreferenced_vertices()
-    n_vertices = len(mesh.vertices)
-    mesh.merge_vertices()
-    if len(mesh.vertices) != n_vertices:
-        changes.append(f"merged {n_vertices - len(mesh.vertices)} duplicate vertices")
-    n_faces = len(mesh.faces)
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.update_faces(mesh.unique_faces())
-    mesh.remove_unreferenced_vertices()
-    if len(mesh.faces) != n_faces:
-        changes.append(f"removed {n_faces - len(mesh.faces)} degenerate or duplicate triangles")
-    if not mesh.is_watertight:
-        n_faces = len(mesh.faces)
-        trimesh.repair.fill_holes(mesh)
-        if len(mesh.faces) != n_faces:
-            changes.append(f"filled holes with {len(mesh.faces) - n_faces} triangles")
-    volume_before = mesh.volume if mesh.is_watertight else None
-    winding_before = mesh.is_winding_consistent
-    trimesh.repair.fix_normals(mesh, multibody=True)
-    if not winding_before and mesh.is_winding_consistent:
-        changes.append("made triangle winding consistent")
-    if volume_before is not None and volume_before < 0 < mesh.volume:
-        changes.append("flipped inside-out mesh")
-    return mesh, changes
+    repaired, summary = repair_shells(mesh)
+    return repaired, summary.lines
 
 
 def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False) -> tuple[trimesh.Trimesh, list[str]]:
@@ -249,18 +226,27 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     MeshError
         Naming ``path`` and the first defect (after repair, if it was asked for).
     """
-    changes: list[str] = []
+    mesh, summary = _validated(mesh, path, repair)
+    return mesh, summary.lines if summary else []
+
+
+def _validated(mesh: trimesh.Trimesh, path: str | Path, repair: bool) -> tuple[trimesh.Trimesh, RepairSummary | None]:
+    """:func:`validate_mesh` keeping the repair's counts."""
+    summary = None
     if len(mesh.faces) == 0:
         raise MeshError(path, "empty mesh: no triangles")
     if repair:
-        mesh, changes = repair_mesh(mesh)
+        original = mesh
+        mesh, summary = repair_shells(mesh)
+        if len(mesh.faces) == 0:
+            raise MeshError(path, f"{mesh_defects(original)[0]}; even after --repair no shell encloses a volume")
     defects = mesh_defects(mesh)
     if defects:
         hint = " even after --repair" if repair else " (run with --repair to try to fix it)"
         raise MeshError(path, defects[0] + hint)
     mesh = mesh.copy()
     mesh.merge_vertices()
-    return mesh, changes
+    return mesh, summary
 
 
 def check_zip_archive(
@@ -455,7 +441,7 @@ def load_parts(
         Scale each mesh uniformly so its longest bounding-box side is this
         long (mm), before splitting it into solids.
     repair : bool
-        Try :func:`repair_mesh` before validating.
+        Repair with :func:`fcso.repair.repair_shells` before validating.
     split_bodies : bool
         Separate solids become separate parts ``<name>#<k>`` (largest first);
         False refuses such a file.
@@ -491,7 +477,7 @@ def load_parts(
         mesh = item.mesh
         if not np.all(np.isfinite(mesh.vertices)) and not repair:
             raise MeshError(where, mesh_defects(mesh)[0])
-        mesh, changes = validate_mesh(mesh, where, repair=repair)
+        mesh, summary = _validated(mesh, where, repair)
         scale = factor
         if scale_to_mm is not None:
             if not scale_to_mm > 0:
@@ -499,6 +485,9 @@ def load_parts(
             scale = scale_to_mm / float(mesh.extents.max())
         mesh.apply_scale(scale)
         solids, shells = mesh_solids(mesh, where)
+        if summary is not None:
+            summary.volume_after = sum(float(s.mesh.volume) for s in solids) / scale**3
+            summary.solids_out = len(solids)
         if len(solids) > 1 and not split_bodies:
             raise MeshError(where, f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting")
         warnings = []
@@ -512,7 +501,8 @@ def load_parts(
                     path=str(path),
                     mesh=solid.mesh,
                     scale=scale,
-                    repairs=changes,
+                    repairs=summary.lines if summary else [],
+                    repair=summary,
                     shells=solid.shells,
                     solid_index=k if len(solids) > 1 else None,
                     shell_note=_shell_note(solid, k, len(solids), shells, float(mesh.volume)),
