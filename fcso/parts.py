@@ -204,18 +204,25 @@ def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[str]]:
 
     Merges duplicate vertices, drops degenerate and duplicated triangles,
     makes each shell's winding consistent, closes open shells' holes
-    (MeshFix) and turns inside-out shells outward. Overlapping shells are
-    left for :func:`mesh_solids` to unite.
+    (MeshFix), turns inside-out shells outward and unites overlapping shells
+    (manifold3d).
 
     Returns
     -------
     mesh : trimesh.Trimesh
-        The repaired copy.
+        The repaired copy (empty if no shell encloses a volume).
     changes : list of str
         One line per kind of change made.
+
+    Raises
+    ------
+    MeshError
+        A repaired shell manifold3d cannot take.
     """
-    repaired, summary = repair_shells(mesh)
-    return repaired, summary.lines
+    shells, summary = repair_shells(mesh)
+    if not shells:
+        return trimesh.Trimesh(), summary.lines
+    return trimesh.util.concatenate([s.mesh for s in _unite_shells(shells, "mesh")]), summary.lines
 
 
 def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False) -> tuple[trimesh.Trimesh, list[str]]:
@@ -226,27 +233,37 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     MeshError
         Naming ``path`` and the first defect (after repair, if it was asked for).
     """
-    mesh, summary = _validated(mesh, path, repair)
-    return mesh, summary.lines if summary else []
-
-
-def _validated(mesh: trimesh.Trimesh, path: str | Path, repair: bool) -> tuple[trimesh.Trimesh, RepairSummary | None]:
-    """:func:`validate_mesh` keeping the repair's counts."""
-    summary = None
     if len(mesh.faces) == 0:
         raise MeshError(path, "empty mesh: no triangles")
     if repair:
-        original = mesh
-        mesh, summary = repair_shells(mesh)
-        if len(mesh.faces) == 0:
-            raise MeshError(path, f"{mesh_defects(original)[0]}; even after --repair no shell encloses a volume")
+        solids, _, summary = _repaired_solids(mesh, path)
+        return trimesh.util.concatenate([s.mesh for s in solids]), summary.lines
     defects = mesh_defects(mesh)
     if defects:
-        hint = " even after --repair" if repair else " (run with --repair to try to fix it)"
-        raise MeshError(path, defects[0] + hint)
+        raise MeshError(path, defects[0] + " (run with --repair to try to fix it)")
     mesh = mesh.copy()
     mesh.merge_vertices()
-    return mesh, summary
+    return mesh, []
+
+
+def _repaired_solids(mesh: trimesh.Trimesh, path: str | Path) -> tuple[list[Solid], list[trimesh.Trimesh], RepairSummary]:
+    """The solids of a repaired mesh, its closed shells (file units), and what repair changed.
+
+    Raises
+    ------
+    MeshError
+        Naming ``path`` and the defect left when repair cannot make a closed volume.
+    """
+    shells, summary = repair_shells(mesh)
+    if not shells:
+        raise MeshError(path, f"{mesh_defects(mesh)[0]}; even after --repair no shell encloses a volume")
+    solids = _unite_shells(shells, path) if len(shells) > 1 else [Solid(mesh=shells[0], shells=1)]
+    defects = mesh_defects(trimesh.util.concatenate([s.mesh for s in solids]))
+    if defects:
+        raise MeshError(path, defects[0] + " even after --repair")
+    summary.volume_after = sum(float(s.mesh.volume) for s in solids)
+    summary.solids_out = len(solids)
+    return solids, shells, summary
 
 
 def check_zip_archive(
@@ -368,6 +385,11 @@ def mesh_solids(mesh: trimesh.Trimesh, source: str | Path) -> tuple[list[Solid],
     shells = mesh.split(only_watertight=False)
     if len(shells) <= 1:
         return [Solid(mesh=mesh, shells=1)], 1
+    return _unite_shells(shells, source), len(shells)
+
+
+def _unite_shells(shells: list[trimesh.Trimesh], source: str | Path) -> list[Solid]:
+    """The solids of closed, oriented shells (see :func:`mesh_solids`), largest first."""
     manifolds = []
     for number, shell in enumerate(shells):
         if shell.volume < 0:
@@ -404,7 +426,7 @@ def mesh_solids(mesh: trimesh.Trimesh, source: str | Path) -> tuple[list[Solid],
         count = sum(1 for m, out in zip(manifolds, outward) if (m ^ filled).volume() > 1e-9 * abs(filled.volume()))
         solids.append(Solid(mesh=whole, shells=max(count, 1)))
     solids.sort(key=lambda s: -s.mesh.volume)
-    return solids, len(shells)
+    return solids
 
 
 def _outermost_container(component: trimesh.Trimesh, outer: list[trimesh.Trimesh]) -> trimesh.Trimesh | None:
@@ -477,17 +499,22 @@ def load_parts(
         mesh = item.mesh
         if not np.all(np.isfinite(mesh.vertices)) and not repair:
             raise MeshError(where, mesh_defects(mesh)[0])
-        mesh, summary = _validated(mesh, where, repair)
+        summary = None
+        if repair:
+            solids, closed, summary = _repaired_solids(mesh, where)
+            shells, shell_sum = len(closed), sum(float(s.volume) for s in closed)
+        else:
+            mesh, _ = validate_mesh(mesh, where)
+            solids, shells = mesh_solids(mesh, where)
+            shell_sum = float(mesh.volume)
         scale = factor
         if scale_to_mm is not None:
             if not scale_to_mm > 0:
                 raise MeshError(path, f"scale-to length must be positive, got {scale_to_mm}")
-            scale = scale_to_mm / float(mesh.extents.max())
-        mesh.apply_scale(scale)
-        solids, shells = mesh_solids(mesh, where)
-        if summary is not None:
-            summary.volume_after = sum(float(s.mesh.volume) for s in solids) / scale**3
-            summary.solids_out = len(solids)
+            bounds = np.array([s.mesh.bounds for s in solids])
+            scale = scale_to_mm / float((bounds[:, 1].max(axis=0) - bounds[:, 0].min(axis=0)).max())
+        for solid in solids:
+            solid.mesh.apply_scale(scale)
         if len(solids) > 1 and not split_bodies:
             raise MeshError(where, f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting")
         warnings = []
@@ -505,7 +532,7 @@ def load_parts(
                     repair=summary,
                     shells=solid.shells,
                     solid_index=k if len(solids) > 1 else None,
-                    shell_note=_shell_note(solid, k, len(solids), shells, float(mesh.volume)),
+                    shell_note=_shell_note(solid, k, len(solids), shells, shell_sum * scale**3),
                     warnings=warnings,
                     instances=transforms,
                 )

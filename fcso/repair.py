@@ -6,11 +6,12 @@ holes, flipped and duplicated triangles. The repair cleans the triangles
 shell's winding consistent, closes each open shell's holes with MeshFix
 (pymeshfix) and orients every shell outward, or inward where it lies inside
 another shell (a void). Overlapping shells stay separate here:
-:func:`fcso.parts.mesh_solids` unites them with manifold3d, as for any file.
+:mod:`fcso.parts` unites them with manifold3d, as it does for any file.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import igl
@@ -52,9 +53,9 @@ class RepairSummary:
         Largest distance from a corner of the repaired mesh to the input triangles, file units.
     volume_after : float
         Volume of the solids made from the repaired shells (overlaps united), file units³;
-        set by :func:`fcso.parts.load_parts`, 0 until then.
+        set by :mod:`fcso.parts` when it unites them, 0 until then.
     solids_out : int
-        Solids made of the repaired shells; set by :func:`fcso.parts.load_parts`.
+        Solids made of the repaired shells; set with ``volume_after``.
     lines : list of str
         The changes in words, one line per kind.
     """
@@ -77,22 +78,45 @@ class RepairSummary:
     lines: list[str] = field(default_factory=list)
 
 
-def repair_shells(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairSummary]:
+def close_holes_meshfix(shell: trimesh.Trimesh) -> trimesh.Trimesh | None:
+    """One open shell with its holes closed by MeshFix, or None if MeshFix leaves nothing."""
+    fixer = pymeshfix.MeshFix(np.asarray(shell.vertices, dtype=np.float64), np.asarray(shell.faces, dtype=np.int32))
+    # one shell at a time: MeshFix would otherwise keep only the largest component
+    fixer.repair(joincomp=False, remove_smallest_components=False)
+    if len(fixer.faces) == 0:
+        return None
+    closed = trimesh.Trimesh(fixer.points, fixer.faces, process=False)
+    closed.merge_vertices()
+    return closed
+
+
+def repair_shells(
+    mesh: trimesh.Trimesh, close_holes: Callable[[trimesh.Trimesh], trimesh.Trimesh | None] = close_holes_meshfix
+) -> tuple[list[trimesh.Trimesh], RepairSummary]:
     """Make closed, oriented shells from an exporter's triangles.
 
     Parameters
     ----------
     mesh : trimesh.Trimesh
         Any triangles, in any unit; not changed.
+    close_holes : callable
+        Closes one consistently wound open shell (None: it cannot); the
+        default is MeshFix, others are measured in ``benchmarks.bench_repair``.
 
     Returns
     -------
-    mesh : trimesh.Trimesh
-        The closed shells (overlaps not yet united), or an empty mesh when no
-        shell could be closed.
+    shells : list of trimesh.Trimesh
+        The closed shells, each with its own vertices (overlaps not yet
+        united); empty when no shell could be closed.
     summary : RepairSummary
         What changed; ``summary.lines`` says it in words.
     """
+    # open and flat shells have zero volume: trimesh divides by it for their centre of mass
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _repair(mesh, close_holes)
+
+
+def _repair(mesh: trimesh.Trimesh, close_holes: Callable[[trimesh.Trimesh], trimesh.Trimesh | None]) -> tuple[list[trimesh.Trimesh], RepairSummary]:
     summary = RepairSummary()
     source = mesh
     mesh = mesh.copy()
@@ -109,7 +133,12 @@ def repair_shells(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairSummary
     n_faces = len(mesh.faces)
     mesh.update_faces(mesh.nondegenerate_faces())
     summary.degenerate_removed = n_faces - len(mesh.faces)
-    resolved, _ = igl.resolve_duplicated_faces(np.ascontiguousarray(mesh.faces, dtype=np.int64))
+    # a triangle written twice the same way is kept once; libigl then drops
+    # opposite pairs (the wall between two bodies exported as one)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    rotation = (faces.argmin(axis=1)[:, None] + np.arange(3)) % 3
+    once = np.unique(np.take_along_axis(faces, rotation, axis=1), axis=0)
+    resolved, _ = igl.resolve_duplicated_faces(once)
     summary.duplicates_removed = len(mesh.faces) - len(resolved)
     mesh = trimesh.Trimesh(mesh.vertices, resolved, process=False)
     mesh.remove_unreferenced_vertices()
@@ -126,43 +155,31 @@ def repair_shells(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairSummary
             shell.invert()
             flipped = len(before) - flipped
         summary.faces_flipped += flipped
+        summary.volume_before += abs(float(shell.volume))
         if not shell.is_watertight:
             summary.open_shells += 1
-            summary.volume_before += abs(float(shell.volume))
-            shell = _close_holes(shell, summary)
-        else:
-            summary.volume_before += abs(float(shell.volume))
+            boundary = shell.edges_sorted[trimesh.grouping.group_rows(shell.edges_sorted, require_count=1)]
+            loops = len(trimesh.graph.connected_components(boundary))
+            opened = len(shell.faces)
+            shell = close_holes(shell)
+            if shell is not None:
+                summary.holes_filled += loops
+                summary.faces_added += max(len(shell.faces) - opened, 0)
         if shell is None or len(shell.faces) < MIN_SHELL_FACES or not shell.is_watertight or abs(shell.volume) <= 0:
             summary.shells_dropped += 1
             continue
         closed.append(shell)
     _orient(closed, summary)
     summary.shells_out = len(closed)
-    repaired = trimesh.util.concatenate(closed) if closed else trimesh.Trimesh()
     if closed:
         squared, _, _ = igl.point_mesh_squared_distance(
-            np.ascontiguousarray(repaired.vertices, dtype=np.float64),
+            np.ascontiguousarray(np.vstack([shell.vertices for shell in closed]), dtype=np.float64),
             np.ascontiguousarray(source.vertices, dtype=np.float64),
             np.ascontiguousarray(source.faces, dtype=np.int64),
         )
         summary.max_deviation = float(np.sqrt(squared.max()))
     summary.lines = summary.lines + _describe(summary)
-    return repaired, summary
-
-
-def _close_holes(shell: trimesh.Trimesh, summary: RepairSummary) -> trimesh.Trimesh | None:
-    """The shell with its holes closed by MeshFix, or None if MeshFix leaves nothing."""
-    loops = len(trimesh.graph.connected_components(shell.edges_sorted[trimesh.grouping.group_rows(shell.edges_sorted, require_count=1)]))
-    fixer = pymeshfix.MeshFix(np.asarray(shell.vertices, dtype=np.float64), np.asarray(shell.faces, dtype=np.int32))
-    # one shell at a time: MeshFix would otherwise keep only the largest component
-    fixer.repair(joincomp=False, remove_smallest_components=False)
-    if len(fixer.faces) == 0:
-        return None
-    closed = trimesh.Trimesh(fixer.points, fixer.faces, process=False)
-    closed.merge_vertices()
-    summary.holes_filled += loops
-    summary.faces_added += max(len(closed.faces) - len(shell.faces), 0)
-    return closed
+    return closed, summary
 
 
 def _orient(shells: list[trimesh.Trimesh], summary: RepairSummary) -> None:
