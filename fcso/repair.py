@@ -79,13 +79,15 @@ class RepairSummary:
 
 
 def close_holes_meshfix(shell: trimesh.Trimesh) -> trimesh.Trimesh | None:
-    """One open shell with its holes closed by MeshFix, or None if MeshFix leaves nothing."""
-    fixer = pymeshfix.MeshFix(np.asarray(shell.vertices, dtype=np.float64), np.asarray(shell.faces, dtype=np.int32))
-    # one shell at a time: MeshFix would otherwise keep only the largest component
-    fixer.repair(joincomp=False, remove_smallest_components=False)
-    if len(fixer.faces) == 0:
+    """One open shell with every hole filled by MeshFix (refined fill), or None if it stays open."""
+    tmesh = pymeshfix.PyTMesh()
+    tmesh.set_quiet(True)
+    tmesh.load_array(np.asarray(shell.vertices, dtype=np.float64), np.asarray(shell.faces, dtype=np.int32))
+    tmesh.fill_small_boundaries(nbe=0, refine=True)
+    vertices, faces = tmesh.return_arrays()
+    if len(faces) == 0:
         return None
-    closed = trimesh.Trimesh(fixer.points, fixer.faces, process=False)
+    closed = trimesh.Trimesh(vertices, faces, process=False)
     closed.merge_vertices()
     return closed
 

@@ -45,6 +45,15 @@ def break_mesh(mesh: trimesh.Trimesh, kind: str, seed: int = 23) -> trimesh.Trim
     return overlap if kind == "overlap" else _duplicate(_flip(overlap, rng), rng)
 
 
+def intact_mesh(mesh: trimesh.Trimesh, kind: str) -> trimesh.Trimesh:
+    """The closed shells ``break_mesh(mesh, kind)`` was made from (for ``overlap``: both bodies)."""
+    if kind not in ("overlap", "all"):
+        return mesh
+    moved = mesh.copy()
+    moved.apply_translation(OVERLAP_SHIFT * mesh.extents)
+    return trimesh.util.concatenate([mesh, moved])
+
+
 def intact_volume(mesh: trimesh.Trimesh, kind: str) -> float:
     """Volume the repair of ``break_mesh(mesh, kind)`` should give, from the intact mesh (file units³)."""
     if kind not in ("overlap", "all"):
