@@ -74,6 +74,21 @@ def test_real_files_as_published_are_repaired():
     assert microscope[0].repair.degenerate_removed == 11
 
 
+def test_real_frame_of_open_overlapping_shells_is_repaired():
+    # as published: 73 shells, some open, some overlapping, slivers and non-manifold edges
+    path = data_path("microscopoio_telaio.stl")
+    with pytest.raises(MeshError, match="not watertight.*--repair"):
+        load_parts(path)
+    parts = load_parts(path, repair=True)
+    for part in parts:
+        assert part.mesh.is_watertight and part.mesh.volume > 0
+        assert len(part.mesh.split(only_watertight=False)) == 1
+    summary = parts[0].repair
+    assert summary.holes_filled >= 1 and summary.shells_in > len(parts)
+    # united overlaps count once: never more than the file's shells add up to
+    assert sum(p.mesh.volume for p in parts) < summary.volume_before
+
+
 def test_design_of_a_broken_real_file_with_repair(tmp_path):
     path, intact_volume = write_broken("20mm-xyz-cube.stl", "all", tmp_path)
     config = tmp_path / "fast.toml"
