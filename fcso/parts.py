@@ -256,7 +256,8 @@ def _repaired_solids(mesh: trimesh.Trimesh, path: str | Path) -> tuple[list[Soli
     """
     shells, summary = repair_shells(mesh)
     if not shells:
-        raise MeshError(path, f"{mesh_defects(mesh)[0]}; even after --repair no shell encloses a volume")
+        defect = (mesh_defects(mesh) or ["no closed volume"])[0]
+        raise MeshError(path, f"{defect}; even after --repair no shell encloses a volume")
     solids = _unite_shells(shells, path) if len(shells) > 1 else [Solid(mesh=shells[0], shells=1)]
     # by manifold3d's topology: lobes of a solid may touch along an edge without sharing it
     failed = sum(1 for s in solids if not (s.mesh.is_watertight and s.mesh.volume > 0))

@@ -38,20 +38,21 @@ class RepairSummary:
     Attributes
     ----------
     vertices_merged, degenerate_removed, duplicates_removed : int
-        Coincident corners merged; zero-area triangles and duplicated
-        triangles (same corners; an opposite pair is an internal wall, both go) removed.
+        Coincident corners merged and open edges' corners stitched; zero-area
+        triangles and duplicated triangles (same corners; an opposite pair is
+        an internal wall, both go) removed.
     faces_flipped : int
         Triangles whose winding was turned to agree with their shell.
     shells_in, shells_out : int
-        Connected shells before and after the repair (open slivers dropped).
+        Connected shells after cleaning, and closed shells after the repair.
     open_shells : int
         Shells that had holes.
     holes_filled : int
         Boundary loops closed by MeshFix.
     faces_added : int
-        Triangles MeshFix added (hole fills, and refills where it removed self-intersections).
+        Triangles MeshFix added to fill the holes.
     shells_inverted : int
-        Closed shells turned over to face outward (or inward for a void).
+        Inside-out closed shells turned over to face outward.
     shells_dropped : int
         Shells that could not be closed into a volume and were left out.
     volume_before : float
