@@ -21,6 +21,7 @@ import trimesh
 
 from .errors import MeshError
 from .geometry import to_manifold, to_trimesh
+from .repair import RepairSummary, repair_shells
 
 #: Length of one unit in millimetres.
 UNIT_MM = {"mm": 1.0, "inch": 25.4, "m": 1000.0}
@@ -62,6 +63,8 @@ class Part:
         Factor applied to the file's coordinates to get mm.
     repairs : list of str
         What ``repair=True`` changed, empty when nothing was repaired.
+    repair : RepairSummary or None
+        The counts behind ``repairs`` (file units; ``scale`` converts), None without ``repair=True``.
     shells : int
         Closed shells of the file's mesh that make up this part.
     solid_index : int or None
@@ -81,6 +84,7 @@ class Part:
     mesh: trimesh.Trimesh
     scale: float = 1.0
     repairs: list[str] = field(default_factory=list)
+    repair: RepairSummary | None = None
     shells: int = 1
     solid_index: int | None = None
     shell_note: str | None = None
@@ -196,49 +200,29 @@ def mesh_defects(mesh: trimesh.Trimesh) -> list[str]:
 
 
 def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, list[str]]:
-    """Repair what can be repaired without changing the shape.
+    """Repair a mesh the way a slicer takes it (see :mod:`fcso.repair`).
 
-    Merges duplicate vertices, drops degenerate and duplicate triangles,
-    makes winding consistent and outward, fills simple holes.
+    Merges duplicate vertices, drops degenerate and duplicated triangles,
+    makes each shell's winding consistent, closes open shells' holes
+    (MeshFix), turns inside-out shells outward and unites overlapping shells
+    (manifold3d).
 
     Returns
     -------
     mesh : trimesh.Trimesh
-        The repaired copy.
+        The repaired copy (empty if no shell encloses a volume).
     changes : list of str
-        One line per change made.
+        One line per kind of change made.
+
+    Raises
+    ------
+    MeshError
+        A repaired shell manifold3d cannot take.
     """
-    mesh = mesh.copy()
-    changes = []
-    finite = np.isfinite(mesh.vertices).all(axis=1)
-    if not finite.all():
-        keep = finite[mesh.faces].all(axis=1)
-        changes.append(f"removed {int((~keep).sum())} triangles with non-finite vertices")
-        mesh.update_faces(keep)
-        mesh.remove_unreferenced_vertices()
-    n_vertices = len(mesh.vertices)
-    mesh.merge_vertices()
-    if len(mesh.vertices) != n_vertices:
-        changes.append(f"merged {n_vertices - len(mesh.vertices)} duplicate vertices")
-    n_faces = len(mesh.faces)
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.update_faces(mesh.unique_faces())
-    mesh.remove_unreferenced_vertices()
-    if len(mesh.faces) != n_faces:
-        changes.append(f"removed {n_faces - len(mesh.faces)} degenerate or duplicate triangles")
-    if not mesh.is_watertight:
-        n_faces = len(mesh.faces)
-        trimesh.repair.fill_holes(mesh)
-        if len(mesh.faces) != n_faces:
-            changes.append(f"filled holes with {len(mesh.faces) - n_faces} triangles")
-    volume_before = mesh.volume if mesh.is_watertight else None
-    winding_before = mesh.is_winding_consistent
-    trimesh.repair.fix_normals(mesh, multibody=True)
-    if not winding_before and mesh.is_winding_consistent:
-        changes.append("made triangle winding consistent")
-    if volume_before is not None and volume_before < 0 < mesh.volume:
-        changes.append("flipped inside-out mesh")
-    return mesh, changes
+    shells, summary = repair_shells(mesh)
+    if not shells:
+        return trimesh.Trimesh(), summary.lines
+    return trimesh.util.concatenate([s.mesh for s in _unite_shells(shells, "mesh")]), summary.lines
 
 
 def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False) -> tuple[trimesh.Trimesh, list[str]]:
@@ -249,18 +233,39 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     MeshError
         Naming ``path`` and the first defect (after repair, if it was asked for).
     """
-    changes: list[str] = []
     if len(mesh.faces) == 0:
         raise MeshError(path, "empty mesh: no triangles")
     if repair:
-        mesh, changes = repair_mesh(mesh)
+        solids, _, summary = _repaired_solids(mesh, path)
+        return trimesh.util.concatenate([s.mesh for s in solids]), summary.lines
     defects = mesh_defects(mesh)
     if defects:
-        hint = " even after --repair" if repair else " (run with --repair to try to fix it)"
-        raise MeshError(path, defects[0] + hint)
+        raise MeshError(path, defects[0] + " (run with --repair to try to fix it)")
     mesh = mesh.copy()
     mesh.merge_vertices()
-    return mesh, changes
+    return mesh, []
+
+
+def _repaired_solids(mesh: trimesh.Trimesh, path: str | Path) -> tuple[list[Solid], list[trimesh.Trimesh], RepairSummary]:
+    """The solids of a repaired mesh, its closed shells (file units), and what repair changed.
+
+    Raises
+    ------
+    MeshError
+        Naming ``path`` and the defect left when repair cannot make a closed volume.
+    """
+    shells, summary = repair_shells(mesh)
+    if not shells:
+        defect = (mesh_defects(mesh) or ["no closed volume"])[0]
+        raise MeshError(path, f"{defect}; even after --repair no shell encloses a volume")
+    solids = _unite_shells(shells, path) if len(shells) > 1 else [Solid(mesh=shells[0], shells=1)]
+    # by manifold3d's topology: lobes of a solid may touch along an edge without sharing it
+    failed = sum(1 for s in solids if not (s.mesh.is_watertight and s.mesh.volume > 0))
+    if failed:
+        raise MeshError(path, f"{failed} of {len(solids)} solids not closed even after --repair")
+    summary.volume_after = sum(float(s.mesh.volume) for s in solids)
+    summary.solids_out = len(solids)
+    return solids, shells, summary
 
 
 def check_zip_archive(
@@ -382,6 +387,11 @@ def mesh_solids(mesh: trimesh.Trimesh, source: str | Path) -> tuple[list[Solid],
     shells = mesh.split(only_watertight=False)
     if len(shells) <= 1:
         return [Solid(mesh=mesh, shells=1)], 1
+    return _unite_shells(shells, source), len(shells)
+
+
+def _unite_shells(shells: list[trimesh.Trimesh], source: str | Path) -> list[Solid]:
+    """The solids of closed, oriented shells (see :func:`mesh_solids`), largest first."""
     manifolds = []
     for number, shell in enumerate(shells):
         if shell.volume < 0:
@@ -418,7 +428,7 @@ def mesh_solids(mesh: trimesh.Trimesh, source: str | Path) -> tuple[list[Solid],
         count = sum(1 for m, out in zip(manifolds, outward) if (m ^ filled).volume() > 1e-9 * abs(filled.volume()))
         solids.append(Solid(mesh=whole, shells=max(count, 1)))
     solids.sort(key=lambda s: -s.mesh.volume)
-    return solids, len(shells)
+    return solids
 
 
 def _outermost_container(component: trimesh.Trimesh, outer: list[trimesh.Trimesh]) -> trimesh.Trimesh | None:
@@ -455,7 +465,7 @@ def load_parts(
         Scale each mesh uniformly so its longest bounding-box side is this
         long (mm), before splitting it into solids.
     repair : bool
-        Try :func:`repair_mesh` before validating.
+        Repair with :func:`fcso.repair.repair_shells` before validating.
     split_bodies : bool
         Separate solids become separate parts ``<name>#<k>`` (largest first);
         False refuses such a file.
@@ -491,14 +501,22 @@ def load_parts(
         mesh = item.mesh
         if not np.all(np.isfinite(mesh.vertices)) and not repair:
             raise MeshError(where, mesh_defects(mesh)[0])
-        mesh, changes = validate_mesh(mesh, where, repair=repair)
+        summary = None
+        if repair:
+            solids, closed, summary = _repaired_solids(mesh, where)
+            shells, shell_sum = len(closed), sum(float(s.volume) for s in closed)
+        else:
+            mesh, _ = validate_mesh(mesh, where)
+            solids, shells = mesh_solids(mesh, where)
+            shell_sum = float(mesh.volume)
         scale = factor
         if scale_to_mm is not None:
             if not scale_to_mm > 0:
                 raise MeshError(path, f"scale-to length must be positive, got {scale_to_mm}")
-            scale = scale_to_mm / float(mesh.extents.max())
-        mesh.apply_scale(scale)
-        solids, shells = mesh_solids(mesh, where)
+            bounds = np.array([s.mesh.bounds for s in solids])
+            scale = scale_to_mm / float((bounds[:, 1].max(axis=0) - bounds[:, 0].min(axis=0)).max())
+        for solid in solids:
+            solid.mesh.apply_scale(scale)
         if len(solids) > 1 and not split_bodies:
             raise MeshError(where, f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting")
         warnings = []
@@ -512,10 +530,11 @@ def load_parts(
                     path=str(path),
                     mesh=solid.mesh,
                     scale=scale,
-                    repairs=changes,
+                    repairs=summary.lines if summary else [],
+                    repair=summary,
                     shells=solid.shells,
                     solid_index=k if len(solids) > 1 else None,
-                    shell_note=_shell_note(solid, k, len(solids), shells, float(mesh.volume)),
+                    shell_note=_shell_note(solid, k, len(solids), shells, shell_sum * scale**3),
                     warnings=warnings,
                     instances=transforms,
                 )

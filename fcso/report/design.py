@@ -16,6 +16,7 @@ from .models import (
     PartReport,
     PrintFitEffect,
     PrintFitReport,
+    RepairReport,
     SampleReport,
     ScenarioQuality,
     ScenarioReport,
@@ -101,9 +102,30 @@ def part_report(part: Part) -> PartReport:
         volume_mm3=rounded(part.mesh.volume),
         faces=len(part.mesh.faces),
         repairs=part.repairs,
+        repair=repair_report(part),
         shells=part.shells,
         solid_index=part.solid_index,
         shell_handling=part.shell_note,
+    )
+
+
+def repair_report(part: Part) -> RepairReport | None:
+    """The part's repair in mm, or None when it was loaded without repair."""
+    summary = part.repair
+    if summary is None:
+        return None
+    return RepairReport(
+        holes_filled=summary.holes_filled,
+        faces_added=summary.faces_added,
+        faces_flipped=summary.faces_flipped,
+        faces_removed=summary.degenerate_removed + summary.duplicates_removed,
+        shells_inverted=summary.shells_inverted,
+        shells_in=summary.shells_in,
+        shells_dropped=summary.shells_dropped,
+        solids_out=summary.solids_out,
+        volume_before_mm3=rounded(summary.volume_before * part.scale**3),
+        volume_after_mm3=rounded(summary.volume_after * part.scale**3),
+        max_surface_deviation_mm=rounded(summary.max_deviation * part.scale),
     )
 
 

@@ -20,6 +20,28 @@ class ReportModel(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+class RepairReport(ReportModel):
+    """What --repair changed on a part's file (parts as a slicer takes them)."""
+
+    holes_filled: int = Field(description="Boundary loops closed (MeshFix)")
+    faces_added: int = Field(description="Triangles added to close holes")
+    faces_flipped: int = Field(description="Triangles turned to agree with their shell's winding")
+    faces_removed: int = Field(description="Degenerate and duplicated triangles removed")
+    shells_inverted: int = Field(description="Closed shells turned over to face outward")
+    shells_in: int = Field(description="Connected shells of the file's triangles after cleaning")
+    shells_dropped: int = Field(description="Shells left out because they enclose no volume")
+    solids_out: int = Field(
+        description="Solids made of the closed shells (overlaps united with manifold3d), all parts of the file"
+    )
+    volume_before_mm3: float = Field(
+        description="Sum of the shells' absolute enclosed volumes before hole filling, mm³"
+    )
+    volume_after_mm3: float = Field(description="Volume of the file's solids after repair and union, mm³")
+    max_surface_deviation_mm: float = Field(
+        description="Largest distance from a repaired corner to the file's triangles, mm"
+    )
+
+
 class PartReport(ReportModel):
     """A part as it was used."""
 
@@ -30,6 +52,7 @@ class PartReport(ReportModel):
     volume_mm3: float
     faces: int
     repairs: list[str] = Field(description="What --repair changed; empty when nothing was repaired")
+    repair: RepairReport | None = Field(None, description="What --repair changed, in figures; null without --repair")
     shells: int = Field(1, description="Closed shells of the file that make up this part")
     solid_index: int | None = Field(
         None, description="k of the name <file>#<k> when the file held several separate solids (1 = largest), else null"

@@ -1,0 +1,92 @@
+"""Broken versions of real closed meshes, the way exporters break them (tests and benchmarks.bench_repair)."""
+
+from __future__ import annotations
+
+import manifold3d
+import numpy as np
+import trimesh
+
+#: The ways :func:`break_mesh` breaks a mesh.
+KINDS = ("holes", "overlap", "flipped", "duplicated", "all")
+
+#: Where ``overlap`` puts the second body, as a fraction of the mesh's extents.
+OVERLAP_SHIFT = np.array([0.3, 0.2, 0.1])
+
+
+def break_mesh(mesh: trimesh.Trimesh, kind: str, seed: int = 23) -> trimesh.Trimesh:
+    """A broken copy of a closed mesh.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Closed mesh with shared vertices.
+    kind : str
+        ``holes``: three holes, each a triangle and its nearly coplanar
+        neighbours deleted (an exporter losing part of one CAD face);
+        ``overlap``: the mesh and a copy moved by ``OVERLAP_SHIFT`` of its
+        extents, overlapping, each with its own vertices and one such hole;
+        ``flipped``: 5 % of the triangles turned over; ``duplicated``: 5 % of
+        the triangles twice; ``all``: overlap, then 5 % flipped and 5 % duplicated.
+    seed : int
+        Seed of the random choices.
+    """
+    rng = np.random.default_rng(seed)
+    if kind == "holes":
+        return _holes(mesh, 3, rng)
+    if kind == "flipped":
+        return _flip(mesh, rng)
+    if kind == "duplicated":
+        return _duplicate(mesh, rng)
+    if kind not in ("overlap", "all"):
+        raise ValueError(f"unknown kind {kind!r} (use {', '.join(KINDS)})")
+    moved = mesh.copy()
+    moved.apply_translation(OVERLAP_SHIFT * mesh.extents)
+    overlap = trimesh.util.concatenate([_holes(mesh, 1, rng), _holes(moved, 1, rng)])
+    return overlap if kind == "overlap" else _duplicate(_flip(overlap, rng), rng)
+
+
+def intact_mesh(mesh: trimesh.Trimesh, kind: str) -> trimesh.Trimesh:
+    """The closed shells ``break_mesh(mesh, kind)`` was made from (for ``overlap``: both bodies)."""
+    if kind not in ("overlap", "all"):
+        return mesh
+    moved = mesh.copy()
+    moved.apply_translation(OVERLAP_SHIFT * mesh.extents)
+    return trimesh.util.concatenate([mesh, moved])
+
+
+def intact_volume(mesh: trimesh.Trimesh, kind: str) -> float:
+    """Volume the repair of ``break_mesh(mesh, kind)`` should give, from the intact mesh (file units³)."""
+    if kind not in ("overlap", "all"):
+        return float(mesh.volume)
+    body = manifold3d.Manifold(
+        manifold3d.Mesh(
+            vert_properties=np.asarray(mesh.vertices, np.float32), tri_verts=np.asarray(mesh.faces, np.uint32)
+        )
+    )
+    moved = body.translate(tuple(float(x) for x in OVERLAP_SHIFT * mesh.extents))
+    return float((body + moved).volume())
+
+
+def _holes(mesh: trimesh.Trimesh, count: int, rng: np.random.Generator) -> trimesh.Trimesh:
+    adjacency = mesh.face_adjacency
+    normals = mesh.face_normals
+    dropped = set()
+    for face in rng.choice(len(mesh.faces), count, replace=False):
+        neighbours = adjacency[(adjacency == face).any(axis=1)].ravel()
+        dropped.update(int(x) for x in neighbours if normals[x] @ normals[face] > 0.95)
+        dropped.add(int(face))
+    keep = np.ones(len(mesh.faces), bool)
+    keep[list(dropped)] = False
+    return trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=False)
+
+
+def _flip(mesh: trimesh.Trimesh, rng: np.random.Generator) -> trimesh.Trimesh:
+    faces = mesh.faces.copy()
+    chosen = rng.choice(len(faces), max(1, len(faces) // 20), replace=False)
+    faces[chosen] = faces[chosen][:, ::-1]
+    return trimesh.Trimesh(mesh.vertices, faces, process=False)
+
+
+def _duplicate(mesh: trimesh.Trimesh, rng: np.random.Generator) -> trimesh.Trimesh:
+    chosen = rng.choice(len(mesh.faces), max(1, len(mesh.faces) // 20), replace=False)
+    return trimesh.Trimesh(mesh.vertices, np.vstack([mesh.faces, mesh.faces[chosen]]), process=False)
