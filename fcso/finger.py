@@ -13,6 +13,7 @@ from .config import FingerConfig, GripperConfig, SamplerConfig
 from .errors import ConfigError, GeometryError
 from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points
 from .parts import read_mesh, unit_factor, validate_mesh
+from .printfit import SIMPLIFY_TOLERANCE_MM
 from .sampler import FingerPlate
 
 #: Built-in finger: plate thickness and mounting flange, mm (Robotiq Hand-E sized).
@@ -224,26 +225,13 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
     near-coincident faces, :mod:`fcso.printfit`) would merge when the file is
     read, leaving zero-area faces and a surface in pieces. So the solid is
     rebuilt by manifold3d from its float32 mesh, which collapses the faces
-    that rounding made degenerate; its coordinates are then exactly the
-    file's. Where that is not enough (distinct vertices that round to one
-    point), the solid is simplified by manifold3d to :data:`SNAP_TOLERANCES_MM`
-    in turn, each moving the surface by less than itself, until the file
-    read back is one watertight body. The result is the written file read
-    back with trimesh.
+    that rounding made degenerate, and simplified to
+    :data:`fcso.printfit.SIMPLIFY_TOLERANCE_MM`, which removes sheets of
+    zero thickness at float32 resolution (a solar tracker's and a DC-DC
+    case's finger kept a two-triangle flap near its pocket floor); simplification keeps a
+    subset of the vertices, so the coordinates stay exactly the file's. The
+    result is the written file read back with trimesh.
     """
-    written = _written(solid)
-    for tolerance in SNAP_TOLERANCES_MM:
-        if not written.defects():
-            break
-        written = _written(solid.simplify(tolerance))
-    return written
-
-
-#: Tolerances (mm) a solid is simplified to, in turn, when its float32 file is not one watertight body.
-SNAP_TOLERANCES_MM = (1e-5, 1e-4, 1e-3)
-
-
-def _written(solid: manifold3d.Manifold) -> WrittenMesh:
     mesh = solid.to_mesh()
     snapped = manifold3d.Manifold(
         manifold3d.Mesh(
@@ -251,6 +239,7 @@ def _written(solid: manifold3d.Manifold) -> WrittenMesh:
             tri_verts=np.array(np.asarray(mesh.tri_verts), dtype=np.uint32, order="C"),
         )
     )
+    snapped = snapped.as_original().simplify(SIMPLIFY_TOLERANCE_MM)
     if snapped.status() != manifold3d.Error.NoError:
         raise GeometryError(f"manifold3d refused the solid snapped to float32: {snapped.status()}")
     data = to_trimesh(snapped).export(file_type="stl")

@@ -29,10 +29,13 @@ double precision they coincide only to 1e-16..1e-7 mm. manifold3d's exact
 Booleans keep every such near-coincidence as a sliver narrower than float32
 resolution; written as a float32 STL, the slivers collapse into zero-area
 triangles and the surface falls apart into pieces (a knurled knob's
-``finger.stl``: 5 627 zero-area triangles, 1 688 pieces). The opening of
-:func:`open_thin_walls` sums a kernel over an eroded pad whose every facet
-carries such slivers, so it multiplied them (a 450-triangle pad opened into
-53 000 triangles), so its erosion and its result are simplified.
+``finger.stl``: 5 627 zero-area triangles, 1 688 pieces). manifold3d's own
+sums do not leave them. The opening of :func:`open_thin_walls` still dilates
+an erosion whose facets carry slivers, and multiplies them (a 450-triangle
+pad opened into 53 000 triangles, 251 of zero area as written): its erosion
+and its result are simplified to :data:`SIMPLIFY_TOLERANCE_MM`. What
+float32 rounding itself makes degenerate is collapsed when a delivered
+solid is written (:func:`fcso.finger.as_written`).
 """
 
 from __future__ import annotations
@@ -102,7 +105,7 @@ def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold
     ----------
     solid : manifold3d.Manifold
     kernel : (k, 3) float
-        Points whose convex hull is the kernel; it must contain the origin.
+        Points whose convex hull is the kernel (mm).
 
     Returns
     -------

@@ -20,8 +20,13 @@ TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 @pytest.fixture(scope="module")
 def two_part_design():
-    # the paper's sampler and measure: every candidate is listed, Q = min E (the capture measure: below)
-    config = small_config(sampler={"stride_mm": 6.0, "feature_positions": False}, quality={"measure": "paper"})
+    # the paper sampler, measure and exact pocket (METHOD §4): every candidate is listed, Q = min E, the pad keeps T - D
+    # and the grasps seat as the candidates were scored (the capture measure: below)
+    config = small_config(
+        sampler={"stride_mm": 6.0, "feature_positions": False},
+        quality={"measure": "paper"},
+        print={"profile": "custom"},
+    )
     return fcso.design([data_path(name) for name in TWO_PARTS], config)
 
 
@@ -122,7 +127,8 @@ def test_tcp_pose_on_a_known_sample():
 
 
 def test_same_inputs_and_seed_give_identical_reports(two_part_design):
-    config = small_config(sampler={"stride_mm": 6.0})
+    # the exact pocket (METHOD §4): the pad keeps T - D and the grasps seat as the candidates were scored
+    config = small_config(sampler={"stride_mm": 6.0}, print={"profile": "custom"})
     again = fcso.design([data_path(name) for name in TWO_PARTS], config).report
     first = json.loads(two_part_design.report.model_dump_json())
     second = json.loads(again.model_dump_json())

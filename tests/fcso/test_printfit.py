@@ -189,7 +189,15 @@ def test_a_sliver_below_the_minimum_wall_is_removed():
 
 
 def test_profiles_load_and_keys_override(tmp_path):
+    # the default is the paper's printer and material (METHOD §9b): HP MJF in PA12
+    assert PrintConfig().profile == "mjf-pa12"
     assert PrintConfig().resolved() == {
+        "clearance_mm": 0.4,
+        "lead_in_deg": 15.0,
+        "min_wall_mm": 0.5,
+        "density_g_cm3": 1.01,
+    }
+    assert PrintConfig(profile="custom").resolved() == {
         "clearance_mm": 0.0,
         "lead_in_deg": 0.0,
         "min_wall_mm": 0.0,

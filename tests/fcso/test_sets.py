@@ -41,7 +41,8 @@ NARROWING_BIG_PLATE = knob_part("narrowing-big-plate", 14.0, 0.7, plate_mm=70.0)
 
 
 def config(**sections):
-    return small_config(finger_sets={"min_retained": MIN_RETAINED}, **sections)
+    # exact pockets: the retained qualities compare solo and shared designs as METHOD §11 scores them
+    return small_config(finger_sets={"min_retained": MIN_RETAINED}, print={"profile": "custom"}, **sections)
 
 
 def test_partition_objective_and_helpers():

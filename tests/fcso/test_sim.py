@@ -41,7 +41,14 @@ def ridged(tmp_path_factory):
     """
     mesh = ridged_block()
     part = Part(name="ridged", path="ridged_block", mesh=mesh, scale=1.0, repairs=[])
-    config = DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}, "sampler": {"yaw_deg": [0.0]}})
+    # the exact pocket: the pads close onto the seat the design scored (q = 0)
+    config = DesignConfig().updated(
+        {
+            "poses": {"count": 1, "select": "most_probable"},
+            "sampler": {"yaw_deg": [0.0]},
+            "print": {"profile": "custom"},
+        }
+    )
     result = design([part], config)
     assert result.report.candidates[0].pad_case != "bad"
     cache = tmp_path_factory.mktemp("cache")
