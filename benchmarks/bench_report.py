@@ -21,7 +21,7 @@ import trimesh
 
 from fcso import design, load_config, load_part
 from fcso.output.design_page import load_report_inputs, render_html, report_inputs
-from fcso.output.render import grasp_picture
+from fcso.output.pictures import grasp_picture
 
 ROOT = Path(__file__).resolve().parents[1]
 

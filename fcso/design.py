@@ -116,6 +116,21 @@ def flat_finger(config: DesignConfig, repair: bool = False) -> FlatFinger:
     )
 
 
+def load_batch(parts: Sequence[Part | str | Path], config: DesignConfig, repair: bool = False) -> list[Part]:
+    """A batch's parts: each path loaded in mm with :func:`fcso.load_parts` (a file may give several), parts as given.
+
+    ``repair`` repairs meshes that are not closed volumes; ``[parts] split_bodies`` decides what separate solids in
+    one file become.
+    """
+    return [
+        one
+        for p in parts
+        for one in (
+            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
+        )
+    ]
+
+
 def prepare(
     parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None = None, repair: bool = False
 ) -> Prepared:
@@ -130,13 +145,7 @@ def prepare(
     report_progress = _progress_with_note(progress)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
-    loaded = [
-        one
-        for p in parts
-        for one in (
-            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
-        )
-    ]
+    loaded = load_batch(parts, config, repair)
     warnings = list(dict.fromkeys(w for p in loaded for w in p.warnings))
     finger = flat_finger(config, repair=repair)
     timings["load"] = time.perf_counter() - clock

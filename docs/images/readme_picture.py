@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from fcso.output.design_page import load_report_inputs
-from fcso.output.render import gripper_picture
+from fcso.output.pictures import gripper_picture
 
 
 def main(directory: str, target: str) -> None:

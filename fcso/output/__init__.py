@@ -8,7 +8,10 @@ package turns its results into files. Submodules:
 - :mod:`~fcso.output.html`: building blocks of the report pages
 - :mod:`~fcso.output.design_page`: ``report.html`` of one design, with the data its pictures are drawn from
 - :mod:`~fcso.output.sets_page`: the finger-sets sections, the job page and the terminal's pick plan
-- :mod:`~fcso.output.render`: the pictures (matplotlib, off screen)
+- :mod:`~fcso.output.render`: drawing meshes off screen (matplotlib's Agg canvas): views, layers, panels, PNG
+- :mod:`~fcso.output.pictures`: the pictures of the design pages
+- :mod:`~fcso.output.verification_page`: the verification section (fcso.sim) and its files
+- :mod:`~fcso.output.read`: reading an output folder back
 - :mod:`~fcso.output.picture_process`: a process that draws the pictures beside the design
 - :mod:`~fcso.output.table`: the quality table (the paper's Table I layout)
 

@@ -24,8 +24,8 @@ from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
 from ..sampler import REJECTION_REASONS
 from .html import closing_sections, html_page, image, key_value_table, text
-from .layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, write_atomic
-from .read import read_report, read_stl, reload_parts
+from .layout import REPORT_HTML, write_atomic
+from .read import read_design_folder
 from .sets_page import finger_sets_section
 from .table import SCENARIO_GROUPS, quality_columns, scenario_labels
 
@@ -102,11 +102,9 @@ def load_report_inputs(directory: str | Path) -> ReportInputs:
     MeshError
         A file is missing or unreadable (named in the message).
     """
-    directory = Path(directory)
-    report = read_report(directory)
-    finger = read_stl(directory / FINGER_STL)
-    fingerpad = read_stl(directory / FINGERPAD_STL)
-    grasps = reseat_grasps(report, reload_parts(report, directory), fingerpad)
+    folder = read_design_folder(directory)
+    report, finger, fingerpad = folder.report, folder.finger, folder.fingerpad
+    grasps = reseat_grasps(report, folder.parts, fingerpad)
     flat = flat_finger(report.settings)
     return ReportInputs(report, finger, fingerpad, pad_to_finger(flat, report.settings.sampler), grasps)
 
@@ -119,11 +117,12 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
     dict
         ``"gripper"`` (both fingers on the first scenario's part), ``"finger"``,
         ``"fingerpad"`` and ``"grasp <m>"``, ``"normals <m>"``, ``"pose <m>"``
-        for each scenario ``m``: PNG bytes.
+        (and ``"capture <m>"`` under the capture measure) for each scenario
+        ``m``: PNG bytes.
     """
     # matplotlib loads only where pictures are drawn (0.4 s): a command that
     # has them drawn by a picture process (fcso.output.picture_process) never loads it
-    from .render import (
+    from .pictures import (
         capture_picture,
         finger_picture,
         fingerpad_picture,

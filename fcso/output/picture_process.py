@@ -78,7 +78,8 @@ class PictureProcess:
 def _serve(connection: Connection, parent_pid: int) -> None:
     # the command's end of the pipe is open here too: without this a killed command would leave the process waiting
     die_with_parent(parent_pid)
-    from . import render  # noqa: F401  loaded now, while the design runs, not when the page arrives
+    # the drawing code loads now, while the design runs, not when the page arrives
+    from . import pictures as drawing  # noqa: F401
     from .design_page import pictures
 
     def report_progress(stage: str, done: int, total: int) -> None:

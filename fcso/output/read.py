@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import trimesh
@@ -10,7 +11,7 @@ import trimesh
 from ..errors import MeshError
 from ..parts import Part, load_parts
 from ..report.models import DesignReport
-from .layout import REPORT_JSON
+from .layout import FINGER_STL, FINGERPAD_STL, REPORT_JSON
 
 
 def read_stl(path: Path) -> trimesh.Trimesh:
@@ -82,3 +83,37 @@ def is_job_folder(directory: str | Path) -> bool:
     except (OSError, ValueError):
         return False
     return isinstance(data, dict) and "finger_sets" in data and "best" not in data
+
+
+@dataclass
+class DesignFolder:
+    """A design's output folder read back.
+
+    Attributes
+    ----------
+    report : DesignReport
+    finger, fingerpad : trimesh.Trimesh
+        ``finger.stl`` (finger frame) and ``fingerpad.stl`` (pad frame), mm, vertices merged.
+    parts : list of Part
+        The report's parts read again from their files, in its order, mm.
+    """
+
+    report: DesignReport
+    finger: trimesh.Trimesh
+    fingerpad: trimesh.Trimesh
+    parts: list[Part]
+
+
+def read_design_folder(directory: str | Path) -> DesignFolder:
+    """``report.json``, ``finger.stl``, ``fingerpad.stl`` and the part files the report names.
+
+    Raises
+    ------
+    MeshError
+        A file is missing or unreadable (named in the message).
+    """
+    directory = Path(directory)
+    report = read_report(directory)
+    finger = read_stl(directory / FINGER_STL)
+    fingerpad = read_stl(directory / FINGERPAD_STL)
+    return DesignFolder(report, finger, fingerpad, reload_parts(report, directory))

@@ -21,7 +21,7 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
     fingers : list of trimesh.Trimesh
         Every set's finger (mm), set order.
     """
-    from .render import finger_picture  # matplotlib loads only where pictures are drawn
+    from .pictures import finger_picture  # matplotlib loads only where pictures are drawn
 
     sets = report.finger_sets
     config = report.settings

@@ -18,8 +18,8 @@ from ..report.models import DesignReport
 from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport
 from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
-from .layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, VERIFICATION_JSON, write_atomic
-from .read import read_report, read_stl, reload_parts
+from .layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
+from .read import read_design_folder
 from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, decimate, draw_layers, png_bytes
 
 #: Markers around the section, so verifying again replaces it.
@@ -304,10 +304,8 @@ def load_design(directory: str | Path) -> tuple[DesignReport, DesignUnderTest]:
     MeshError
         A file is missing or unreadable (named in the message).
     """
-    directory = Path(directory)
-    report = read_report(directory)
-    parts = {entry.name: part.mesh for entry, part in zip(report.parts, reload_parts(report, directory))}
+    folder = read_design_folder(directory)
+    report = folder.report
+    parts = {entry.name: part.mesh for entry, part in zip(report.parts, folder.parts)}
     cases = [grasp_case(report, g, parts[g.part]) for g in report.grasps]
-    fingerpad = read_stl(directory / FINGERPAD_STL)
-    finger = read_stl(directory / FINGER_STL)
-    return report, DesignUnderTest(cases, fingerpad, finger_hull(report, finger))
+    return report, DesignUnderTest(cases, folder.fingerpad, finger_hull(report, folder.finger))

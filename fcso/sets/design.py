@@ -11,10 +11,10 @@ from pathlib import Path
 
 from .. import __version__
 from ..config import DesignConfig
-from ..design import DesignResult, design, design_prepared, prepare, subset
+from ..design import DesignResult, design, design_prepared, load_batch, prepare, subset
 from ..errors import NoGraspError
 from ..parallel import WorkerPool
-from ..parts import Part, load_parts
+from ..parts import Part
 from ..progress import Progress
 from ..report.design import part_report
 from ..report.models import DesignReport, FingerSetsReport, JobReport
@@ -87,13 +87,7 @@ def design_sets(
         return SetsResult([design(parts, config, progress=progress, repair=repair)], None, None)
     report_progress = progress or (lambda stage, done, total, note="": None)
     clock = time.perf_counter()
-    loaded = [
-        one
-        for p in parts
-        for one in (
-            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
-        )
-    ]
+    loaded = load_batch(parts, config, repair)
     groups = identical_groups([p.mesh for p in loaded])
     unique = [loaded[g[0]] for g in groups]
     dedup_s = time.perf_counter() - clock
