@@ -31,10 +31,13 @@ class SamplerConfig(_Section):
     yaw_deg: list[float] = Field(
         default_factory=lambda: [0.0, 90.0],
         min_length=1,
-        description="Yaw angles of the closing axis about the table normal, degrees, in the rested part's bounding-box frame",
+        description="Yaw angles of the closing axis about the table normal, degrees, "
+        "in the rested part's bounding-box frame",
     )
     table_clearance_mm: float = Field(
-        1.0, ge=0, description="Lowest pad height above the table and the clearance the part needs between the open pads, mm"
+        1.0,
+        ge=0,
+        description="Lowest pad height above the table and the clearance the part needs between the open pads, mm",
     )
     min_contact_area_mm2: float | None = Field(
         None, ge=0, description="Least part surface inside each pad box, mm²; default 10 % of L x W"
@@ -46,7 +49,7 @@ class SamplerConfig(_Section):
     )
 
     @model_validator(mode="after")
-    def _penetration_inside_pad(self) -> "SamplerConfig":
+    def _penetration_inside_pad(self) -> SamplerConfig:
         if not self.penetration_mm < self.thickness_mm:
             raise ValueError(
                 f"penetration_mm ({self.penetration_mm}) must be smaller than thickness_mm ({self.thickness_mm})"
@@ -76,7 +79,7 @@ class GripperConfig(_Section):
     )
 
     @model_validator(mode="after")
-    def _opening_order(self) -> "GripperConfig":
+    def _opening_order(self) -> GripperConfig:
         if self.min_opening_mm >= self.max_opening_mm:
             raise ValueError("min_opening_mm must be smaller than max_opening_mm")
         return self
@@ -87,7 +90,9 @@ class FilterConfig(_Section):
 
     volume_ratio_threshold: float = Field(0.1, ge=0, le=1, description="Threshold th on R = (V_B - V_I)/V_B")
     block_factor: float = Field(1.5, gt=0, description="K: block depth d_B = K x min(d_n of good geometries)")
-    cluster_angle_deg: float = Field(15.0, gt=0, lt=90, description="Angle for normal clustering and the flatness test, degrees")
+    cluster_angle_deg: float = Field(
+        15.0, gt=0, lt=90, description="Angle for normal clustering and the flatness test, degrees"
+    )
     full_cover_fraction: float = Field(
         0.99, gt=0, le=1, description="Fraction of the pad face a cross-section must cover to count as full"
     )
@@ -104,7 +109,8 @@ class PosesConfig(_Section):
     # always gets the same poses, and no draw can land on a rare one.
     select: Literal["random", "most_probable"] | list[int] = Field(
         "most_probable",
-        description="'most_probable' (the count most probable poses), 'random' (uniform over all stable poses, seeded), "
+        description="'most_probable' (the count most probable poses), "
+        "'random' (uniform over all stable poses, seeded), "
         "or explicit pose indices (0 = most probable)",
     )
     seed: int = Field(0, description="Seed of the random pose selection (select = 'random')")
@@ -113,8 +119,12 @@ class PosesConfig(_Section):
 class ContactConfig(_Section):
     """Contact evaluation by seating (METHOD §6)."""
 
-    eps_mm: float = Field(0.05, gt=0, description="Contact tolerance: part points within eps of the pad are in contact, mm")
-    sample_density_per_mm2: float = Field(4.0, gt=0, description="Surface samples per mm² of part surface inside a pad box")
+    eps_mm: float = Field(
+        0.05, gt=0, description="Contact tolerance: part points within eps of the pad are in contact, mm"
+    )
+    sample_density_per_mm2: float = Field(
+        4.0, gt=0, description="Surface samples per mm² of part surface inside a pad box"
+    )
     seed: int = Field(0, description="Seed of the surface sampling")
 
 
@@ -123,10 +133,14 @@ class SearchConfig(_Section):
 
     max_exhaustive: int = Field(20000, ge=1, description="Screen every candidate when there are at most this many")
     max_evaluations: int = Field(
-        4000, ge=1, description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds"
+        4000,
+        ge=1,
+        description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds",
     )
     exact_top_k: int = Field(8, ge=8, description="Best screened candidates re-evaluated exactly (METHOD §8b: k >= 8)")
-    report_candidates: int = Field(1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)")
+    report_candidates: int = Field(
+        1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)"
+    )
     jobs: int = Field(0, ge=0, description="Worker processes; 0: every available core")
 
 
@@ -150,7 +164,9 @@ class FingerConfig(_Section):
     """
 
     mesh: Path | None = Field(None, description="Flat finger mesh file; none: built-in parametric finger")
-    units: Literal["mm", "inch", "m"] | float = Field("mm", description="Unit of the finger mesh: mm, inch, m or a factor to mm")
+    units: Literal["mm", "inch", "m"] | float = Field(
+        "mm", description="Unit of the finger mesh: mm, inch, m or a factor to mm"
+    )
     contact_origin_mm: tuple[float, float, float] | None = Field(
         None, description="Centre of the contact face where the pad's back face goes, mm (finger mesh coordinates)"
     )
@@ -161,11 +177,13 @@ class FingerConfig(_Section):
     overlap_mm: float = Field(0.2, gt=0, description="Overlap of pad and finger so the union is one solid, mm")
 
     @model_validator(mode="after")
-    def _frame_with_mesh(self) -> "FingerConfig":
+    def _frame_with_mesh(self) -> FingerConfig:
         if self.mesh is not None:
             missing = [k for k in ("contact_origin_mm", "contact_normal", "up") if getattr(self, k) is None]
             if missing:
-                raise ValueError(f"finger mesh {self.mesh} needs its contact-face frame: set {', '.join(missing)} in [finger]")
+                raise ValueError(
+                    f"finger mesh {self.mesh} needs its contact-face frame: set {', '.join(missing)} in [finger]"
+                )
         return self
 
 
@@ -223,21 +241,34 @@ class PrintConfig(_Section):
 
     profile: Literal["mjf-pa12", "fdm-pla", "sla-resin", "custom"] = Field(
         "mjf-pa12",
-        description="Printer profile giving the defaults; mjf-pa12: the paper's HP Multi Jet Fusion in PA12; custom: zero clearance, lead-in and minimum wall (the exact pocket)",
+        description="Printer profile giving the defaults; mjf-pa12: the paper's HP Multi Jet Fusion in PA12; "
+        "custom: zero clearance, lead-in and minimum wall (the exact pocket)",
     )
     clearance_mm: float | None = Field(
-        None, ge=0, description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm"
+        None,
+        ge=0,
+        description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm",
     )
     lead_in_deg: float | None = Field(
-        None, ge=0, lt=60, description="Draft of the pocket walls, wider at the pad face and exact at depth, degrees; 0 disables"
+        None,
+        ge=0,
+        lt=60,
+        description="Draft of the pocket walls, wider at the pad face and exact at depth, degrees; 0 disables",
     )
     min_wall_mm: float | None = Field(
-        None, ge=0, description="Thinnest pad wall kept: thinner walls and slivers are removed after carving, mm; 0 disables"
+        None,
+        ge=0,
+        description="Thinnest pad wall kept: thinner walls and slivers are removed after carving, mm; 0 disables",
     )
-    density_g_cm3: float | None = Field(None, gt=0, description="Density of the printed part material, for the simulation's mass, g/cm³")
+    density_g_cm3: float | None = Field(
+        None, gt=0, description="Density of the printed part material, for the simulation's mass, g/cm³"
+    )
 
     def resolved(self) -> dict[str, float]:
-        """The effective ``clearance_mm``, ``lead_in_deg``, ``min_wall_mm`` and ``density_g_cm3``: explicit keys over the profile's."""
+        """The effective ``clearance_mm``, ``lead_in_deg``, ``min_wall_mm`` and ``density_g_cm3``.
+
+        Explicit keys over the profile's.
+        """
         values = dict(PRINT_PROFILES[self.profile])
         values.update({k: v for k in values if (v := getattr(self, k)) is not None})
         return values
@@ -257,28 +288,46 @@ class QualityConfig(_Section):
     )
     position_error_mm: float = Field(2.0, gt=0, description="Start error along each table axis, -x..x, mm")
     yaw_error_deg: float = Field(3.0, ge=0, description="Start error about the vertical, -x..x, degrees")
-    success_mm: float = Field(0.3, gt=0, description="A start is captured when the part ends this close to its seat, mm")
+    success_mm: float = Field(
+        0.3, gt=0, description="A start is captured when the part ends this close to its seat, mm"
+    )
     success_deg: float = Field(1.0, gt=0, description="... and this close in rotation, degrees")
     friction: float = Field(0.4, ge=0, description="Coulomb friction coefficient between pad and part")
     grip_force_n: float = Field(60.0, gt=0, description="Grip force of each finger, N")
-    hold_force_n: float = Field(30.0, gt=0, description="Largest push at the centre of mass that holding is measured up to, N")
+    hold_force_n: float = Field(
+        30.0, gt=0, description="Largest push at the centre of mass that holding is measured up to, N"
+    )
 
 
 class FingerSetsConfig(_Section):
     """How many finger sets a job may use and what each part must keep (METHOD §11, ``[finger_sets]``)."""
 
-    max: int = Field(4, ge=1, description="Most finger sets (fingers the cell changes between) for one job; 1: one finger for every part, the paper's method")
+    max: int = Field(
+        4,
+        ge=1,
+        description="Most finger sets (fingers the cell changes between) for one job; "
+        "1: one finger for every part, the paper's method",
+    )
     min_retained: float = Field(
-        0.5, ge=0, le=1, description="Least retained quality E / E* every graspable scenario should keep in its set (E*: its solo best E)"
+        0.5,
+        ge=0,
+        le=1,
+        description="Least retained quality E / E* every graspable scenario should keep in its set "
+        "(E*: its solo best E)",
     )
     screen_samples: int = Field(
-        10, ge=1, description="Best samples per scenario (by solo screened E) that the partition search screens sets with"
+        10,
+        ge=1,
+        description="Best samples per scenario (by solo screened E) that the partition search screens sets with",
     )
     screen_evaluations: int = Field(
         1000, ge=1, description="Screened candidates per set while the partition is searched (final sets use [search])"
     )
     exhaustive_parts: int = Field(
-        5, ge=1, le=8, description="Jobs with at most this many distinct graspable parts try every partition (proof under screening)"
+        5,
+        ge=1,
+        le=8,
+        description="Jobs with at most this many distinct graspable parts try every partition (proof under screening)",
     )
 
 
@@ -297,7 +346,7 @@ class DesignConfig(_Section):
     finger_sets: FingerSetsConfig = Field(default_factory=FingerSetsConfig)
     quality: QualityConfig = Field(default_factory=QualityConfig)
 
-    def updated(self, overrides: dict) -> "DesignConfig":
+    def updated(self, overrides: dict) -> DesignConfig:
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""
         merged = self.model_dump()
         for section, values in overrides.items():
@@ -364,7 +413,9 @@ def load_config(path: str | Path) -> DesignConfig:
     finger = data.get("finger")
     if isinstance(finger, dict) and isinstance(finger.get("mesh"), str):
         # a relative finger mesh is relative to the config file, not the cwd
-        finger["mesh"] = str((path.parent / finger["mesh"]).resolve()) if not Path(finger["mesh"]).is_absolute() else finger["mesh"]
+        finger["mesh"] = (
+            str((path.parent / finger["mesh"]).resolve()) if not Path(finger["mesh"]).is_absolute() else finger["mesh"]
+        )
     try:
         return DesignConfig.model_validate(data)
     except ValidationError as exc:

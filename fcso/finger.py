@@ -299,7 +299,8 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
     bodies = len(fused.decompose())
     if bodies != 1:
         raise GeometryError(
-            f"{finger.source}: fused finger is not one body (bodies: {bodies}); check the finger's contact_origin_mm and contact_normal"
+            f"{finger.source}: fused finger is not one body (bodies: {bodies}); "
+            "check the finger's contact_origin_mm and contact_normal"
         )
     written = print_ready(fused, f"{finger.source}: fused finger")
     return FusedFinger(

@@ -134,7 +134,9 @@ def pad_geometry(
     )
 
 
-def surface_in_pad(vertices: np.ndarray, faces: np.ndarray, frame: np.ndarray, sampler: SamplerConfig) -> tuple[np.ndarray, np.ndarray]:
+def surface_in_pad(
+    vertices: np.ndarray, faces: np.ndarray, frame: np.ndarray, sampler: SamplerConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """The part surface inside the pad box, in the pad frame.
 
     Parameters

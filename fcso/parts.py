@@ -168,7 +168,8 @@ def _check_stl_size(path: Path) -> None:
     expected = 84 + 50 * count
     if len(data) < expected:
         raise MeshError(
-            path, f"truncated binary STL: header announces {count} triangles ({expected} bytes), file has {len(data)} bytes"
+            path,
+            f"truncated binary STL: header announces {count} triangles ({expected} bytes), file has {len(data)} bytes",
         )
 
 
@@ -177,16 +178,27 @@ def mesh_defects(mesh: trimesh.Trimesh) -> list[str]:
     if len(mesh.faces) == 0:
         return ["empty mesh: no triangles"]
     if not np.all(np.isfinite(mesh.vertices)):
-        return [f"non-finite coordinates (NaN or infinity) in {int((~np.isfinite(mesh.vertices)).any(axis=1).sum())} vertices"]
+        return [
+            "non-finite coordinates (NaN or infinity) in "
+            f"{int((~np.isfinite(mesh.vertices)).any(axis=1).sum())} vertices"
+        ]
     defects = []
     merged = mesh.copy()
     merged.merge_vertices()
     if not merged.is_watertight:
         _, counts = np.unique(merged.edges_sorted, axis=0, return_counts=True)
         boundary, shared = int((counts == 1).sum()), int((counts > 2).sum())
-        what = ", ".join(
-            text for n, text in ((boundary, f"{boundary} boundary edges"), (shared, f"{shared} edges shared by more than two triangles")) if n
-        ) or "degenerate triangles"
+        what = (
+            ", ".join(
+                text
+                for n, text in (
+                    (boundary, f"{boundary} boundary edges"),
+                    (shared, f"{shared} edges shared by more than two triangles"),
+                )
+                if n
+            )
+            or "degenerate triangles"
+        )
         defects.append(f"open mesh: not watertight ({what})")
     elif not merged.is_winding_consistent:
         defects.append("inconsistent triangle winding")
@@ -246,7 +258,9 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     return mesh, []
 
 
-def _repaired_solids(mesh: trimesh.Trimesh, path: str | Path) -> tuple[list[Solid], list[trimesh.Trimesh], RepairSummary]:
+def _repaired_solids(
+    mesh: trimesh.Trimesh, path: str | Path
+) -> tuple[list[Solid], list[trimesh.Trimesh], RepairSummary]:
     """The solids of a repaired mesh, its closed shells (file units), and what repair changed.
 
     Raises
@@ -299,7 +313,9 @@ def check_zip_archive(
         ratio = entry.file_size / max(entry.compress_size, 1)
         if ratio > max_ratio:
             raise MeshError(
-                path, f"3MF entry {entry.filename!r} inflates {ratio:.0f} times (limit {max_ratio:.0f}): refused as a zip bomb"
+                path,
+                f"3MF entry {entry.filename!r} inflates {ratio:.0f} times (limit {max_ratio:.0f}): "
+                "refused as a zip bomb",
             )
 
 
@@ -406,7 +422,8 @@ def _unite_shells(shells: list[trimesh.Trimesh], source: str | Path) -> list[Sol
     void_union = manifold3d.Manifold.batch_boolean(voids, manifold3d.OpType.Add) if voids else None
     # a shell inside a void is a piece in that cavity: added back after the voids are cut
     islands = [
-        out and void_union is not None and (m ^ void_union).volume() >= m.volume() * (1 - 1e-6) for m, out in zip(manifolds, outward)
+        out and void_union is not None and (m ^ void_union).volume() >= m.volume() * (1 - 1e-6)
+        for m, out in zip(manifolds, outward)
     ]
     solid = manifold3d.Manifold.batch_boolean(
         [m for m, out, island in zip(manifolds, outward, islands) if out and not island], manifold3d.OpType.Add
@@ -414,7 +431,9 @@ def _unite_shells(shells: list[trimesh.Trimesh], source: str | Path) -> list[Sol
     if void_union is not None:
         solid = solid - void_union
     if any(islands):
-        solid = manifold3d.Manifold.batch_boolean([solid] + [m for m, island in zip(manifolds, islands) if island], manifold3d.OpType.Add)
+        solid = manifold3d.Manifold.batch_boolean(
+            [solid] + [m for m, island in zip(manifolds, islands) if island], manifold3d.OpType.Add
+        )
     components = [to_trimesh(c) for c in solid.decompose()]
     outer = [c for c in components if c.volume > 0]
     owners = [_outermost_container(c, outer) for c in components]
@@ -440,7 +459,8 @@ def _outermost_container(component: trimesh.Trimesh, outer: list[trimesh.Trimesh
 
 def _geometry_key(mesh: trimesh.Trimesh) -> str:
     return hashlib.sha256(
-        np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes() + np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes()
+        np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes()
+        + np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes()
     ).hexdigest()
 
 
@@ -518,11 +538,16 @@ def load_parts(
         for solid in solids:
             solid.mesh.apply_scale(scale)
         if len(solids) > 1 and not split_bodies:
-            raise MeshError(where, f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting")
+            raise MeshError(
+                where,
+                f"holds {len(solids)} separate solids (parts.split_bodies = false): split the file or allow splitting",
+            )
         warnings = []
         if len(solids) > 1:
             names = ", ".join(f"{name}#{k}" for k in range(1, len(solids) + 1))
-            warnings.append(f"{where} holds {len(solids)} separate solids ({shells} shells): designed as separate parts {names}")
+            warnings.append(
+                f"{where} holds {len(solids)} separate solids ({shells} shells): designed as separate parts {names}"
+            )
         for k, solid in enumerate(solids, start=1):
             parts.append(
                 Part(
@@ -552,7 +577,11 @@ def _shell_note(solid: Solid, k: int, solids: int, shells: int, shell_sum_mm3: f
             f"{shells} overlapping or touching shells united into one solid with manifold3d: "
             f"{volume}, where the shells add up to {shell_sum_mm3:.1f} mm³"
         )
-    made = f"{solid.shells} of its {shells} shells united with manifold3d" if solid.shells > 1 else f"1 of its {shells} shells"
+    made = (
+        f"{solid.shells} of its {shells} shells united with manifold3d"
+        if solid.shells > 1
+        else f"1 of its {shells} shells"
+    )
     return f"solid {k} of {solids} in the file (largest first), {made}; {volume}"
 
 
@@ -593,7 +622,9 @@ def load_part(
     """
     parts = load_parts(path, units=units, scale_to_mm=scale_to_mm, repair=repair)
     if len(parts) > 1:
-        raise MeshError(path, f"holds {len(parts)} parts (separate solids or 3MF objects): load it with fcso.load_parts")
+        raise MeshError(
+            path, f"holds {len(parts)} parts (separate solids or 3MF objects): load it with fcso.load_parts"
+        )
     part = parts[0]
     if name is not None:
         part.name = name

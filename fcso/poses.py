@@ -90,7 +90,17 @@ def toppling_poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     side = [np.arccos(np.clip((rays[:, i] * rays[:, (i + 1) % 3]).sum(axis=1), -1.0, 1.0)) for i in range(3)]
     half = (side[0] + side[1] + side[2]) / 2.0
     with np.errstate(invalid="ignore"):
-        probability = np.arctan(np.sqrt(np.tan(half / 2) * np.tan((half - side[0]) / 2) * np.tan((half - side[1]) / 2) * np.tan((half - side[2]) / 2))) / np.pi
+        probability = (
+            np.arctan(
+                np.sqrt(
+                    np.tan(half / 2)
+                    * np.tan((half - side[0]) / 2)
+                    * np.tan((half - side[1]) / 2)
+                    * np.tan((half - side[2]) / 2)
+                )
+            )
+            / np.pi
+        )
     # a face is unstable when the centre of mass projects outside it
     distances = trimesh.util.diagonal_dot(normals, com - triangles[:, 0])
     projected = com - distances[:, None] * normals
@@ -158,7 +168,9 @@ def _orientation(a: np.ndarray, b: np.ndarray, c: np.ndarray, point: np.ndarray)
     )
 
 
-def select_poses(probabilities: np.ndarray, config: PosesConfig, part_index: int, part_name: str) -> tuple[list[int], list[str]]:
+def select_poses(
+    probabilities: np.ndarray, config: PosesConfig, part_index: int, part_name: str
+) -> tuple[list[int], list[str]]:
     """Choose which stable poses of one part to plan for.
 
     Parameters
@@ -184,7 +196,9 @@ def select_poses(probabilities: np.ndarray, config: PosesConfig, part_index: int
     if isinstance(config.select, list):
         bad = [i for i in config.select if not 0 <= i < available]
         if bad:
-            raise ConfigError("poses.select", f"pose indices {bad} do not exist for {part_name} ({available} stable poses)")
+            raise ConfigError(
+                "poses.select", f"pose indices {bad} do not exist for {part_name} ({available} stable poses)"
+            )
         return sorted(set(config.select)), warnings
     count = config.count
     if count > available:

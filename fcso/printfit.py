@@ -127,7 +127,9 @@ def grow(part: manifold3d.Manifold, clearance_mm: float) -> manifold3d.Manifold:
     return minkowski_convex(part, ball_points(clearance_mm))
 
 
-def draft(geometry: manifold3d.Manifold, pad_box: manifold3d.Manifold, height_mm: float, lead_in_deg: float) -> manifold3d.Manifold:
+def draft(
+    geometry: manifold3d.Manifold, pad_box: manifold3d.Manifold, height_mm: float, lead_in_deg: float
+) -> manifold3d.Manifold:
     """The pocket geometry with its walls drafted by the lead-in: ``I ⊕ cone``, clipped to a box.
 
     Every point of ``I`` at depth ``u`` widens the pocket at every shallower
@@ -213,12 +215,19 @@ def closing_travel_mm(clearance_mm: float) -> float:
     return 2.0 * clearance_mm
 
 
-def _backed(pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, backing_mm: float) -> manifold3d.Manifold:
-    """The pad with a slab behind its back face (``u`` in ``[T, T + backing]``): material fused to the finger is never a thin wall."""
+def _backed(
+    pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, backing_mm: float
+) -> manifold3d.Manifold:
+    """The pad with a slab behind its back face (``u`` in ``[T, T + backing]``).
+
+    Material fused to the finger is never a thin wall.
+    """
     return pad + box((thickness_mm - 1e-3, 0.0, 0.0), (thickness_mm + backing_mm, length_mm, width_mm))
 
 
-def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, min_wall_mm: float) -> manifold3d.Manifold:
+def open_thin_walls(
+    pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, min_wall_mm: float
+) -> manifold3d.Manifold:
     """Remove pad walls and slivers thinner than ``min_wall_mm``: a morphological opening.
 
     ``P ∘ B = (P ⊖ B) ⊕ B`` with ``B`` a ball of diameter ``min_wall_mm``:
@@ -254,13 +263,26 @@ def open_thin_walls(pad: manifold3d.Manifold, thickness_mm: float, length_mm: fl
     # dilation sums the kernel over every one of them: merge them first
     eroded = backed.minkowski_difference(kernel).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
     # so does the dilation's (sliver faces where the kernel's copies meet)
-    opened = (eroded.minkowski_sum(kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm))).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
+    opened = (
+        (eroded.minkowski_sum(kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm)))
+        .as_original()
+        .simplify(SIMPLIFY_TOLERANCE_MM)
+    )
     pieces = [p for p in opened.decompose() if p.bounding_box()[3] >= thickness_mm - 1e-4]
-    return manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add) if len(pieces) > 1 else (pieces[0] if pieces else opened)
+    return (
+        manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add)
+        if len(pieces) > 1
+        else (pieces[0] if pieces else opened)
+    )
 
 
 def thinnest_wall_mm(
-    pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, density_per_mm2: float = 2.0, seed: int = 0
+    pad: manifold3d.Manifold,
+    thickness_mm: float,
+    length_mm: float,
+    width_mm: float,
+    density_per_mm2: float = 2.0,
+    seed: int = 0,
 ) -> float:
     """The pad's thinnest wall: the shortest run of material behind its surface, mm.
 

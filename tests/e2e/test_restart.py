@@ -10,9 +10,17 @@ import threading
 import time
 
 from fcsod.record.recorder import TOPIC_STATE, read_record
-
 from tests.conftest import process_running
-from tests.fcsod_helpers import DATA, SLOW_DESIGN, drop_job, free_port, slow_manifest, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import (
+    DATA,
+    SLOW_DESIGN,
+    drop_job,
+    free_port,
+    slow_manifest,
+    start_daemon,
+    start_subscriber,
+    write_config,
+)
 
 SOLAR = DATA / "solar_tracker.stl"
 
@@ -83,7 +91,10 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
     second = start_daemon(config, env=environment)
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
-        done = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"), 120)
+        done = subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"),
+            120,
+        )
         assert done["job_id"] == job_id and done["body"]["state"] == "done", done
         assert done["body"]["attempt"] == 2
         assert systemd.wait_for("WATCHDOG=1", 60) > systemd.wait_for("READY=1", 60)
@@ -110,8 +121,13 @@ def test_job_over_its_time_limit_fails_with_a_finished_record(tmp_path):
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
         # a design of many minutes: over the 1 s limit on any machine
-        drop_job(tmp_path / "watch" / "slow", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
-        failed = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"), 90)
+        drop_job(
+            tmp_path / "watch" / "slow", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR}
+        )
+        failed = subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"),
+            90,
+        )
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
@@ -131,13 +147,19 @@ def test_worker_killed_mid_job_fails_that_job_only(tmp_path):
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
         # a design of many minutes: still running when its worker is killed
-        drop_job(tmp_path / "watch" / "victim", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
+        drop_job(
+            tmp_path / "watch" / "victim", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR}
+        )
         started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
         daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
         os.kill(started["worker_pid"], signal.SIGKILL)
-        failed = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "failed", 60)
+        failed = subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "failed", 60
+        )
         drop_job(tmp_path / "watch" / "next", {"cube.stl": DATA / "20mm-xyz-cube.stl"})
-        done = subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", 90)
+        done = subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", 90
+        )
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
