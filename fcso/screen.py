@@ -465,7 +465,7 @@ def screen(
         occupied = np.unique(np.concatenate(bins))
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
-        capture = geometries[2 * pair_number].capture
+        capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0
         results.append(
             ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, capture * effective)
         )

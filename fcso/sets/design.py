@@ -100,9 +100,12 @@ def design_sets(
             warnings.append(f"{names} have the same geometry: designed once as {loaded[group[0]].name}")
 
     clock = time.perf_counter()
+    # METHOD §11 judges a set by the effective area each scenario keeps of its solo best (E / E*): the solo qualities
+    # and the partition are found on E whatever ranks a set's candidates (its design below uses [quality] as asked)
+    by_area = config.updated({"quality": {"measure": "paper"}})
     report_progress("solo quality", 0, len(prepared.scenarios), "")
     # no more workers than tasks: forking costs more than one small task
-    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios))) as pool:
+    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios))) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
@@ -128,12 +131,12 @@ def design_sets(
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
     # one part has one partition: nothing to screen in parallel
-    with WorkerPool((prepared, pools, config), prepared.jobs if len(graspable) > 1 else 1) as pool:
-        screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, config, pool)
+    with WorkerPool((prepared, pools, by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
+        screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, by_area, pool)
         outcome = search_partition(
             screener,
             len(graspable),
-            config,
+            by_area,
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
         )
     timings["partition"] = time.perf_counter() - clock

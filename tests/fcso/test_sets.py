@@ -81,8 +81,11 @@ def test_same_geometry_ignores_translation_and_vertex_order():
 
 @pytest.fixture(scope="module")
 def conflicting_together():
-    """The two knobs designed as one finger by main's single-design path, and each alone."""
-    cfg = config()
+    """The two knobs designed as one finger by main's single-design path, and each alone.
+
+    By the paper's measure: METHOD §11 judges sets by the effective area E retained of the solo best E*.
+    """
+    cfg = config().updated({"quality": {"measure": "paper"}})
     return fcso.design([NARROWING, WIDENING], cfg), fcso.design([NARROWING], cfg), fcso.design([WIDENING], cfg)
 
 
