@@ -28,9 +28,13 @@ def test_the_process_draws_the_pictures_drawn_here(cube_inputs):
     with PictureProcess() as draw:
         drawn = draw(cube_inputs, lambda stage, done, total: steps.append((stage, done, total)))
     here = pictures(cube_inputs)
-    assert sorted(drawn) == sorted(here) == sorted(["gripper", "finger", "fingerpad", "grasp 0", "normals 0", "pose 0"])
+    assert (
+        sorted(drawn)
+        == sorted(here)
+        == sorted(["gripper", "finger", "fingerpad", "grasp 0", "normals 0", "pose 0", "capture 0"])
+    )
     assert all(drawn[name] == here[name] for name in here)
-    assert steps == [("pictures", 0, 6), ("pictures", 6, 6)]
+    assert steps == [("pictures", 0, 7), ("pictures", 7, 7)]
 
 
 def test_a_failure_in_the_process_is_raised_in_the_command_and_the_process_serves_on(cube_inputs):
