@@ -43,6 +43,12 @@ def ungraspable_report(scenario: Scenario, config: DesignConfig) -> UngraspableR
             area=config.sampler.min_contact_area, opening=config.gripper.max_opening_mm
         )
         reason = f"{reason} ({result.rejected[worst]} of {result.tried} samples)"
+    return ungraspable_entry(scenario, reason)
+
+
+def ungraspable_entry(scenario: Scenario, reason: str) -> UngraspableReport:
+    """A scenario left out of the design, with its sampler's counts and ``reason`` (one sentence)."""
+    result = scenario.sampler_result
     return UngraspableReport(
         part=scenario.part.name,
         pose_index=scenario.pose_index,

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..evaluate import Scenario
 from ..output.layout import set_finger_path, set_folder
+from .design import ungraspable_entry
 from .models import (
     FingerSetReport,
     FingerSetsReport,
@@ -26,14 +27,8 @@ if TYPE_CHECKING:  # the partition search builds on these reports: its outcome i
 
 def zero_quality_report(scenario: Scenario) -> UngraspableReport:
     """The entry of a scenario whose every sample loses all contact once carved and seated (E* = 0)."""
-    result = scenario.sampler_result
-    return UngraspableReport(
-        part=scenario.part.name,
-        pose_index=scenario.pose_index,
-        pose_probability=round(float(scenario.probability), 6),
-        tried_samples=result.tried,
-        rejected=dict(result.rejected),
-        reason="every valid sample loses all contact when its pad is carved and the part seated (E* = 0)",
+    return ungraspable_entry(
+        scenario, "every valid sample loses all contact when its pad is carved and the part seated (E* = 0)"
     )
 
 
