@@ -17,6 +17,7 @@ from .errors import NoGraspError
 from .evaluate import CandidateEvaluation, SampleGeometry, Scenario, evaluate_candidate, sample_geometry, versus_flat
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
 from .geometry import to_manifold
+from .measure import quality_words, scenario_measure
 from .parallel import WorkerPool, resolve_jobs
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
@@ -364,7 +365,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
                 "screening",
                 min(screened_count, expected),
                 expected,
-                f"best Q {best_screened:.1f} of bound {screened_bound:.1f} mm² (screened)",
+                f"best {quality_words(best_screened, config)} of bound {screened_bound:.3g} (screened)",
             )
             return scored
 
@@ -390,11 +391,19 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     with WorkerPool((scenarios, config), jobs) as pool:
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
     report_progress(
-        "exact", len(finalists), len(finalists), f"best Q {max(e.quality for e in exact.values()):.1f} mm² (exact)"
+        "exact",
+        len(finalists),
+        len(finalists),
+        f"best {quality_words(max(e.quality for e in exact.values()), config)} (exact)",
     )
     best_choice = max(finalists, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]))
     upper_bound = max(
-        quality_upper_bound([np.array([g.effective_area_bound for g in s.samples]) for s in scenarios]),
+        quality_upper_bound(
+            [
+                np.array([scenario_measure(1.0, 1.0, g.effective_area_bound, config) for g in s.samples])
+                for s in scenarios
+            ]
+        ),
         exact[best_choice].quality,
     )
     if not outcome.proven_optimal:

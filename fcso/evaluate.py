@@ -19,6 +19,7 @@ from .config import DesignConfig
 from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
 from .geometry import to_manifold
 from .holding import holding_forces_n
+from .measure import scenario_measure
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
 from .parts import Part
 from .printfit import carve, closing_travel_mm, open_thin_walls
@@ -142,7 +143,7 @@ def sample_geometry(
         surfaces=surfaces,
         effective_area_bound=float(bound),
         screen=screens,
-        screened_bound=screened_bound(screens, lattice) * screens[0].capture,
+        screened_bound=scenario_measure(screens[0].capture, 1.0, screened_bound(screens, lattice), config),
         centres_uv_mm=centres,
     )
 
@@ -218,7 +219,8 @@ def evaluate_candidate(
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
         holding = _holding(scenario, sample, contacts, normals, config)
-        measure = landscapes[number].fraction * min(1.0, float(holding.min()) / config.quality.hold_force_n) * effective
+        holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
+        measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
         results.append(
             ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)
         )

@@ -49,6 +49,7 @@ from scipy.ndimage import maximum_filter, minimum_filter
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .config import DesignConfig
+from .measure import scenario_measure
 from .rles import fibonacci_sphere, rles
 
 #: Lattice directions normals are quantised to (no more than 0.084 apart in chord
@@ -466,8 +467,7 @@ def screen(
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
         capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0
-        results.append(
-            ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, capture * effective)
-        )
+        measure = scenario_measure(capture, 1.0, effective, config)
+        results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, measure))
     measures = [r.measure for r in results]
     return ScreenedCandidate(float(min(measures)), float(np.mean(measures)), results, case)

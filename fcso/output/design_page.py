@@ -19,6 +19,7 @@ import trimesh
 from ..design import DesignResult, flat_finger
 from ..evaluate import GraspScene, chosen_grasp_scenes, reseat_grasps
 from ..finger import pad_to_finger
+from ..measure import quality_decimals, quality_title, quality_words
 from ..parallel import WorkerPool, resolve_jobs
 from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
@@ -314,7 +315,8 @@ def _print_fit_section(report: DesignReport) -> list[str]:
     ]
     titles = _scenario_titles(report)
     header = (
-        '<tr><th class="text">chosen candidate</th><th>pocket volume (mm³)</th><th>Q (mm²)</th>'
+        '<tr><th class="text">chosen candidate</th><th>pocket volume (mm³)</th>'
+        + f"<th>{text(quality_title(report.settings))}</th>"
         + "".join(f"<th>A {text(t)} (mm²)</th><th>seat offsets {text(t)} (mm)</th>" for t in titles)
         + "</tr>"
     )
@@ -329,7 +331,7 @@ def _print_fit_section(report: DesignReport) -> list[str]:
         )
         rows.append(
             f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td>'
-            f"<td>{effect.quality:.1f}</td>{cells}</tr>"
+            f"<td>{effect.quality:.{quality_decimals(report.settings)}f}</td>{cells}</tr>"
         )
     return [
         "<h2>Printed fit</h2>",
@@ -352,12 +354,13 @@ def _summary(report: DesignReport, chosen) -> str:
             f"screened, "
             f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
             f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
-            f"upper bound on Q {report.search.quality_upper_bound or 0:.1f} mm², chosen Q is "
-            f"{report.search.gap or 0:.0%} of it",
+            f"upper bound {quality_words(report.search.quality_upper_bound or 0, report.settings)}, "
+            f"the chosen is {report.search.gap or 0:.0%} of it",
         ),
         (
             "chosen candidate",
-            f"{chosen.index} (samples {chosen.samples}), Q = {chosen.quality:.1f} mm², {chosen.pad_case} pad",
+            f"{chosen.index} (samples {chosen.samples}), {quality_words(chosen.quality, report.settings)}, "
+            f"{chosen.pad_case} pad",
         ),
         (
             "finger",
@@ -445,7 +448,7 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
     top = (
         '<tr><th rowspan="2">i</th>'
         + "".join(f'<th colspan="{count}">{text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS)
-        + '<th rowspan="2">Q (mm²)</th><th rowspan="2" class="text">pad</th></tr>'
+        + f'<th rowspan="2">{text(quality_title(report.settings))}</th><th rowspan="2" class="text">pad</th></tr>'
     )
     second = "<tr>" + "".join(f"<th>{text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
     lines = [f'<table id="{table_id}" class="quality">', top, second]

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..measure import quality_decimals, quality_title, quality_words
 from ..report.models import CandidateReport, DesignReport, chosen_candidate, ranked_candidates
 
 #: Column groups of the quality table: title, ScenarioQuality field, decimals.
@@ -52,7 +53,9 @@ def quality_columns(report: DesignReport) -> list[QualityColumn]:
         for group, name, decimals in SCENARIO_GROUPS
         for m, label in enumerate(labels)
     ]
-    columns.append(QualityColumn("Q", None, 1, lambda c: c.quality))
+    columns.append(
+        QualityColumn(quality_title(report.settings), None, quality_decimals(report.settings), lambda c: c.quality)
+    )
     return columns
 
 
@@ -86,7 +89,7 @@ def quality_table(report: DesignReport, limit: int | None = 20) -> str:
         f"{len(rows)} of {len(report.candidates)} listed candidates shown ({report.search.kind}: "
         f"{report.search.screened} screened "
         f"of C = {report.search.candidates_total}, the best {report.search.exact} re-evaluated exactly); * = chosen, "
-        f"Q = {chosen_candidate(report).quality:.1f} mm², {_gap(report)}"
+        f"{quality_words(chosen_candidate(report).quality, report.settings)}, {_gap(report)}"
     )
     return "\n".join(lines)
 
@@ -95,4 +98,5 @@ def _gap(report: DesignReport) -> str:
     """The chosen Q against the search's upper bound, in words."""
     if report.search.quality_upper_bound is None:
         return "no upper bound"
-    return f"upper bound {report.search.quality_upper_bound:.1f} mm² (Q is {report.search.gap:.0%} of it)"
+    bound = quality_words(report.search.quality_upper_bound, report.settings)
+    return f"upper bound {bound} (the chosen is {report.search.gap:.0%} of it)"

@@ -154,8 +154,8 @@ class ScenarioQuality(ReportModel):
     )
     measure: float = Field(
         0.0,
-        description="What ranks the scenario: E (paper), or capture x min(1, worst holding / hold force) x E "
-        "(capture; screened: capture x E), mm²",
+        description="What ranks the scenario: E in mm² (paper), or (floor(20 c h) + E / (E + L W)) / 20 with c the "
+        "capture and h = min(1, worst holding / hold force) (capture, fcso.measure; screened: h = 1), no unit",
     )
 
 
@@ -168,9 +168,12 @@ class CandidateReport(ReportModel):
         "exact", description="exact: METHOD §6-7 (re-evaluated finalists); screened: the fast ranking of METHOD §8b"
     )
     per_scenario: list[ScenarioQuality]
-    quality: float = Field(description="The worst scenario's measure: Q = min E under the paper's measure, mm²")
+    quality: float = Field(
+        description="The worst scenario's measure: Q = min E in mm² under the paper's measure; under the capture "
+        "measure (fcso.measure) capture x holding in bands of 1/20, then E within a band, no unit"
+    )
     mean_effective_area: float = Field(
-        description="Mean measure over scenarios (first tie-break; mean E under the paper's measure), mm²"
+        description="Mean measure over scenarios (first tie-break; mean E in mm² under the paper's measure)"
     )
     pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
     block_depth_mm: float | None = Field(None, description="d_B in the mixed case, mm")
@@ -234,7 +237,9 @@ class PrintFitEffect(ReportModel):
     seat_offsets_mm: list[list[float]] = Field(
         description="Seating offset t of the + and - pads per scenario (negative: the pad closed a clearance), mm"
     )
-    quality: float = Field(description="Q = min E, mm²")
+    quality: float = Field(
+        description="The worst scenario's measure as the design's quality (Q = min E, mm², or the capture measure)"
+    )
 
 
 class PrintFitReport(ReportModel):
