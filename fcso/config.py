@@ -283,7 +283,8 @@ class QualityConfig(_Section):
 
     measure: Literal["capture", "paper"] = Field(
         "capture",
-        description="'capture': worst scenario of capture x min(1, holding / hold_force_n) x E (METHOD §7b); "
+        description="'capture': worst scenario of capture x min(1, holding / hold_force_n) in bands of 1/20, "
+        "then E (METHOD §7b, fcso.measure); "
         "'paper': Q = worst E (METHOD §7, the paper's experiment)",
     )
     position_error_mm: float = Field(2.0, gt=0, description="Start error along each table axis, -x..x, mm")

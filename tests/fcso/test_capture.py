@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 import fcso
-from examples.sim_parts import featured_cube, ribbed_block, two_ridge_block, upright_grasp_settings
+from examples.sim_parts import featured_cube, plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
 from fcso.capture import pad_landscapes
 from fcso.design import prepare
 from fcso.holding import holding_forces_n
+from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
 from fcso.screen import ScreenGrid
 
@@ -49,6 +50,31 @@ def test_a_v_notch_captures_two_millimetres_and_flat_pads_capture_nothing():
     flat = _landscape(prepared, config, centred, flat=True)
     assert not any(_captured_at(flat, t) for t in (-2.0, -1.0, -0.6, 0.6, 1.0, 2.0))
     assert flat.fraction <= (2 * 0.3 + 0.2) / 4.0
+
+
+def test_flat_pads_turn_a_wide_part_into_line_but_do_not_centre_it():
+    # 10 mm pads on a box 30 mm across the jaws: a turn θ raises the separation by about 2 x 5 mm x θ over
+    # an arc of 15 mm x θ on two jaws, a slope of 0.33, below friction 0.4; yet squeezing between parallel jaws turns a
+    # box into line (Goldberg's squeeze): the part pivots on a pad's edge instead of sliding along it
+    prepared, config = _prepared(
+        plain_box(30.0, 40.0, 20.0), "box", sampler={"length_mm": 10.0, "width_mm": 10.0, "stride_mm": 2.0}
+    )
+    flat = _landscape(prepared, config, _sample_at(prepared, 0.0, 5.0), flat=True)
+    assert all(_captured_at(flat, 0.0, yaw) for yaw in (-3.0, -2.0, 2.0, 3.0))
+    assert not any(_captured_at(flat, t, yaw) for t in (-2.0, -1.0, 1.0, 2.0) for yaw in (-3.0, 0.0, 3.0))
+
+
+def test_the_capture_measure_ranks_by_capture_bands_then_by_e():
+    # capture x holding share in bands of 1/20, E / (E + L W) within a band
+    assert capture_measure(1.0, 1.0, 10.0, 100.0) == pytest.approx((20 + 10 / 110) / 20)
+    assert capture_measure(0.9, 1.0, 1000.0, 100.0) == pytest.approx((18 + 1000 / 1100) / 20)
+    assert capture_measure(1.0, 1.0, 10.0, 100.0) > capture_measure(0.9, 1.0, 1000.0, 100.0)
+    # 0.52 and 0.53 share a band: the larger E wins
+    assert capture_measure(0.52, 1.0, 50.0, 100.0) > capture_measure(0.53, 1.0, 20.0, 100.0)
+    # holding half the test's force halves the band
+    assert capture_measure(1.0, 0.5, 10.0, 100.0) == pytest.approx((10 + 10 / 110) / 20)
+    paper = fcso.DesignConfig().updated({"quality": {"measure": "paper"}})
+    assert scenario_measure(0.1, 0.1, 179.4, paper) == 179.4
 
 
 def test_a_pocket_without_lead_in_jams_where_the_same_pocket_with_one_does_not():
