@@ -264,9 +264,12 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     :data:`FEATURE_DEPTH_MM` is a concave interval: a notch, a hole, a gap
     between teeth. The same test on the negated map finds convex intervals
     (ribs, teeth, ridges), on whose middle a pocket holds the whole
-    feature. Cells that dip in at least four rows (1 mm of height) make
-    up the intervals along ``b`` whose middles are returned, and likewise
-    along the height.
+    feature, and a stretch along ``b`` that dips below the highest value
+    before it and runs on to the part's end is a notch or a chamfer at an
+    end, on whose middle a pad wraps the part's end. Cells that dip in at
+    least four rows (1 mm of height) make up the intervals along ``b``
+    whose middles are returned, and likewise along the height, for each
+    kind of interval apart.
 
     Parameters
     ----------
@@ -285,7 +288,9 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     if count_b < 3 or count_z < 3:
         return np.zeros(0), np.zeros(0)
     grid = ScreenGrid(PROFILE_STEP_MM, count_b, count_z)
-    dips = np.zeros((count_b, count_z), dtype=bool)
+    # concave intervals (notches, holes, gaps between teeth), convex ones (ribs, teeth, ridges) and notches
+    # at the part's ends, apart: a rib and the notch beside it are two places for a pad, not one
+    concave, convex, at_ends = (np.zeros((count_b, count_z), dtype=bool) for _ in range(3))
     for side in (1.0, -1.0):
         # u = outward distance along this side's a, shifted positive: 0 stays "no surface"
         seen = np.column_stack(
@@ -293,17 +298,30 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
         )
         outermost = column_heights(seen, faces, grid).reshape(count_b, count_z)
         outermost = np.where(outermost > 0, outermost, -np.inf)
-        # concave intervals (notches, holes, gaps between teeth) and convex ones (ribs, teeth, ridges)
         inward = np.where(np.isfinite(outermost), -outermost, -np.inf)
-        dips |= _dips(outermost) | _dips(outermost.T).T | _dips(inward) | _dips(inward.T).T
-    centres = []
-    for axis, origin in ((1, low[1]), (0, low[2])):
-        # along b: cells dipping in >= 4 rows of the height; along z: in >= 4 columns of b
-        run = dips.sum(axis=axis) >= 4
-        starts = np.flatnonzero(run & ~np.concatenate([[False], run[:-1]]))
-        ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
-        centres.append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
-    return centres[0], centres[1]
+        concave |= _dips(outermost) | _dips(outermost.T).T
+        convex |= _dips(inward) | _dips(inward.T).T
+        # a notch or a chamfer at an end of the part along b: a pad centred on it wraps that end
+        at_ends |= _end_dips(outermost) | _end_dips(outermost[::-1])[::-1]
+    centres = ([], [])
+    for dips in (concave, convex, at_ends):
+        for number, (axis, origin) in enumerate(((1, low[1]), (0, low[2]))):
+            # along b: cells dipping in >= 4 rows of the height; along z: in >= 4 columns of b
+            run = dips.sum(axis=axis) >= 4
+            starts = np.flatnonzero(run & ~np.concatenate([[False], run[:-1]]))
+            ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
+            centres[number].append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
+    return np.unique(np.concatenate(centres[0])), np.unique(np.concatenate(centres[1]))
+
+
+def _end_dips(heights: np.ndarray) -> np.ndarray:
+    """Cells of each row (along axis 0) at least :data:`FEATURE_DEPTH_MM` below the highest before them, in a
+    stretch that runs on to the row's end: a corner notch or a chamfer, which :func:`_dips` misses (no rim
+    beyond it holds water)."""
+    finite = np.isfinite(heights)
+    with np.errstate(invalid="ignore"):
+        low = finite & (np.maximum.accumulate(heights, axis=0) - heights >= FEATURE_DEPTH_MM)
+    return low & np.logical_and.accumulate((low | ~finite)[::-1], axis=0)[::-1]
 
 
 def _dips(heights: np.ndarray) -> np.ndarray:

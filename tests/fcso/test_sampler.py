@@ -9,7 +9,7 @@ from fcso import load_part, stable_poses
 from fcso.config import DesignConfig, FingerConfig, GripperConfig, SamplerConfig, load_config
 from fcso.finger import finger_plate, load_finger, parametric_finger
 from fcso.geometry import box, to_manifold, to_trimesh
-from fcso.sampler import REJECTION_REASONS, FingerPlate, sample_grasps
+from fcso.sampler import REJECTION_REASONS, FingerPlate, feature_centres, sample_grasps
 from tests.conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
@@ -225,3 +225,20 @@ def test_every_nth_pad_position_together_make_the_whole_sampling():
     }
     positions = [{(s.yaw_deg, s.s_mm) for s in r.samples} for r in subsets]
     assert all(not (p & q) for p in positions for q in positions if p is not q)
+
+
+def test_pads_centre_on_notches_inside_a_face_and_at_its_ends():
+    # a 30 mm cube centred on the origin with 45-degree notches along its vertical edges, 6 mm squares turned
+    # about z: seen along x, each notch cuts 3 sqrt(2) = 4.24 mm into the face's ends (|y| from 10.76 to 15)
+    from examples.sim_parts import holed_notched_cube
+
+    cube = holed_notched_cube(size_mm=30.0, hole_mm=8.0, notch_mm=6.0)
+    along_b, _ = feature_centres(np.asarray(cube.vertices), np.asarray(cube.faces))
+    notch_middle = 15.0 - 3.0 * np.sqrt(2.0) / 2.0
+    for expected in (-notch_middle, notch_middle):
+        assert np.min(np.abs(along_b - expected)) <= 0.3, along_b
+    # and the face between them, whose middle a pocket holds: the plateau's middle
+    assert np.min(np.abs(along_b)) <= 0.3
+    # a plain box has no notches: only its face's middle
+    plain, _ = feature_centres(np.asarray(block_part().vertices), np.asarray(block_part().faces))
+    assert len(plain) <= 1
