@@ -99,8 +99,10 @@ def step_load(run: JobRun) -> None:
             part.path,
             units=part.entry.units,
             scale_to_mm=part.entry.scale_to_mm,
-            repair=run.manifest.repair,
+            repair=run.task.config.parts.repair if run.manifest.repair is None else run.manifest.repair,
             split_bodies=run.settings.parts.split_bodies,
+            max_repair_volume_change_percent=run.settings.parts.repair_max_volume_change_percent,
+            max_repair_deviation_mm=run.settings.parts.repair_max_deviation_mm,
             max_uncompressed_bytes=run.task.config.limits.max_3mf_uncompressed_bytes,
         )
         for one in loaded:
