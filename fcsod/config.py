@@ -103,6 +103,25 @@ class PartsSettings(_Section):
     )
 
 
+class ReuseConfig(_Section):
+    """Finger reuse (METHOD §11b): a job whose parts are all served by delivered fingers prints none."""
+
+    enabled: bool = Field(
+        True,
+        description=(
+            "Keep every delivered finger set in the cell's library (<state.dir>/fingers.sqlite3) and serve a job whose "
+            "parts all have the geometry of parts of active library fingers with those fingers: no new finger is "
+            "designed or printed"
+        ),
+    )
+    reprint_after_jobs: int = Field(
+        100,
+        ge=1,
+        description="Wear limit: a finger that served this many jobs (its own included) serves no more; the next "
+        "job of its parts designs and prints a new one",
+    )
+
+
 class BusConfig(_Section):
     """Zenoh key expressions: ``<prefix>/<cell>/jobs/<job_id>/...``."""
 
@@ -166,6 +185,7 @@ class DaemonConfig(_Section):
     jobs: JobsConfig = Field(default_factory=JobsConfig)
     limits: LimitsConfig = Field(default_factory=LimitsConfig)
     parts: PartsSettings = Field(default_factory=PartsSettings)
+    reuse: ReuseConfig = Field(default_factory=ReuseConfig)
     bus: BusConfig = Field(default_factory=BusConfig)
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     mcap: McapConfig = Field(default_factory=McapConfig)
