@@ -1,4 +1,4 @@
-"""Finger reuse through the real daemon (METHOD §11b): a repeated job mounts the delivered finger, even after kill -9."""
+"""Finger reuse through the real daemon (METHOD §11b): a repeated job mounts the delivered finger, after kill -9 too."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from fcsod.record.recorder import TOPIC_BUS, read_record
 from tests.fcsod_helpers import DATA, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
-#: A real print part as published: open (a sliver), repaired by the daemon's default
-ENCODER = DATA / "encoder.stl"
+#: Other parts: the same file scaled, another geometry
+SMALLER_CUBE = '[[parts]]\nfile = "cube.stl"\nscale_to_mm = 18\n'
 
 
 def _plan(subscriber, job_id: str) -> dict:
@@ -24,7 +24,7 @@ def _plan(subscriber, job_id: str) -> dict:
 
 
 def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts_do_not(tmp_path, capsys):
-    config = write_config(tmp_path, free_port())
+    config = write_config(tmp_path, free_port(), reuse=True)
     daemon = start_daemon(config)
     subscriber = start_subscriber(config)
     try:
@@ -46,7 +46,7 @@ def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts
         drop_job(tmp_path / "watch" / "job-a-again", {"cube.stl": CUBE})
         again = finished(subscriber, "job-a-again")
         assert again["body"]["state"] == "done", again["body"]["error"]
-        drop_job(tmp_path / "watch" / "job-b", {"encoder.stl": ENCODER})
+        drop_job(tmp_path / "watch" / "job-b", {"cube.stl": CUBE, "job.toml": SMALLER_CUBE})
         other = finished(subscriber, "job-b")
         assert other["body"]["state"] == "done", other["body"]["error"]
         plan_again, plan_b = _plan(subscriber, again["job_id"]), _plan(subscriber, other["job_id"])
@@ -77,18 +77,19 @@ def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts
     recorded_plan = next(body for body in published if "sets" in body)
     assert recorded_plan["sets"][0]["finger_id"] == 1 and recorded_plan["sets"][0]["finger_sha256"] == finger_sha256
 
-    # B: other parts, a new finger designed and printed (its open file repaired by default)
+    # B: other parts, a new finger designed and printed
     out_b = tmp_path / "out" / other["job_id"]
     assert (out_b / "finger.stl").is_file() and plan_b["sets"][0]["finger_id"] is None
-    part_b = json.loads((out_b / "report.json").read_text())["parts"][0]
-    assert part_b["repair"] is not None and part_b["repair"]["volume_change_percent"] == 0.0
+    # the daemon repairs by default: a closed file goes through unchanged
+    part_a = json.loads((out_a / "report.json").read_text())["parts"][0]
+    assert part_a["repair"]["volume_change_percent"] == 0.0 and part_a["repairs"] == []
 
     # the library: A's finger served two jobs, B's one; a retired finger is listed as such
     capsys.readouterr()
     assert main(["fingers", "list", "--config", str(config)]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert listed[0].startswith("1: active, 2/100 jobs, sha256 " + finger_sha256) and listed[0].endswith("parts cube")
-    assert listed[1].startswith("2: active, 1/100 jobs") and listed[1].endswith("parts encoder")
+    assert listed[1].startswith("2: active, 1/100 jobs") and listed[1].endswith("parts cube")
     assert main(["fingers", "retire", "1", "--config", str(config)]) == 0
     assert main(["fingers", "retire", "1", "--config", str(config)]) == 2
     assert main(["fingers", "list", "--config", str(config)]) == 0
