@@ -109,11 +109,14 @@ def test_real_files_of_overlapping_shells_change_less_than_two_percent(name, sol
 def test_a_repair_beyond_the_tolerance_is_refused_with_its_figure(tmp_path):
     # the frame's hole patches and dropped sheets change its shells' volume by +2.6 %
     path = data_path("microscopoio_telaio.stl")
-    parts = load_parts(path, repair=True, max_repair_volume_change_percent=5.0, max_repair_deviation_mm=5.0)
-    change = parts[0].repair.volume_change_percent
-    assert 2.0 < change < 5.0
-    with pytest.raises(RepairToleranceError, match=r"microscopoio_telaio.stl: repair would change.*volume \+2\.\d\d %"):
-        load_parts(path, repair=True, max_repair_volume_change_percent=2.0)
+    with pytest.raises(
+        RepairToleranceError, match=r"microscopoio_telaio.stl: repair would change.*volume \+2\.\d\d %"
+    ) as refused:
+        load_parts(path, repair=True, max_repair_volume_change_percent=2.0, max_repair_deviation_mm=5.0)
+    change = refused.value.volume_change_percent
+    assert 2.0 < change < 5.0 and refused.value.max_deviation_mm < 5.0
+    # the defaults (5 %, 5 mm) take it
+    assert len(load_parts(path, repair=True, max_repair_volume_change_percent=5.0, max_repair_deviation_mm=5.0)) == 4
     config = tmp_path / "tight.toml"
     config.write_text(FAST + "\n[parts]\nrepair_max_volume_change_percent = 2.0\n")
     run = fcso("design", path, "--out", tmp_path / "out", "--config", config, "--repair")
