@@ -10,7 +10,7 @@ __version__ = "0.1.0"
 
 from .config import DesignConfig, load_config  # noqa: E402
 from .design import DesignResult, design  # noqa: E402
-from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError  # noqa: E402
+from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError, RepairToleranceError  # noqa: E402
 from .output.files import output_files, write_outputs, write_set_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
@@ -24,6 +24,7 @@ __all__ = [
     "FcsoError",
     "GeometryError",
     "MeshError",
+    "RepairToleranceError",
     "NoGraspError",
     "MeshItem",
     "Part",

@@ -218,6 +218,8 @@ def _design(args) -> int:
                 scale_to_mm=args.scale_to,
                 repair=args.repair,
                 split_bodies=config.parts.split_bodies,
+                max_repair_volume_change_percent=config.parts.repair_max_volume_change_percent,
+                max_repair_deviation_mm=config.parts.repair_max_deviation_mm,
             )
         ]
         progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())

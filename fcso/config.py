@@ -150,6 +150,17 @@ class PartsConfig(_Section):
     split_bodies: bool = Field(
         True, description="Separate solids in one file become separate parts <file>#<k>; false refuses such a file"
     )
+    repair_max_volume_change_percent: float = Field(
+        5.0,
+        gt=0,
+        description=(
+            "A repair (--repair, fcsod's default) that changes the shells' volume by more than this, %, is refused "
+            "(hole patches and dropped shells; overlaps united are not a change)"
+        ),
+    )
+    repair_max_deviation_mm: float = Field(
+        5.0, gt=0, description="A repair that puts a corner farther than this from the file's triangles is refused, mm"
+    )
 
 
 class FingerConfig(_Section):

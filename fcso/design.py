@@ -127,7 +127,15 @@ def load_batch(parts: Sequence[Part | str | Path], config: DesignConfig, repair:
         one
         for p in parts
         for one in (
-            [p] if isinstance(p, Part) else load_parts(p, repair=repair, split_bodies=config.parts.split_bodies)
+            [p]
+            if isinstance(p, Part)
+            else load_parts(
+                p,
+                repair=repair,
+                split_bodies=config.parts.split_bodies,
+                max_repair_volume_change_percent=config.parts.repair_max_volume_change_percent,
+                max_repair_deviation_mm=config.parts.repair_max_deviation_mm,
+            )
         )
     ]
 

@@ -26,6 +26,31 @@ class MeshError(FcsoError):
         super().__init__(f"{self.path}: {defect}")
 
 
+class RepairToleranceError(MeshError):
+    """A repair that would change a part more than ``[parts]`` allows (the file is refused).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file at fault.
+    volume_change_percent : float
+        How much hole filling and dropped shells changed the shells' volume, %.
+    max_deviation_mm : float
+        Largest distance from a repaired corner to the file's triangles, mm.
+    limits : str
+        The limits that were passed, in words with their config keys.
+    """
+
+    def __init__(self, path: str | Path, volume_change_percent: float, max_deviation_mm: float, limits: str):
+        self.volume_change_percent = volume_change_percent
+        self.max_deviation_mm = max_deviation_mm
+        super().__init__(
+            path,
+            f"repair would change the part too much: volume {volume_change_percent:+.2f} %, largest surface "
+            f"deviation {max_deviation_mm:.3f} mm ({limits}); fix the file or raise the limit",
+        )
+
+
 class ConfigError(FcsoError):
     """A configuration file or value that is not valid."""
 

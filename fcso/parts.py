@@ -19,7 +19,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .errors import MeshError
+from .errors import MeshError, RepairToleranceError
 from .geometry import to_manifold, to_trimesh
 from .repair import RepairSummary, repair_shells
 
@@ -471,6 +471,8 @@ def load_parts(
     repair: bool = False,
     split_bodies: bool = True,
     max_uncompressed_bytes: int = MAX_3MF_UNCOMPRESSED_BYTES,
+    max_repair_volume_change_percent: float | None = None,
+    max_repair_deviation_mm: float | None = None,
 ) -> list[Part]:
     """Load every part of a mesh file, as a slicer would print it.
 
@@ -491,6 +493,10 @@ def load_parts(
         False refuses such a file.
     max_uncompressed_bytes : int
         Zip-bomb limit of a 3MF, bytes.
+    max_repair_volume_change_percent, max_repair_deviation_mm : float, optional
+        A repair that changes the shells' volume by more than this (%), or
+        moves a corner farther than this from the file's triangles (mm), is
+        refused (``[parts] repair_max_*``); None: no limit.
 
     Returns
     -------
@@ -502,6 +508,8 @@ def load_parts(
     MeshError
         Naming the file and the defect (also several solids with
         ``split_bodies=False``).
+    RepairToleranceError
+        A repair beyond the limits, with its figures.
     """
     path = Path(path)
     if path.suffix.lower() == ".3mf":
@@ -535,6 +543,8 @@ def load_parts(
                 raise MeshError(path, f"scale-to length must be positive, got {scale_to_mm}")
             bounds = np.array([s.mesh.bounds for s in solids])
             scale = scale_to_mm / float((bounds[:, 1].max(axis=0) - bounds[:, 0].min(axis=0)).max())
+        if summary is not None:
+            _check_repair(summary, scale, where, max_repair_volume_change_percent, max_repair_deviation_mm)
         for solid in solids:
             solid.mesh.apply_scale(scale)
         if len(solids) > 1 and not split_bodies:
@@ -565,6 +575,24 @@ def load_parts(
                 )
             )
     return parts
+
+
+def _check_repair(
+    summary: RepairSummary,
+    scale: float,
+    where: str | Path,
+    max_volume_change_percent: float | None,
+    max_deviation_mm: float | None,
+) -> None:
+    """Refuse a repair beyond the limits (:class:`RepairToleranceError` with its figures); ``scale`` converts to mm."""
+    change, deviation_mm = summary.volume_change_percent, summary.max_deviation * scale
+    passed = []
+    if max_volume_change_percent is not None and abs(change) > max_volume_change_percent:
+        passed.append(f"parts.repair_max_volume_change_percent = {max_volume_change_percent:g}")
+    if max_deviation_mm is not None and deviation_mm > max_deviation_mm:
+        passed.append(f"parts.repair_max_deviation_mm = {max_deviation_mm:g}")
+    if passed:
+        raise RepairToleranceError(where, change, deviation_mm, "limits " + ", ".join(passed))
 
 
 def _shell_note(solid: Solid, k: int, solids: int, shells: int, shell_sum_mm3: float) -> str | None:

@@ -57,7 +57,10 @@ class RepairSummary:
         Shells that could not be closed into a volume and were left out.
     volume_before : float
         Sum of the shells' absolute enclosed volumes before hole filling, file units³
-        (an open shell's volume is its divergence integral).
+        (an open shell's volume is its divergence integral about the centre of
+        its open edges' corners, so a flat patch over a hole adds nothing).
+    volume_closed : float
+        Sum of the closed shells' volumes after hole filling, before overlaps are united, file units³.
     max_deviation : float
         Largest distance from a corner of the repaired mesh to the input triangles, file units.
     volume_after : float
@@ -81,10 +84,21 @@ class RepairSummary:
     shells_inverted: int = 0
     shells_dropped: int = 0
     volume_before: float = 0.0
+    volume_closed: float = 0.0
     max_deviation: float = 0.0
     volume_after: float = 0.0
     solids_out: int = 0
     lines: list[str] = field(default_factory=list)
+
+    @property
+    def volume_change_percent(self) -> float:
+        """How much hole filling and dropped shells changed the shells' volume, % of ``volume_before``.
+
+        Overlaps are not counted: both sums are taken before the union.
+        """
+        if self.volume_before <= 0:
+            return 0.0 if self.volume_closed <= 0 else float("inf")
+        return 100.0 * (self.volume_closed - self.volume_before) / self.volume_before
 
 
 def close_holes_meshfix(shell: trimesh.Trimesh) -> trimesh.Trimesh | None:
@@ -168,10 +182,12 @@ def _repair(
             shell.invert()
             flipped = len(before) - flipped
         summary.faces_flipped += flipped
-        summary.volume_before += abs(float(shell.volume))
-        if not shell.is_watertight:
+        if shell.is_watertight:
+            summary.volume_before += abs(float(shell.volume))
+        else:
             summary.open_shells += 1
             boundary = shell.edges_sorted[trimesh.grouping.group_rows(shell.edges_sorted, require_count=1)]
+            summary.volume_before += abs(_volume_about(shell, shell.vertices[np.unique(boundary)].mean(axis=0)))
             loops = len(trimesh.graph.connected_components(boundary))
             opened = len(shell.faces)
             shell = close_holes(shell)
@@ -184,6 +200,7 @@ def _repair(
         closed.append(shell)
     _orient(closed, summary)
     summary.shells_out = len(closed)
+    summary.volume_closed = sum(abs(float(shell.volume)) for shell in closed)
     if closed:
         squared, _, _ = igl.point_mesh_squared_distance(
             np.ascontiguousarray(np.vstack([shell.vertices for shell in closed]), dtype=np.float64),
@@ -193,6 +210,12 @@ def _repair(
         summary.max_deviation = float(np.sqrt(squared.max()))
     summary.lines = summary.lines + _describe(summary)
     return closed, summary
+
+
+def _volume_about(shell: trimesh.Trimesh, origin: np.ndarray) -> float:
+    """The divergence integral of ``shell``'s triangles about ``origin`` (its volume if closed), file units³."""
+    corners = np.asarray(shell.triangles, dtype=np.float64) - origin
+    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
 
 
 def _weld(mesh: trimesh.Trimesh, tolerance: float) -> None:

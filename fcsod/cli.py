@@ -1,4 +1,4 @@
-"""Command line: ``fcsod run | audit | replay | subscribe | pki | journal | schema``.
+"""Command line: ``fcsod run | audit | replay | subscribe | pki | journal | fingers | schema``.
 
 Exit codes: 0 success, 1 a check failed (audit, journal check) or nothing
 arrived in time (subscribe), 2 bad input (config file, arguments, unreadable
@@ -148,6 +148,14 @@ def _parser() -> argparse.ArgumentParser:
         command = journal_commands.add_parser(name, help=text)
         command.add_argument("--config", required=True, type=Path, help="daemon settings (state and output folders)")
 
+    fingers = commands.add_parser("fingers", help="the cell's library of delivered fingers (reused by later jobs)")
+    fingers_commands = fingers.add_subparsers(dest="fingers_command", required=True)
+    listing = fingers_commands.add_parser("list", help="every finger: id, parts, sha256, jobs served, retired or not")
+    retire = fingers_commands.add_parser("retire", help="take a finger out of use (worn or lost): it serves no job")
+    retire.add_argument("finger_id", type=int, metavar="ID")
+    for command in (listing, retire):
+        command.add_argument("--config", required=True, type=Path, help="daemon settings (state folder, cell)")
+
     schema = commands.add_parser(
         "schema", help="write the JSON Schemas of config, manifest, messages and MCAP channels"
     )
@@ -171,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
             return _pki(args)
         if args.command == "journal":
             return _journal(args)
+        if args.command == "fingers":
+            return _fingers(args)
         return _schema(args)
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
@@ -400,6 +410,34 @@ def _pki(args: argparse.Namespace) -> int:
     )
     for line in config_lines(files):
         print(line)
+    return EXIT_OK
+
+
+def _fingers(args: argparse.Namespace) -> int:
+    from .job.reuse import library_path
+    from .service.fingers import FingerLibrary
+
+    config = load_daemon_config(args.config)
+    path = library_path(config)
+    if not path.exists():
+        print(f"{path}: no finger delivered yet")
+        return EXIT_OK if args.fingers_command == "list" else EXIT_BAD_INPUT
+    library = FingerLibrary(path)
+    try:
+        if args.fingers_command == "retire":
+            if not library.retire(args.finger_id):
+                print(f"fcsod: {path}: no active finger {args.finger_id} (fcsod fingers list)", file=sys.stderr)
+                return EXIT_BAD_INPUT
+            print(f"finger {args.finger_id} retired: it serves no more jobs")
+            return EXIT_OK
+        for entry in library.entries(config.bus.cell):
+            state = f"retired {entry.retired_at}" if entry.retired_at else "active"
+            print(
+                f"{entry.finger_id}: {state}, {entry.jobs}/{config.reuse.reprint_after_jobs} jobs, "
+                f"sha256 {entry.sha256}, {entry.job_id}/{entry.finger_file}, parts {', '.join(entry.parts)}"
+            )
+    finally:
+        library.close()
     return EXIT_OK
 
 

@@ -91,6 +91,37 @@ class LimitsConfig(_Section):
     max_3mf_ratio: float = Field(200.0, gt=1, description="Largest uncompressed/compressed size ratio of a 3MF entry")
 
 
+class PartsSettings(_Section):
+    """How the daemon takes part files (the design's ``[design.parts]`` limits what a repair may change)."""
+
+    repair: bool = Field(
+        True,
+        description=(
+            "Repair part files as a slicer takes them (open and overlapping shells, holes, flipped and duplicated "
+            "triangles) unless a job's manifest says repair = false; the report lists what changed"
+        ),
+    )
+
+
+class ReuseConfig(_Section):
+    """Finger reuse (METHOD §11b): a job whose parts are all served by delivered fingers prints none."""
+
+    enabled: bool = Field(
+        True,
+        description=(
+            "Keep every delivered finger set in the cell's library (<state.dir>/fingers.sqlite3) and serve a job whose "
+            "parts all have the geometry of parts of active library fingers with those fingers: no new finger is "
+            "designed or printed"
+        ),
+    )
+    reprint_after_jobs: int = Field(
+        100,
+        ge=1,
+        description="Wear limit: a finger that served this many jobs (its own included) serves no more; the next "
+        "job of its parts designs and prints a new one",
+    )
+
+
 class BusConfig(_Section):
     """Zenoh key expressions: ``<prefix>/<cell>/jobs/<job_id>/...``."""
 
@@ -153,6 +184,8 @@ class DaemonConfig(_Section):
     state: StateConfig
     jobs: JobsConfig = Field(default_factory=JobsConfig)
     limits: LimitsConfig = Field(default_factory=LimitsConfig)
+    parts: PartsSettings = Field(default_factory=PartsSettings)
+    reuse: ReuseConfig = Field(default_factory=ReuseConfig)
     bus: BusConfig = Field(default_factory=BusConfig)
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     mcap: McapConfig = Field(default_factory=McapConfig)
@@ -321,7 +354,9 @@ class JobManifest(_Section):
     parts: list[PartEntry] = Field(
         default_factory=list, description="The parts; empty: every mesh file in the folder, in mm, quantity 1"
     )
-    repair: bool = Field(False, description="Repair part meshes that are not closed volumes")
+    repair: bool | None = Field(
+        None, description="Repair part meshes that are not closed volumes; default the daemon's [parts] repair"
+    )
     sampler: SamplerConfig | None = None
     gripper: GripperConfig | None = None
     filter: FilterConfig | None = None

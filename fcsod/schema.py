@@ -21,6 +21,7 @@ from .bus.messages import (
     VerificationMessage,
 )
 from .config import DaemonConfig, JobManifest
+from .job.reuse import ReuseReport
 from .record.recorder import CHANNELS, TOPIC_VERIFICATION
 
 
@@ -40,6 +41,7 @@ FCSOD_SCHEMAS: dict[str, type[BaseModel]] = {
     "zenoh-placement.json": PlacementMessage,
     "zenoh-plan.json": PlanMessage,
     "placement-report.json": PlacementReport,
+    "reuse-report.json": ReuseReport,
     **{_channel_file(topic): model for topic, model in CHANNELS.items()},
     "zenoh-verification.json": VerificationMessage,
     _channel_file(TOPIC_VERIFICATION): VerificationReport,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import manifold3d
 import numpy as np
 import trimesh
@@ -90,3 +92,11 @@ def _flip(mesh: trimesh.Trimesh, rng: np.random.Generator) -> trimesh.Trimesh:
 def _duplicate(mesh: trimesh.Trimesh, rng: np.random.Generator) -> trimesh.Trimesh:
     chosen = rng.choice(len(mesh.faces), max(1, len(mesh.faces) // 20), replace=False)
     return trimesh.Trimesh(mesh.vertices, np.vstack([mesh.faces, mesh.faces[chosen]]), process=False)
+
+
+def sheet_stl(path: Path) -> bytes:
+    """The upward faces of the real mesh at ``path`` as binary STL: a surface that encloses no volume, which no
+    repair can make a part.
+    """
+    mesh = trimesh.load(path, force="mesh")
+    return trimesh.Trimesh(mesh.vertices, mesh.faces[mesh.face_normals[:, 2] > 0.99]).export(file_type="stl")

@@ -78,11 +78,14 @@ def write_config(
     zenoh_extra: str = "",
     bus_extra: str = "",
     design: str = FAST_DESIGN,
+    reuse: bool = False,
 ) -> Path:
     """Write an fcsod.toml for a daemon listening on ``<scheme>/127.0.0.1:<port>`` with folders below ``base``.
 
     ``zenoh_extra`` and ``bus_extra`` are lines added to the ``[zenoh]`` and ``[bus]`` sections;
     ``design`` the daemon's ``[design.*]`` sections (:data:`FAST_DESIGN` or :data:`SLOW_DESIGN`).
+    ``reuse`` keeps finger reuse on (the daemon's default); off, tests that
+    drop the same part twice see it designed twice.
 
     Returns
     -------
@@ -116,6 +119,9 @@ multicast_scouting = false
 
 [mcap]
 chunk_size_bytes = 4096
+
+[reuse]
+enabled = {str(reuse).lower()}
 {extra}
 {design}
 """,

@@ -131,6 +131,7 @@ def repair_report(part: Part) -> RepairReport | None:
         solids_out=summary.solids_out,
         volume_before_mm3=rounded(summary.volume_before * part.scale**3),
         volume_after_mm3=rounded(summary.volume_after * part.scale**3),
+        volume_change_percent=rounded(summary.volume_change_percent),
         max_surface_deviation_mm=rounded(summary.max_deviation * part.scale),
     )
 

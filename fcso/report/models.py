@@ -34,9 +34,18 @@ class RepairReport(ReportModel):
         description="Solids made of the closed shells (overlaps united with manifold3d), all parts of the file"
     )
     volume_before_mm3: float = Field(
-        description="Sum of the shells' absolute enclosed volumes before hole filling, mm³"
+        description=(
+            "Sum of the shells' absolute enclosed volumes before hole filling (an open shell's about the centre of "
+            "its open edges), mm³"
+        )
     )
     volume_after_mm3: float = Field(description="Volume of the file's solids after repair and union, mm³")
+    volume_change_percent: float = Field(
+        description=(
+            "Change of the shells' volume by hole filling and dropped shells, % of volume_before_mm3 (before the "
+            "union, so overlaps are no change); limited by [parts] repair_max_volume_change_percent"
+        )
+    )
     max_surface_deviation_mm: float = Field(
         description="Largest distance from a repaired corner to the file's triangles, mm"
     )

@@ -125,11 +125,19 @@ class PlanSet(_Message):
     finger_file: str = Field(description="The finger STL in the job's output folder")
     finger_sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="SHA-256 of the finger STL, hex")
     finger_copies: int = Field(
-        description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested)"
+        description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested; 0 when reused)"
     )
     quality_mm2: float = Field(description="Q of the set's finger (min E over its scenarios), mm²")
     worst_retained: float = Field(description="Least E / E* over the set's scenarios")
     parts: list[PickPart] = Field(description="Parts to pick with this finger, with quantities and grasps")
+    finger_id: int | None = Field(
+        None,
+        description="Id in the cell's finger library of a finger delivered before and reused (fcsod fingers list); "
+        "null for a finger this job delivers",
+    )
+    reused_from_job: str | None = Field(
+        None, description="The job that delivered the reused finger (its finger_key and finger_file are that job's)"
+    )
 
 
 class PlanMessage(_Message):

@@ -123,8 +123,11 @@ def plan_lines(plan: dict) -> list[str]:
         + ("reached" if plan["min_retained_reached"] else "NOT reached")
     ]
     for entry in plan["sets"]:
+        reused = entry.get("finger_id")
         lines.append(
-            f"  set {entry['set']}: mount {entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, "
+            f"  set {entry['set']}: mount "
+            + (f"library finger {reused} delivered by {entry['reused_from_job']}, " if reused is not None else "")
+            + f"{entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, "
             f"sha256 {entry['finger_sha256']}, "
             f"Q = {entry['quality_mm2']:.1f} mm²)"
         )

@@ -17,7 +17,7 @@ from fcso import FcsoError
 from ..bus.messages import BusMessage, StateChangeRecord, utc_now
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder
-from .steps import STEPS
+from .steps import job_steps
 from .task import JobFolderDeleted, JobRun, JobTask, TimeLimitExceeded, Withdrawn, status_message, time_limit_error
 from .verification import verify_done_job
 
@@ -53,7 +53,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     error = None
     try:
         recorder.flush()
-        for step in STEPS:
+        for step in job_steps(run):
             started = time.perf_counter()
             step(run)
             run.log(

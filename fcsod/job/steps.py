@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -26,10 +26,8 @@ from ..bus.messages import (
     DesignAttachment,
     DesignRecord,
     GraspsMessage,
-    InputFile,
     InputHashesRecord,
     JobSpecRecord,
-    OutputFilesRecord,
     PlacementMessage,
     PoseRecord,
     QualityMessage,
@@ -43,7 +41,6 @@ from ..record.recorder import (
     TOPIC_DESIGN,
     TOPIC_GRASPS,
     TOPIC_INPUTS,
-    TOPIC_OUTPUTS,
     TOPIC_PLACEMENT,
     TOPIC_POSES,
     TOPIC_SAMPLES,
@@ -53,6 +50,7 @@ from ..record.recorder import (
 from ..record.scene import base64_text, build_scene_update, scene_update
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
+from .reuse import step_add_to_library, step_reuse, step_reused_outputs
 from .task import BUILD_NAME, FINGER_SET, PROGRESS_INTERVAL_S, JobFolderDeleted, JobRun
 from .verification import choose_by_verification, job_settings
 
@@ -99,8 +97,10 @@ def step_load(run: JobRun) -> None:
             part.path,
             units=part.entry.units,
             scale_to_mm=part.entry.scale_to_mm,
-            repair=run.manifest.repair,
+            repair=run.task.config.parts.repair if run.manifest.repair is None else run.manifest.repair,
             split_bodies=run.settings.parts.split_bodies,
+            max_repair_volume_change_percent=run.settings.parts.repair_max_volume_change_percent,
+            max_repair_deviation_mm=run.settings.parts.repair_max_deviation_mm,
             max_uncompressed_bytes=run.task.config.limits.max_3mf_uncompressed_bytes,
         )
         for one in loaded:
@@ -315,23 +315,7 @@ def step_outputs(run: JobRun) -> None:
     adds to the report; the meshes are those the design record holds.
     """
     run.files = {**sets_output_files(run.sets), **run.files}
-    for name, data in run.files.items():
-        path = run.work_dir / name
-        try:
-            path.parent.mkdir(exist_ok=True)
-            path.write_bytes(data)
-        except OSError as exc:
-            # a failed write() does not say which file it was writing
-            raise OSError(exc.errno, exc.strerror, str(path)) from exc
-    run.recorder.write(
-        TOPIC_OUTPUTS,
-        OutputFilesRecord(
-            job_id=run.task.job_id,
-            files=[
-                InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in run.files.items()
-            ],
-        ),
-    )
+    run.write_files()
     bus, report = run.task.config.bus, run.result.report
     if run.sets is not None and run.sets.report is not None:
         copies = [
@@ -409,10 +393,24 @@ def step_folder_kept(run: JobRun) -> None:
 STEPS: list[Callable[[JobRun], None]] = [
     step_inputs,
     step_load,
+    step_reuse,
     step_design,
     step_choose_by_verification,
     step_record_design,
     step_placement,
     step_outputs,
     step_folder_kept,
+    step_add_to_library,
 ]
+
+#: The steps after :func:`step_reuse` of a job the finger library serves.
+REUSED_STEPS: list[Callable[[JobRun], None]] = [step_reused_outputs, step_folder_kept]
+
+
+def job_steps(run: JobRun) -> Iterator[Callable[[JobRun], None]]:
+    """The job's steps: :data:`STEPS`, or :data:`REUSED_STEPS` once :func:`step_reuse` found every part served."""
+    for step in STEPS:
+        yield step
+        if run.reuse is not None:
+            yield from REUSED_STEPS
+            return

@@ -12,6 +12,7 @@ each takes the :class:`JobRun` and records what it made.
 
 from __future__ import annotations
 
+import hashlib
 import signal
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,10 +24,18 @@ from fcso.sets import SetsResult
 
 from ..build.build3mf import Build
 from ..build.models import BuildConfig
-from ..bus.messages import BusMessage, InputFile, LogRecord, StateChangeRecord, StatusMessage, utc_now
+from ..bus.messages import (
+    BusMessage,
+    InputFile,
+    LogRecord,
+    OutputFilesRecord,
+    StateChangeRecord,
+    StatusMessage,
+    utc_now,
+)
 from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest
-from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, Recorder
+from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_STATE, Recorder
 from .inputs import PartInput
 
 #: Shortest interval between two progress lines of the same stage, s.
@@ -95,7 +104,9 @@ class JobTask:
 
 @dataclass
 class JobRun:
-    """The state of a running job that steps read and extend."""
+    """The state of a running job that steps read and extend (``reuse``: part name -> how the finger library serves
+    it, :class:`~fcsod.service.fingers.ServedPart`, when it serves the whole job).
+    """
 
     task: JobTask
     folder: Path
@@ -115,11 +126,33 @@ class JobRun:
     outgoing: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verified: tuple | None = None
+    reuse: dict | None = None
 
     @property
     def result(self) -> DesignResult:
         """The first finger set's design: the job's design when one set serves it."""
         return self.sets.designs[0]
+
+    def write_files(self) -> None:
+        """Write every output file into the work folder and record their hashes."""
+        for name, data in self.files.items():
+            path = self.work_dir / name
+            try:
+                path.parent.mkdir(exist_ok=True)
+                path.write_bytes(data)
+            except OSError as exc:
+                # a failed write() does not say which file it was writing
+                raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        self.recorder.write(
+            TOPIC_OUTPUTS,
+            OutputFilesRecord(
+                job_id=self.task.job_id,
+                files=[
+                    InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest())
+                    for n, d in self.files.items()
+                ],
+            ),
+        )
 
     def log(self, level: str, message: str, **fields) -> None:
         """Record a log line and send it to the daemon's log."""

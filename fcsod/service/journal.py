@@ -119,7 +119,7 @@ class Journal:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._db = _connect(self.path)
+        self._db = connect_database(self.path)
         self._db.executescript(_SCHEMA)
 
     def close(self) -> None:
@@ -209,7 +209,7 @@ class Journal:
 
 def stored_messages(path: str | Path) -> list[StoredMessage]:
     """Every stored message, read on a connection of its own (safe from any thread)."""
-    db = _connect(Path(path))
+    db = connect_database(Path(path))
     try:
         rows = db.execute(
             "SELECT job_id, topic, key_expr, encoding, payload, attachment, file FROM messages ORDER BY rowid"
@@ -219,7 +219,8 @@ def stored_messages(path: str | Path) -> list[StoredMessage]:
     return [StoredMessage(*r) for r in rows]
 
 
-def _connect(path: Path) -> sqlite3.Connection:
+def connect_database(path: Path) -> sqlite3.Connection:
+    """A connection to one of the daemon's SQLite files: WAL, every commit synced (survives ``kill -9``)."""
     db = sqlite3.connect(path, timeout=30.0, isolation_level="DEFERRED")
     db.execute("PRAGMA journal_mode = WAL")
     db.execute("PRAGMA synchronous = FULL")

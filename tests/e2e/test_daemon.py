@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 
 from fcsod.cli import main
 from fcsod.record.recorder import ALWAYS_RECORDED, DESIGN_RECORDED, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record
+from tests.broken_meshes import sheet_stl
 from tests.fcsod_helpers import (
     DATA,
     Process,
@@ -171,7 +172,8 @@ def test_same_job_dropped_twice_runs_once(cell, cube_job):
 
 def test_bad_jobs_fail_clearly_and_the_next_good_job_runs(cell):
     base, subscriber = cell["base"], cell["subscriber"]
-    drop_job(base / "watch" / "open-mesh", {"encoder.stl": DATA / "encoder.stl"})
+    # the daemon repairs by default: only a file that encloses no volume fails
+    drop_job(base / "watch" / "open-mesh", {"top_face.stl": sheet_stl(DATA / "20mm-xyz-cube.stl")})
     drop_job(
         base / "watch" / "unknown-key", {"job.toml": "[sampler]\nlength_mm = 10\nlenght_mm = 12\n", "cube.stl": CUBE}
     )
@@ -180,7 +182,8 @@ def test_bad_jobs_fail_clearly_and_the_next_good_job_runs(cell):
 
     open_mesh = finished(subscriber, "open-mesh")["body"]
     assert open_mesh["state"] == "failed"
-    assert "encoder.stl" in open_mesh["error"] and "open mesh" in open_mesh["error"]
+    assert "top_face.stl" in open_mesh["error"] and "open mesh" in open_mesh["error"]
+    assert "even after --repair no shell encloses a volume" in open_mesh["error"]
     unknown = finished(subscriber, "unknown-key")["body"]
     assert unknown["state"] == "failed"
     assert "job.toml" in unknown["error"] and "sampler.lenght_mm: unknown key" in unknown["error"]

@@ -21,6 +21,7 @@ import pytest
 from fcsod.bus.pki import add_client, init_pki
 from fcsod.record.recorder import TOPIC_STATE, read_record
 from fcsod.service.journal import journal_problem
+from tests.broken_meshes import sheet_stl
 from tests.fcsod_helpers import (
     DATA,
     REPO,
@@ -210,7 +211,7 @@ def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunni
     subscriber = start_subscriber(config, extra=["--no-query"])
     try:
         drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
-        drop_job(tmp_path / "watch" / "broken", {"encoder.stl": DATA / "encoder.stl"})
+        drop_job(tmp_path / "watch" / "broken", {"top_face.stl": sheet_stl(DATA / "20mm-xyz-cube.stl")})
         done, failed = finished(subscriber, "cube"), finished(subscriber, "broken")
     finally:
         subscriber.stop()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fcso import MeshError, load_parts
+from fcso import MeshError, RepairToleranceError, load_parts
 from fcso.parts import read_mesh
 from tests.broken_meshes import KINDS, break_mesh, intact_volume
 from tests.conftest import data_path
@@ -88,6 +88,41 @@ def test_real_frame_of_open_overlapping_shells_is_repaired():
     assert sum(p.mesh.volume for p in parts) < summary.volume_before
 
 
+@pytest.mark.parametrize(
+    ("name", "solids"),
+    # real print files as published: a sign support of 8 overlapping closed shells, an early solar tracker of 8
+    # shells with non-manifold edges where they touch, a microscope of overlapping shells and slivers
+    [("supporto_cartello.stl", 2), ("solar_tracker_4975bf1.stl", 2), ("microscopio.stl", 2)],
+)
+def test_real_files_of_overlapping_shells_change_less_than_two_percent(name, solids):
+    parts = load_parts(data_path(name), repair=True, max_repair_volume_change_percent=2.0)
+    assert len(parts) == solids
+    for part in parts:
+        assert part.mesh.is_watertight and part.mesh.volume > 0
+    summary = parts[0].repair
+    assert summary.shells_in > solids and summary.solids_out == solids
+    assert abs(summary.volume_change_percent) < 2.0
+    # overlaps united count once: the solids hold less than the shells add up to
+    assert sum(p.mesh.volume for p in parts) < summary.volume_before
+
+
+def test_a_repair_beyond_the_tolerance_is_refused_with_its_figure(tmp_path):
+    # the frame's hole patches and dropped sheets change its shells' volume by +2.6 %
+    path = data_path("microscopoio_telaio.stl")
+    with pytest.raises(
+        RepairToleranceError, match=r"microscopoio_telaio.stl: repair would change.*volume \+2\.\d\d %"
+    ) as refused:
+        load_parts(path, repair=True, max_repair_volume_change_percent=2.0, max_repair_deviation_mm=5.0)
+    change = refused.value.volume_change_percent
+    assert 2.0 < change < 5.0 and refused.value.max_deviation_mm < 5.0
+    # the defaults (5 %, 5 mm) take it
+    assert len(load_parts(path, repair=True, max_repair_volume_change_percent=5.0, max_repair_deviation_mm=5.0)) == 4
+    config = tmp_path / "tight.toml"
+    config.write_text(FAST + "\n[parts]\nrepair_max_volume_change_percent = 2.0\n")
+    run = fcso("design", path, "--out", tmp_path / "out", "--config", config, "--repair")
+    assert_bad_input(run, "microscopoio_telaio.stl", f"volume {change:+.2f} %", "repair_max_volume_change_percent = 2")
+
+
 def test_design_of_a_broken_real_file_with_repair(tmp_path):
     path, intact_volume = write_broken("20mm-xyz-cube.stl", "all", tmp_path)
     config = tmp_path / "fast.toml"
@@ -100,6 +135,7 @@ def test_design_of_a_broken_real_file_with_repair(tmp_path):
     repair = part["repair"]
     assert repair["holes_filled"] >= 1 and repair["faces_flipped"] >= 1 and repair["faces_removed"] >= 1
     assert repair["shells_in"] == 2 and repair["solids_out"] == 1
+    assert abs(repair["volume_change_percent"]) < 100 * VOLUME_TOLERANCE
     assert repair["volume_after_mm3"] == pytest.approx(intact_volume, rel=VOLUME_TOLERANCE)
     assert part["volume_mm3"] == pytest.approx(repair["volume_after_mm3"], rel=1e-6)
     assert any("filled" in line for line in part["repairs"])

@@ -1,0 +1,243 @@
+"""Finger reuse in a job (METHOD §11b): serve a job from the cell's finger library, or add the job's fingers to it.
+
+After loading, :func:`step_reuse` asks the library (:mod:`fcsod.service.fingers`)
+for delivered fingers whose parts have the geometry of every part of the job.
+When they serve it, the job designs nothing and prints no finger:
+:func:`step_reused_outputs` writes ``build.3mf`` with the parts alone, a
+``report.json`` that names the reused fingers (:class:`ReuseReport`), and
+publishes the grasps, the placement and a pick plan whose sets name the
+library's fingers (id, sha256, the job that delivered them). A job that
+designs keeps its finger sets in the library when it is done
+(:func:`step_add_to_library`).
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import trimesh
+from pydantic import BaseModel, ConfigDict, Field
+
+import fcso
+from fcso.output.layout import REPORT_JSON, set_finger_path
+from fcso.report.design import part_report
+from fcso.report.models import GraspReport, PartReport, PickPart
+
+from .. import __version__
+from ..build.build3mf import export_build_3mf
+from ..build.placement import place_fingers
+from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now
+from ..config import DaemonConfig
+from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
+from ..service.fingers import LIBRARY_NAME, DeliveredFinger, DeliveredPart, FingerEntry, FingerLibrary
+from .task import BUILD_NAME, FINGER_SET, JobRun
+
+
+class _Report(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ReusedPartReport(_Report):
+    """A part of the job and the library part whose geometry it has."""
+
+    part: str = Field(description="The part in this job")
+    library_part: str = Field(description="The part of the same geometry in the job that delivered the finger")
+
+
+class ReusedFingerReport(_Report):
+    """A finger from the cell's library that serves this job."""
+
+    finger_id: int = Field(description="Id in the library (fcsod fingers list)")
+    sha256: str = Field(description="SHA-256 of the finger STL, hex")
+    delivered_by_job: str = Field(description="The job that designed and printed it")
+    finger_file: str = Field(description="Its STL, relative to this job's output folder (the delivering job's)")
+    finger_key: str = Field(description="zenoh key the delivering job published it on")
+    jobs_served: int = Field(description="Jobs it has served, this one and the delivering one included")
+    reprint_after_jobs: int = Field(description="[reuse] reprint_after_jobs: the wear limit")
+    parts: list[ReusedPartReport]
+
+
+class ReuseReport(_Report):
+    """``report.json`` of a job served by fingers delivered before: nothing designed, no finger printed."""
+
+    job_id: str
+    fcsod_version: str
+    fcso_version: str
+    message: str = Field(description="What was reused, in one sentence")
+    reused: list[ReusedFingerReport] = Field(description="The fingers to mount, in the pick plan's order")
+    parts: list[PartReport] = Field(description="The job's parts as loaded (repair included)")
+    grasps: list[GraspReport] = Field(description="The delivered grasps, rest transforms from this job's part files")
+    placement: dict = Field(description="The parts in build.3mf, no finger copies (schema: placement-report.json)")
+    warnings: list[str]
+
+
+def library_path(config: DaemonConfig) -> Path:
+    """The cell's finger library in the daemon's state folder."""
+    return config.state.dir / LIBRARY_NAME
+
+
+def step_reuse(run: JobRun) -> None:
+    """Serve the job from the finger library when every part has the geometry of a part of an active finger."""
+    config = run.task.config
+    if not config.reuse.enabled or not run.loaded:
+        return
+    library = FingerLibrary(library_path(config))
+    try:
+        served = library.claim(
+            config.bus.cell, run.task.job_id, {p.name: p.mesh for p in run.loaded}, config.reuse.reprint_after_jobs
+        )
+    finally:
+        library.close()
+    if served is None:
+        run.log("info", "finger library: not every part is served by a delivered finger; designing")
+        return
+    run.reuse = served
+    ids = sorted({s.finger.finger_id for s in served.values()})
+    run.log("info", f"finger library: every part is served by finger {', '.join(map(str, ids))}: nothing to design")
+
+
+def step_reused_outputs(run: JobRun) -> None:
+    """The outputs and messages of a job the library serves: build with the parts alone, report, grasps, plan."""
+    config, job_id, served = run.task.config, run.task.job_id, run.reuse
+    fingers: dict[int, FingerEntry] = {}
+    for part in run.loaded:
+        fingers.setdefault(served[part.name].finger.finger_id, served[part.name].finger)
+    library = FingerLibrary(library_path(config))
+    try:
+        finger = trimesh.load(io.BytesIO(library.finger_stl(min(fingers))), file_type="stl")
+    finally:
+        library.close()
+    # the placer with no finger copies packs the job's parts alone
+    no_fingers = run.build_settings.model_copy(update={"finger_copies": 0, "spare_fingers": 0})
+    placed = place_fingers(run.build, finger, no_fingers)
+    run.recorder.write(TOPIC_PLACEMENT, placed.report)
+    run.log("info", f"placement: {placed.report.message}")
+    run.files = {
+        BUILD_NAME: export_build_3mf(
+            placed.items,
+            job_id=job_id,
+            application=f"fcsod {__version__}",
+            creation_date=utc_now(),
+            finger_set=FINGER_SET,
+        )
+    }
+    grasps = [g for p in run.loaded for g in served[p.name].grasps]
+    run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
+    min_retained = run.settings.finger_sets.min_retained
+    worst = min(f.worst_retained for f in fingers.values())
+    reused = []
+    plan_sets = []
+    for number, entry in enumerate(fingers.values(), start=1):
+        parts = [p for p in run.loaded if served[p.name].finger.finger_id == entry.finger_id]
+        finger_file = f"../{entry.job_id}/{entry.finger_file}"
+        reused.append(
+            ReusedFingerReport(
+                finger_id=entry.finger_id,
+                sha256=entry.sha256,
+                delivered_by_job=entry.job_id,
+                finger_file=finger_file,
+                finger_key=entry.design_key,
+                jobs_served=entry.jobs,
+                reprint_after_jobs=config.reuse.reprint_after_jobs,
+                parts=[ReusedPartReport(part=p.name, library_part=served[p.name].library_part) for p in parts],
+            )
+        )
+        plan_sets.append(
+            PlanSet(
+                set=number,
+                finger_key=entry.design_key,
+                finger_file=finger_file,
+                finger_sha256=entry.sha256,
+                finger_copies=0,
+                quality_mm2=entry.quality_mm2,
+                worst_retained=entry.worst_retained,
+                parts=[
+                    PickPart(part=p.name, copies=[p.name], quantity=len(p.instances), grasps=served[p.name].grasps)
+                    for p in parts
+                ],
+                finger_id=entry.finger_id,
+                reused_from_job=entry.job_id,
+            )
+        )
+    message = (
+        f"every part is served by {len(fingers)} finger set(s) delivered before (library finger "
+        f"{', '.join(str(f.finger_id) for f in fingers.values())}): no finger designed, none in build.3mf"
+    )
+    warnings = list(dict.fromkeys(w for p in run.loaded for w in p.warnings)) + placed.report.warnings
+    report = ReuseReport(
+        job_id=job_id,
+        fcsod_version=__version__,
+        fcso_version=fcso.__version__,
+        message=message,
+        reused=reused,
+        parts=[part_report(p) for p in run.loaded],
+        grasps=grasps,
+        placement=placed.report.model_dump(mode="json"),
+        warnings=warnings,
+    )
+    run.files[REPORT_JSON] = report.model_dump_json(indent=2).encode()
+    run.warnings.extend(placed.report.warnings)
+    bus = config.bus
+    plan = PlanMessage(
+        job_id=job_id,
+        sets=plan_sets,
+        min_retained=min_retained,
+        min_retained_reached=worst >= min_retained,
+        worst_retained=worst,
+        ungraspable_parts=[],
+        partition=f"reused: {message}",
+    )
+    summary = placed.report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
+    run.outgoing = [
+        BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=job_id, grasps=grasps)),
+        BusMessage.json_body(bus.prefix, bus.cell, "plan", plan),
+        BusMessage.json_body(
+            bus.prefix, bus.cell, "placement", PlacementMessage(job_id=job_id, file=BUILD_NAME, **summary)
+        ),
+    ]
+    run.write_files()
+    for published in run.outgoing:
+        run.record_published(published)
+    run.log("info", f"finger reuse: {message}")
+
+
+def step_add_to_library(run: JobRun) -> None:
+    """Keep the done job's finger sets in the cell's library, each with its parts' geometry and grasps."""
+    config = run.task.config
+    if not config.reuse.enabled:
+        return
+    meshes = {p.name: p.mesh for p in run.loaded}
+    report, several = run.sets.report, run.sets.several
+    delivered = []
+    for number in range(1, len(run.sets.designs) + 1):
+        design = run.sets.designs[number - 1].report
+        if report is not None:
+            entry = next(s for s in report.sets if s.set == number)
+            picks = [(pick.part, pick.grasps) for step in report.pick_plan if step.set == number for pick in step.parts]
+            quality, worst = entry.quality, entry.worst_retained
+        else:
+            names = list(dict.fromkeys(g.part for g in design.grasps))
+            picks = [(name, [g for g in design.grasps if g.part == name]) for name in names]
+            quality, worst = next(c.quality for c in design.candidates if c.index == design.best), 1.0
+        finger_file = set_finger_path(number, several)
+        delivered.append(
+            DeliveredFinger(
+                job_id=run.task.job_id,
+                finger_set=number,
+                finger_file=finger_file,
+                design_key=job_key(
+                    config.bus.prefix, config.bus.cell, run.task.job_id, f"design/{number}" if several else "design"
+                ),
+                finger_stl=run.files[finger_file],
+                quality_mm2=quality,
+                worst_retained=worst,
+                parts=[DeliveredPart(name, meshes[name], grasps) for name, grasps in picks if name in meshes],
+            )
+        )
+    library = FingerLibrary(library_path(config))
+    try:
+        ids = [library.add(config.bus.cell, finger) for finger in delivered]
+    finally:
+        library.close()
+    run.log("info", f"finger library: this job's finger set(s) kept as finger {', '.join(map(str, ids))}")

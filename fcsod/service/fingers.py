@@ -1,0 +1,312 @@
+"""The cell's finger library (METHOD §11b): the finger sets the daemon delivered, to reuse for jobs of the same parts.
+
+One SQLite file, ``<state_dir>/fingers.sqlite3``, next to the journal and
+written the same way (WAL, every commit synced, so a ``kill -9`` loses no
+delivered finger). A finger is kept with the geometry of every part it
+serves (vertices and triangles in mm, moved so their bounding box starts at
+the origin, as :func:`fcso.sets.identity.same_geometry` compares them), the
+grasps of those parts, the finger STL and its sha256, and the jobs it served.
+Workers of concurrent jobs open it each on their own connection; a reuse
+claims its fingers in one write transaction, so the wear count cannot be
+passed by two jobs at once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from fcso.report.models import GraspReport
+from fcso.sets.identity import same_geometry
+
+from ..bus.messages import utc_now
+from .journal import connect_database
+
+#: The library's file in the daemon's state folder.
+LIBRARY_NAME = "fingers.sqlite3"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS fingers (
+    finger_id      INTEGER PRIMARY KEY AUTOINCREMENT,
+    cell           TEXT NOT NULL,
+    job_id         TEXT NOT NULL,
+    finger_set     INTEGER NOT NULL,
+    finger_file    TEXT NOT NULL,
+    design_key     TEXT NOT NULL,
+    sha256         TEXT NOT NULL,
+    finger_stl     BLOB NOT NULL,
+    quality_mm2    REAL NOT NULL,
+    worst_retained REAL NOT NULL,
+    created_at     TEXT NOT NULL,
+    retired_at     TEXT,
+    UNIQUE (job_id, finger_set)
+);
+CREATE TABLE IF NOT EXISTS finger_parts (
+    finger_id  INTEGER NOT NULL REFERENCES fingers (finger_id),
+    part       TEXT NOT NULL,
+    faces      INTEGER NOT NULL,
+    vertices   INTEGER NOT NULL,
+    volume_mm3 REAL NOT NULL,
+    geometry   BLOB NOT NULL,
+    min_corner TEXT NOT NULL,
+    grasps     TEXT NOT NULL,
+    PRIMARY KEY (finger_id, part)
+);
+CREATE TABLE IF NOT EXISTS served (
+    finger_id INTEGER NOT NULL REFERENCES fingers (finger_id),
+    job_id    TEXT NOT NULL,
+    served_at TEXT NOT NULL,
+    PRIMARY KEY (finger_id, job_id)
+);
+"""
+
+
+@dataclass
+class DeliveredPart:
+    """A part a delivered finger serves.
+
+    Attributes
+    ----------
+    name : str
+        The part's name in the job that delivered the finger.
+    mesh : trimesh.Trimesh
+        The part in mm, in its file's frame (after units and shell union).
+    grasps : list of GraspReport
+        The part's grasps with this finger (rest transforms from this frame).
+    """
+
+    name: str
+    mesh: trimesh.Trimesh
+    grasps: list[GraspReport]
+
+
+@dataclass
+class DeliveredFinger:
+    """One finger set a done job delivered: what the library keeps of it."""
+
+    job_id: str
+    finger_set: int
+    finger_file: str
+    design_key: str
+    finger_stl: bytes
+    quality_mm2: float
+    worst_retained: float
+    parts: list[DeliveredPart]
+
+
+@dataclass
+class FingerEntry:
+    """A library entry as ``fcsod fingers list`` shows it."""
+
+    finger_id: int
+    cell: str
+    job_id: str
+    finger_set: int
+    finger_file: str
+    design_key: str
+    sha256: str
+    quality_mm2: float
+    worst_retained: float
+    created_at: str
+    retired_at: str | None
+    jobs: int
+    parts: list[str]
+
+
+@dataclass
+class ServedPart:
+    """How the library serves one part of a new job.
+
+    Attributes
+    ----------
+    finger : FingerEntry
+        The finger that serves it.
+    library_part : str
+        The part's name in the job that delivered the finger.
+    grasps : list of GraspReport
+        The delivered grasps, named for the new part, rest transforms from the new part's file frame.
+    """
+
+    finger: FingerEntry
+    library_part: str
+    grasps: list[GraspReport]
+
+
+class FingerLibrary:
+    """The library in ``<state_dir>/fingers.sqlite3`` (created if missing).
+
+    Parameters
+    ----------
+    path : Path
+        The database file.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._db = connect_database(self.path)
+        self._db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def add(self, cell: str, finger: DeliveredFinger) -> int:
+        """Keep a delivered finger; it counts its own job as served. A job run again adds nothing. Returns its id."""
+        with self._db:
+            self._db.execute(
+                "INSERT OR IGNORE INTO fingers (cell, job_id, finger_set, finger_file, design_key, sha256, finger_stl, "
+                "quality_mm2, worst_retained, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    cell,
+                    finger.job_id,
+                    finger.finger_set,
+                    finger.finger_file,
+                    finger.design_key,
+                    hashlib.sha256(finger.finger_stl).hexdigest(),
+                    finger.finger_stl,
+                    finger.quality_mm2,
+                    finger.worst_retained,
+                    utc_now(),
+                ),
+            )
+            finger_id = self._db.execute(
+                "SELECT finger_id FROM fingers WHERE job_id = ? AND finger_set = ?", (finger.job_id, finger.finger_set)
+            ).fetchone()[0]
+            for part in finger.parts:
+                vertices = np.asarray(part.mesh.vertices, dtype=np.float64)
+                corner = vertices.min(axis=0)
+                self._db.execute(
+                    "INSERT OR IGNORE INTO finger_parts VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        finger_id,
+                        part.name,
+                        len(part.mesh.faces),
+                        len(vertices),
+                        float(part.mesh.volume),
+                        _geometry_blob(vertices - corner, np.asarray(part.mesh.faces, dtype=np.int64)),
+                        json.dumps(corner.tolist()),
+                        json.dumps([g.model_dump(mode="json") for g in part.grasps]),
+                    ),
+                )
+            self._db.execute("INSERT OR IGNORE INTO served VALUES (?, ?, ?)", (finger_id, finger.job_id, utc_now()))
+        return finger_id
+
+    def entries(self, cell: str | None = None) -> list[FingerEntry]:
+        """Every finger (of ``cell``, or of all cells), oldest first."""
+        rows = self._db.execute(
+            "SELECT finger_id, cell, job_id, finger_set, finger_file, design_key, sha256, quality_mm2, worst_retained, "
+            "created_at, retired_at, (SELECT COUNT(*) FROM served s WHERE s.finger_id = f.finger_id) FROM fingers f "
+            + ("WHERE cell = ? " if cell is not None else "")
+            + "ORDER BY finger_id",
+            (cell,) if cell is not None else (),
+        ).fetchall()
+        parts = {}
+        for finger_id, name in self._db.execute("SELECT finger_id, part FROM finger_parts ORDER BY rowid"):
+            parts.setdefault(finger_id, []).append(name)
+        return [FingerEntry(*row, parts=parts.get(row[0], [])) for row in rows]
+
+    def finger_stl(self, finger_id: int) -> bytes:
+        """The STL of a finger in the library."""
+        return self._db.execute("SELECT finger_stl FROM fingers WHERE finger_id = ?", (finger_id,)).fetchone()[0]
+
+    def retire(self, finger_id: int) -> bool:
+        """Take a finger out of use (worn or lost); False when there is no such active finger."""
+        with self._db:
+            cursor = self._db.execute(
+                "UPDATE fingers SET retired_at = ? WHERE finger_id = ? AND retired_at IS NULL", (utc_now(), finger_id)
+            )
+        return cursor.rowcount == 1
+
+    def claim(
+        self, cell: str, job_id: str, meshes: dict[str, trimesh.Trimesh], reprint_after_jobs: int
+    ) -> dict[str, ServedPart] | None:
+        """Serve every part of a job from the library, and count the job on the fingers that serve it.
+
+        Parameters
+        ----------
+        cell : str
+            Only this cell's fingers serve.
+        job_id : str
+            The new job; a finger it delivered itself (a job run again) does not serve it.
+        meshes : dict
+            Part name -> part mesh in mm, file frame (:func:`fcso.load_parts`).
+        reprint_after_jobs : int
+            A finger that served this many jobs is worn: it serves no more.
+
+        Returns
+        -------
+        dict or None
+            Part name -> how it is served; None (and nothing counted) unless
+            every part has the same geometry as a part of an active finger.
+            Each part takes the newest such finger.
+        """
+        with self._db:
+            # one write transaction: concurrent jobs see each other's claims
+            self._db.execute("BEGIN IMMEDIATE")
+            entries = {e.finger_id: e for e in self.entries(cell) if e.retired_at is None and e.job_id != job_id}
+            active = [i for i, e in entries.items() if e.jobs < reprint_after_jobs or job_id in self._served(i)]
+            served = {}
+            for name, mesh in meshes.items():
+                match = self._serving(active, mesh)
+                if match is None:
+                    return None
+                finger_id, library_part, corner, grasps = match
+                shift = np.asarray(mesh.vertices, dtype=np.float64).min(axis=0) - corner
+                served[name] = ServedPart(entries[finger_id], library_part, [_moved(g, name, shift) for g in grasps])
+            at = utc_now()
+            for finger_id in sorted({s.finger.finger_id for s in served.values()}):
+                self._db.execute("INSERT OR IGNORE INTO served VALUES (?, ?, ?)", (finger_id, job_id, at))
+                entries[finger_id].jobs = len(self._served(finger_id))
+        return served
+
+    def _served(self, finger_id: int) -> set[str]:
+        return {r[0] for r in self._db.execute("SELECT job_id FROM served WHERE finger_id = ?", (finger_id,))}
+
+    def _serving(
+        self, finger_ids: list[int], mesh: trimesh.Trimesh
+    ) -> tuple[int, str, np.ndarray, list[GraspReport]] | None:
+        """The newest of ``finger_ids`` with a part of ``mesh``'s geometry: id, part name, its corner, its grasps."""
+        if not finger_ids:
+            return None
+        volume = float(mesh.volume)
+        rows = self._db.execute(
+            "SELECT finger_id, part, geometry, min_corner, grasps FROM finger_parts WHERE faces = ? AND vertices = ? "
+            "AND ABS(volume_mm3 - ?) <= 1e-6 * ABS(?) + 1e-6 AND finger_id IN ("
+            + ",".join("?" * len(finger_ids))
+            + ") "
+            "ORDER BY finger_id DESC",
+            (len(mesh.faces), len(mesh.vertices), volume, volume, *finger_ids),
+        ).fetchall()
+        for finger_id, part, geometry, corner, grasps in rows:
+            if same_geometry(_geometry_mesh(geometry), mesh):
+                return (
+                    finger_id,
+                    part,
+                    np.array(json.loads(corner)),
+                    [GraspReport.model_validate(g) for g in json.loads(grasps)],
+                )
+        return None
+
+
+def _moved(grasp: GraspReport, part: str, shift: np.ndarray) -> GraspReport:
+    """A delivered grasp for the same geometry moved by ``shift`` (mm) in its file frame, named ``part``."""
+    rest = np.asarray(grasp.rest_transform, dtype=float)
+    back = np.eye(4)
+    back[:3, 3] = -shift
+    return grasp.model_copy(update={"part": part, "rest_transform": (rest @ back).tolist()})
+
+
+def _geometry_blob(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.savez(buffer, vertices=vertices, faces=faces)
+    return buffer.getvalue()
+
+
+def _geometry_mesh(blob: bytes) -> trimesh.Trimesh:
+    arrays = np.load(io.BytesIO(blob))
+    return trimesh.Trimesh(arrays["vertices"], arrays["faces"], process=False)
