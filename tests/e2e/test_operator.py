@@ -1,0 +1,133 @@
+"""What an operator of the print server uses on a running daemon: ``fcsod jobs | cancel | retry`` and the metrics."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import urllib.request
+
+from prometheus_client.parser import text_string_to_metric_families
+
+from fcsod.record.recorder import TOPIC_STATE, read_record
+from fcsod.service.daemon import CANCELLED_ERROR
+from tests.fcsod_helpers import (
+    DATA,
+    REPO,
+    SLOW_DESIGN,
+    drop_job,
+    free_port,
+    start_daemon,
+    write_config,
+)
+
+SOLAR = DATA / "solar_tracker.stl"
+CUBE = DATA / "20mm-xyz-cube.stl"
+
+
+def fcsod(*args: str) -> subprocess.CompletedProcess:
+    """Run an fcsod command to its end."""
+    return subprocess.run([sys.executable, "-m", "fcsod", *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+
+
+def jobs(config, *args: str) -> dict[str, dict]:
+    """``fcsod jobs --json``: job id -> row."""
+    listed = fcsod("jobs", "--config", str(config), "--json", *args)
+    assert listed.returncode == 0, listed.stderr
+    return {row["job_id"]: row for row in map(json.loads, listed.stdout.splitlines())}
+
+
+def scrape(port: int) -> dict[tuple, float]:
+    """The metrics endpoint's samples, parsed by prometheus-client's parser: (name, sorted labels) -> value."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=30) as response:
+        text = response.read().decode()
+    return {
+        (sample.name, tuple(sorted(sample.labels.items()))): sample.value
+        for family in text_string_to_metric_families(text)
+        for sample in family.samples
+    }
+
+
+def test_cancel_retry_and_metrics_on_a_running_daemon(tmp_path):
+    metrics_port = free_port()
+    metrics = f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n'
+    # the first daemon designs for many minutes (SLOW_DESIGN): its job is surely still running when cancelled
+    config = write_config(tmp_path, free_port(), extra=metrics, design=SLOW_DESIGN)
+    daemon = start_daemon(config)
+    try:
+        before = scrape(metrics_port)
+        drop_job(tmp_path / "watch" / "slow", {"solar_tracker.stl": SOLAR})
+        started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
+        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+        # one job at a time: the second waits in the queue behind the running one
+        drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
+        queued = daemon.wait_for(
+            lambda v: isinstance(v, dict) and v.get("message") == "job queued" and v["folder"].endswith("/cube"), 60
+        )
+        running_id, queued_id = started["job_id"], queued["job_id"]
+
+        listed = jobs(config)
+        assert {k: v["state"] for k, v in listed.items()} == {running_id: "running", queued_id: "queued"}
+        assert listed[running_id]["folder"] == str(tmp_path / "watch" / "slow")
+        assert list(jobs(config, "--state", "queued")) == [queued_id]
+        during = scrape(metrics_port)
+
+        cancelled_queued = fcsod("cancel", queued_id[:10], "--config", str(config))
+        assert cancelled_queued.returncode == 0, cancelled_queued.stdout + cancelled_queued.stderr
+        cancelled_running = fcsod("cancel", running_id, "--config", str(config))
+        assert cancelled_running.returncode == 0, cancelled_running.stdout + cancelled_running.stderr
+        # a job that already ended cannot be cancelled; an unknown one is bad input
+        assert fcsod("cancel", running_id, "--config", str(config)).returncode == 1
+        assert fcsod("cancel", "no-such-job", "--config", str(config)).returncode == 2
+        after_cancel = scrape(metrics_port)
+        ended = jobs(config, "--state", "failed")
+    finally:
+        assert daemon.stop() == 0
+
+    assert before[("fcsod_jobs", (("state", "running"),))] == 0
+    assert during[("fcsod_jobs", (("state", "running"),))] == 1
+    assert during[("fcsod_queue_depth", ())] == 1
+    assert after_cancel[("fcsod_jobs", (("state", "failed"),))] == 2
+    assert after_cancel[("fcsod_queue_depth", ())] == 0
+    assert after_cancel[("fcsod_jobs_finished_total", (("state", "failed"),))] == 2
+    assert {k: v["error"] for k, v in ended.items()} == {running_id: CANCELLED_ERROR, queued_id: CANCELLED_ERROR}
+    out = tmp_path / "out"
+    # nothing partial: each cancelled job's folder holds its finished record only, no work folder is left
+    assert sorted(p.name for p in out.iterdir()) == sorted([running_id, queued_id])
+    for job in (running_id, queued_id):
+        assert sorted(p.name for p in (out / job).iterdir()) == ["job.mcap"]
+        record = read_record(out / job / "job.mcap")
+        assert not record.truncated
+        assert record.of(TOPIC_STATE)[-1]["state"] == "failed"
+        assert record.of(TOPIC_STATE)[-1]["error"] == CANCELLED_ERROR
+    assert any(
+        line["message"].startswith("loaded solar_tracker.stl")
+        for line in read_record(out / running_id / "job.mcap").of("/job/log")
+    )
+
+    # the settings fixed (quick ones), the cancelled cube is retried on a new daemon: a new run, a new record
+    config = write_config(tmp_path, free_port(), extra=metrics)
+    daemon = start_daemon(config)
+    try:
+        retried = fcsod("retry", queued_id, "--config", str(config))
+        assert retried.returncode == 0, retried.stdout + retried.stderr
+        done = daemon.wait_for(
+            lambda v: isinstance(v, dict) and v.get("job_id") == queued_id and v.get("message") == "job done", 120
+        )
+        finished = scrape(metrics_port)
+        # a done job is not retried
+        assert fcsod("retry", queued_id, "--config", str(config)).returncode == 1
+        final = jobs(config)
+    finally:
+        assert daemon.stop() == 0
+    assert done["state"] == "done"
+    assert final[queued_id]["state"] == "done" and final[queued_id]["error"] is None
+    assert final[running_id]["state"] == "failed", "the other failed job stays as it was"
+    kept = read_record(out / "attempts" / queued_id / "1" / "job.mcap")
+    assert kept.of(TOPIC_STATE)[-1]["error"] == CANCELLED_ERROR
+    assert [s["state"] for s in read_record(out / queued_id / "job.mcap").of(TOPIC_STATE)][-1] == "done"
+    assert finished[("fcsod_jobs", (("state", "done"),))] == 1
+    assert finished[("fcsod_jobs", (("state", "failed"),))] == 1
+    assert finished[("fcsod_jobs_finished_total", (("state", "done"),))] == 1
+    assert finished[("fcsod_stage_duration_seconds_count", (("stage", "design"),))] == 1
+    assert finished[("fcsod_stage_duration_seconds_sum", (("stage", "design"),))] > 0
