@@ -30,7 +30,8 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     task : JobTask
     emit : callable
         Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``,
-        ``("step", name, seconds)`` after each step, and finally ``("finished", state, error, [BusMessage, ...])``.
+        ``("step", name, seconds)`` after each step, ``("foxglove", topic, protobuf bytes, log time ns)`` for
+        each scene, and finally ``("finished", state, error, [BusMessage, ...])``.
     """
     config = task.config
     output_root = config.output.root

@@ -107,6 +107,7 @@ class Daemon:
         self._context = multiprocessing.get_context("spawn")
         self._lock_file = None
         self.metrics = DaemonMetrics(self.journal_path)
+        self.foxglove = None
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -151,6 +152,11 @@ class Daemon:
         if self.config.metrics.enabled:
             self.metrics.serve(self.config.metrics)
             log.info("metrics endpoint", extra={"url": f"http://{self.config.metrics.listen}/metrics"})
+        if self.config.foxglove.enabled:
+            from .foxglove_live import FoxgloveLive
+
+            self.foxglove = FoxgloveLive(self.config.foxglove)
+            log.info("Foxglove live server", extra={"url": f"ws://{self.config.foxglove.listen}"})
         self._rescan()
         self._fill_workers()
         log.info(
@@ -201,6 +207,8 @@ class Daemon:
         self.bus.close()
         self.journal.close()
         self.metrics.close()
+        if self.foxglove is not None:
+            self.foxglove.close()
         log.info("fcsod stopped")
         if self._lock_file is not None:
             self._lock_file.close()
@@ -344,6 +352,9 @@ class Daemon:
                 if event[1].topic.partition("/")[0] == "verification":
                     self.metrics.verified(VerificationMessage.model_validate_json(event[1].payload).passed)
                 self._publish(event[1])
+            elif kind == "foxglove":
+                if self.foxglove is not None:
+                    self.foxglove.log_scene(event[2], event[3])
             elif kind == "step":
                 self.metrics.stage_seconds.labels(event[1]).observe(event[2])
             elif kind == "finished":
@@ -512,8 +523,10 @@ class Daemon:
         """Sign the message, keep it for the queryable, then publish it."""
         message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
-        transports = [("zenoh", self.bus)] + ([("ros2", self.ros2)] if self.ros2 is not None else [])
+        transports = [("zenoh", self.bus), ("ros2", self.ros2), ("foxglove", self.foxglove)]
         for transport, publisher in transports:
+            if publisher is None:
+                continue
             try:
                 publisher.publish(message)
             except Exception as exc:  # the journal keeps the message for the queryable; the daemon goes on

@@ -78,7 +78,7 @@ class DaemonMetrics:
         )
         self.publish_failures = Counter(
             "fcsod_bus_publish_failures",
-            "Messages that could not be published, by transport (zenoh or ros2)",
+            "Messages that could not be published, by transport (zenoh, ros2 or foxglove)",
             ["transport"],
             registry=self.registry,
         )
@@ -86,7 +86,7 @@ class DaemonMetrics:
             self.jobs_finished.labels(state)
         for result in ("passed", "failed"):
             self.verifications.labels(result)
-        for transport in ("zenoh", "ros2"):
+        for transport in ("zenoh", "ros2", "foxglove"):
             self.publish_failures.labels(transport)
         self._server = None
         self._verified = {"passed": 0, "failed": 0}

@@ -1,21 +1,30 @@
-"""What an operator of the print server uses on a running daemon: ``fcsod jobs | cancel | retry`` and the metrics."""
+"""What the people around a running daemon use: ``fcsod jobs | cancel | retry``, the metrics, the live Foxglove view."""
 
 from __future__ import annotations
 
+import base64
+import contextlib
+import io
 import json
-import subprocess
-import sys
+import struct
+import threading
 import urllib.request
+from dataclasses import dataclass
 
+from foxglove.messages import SceneUpdate
 from prometheus_client.parser import text_string_to_metric_families
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
 
+from fcsod.cli import main
 from fcsod.record.recorder import TOPIC_STATE, read_record
 from fcsod.service.daemon import CANCELLED_ERROR
 from tests.fcsod_helpers import (
     DATA,
-    REPO,
     SLOW_DESIGN,
+    decode_foxglove,
     drop_job,
+    foxglove_messages,
     free_port,
     start_daemon,
     write_config,
@@ -25,9 +34,21 @@ SOLAR = DATA / "solar_tracker.stl"
 CUBE = DATA / "20mm-xyz-cube.stl"
 
 
-def fcsod(*args: str) -> subprocess.CompletedProcess:
-    """Run an fcsod command to its end."""
-    return subprocess.run([sys.executable, "-m", "fcsod", *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+@dataclass
+class Command:
+    """What an fcsod command did: exit code and printed text."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def fcsod(*args: str) -> Command:
+    """Run an fcsod command to its end (in this process: the daemon it talks to runs in its own)."""
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main(list(args))
+    return Command(code, stdout.getvalue(), stderr.getvalue())
 
 
 def jobs(config, *args: str) -> dict[str, dict]:
@@ -48,7 +69,48 @@ def scrape(port: int) -> dict[tuple, float]:
     }
 
 
-def test_cancel_retry_and_metrics_on_a_running_daemon(tmp_path):
+class FoxgloveClient:
+    """A Foxglove WebSocket client in a thread, on ``socket`` (opened with the subprotocol foxglove.sdk.v1):
+    subscribes to ``topics`` as they are advertised and keeps each message it receives with its channel.
+    """
+
+    def __init__(self, socket, topics: set[str]):
+        self.socket = socket
+        self.topics = topics
+        self.channels: dict[int, dict] = {}
+        self.received: list[tuple[dict, bytes]] = []
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        subscriptions: dict[int, dict] = {}
+        with contextlib.suppress(ConnectionClosed):
+            for frame in self.socket:
+                if isinstance(frame, str):
+                    message = json.loads(frame)
+                    if message["op"] != "advertise":
+                        continue
+                    wanted = [c for c in message["channels"] if c["topic"] in self.topics]
+                    for channel in wanted:
+                        subscriptions[channel["id"]] = channel
+                    self.socket.send(
+                        json.dumps(
+                            {
+                                "op": "subscribe",
+                                "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in wanted],
+                            }
+                        )
+                    )
+                elif frame[0] == 1:  # message data: opcode, subscription id (u32), log time (u64), payload
+                    (subscription,) = struct.unpack_from("<I", frame, 1)
+                    self.received.append((subscriptions[subscription], frame[13:]))
+
+    def join(self) -> None:
+        """Wait for the end of the connection (the caller closed the socket)."""
+        self.thread.join(timeout=10)
+
+
+def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
     metrics_port = free_port()
     metrics = f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n'
     # the first daemon designs for many minutes (SLOW_DESIGN): its job is surely still running when cancelled
@@ -105,22 +167,41 @@ def test_cancel_retry_and_metrics_on_a_running_daemon(tmp_path):
         for line in read_record(out / running_id / "job.mcap").of("/job/log")
     )
 
-    # the settings fixed (quick ones), the cancelled cube is retried on a new daemon: a new run, a new record
-    config = write_config(tmp_path, free_port(), extra=metrics)
+    # the settings fixed (quick ones), the cancelled cube is retried on a new daemon: a new run, a new record;
+    # a Foxglove client watches it live
+    foxglove_port = free_port()
+    live = f'[foxglove]\nenabled = true\nlisten = "127.0.0.1:{foxglove_port}"\n'
+    config = write_config(tmp_path, free_port(), extra=metrics + live)
     daemon = start_daemon(config)
     try:
-        retried = fcsod("retry", queued_id, "--config", str(config))
-        assert retried.returncode == 0, retried.stdout + retried.stderr
-        done = daemon.wait_for(
-            lambda v: isinstance(v, dict) and v.get("job_id") == queued_id and v.get("message") == "job done", 120
-        )
-        finished = scrape(metrics_port)
-        # a done job is not retried
-        assert fcsod("retry", queued_id, "--config", str(config)).returncode == 1
-        final = jobs(config)
+        with connect(f"ws://127.0.0.1:{foxglove_port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30) as socket:
+            client = FoxgloveClient(socket, {"/scene", "/fcsod/status"})
+            for topic in ("/scene", "/fcsod/status"):
+                daemon.wait_for(
+                    lambda v, topic=topic: (
+                        isinstance(v, dict) and v.get("message") == "Foxglove client subscribed" and v["topic"] == topic
+                    ),
+                    60,
+                )
+            retried = fcsod("retry", queued_id, "--config", str(config))
+            assert retried.returncode == 0, retried.stdout + retried.stderr
+            done = daemon.wait_for(
+                lambda v: (
+                    isinstance(v, dict)
+                    and v.get("job_id") == queued_id
+                    and v.get("state") in ("done", "failed")
+                    and str(v.get("message")).startswith("job ")
+                ),
+                120,
+            )
+            finished = scrape(metrics_port)
+            # a done job is not retried
+            assert fcsod("retry", queued_id, "--config", str(config)).returncode == 1
+            final = jobs(config)
+        client.join()
     finally:
         assert daemon.stop() == 0
-    assert done["state"] == "done"
+    assert done["state"] == "done", done
     assert final[queued_id]["state"] == "done" and final[queued_id]["error"] is None
     assert final[running_id]["state"] == "failed", "the other failed job stays as it was"
     kept = read_record(out / "attempts" / queued_id / "1" / "job.mcap")
@@ -131,3 +212,14 @@ def test_cancel_retry_and_metrics_on_a_running_daemon(tmp_path):
     assert finished[("fcsod_jobs_finished_total", (("state", "done"),))] == 1
     assert finished[("fcsod_stage_duration_seconds_count", (("stage", "design"),))] == 1
     assert finished[("fcsod_stage_duration_seconds_sum", (("stage", "design"),))] > 0
+
+    # live: the statuses of the run, and its scene (the same bytes as in its record) before it was done
+    topics = [channel["topic"] for channel, _ in client.received]
+    states = [json.loads(data)["state"] for channel, data in client.received if channel["topic"] == "/fcsod/status"]
+    assert states == ["queued", "running", "done"]
+    assert topics.index("/scene") < len(topics) - 1 - topics[::-1].index("/fcsod/status")
+    scene_channel, scene = next((c, d) for c, d in client.received if c["topic"] == "/scene")
+    assert (scene_channel["schemaName"], scene_channel["encoding"]) == ("foxglove.SceneUpdate", "protobuf")
+    assert base64.b64decode(scene_channel["schema"]) == SceneUpdate.get_schema().data
+    recorded = foxglove_messages(out / queued_id / "job.mcap")["/scene"]
+    assert decode_foxglove("foxglove.SceneUpdate", scene) in recorded
