@@ -34,7 +34,7 @@
   function material(group) {
     // the pocket lies on the finger's own surface: drawn a little in front so it shows
     return new THREE.MeshStandardMaterial({
-      color: COLOURS[group], metalness: 0.0, roughness: 0.8, side: THREE.DoubleSide,
+      color: COLOURS[group], metalness: 0.0, roughness: 0.8, side: THREE.DoubleSide, flatShading: true,
       polygonOffset: group === "pad", polygonOffsetFactor: -1, polygonOffsetUnits: -1
     });
   }
@@ -106,12 +106,8 @@
   var keys = Object.keys(data.meshes), left = keys.length, loader = new THREE.GLTFLoader();
   keys.forEach(function (key) {
     loader.parse(bytes(data.meshes[key]).buffer, "", function (gltf) {
-      gltf.scene.traverse(function (node) {
-        if (node.isMesh) {
-          node.geometry.computeVertexNormals();
-          geometries[key] = node.geometry;
-        }
-      });
+      // the GLB has no normals: the materials shade flat, face by face, as a part's edges are
+      gltf.scene.traverse(function (node) { if (node.isMesh) geometries[key] = node.geometry; });
       if (--left === 0) setUp();
     }, function (error) { console.error("fcso 3D view: mesh " + key + ": " + error); });
   });
