@@ -18,7 +18,6 @@ import numpy as np
 import trimesh
 
 from .html import text
-from .render import decimate
 
 #: The vendored viewer files, inlined into the page in this order.
 VIEWER_DIR = Path(__file__).with_name("viewer")
@@ -32,6 +31,8 @@ def glb_base64(mesh: trimesh.Trimesh, max_faces: int) -> str:
     """``mesh`` (mm) decimated to at most ``max_faces`` triangles, as base64 GLB without normals (the viewer
     computes them).
     """
+    from .render import decimate  # render loads matplotlib: only where a page is written
+
     vertices, faces = decimate(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_faces)
     glb = trimesh.Trimesh(vertices, faces, process=False).export(file_type="glb", include_normals=False)
     return base64.b64encode(glb).decode("ascii")
