@@ -21,11 +21,11 @@ from fcsod.record.recorder import TOPIC_STATE, read_record
 from fcsod.service.daemon import CANCELLED_ERROR
 from tests.fcsod_helpers import (
     DATA,
-    SLOW_DESIGN,
     decode_foxglove,
     drop_job,
     foxglove_messages,
     free_port,
+    slow_manifest,
     start_daemon,
     write_config,
 )
@@ -111,67 +111,13 @@ class FoxgloveClient:
 
 
 def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
-    metrics_port = free_port()
-    metrics = f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n'
-    # the first daemon designs for many minutes (SLOW_DESIGN): its job is surely still running when cancelled
-    config = write_config(tmp_path, free_port(), extra=metrics, design=SLOW_DESIGN)
-    daemon = start_daemon(config)
-    try:
-        before = scrape(metrics_port)
-        drop_job(tmp_path / "watch" / "slow", {"solar_tracker.stl": SOLAR})
-        started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
-        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
-        # one job at a time: the second waits in the queue behind the running one
-        drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
-        queued = daemon.wait_for(
-            lambda v: isinstance(v, dict) and v.get("message") == "job queued" and v["folder"].endswith("/cube"), 60
-        )
-        running_id, queued_id = started["job_id"], queued["job_id"]
-
-        listed = jobs(config)
-        assert {k: v["state"] for k, v in listed.items()} == {running_id: "running", queued_id: "queued"}
-        assert listed[running_id]["folder"] == str(tmp_path / "watch" / "slow")
-        assert list(jobs(config, "--state", "queued")) == [queued_id]
-        during = scrape(metrics_port)
-
-        cancelled_queued = fcsod("cancel", queued_id[:10], "--config", str(config))
-        assert cancelled_queued.returncode == 0, cancelled_queued.stdout + cancelled_queued.stderr
-        cancelled_running = fcsod("cancel", running_id, "--config", str(config))
-        assert cancelled_running.returncode == 0, cancelled_running.stdout + cancelled_running.stderr
-        # a job that already ended cannot be cancelled; an unknown one is bad input
-        assert fcsod("cancel", running_id, "--config", str(config)).returncode == 1
-        assert fcsod("cancel", "no-such-job", "--config", str(config)).returncode == 2
-        after_cancel = scrape(metrics_port)
-        ended = jobs(config, "--state", "failed")
-    finally:
-        assert daemon.stop() == 0
-
-    assert before[("fcsod_jobs", (("state", "running"),))] == 0
-    assert during[("fcsod_jobs", (("state", "running"),))] == 1
-    assert during[("fcsod_queue_depth", ())] == 1
-    assert after_cancel[("fcsod_jobs", (("state", "failed"),))] == 2
-    assert after_cancel[("fcsod_queue_depth", ())] == 0
-    assert after_cancel[("fcsod_jobs_finished_total", (("state", "failed"),))] == 2
-    assert {k: v["error"] for k, v in ended.items()} == {running_id: CANCELLED_ERROR, queued_id: CANCELLED_ERROR}
-    out = tmp_path / "out"
-    # nothing partial: each cancelled job's folder holds its finished record only, no work folder is left
-    assert sorted(p.name for p in out.iterdir()) == sorted([running_id, queued_id])
-    for job in (running_id, queued_id):
-        assert sorted(p.name for p in (out / job).iterdir()) == ["job.mcap"]
-        record = read_record(out / job / "job.mcap")
-        assert not record.truncated
-        assert record.of(TOPIC_STATE)[-1]["state"] == "failed"
-        assert record.of(TOPIC_STATE)[-1]["error"] == CANCELLED_ERROR
-    assert any(
-        line["message"].startswith("loaded solar_tracker.stl")
-        for line in read_record(out / running_id / "job.mcap").of("/job/log")
+    metrics_port, foxglove_port = free_port(), free_port()
+    extra = (
+        f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n'
+        f'[foxglove]\nenabled = true\nlisten = "127.0.0.1:{foxglove_port}"\n'
     )
-
-    # the settings fixed (quick ones), the cancelled cube is retried on a new daemon: a new run, a new record;
-    # a Foxglove client watches it live
-    foxglove_port = free_port()
-    live = f'[foxglove]\nenabled = true\nlisten = "127.0.0.1:{foxglove_port}"\n'
-    config = write_config(tmp_path, free_port(), extra=metrics + live)
+    config = write_config(tmp_path, free_port(), extra=extra)
+    out = tmp_path / "out"
     daemon = start_daemon(config)
     try:
         with connect(f"ws://127.0.0.1:{foxglove_port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30) as socket:
@@ -183,6 +129,39 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
                     ),
                     60,
                 )
+            before = scrape(metrics_port)
+            # a design of many minutes (SLOW_SECTIONS in its job.toml): surely still running when cancelled
+            drop_job(tmp_path / "watch" / "slow", {"job.toml": slow_manifest("solar.stl"), "solar.stl": SOLAR})
+            started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
+            daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+            # one job at a time: the second waits in the queue behind the running one
+            drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
+            queued = daemon.wait_for(
+                lambda v: isinstance(v, dict) and v.get("message") == "job queued" and v["folder"].endswith("/cube"),
+                60,
+            )
+            running_id, queued_id = started["job_id"], queued["job_id"]
+
+            listed = jobs(config)
+            assert {k: v["state"] for k, v in listed.items()} == {running_id: "running", queued_id: "queued"}
+            assert listed[running_id]["folder"] == str(tmp_path / "watch" / "slow")
+            assert list(jobs(config, "--state", "queued")) == [queued_id]
+            during = scrape(metrics_port)
+
+            cancelled_queued = fcsod("cancel", queued_id[:10], "--config", str(config))
+            assert cancelled_queued.returncode == 0, cancelled_queued.stdout + cancelled_queued.stderr
+            cancelled_running = fcsod("cancel", running_id, "--config", str(config))
+            assert cancelled_running.returncode == 0, cancelled_running.stdout + cancelled_running.stderr
+            # a job that already ended cannot be cancelled; an unknown one is bad input
+            assert fcsod("cancel", running_id, "--config", str(config)).returncode == 1
+            assert fcsod("cancel", "no-such-job", "--config", str(config)).returncode == 2
+            after_cancel = scrape(metrics_port)
+            cancelled = jobs(config, "--state", "failed")
+            # nothing partial: each cancelled job's folder holds its finished record only, no work folder is left
+            assert sorted(p.name for p in out.iterdir()) == sorted([running_id, queued_id])
+            assert all(sorted(p.name for p in (out / j).iterdir()) == ["job.mcap"] for j in (running_id, queued_id))
+
+            # the cancelled cube retried: a new run and a new record, the cancelled run's record kept
             retried = fcsod("retry", queued_id, "--config", str(config))
             assert retried.returncode == 0, retried.stdout + retried.stderr
             done = daemon.wait_for(
@@ -201,25 +180,52 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
         client.join()
     finally:
         assert daemon.stop() == 0
+
+    assert before[("fcsod_jobs", (("state", "running"),))] == 0
+    assert during[("fcsod_jobs", (("state", "running"),))] == 1
+    assert during[("fcsod_queue_depth", ())] == 1
+    assert after_cancel[("fcsod_jobs", (("state", "failed"),))] == 2
+    assert after_cancel[("fcsod_queue_depth", ())] == 0
+    assert after_cancel[("fcsod_jobs_finished_total", (("state", "failed"),))] == 2
+    assert {k: v["error"] for k, v in cancelled.items()} == {running_id: CANCELLED_ERROR, queued_id: CANCELLED_ERROR}
+    solar = read_record(out / running_id / "job.mcap")
+    assert not solar.truncated
+    last = solar.of(TOPIC_STATE)[-1]
+    assert (last["state"], last["error"]) == ("failed", CANCELLED_ERROR)
+    assert any(line["message"].startswith("loaded solar.stl") for line in solar.of("/job/log"))
+
     assert done["state"] == "done", done
     assert final[queued_id]["state"] == "done" and final[queued_id]["error"] is None
     assert final[running_id]["state"] == "failed", "the other failed job stays as it was"
     kept = read_record(out / "attempts" / queued_id / "1" / "job.mcap")
+    assert [s["state"] for s in kept.of(TOPIC_STATE)] == ["failed"]
     assert kept.of(TOPIC_STATE)[-1]["error"] == CANCELLED_ERROR
-    assert [s["state"] for s in read_record(out / queued_id / "job.mcap").of(TOPIC_STATE)][-1] == "done"
+    assert [s["state"] for s in read_record(out / queued_id / "job.mcap").of(TOPIC_STATE)] == [
+        "queued",
+        "running",
+        "done",
+    ]
     assert finished[("fcsod_jobs", (("state", "done"),))] == 1
     assert finished[("fcsod_jobs", (("state", "failed"),))] == 1
     assert finished[("fcsod_jobs_finished_total", (("state", "done"),))] == 1
     assert finished[("fcsod_stage_duration_seconds_count", (("stage", "design"),))] == 1
     assert finished[("fcsod_stage_duration_seconds_sum", (("stage", "design"),))] > 0
 
-    # live: the statuses of the run, and its scene (the same bytes as in its record) before it was done
+    # live: every status of the cube's job, and the scene of its run (the bytes of its record) before it was done
+    statuses = [json.loads(data) for channel, data in client.received if channel["topic"] == "/fcsod/status"]
+    assert [s["state"] for s in statuses if s["job_id"] == queued_id] == [
+        "queued",
+        "failed",
+        "queued",
+        "running",
+        "done",
+    ]
     topics = [channel["topic"] for channel, _ in client.received]
-    states = [json.loads(data)["state"] for channel, data in client.received if channel["topic"] == "/fcsod/status"]
-    assert states == ["queued", "running", "done"]
+    assert topics.count("/scene") == 2, "the grasps, then the placed build"
     assert topics.index("/scene") < len(topics) - 1 - topics[::-1].index("/fcsod/status")
     scene_channel, scene = next((c, d) for c, d in client.received if c["topic"] == "/scene")
     assert (scene_channel["schemaName"], scene_channel["encoding"]) == ("foxglove.SceneUpdate", "protobuf")
     assert base64.b64decode(scene_channel["schema"]) == SceneUpdate.get_schema().data
-    recorded = foxglove_messages(out / queued_id / "job.mcap")["/scene"]
-    assert decode_foxglove("foxglove.SceneUpdate", scene) in recorded
+    assert (
+        decode_foxglove("foxglove.SceneUpdate", scene) == foxglove_messages(out / queued_id / "job.mcap")["/scene"][0]
+    )
