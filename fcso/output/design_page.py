@@ -279,6 +279,7 @@ def viewer_scene(inputs: ReportInputs, titles: list[str]) -> dict:
     both fingers seated and the contact samples, then the finger alone with its pocket.
     """
     to_pad = np.linalg.inv(inputs.pad_to_finger)
+    part_faces = max(VIEW_FACES["part"], VIEW_FACES["parts"] // len(inputs.grasps))
     scene = {
         "meshes": {
             "finger": glb_base64(inputs.finger, VIEW_FACES["finger"]),
@@ -288,7 +289,7 @@ def viewer_scene(inputs: ReportInputs, titles: list[str]) -> dict:
         "views": [],
     }
     for m, grasp in enumerate(inputs.grasps):
-        scene["meshes"][f"part-{m}"] = glb_base64(grasp.mesh, VIEW_FACES["part"])
+        scene["meshes"][f"part-{m}"] = glb_base64(grasp.mesh, part_faces)
         fingers, contact = [], []
         for placement in grasp.placements:
             to_rest = np.linalg.inv(placement.frame)
