@@ -278,7 +278,10 @@ def decode_foxglove(schema_name: str, data: bytes) -> dict:
     for file in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
         pool.Add(file)
     decoded = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name)).FromString(data)
-    fields = json_format.MessageToDict(decoded, preserving_proto_field_name=True)
+    # every field, empty lists and zeros included (a build scene without finger copies has no triangles)
+    fields = json_format.MessageToDict(
+        decoded, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
+    )
     again = json_format.ParseDict(fields, type(decoded)())
     assert again.SerializeToString(deterministic=True) == data, f"{schema_name}: fields the schema does not know"
     return fields
