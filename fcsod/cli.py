@@ -1,8 +1,9 @@
-"""Command line: ``fcsod run | audit | replay | subscribe | pki | journal | fingers | schema``.
+"""Command line: ``fcsod run | jobs | retry | cancel | audit | replay | subscribe | pki | journal | fingers | schema``.
 
-Exit codes: 0 success, 1 a check failed (audit, journal check) or nothing
-arrived in time (subscribe), 2 bad input (config file, arguments, unreadable
-record, corrupt journal, a zenoh session that cannot open).
+Exit codes: 0 success, 1 a check failed (audit, journal check), nothing
+arrived in time (subscribe) or the daemon refused or did not answer a
+request (retry, cancel), 2 bad input (config file, arguments, unreadable
+record, corrupt journal, a zenoh session that cannot open, an unknown job).
 """
 
 from __future__ import annotations
@@ -35,6 +36,21 @@ def _parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run the daemon")
     run.add_argument("--config", required=True, type=Path, help="daemon settings (fcsod.toml)")
     run.add_argument("--log-level", default="info", choices=["debug", "info", "warning", "error"])
+
+    jobs = commands.add_parser("jobs", help="list the journal's jobs: id, folder, state, attempt, times, error")
+    jobs.add_argument("--config", required=True, type=Path, help="daemon settings (state folder)")
+    jobs.add_argument("--state", action="append", choices=["queued", "running", "done", "failed"], help="only these")
+    jobs.add_argument("--json", action="store_true", help="one JSON object per line instead of a table")
+    for name, text in (
+        ("retry", "run a failed job again (the daemon keeps the failed run's record in <output>/attempts/)"),
+        ("cancel", "end a queued or running job failed, with the reason cancelled"),
+    ):
+        command = commands.add_parser(name, help=text)
+        command.add_argument("job", metavar="JOB", help="job id, or a prefix of exactly one job id")
+        command.add_argument("--config", required=True, type=Path, help="daemon settings (state folder)")
+        command.add_argument(
+            "--timeout", type=float, default=60.0, metavar="S", help="wait up to S seconds for the daemon's answer"
+        )
 
     audit = commands.add_parser("audit", help="print a job's story from its job.mcap and check its hashes")
     audit.add_argument("record", type=Path, metavar="FILE.mcap")
@@ -169,6 +185,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "jobs":
+            return _jobs(args)
+        if args.command in ("retry", "cancel"):
+            return _request(args)
         if args.command == "audit":
             return _audit(args)
         if args.command == "replay":
@@ -205,6 +225,63 @@ def _run(args: argparse.Namespace) -> int:
         # e.g. a listen endpoint already in use or a bad zenoh config file
         print(f"fcsod: {args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def _journal_path(config: DaemonConfig) -> Path:
+    return config.state.dir / "journal.sqlite3"
+
+
+def _jobs(args: argparse.Namespace) -> int:
+    from .service.journal import read_jobs
+
+    config = load_daemon_config(args.config)
+    path = _journal_path(config)
+    if not path.is_file():
+        print(f"fcsod: {path}: no journal (the daemon has not run with this state folder)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    rows = [r for r in read_jobs(path) if not args.state or r.state in args.state]
+    if args.json:
+        for row in rows:
+            print(json.dumps(row.__dict__))
+        return EXIT_OK
+    print(f"{'JOB':<32} {'STATE':<8} {'RUN':>3} {'QUEUED':<20} {'FINISHED':<20} FOLDER / ERROR")
+    for row in rows:
+        print(
+            f"{row.job_id:<32} {row.state:<8} {row.attempt:>3} {(row.queued_at or '-')[:19]:<20} "
+            f"{(row.finished_at or '-')[:19]:<20} {row.folder}" + (f"\n    error: {row.error}" if row.error else "")
+        )
+    return EXIT_OK
+
+
+def _request(args: argparse.Namespace) -> int:
+    """``fcsod retry | cancel JOB``: ask the daemon through the journal's request table and print its answer."""
+    from .bus.messages import utc_now
+    from .service.journal import read_jobs, read_request, submit_request
+
+    config = load_daemon_config(args.config)
+    path = _journal_path(config)
+    if not path.is_file():
+        print(f"fcsod: {path}: no journal (the daemon has not run with this state folder)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    matches = [r.job_id for r in read_jobs(path) if r.job_id == args.job] or [
+        r.job_id for r in read_jobs(path) if r.job_id.startswith(args.job)
+    ]
+    if len(matches) != 1:
+        found = "no job" if not matches else f"{len(matches)} jobs ({', '.join(matches[:5])})"
+        print(f"fcsod: {path}: {found} with the id or id prefix {args.job!r}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    request_id = submit_request(path, matches[0], args.command, utc_now())
+    deadline = time.monotonic() + args.timeout
+    while (request := read_request(path, request_id)).handled_at is None:
+        if time.monotonic() > deadline:
+            print(
+                f"no answer from the daemon within {args.timeout:g} s (is it running?); the request stays in "
+                f"{path} and is handled when the daemon runs"
+            )
+            return EXIT_FAILED
+        time.sleep(0.1)
+    print(request.outcome)
+    return EXIT_OK if request.accepted else EXIT_FAILED
 
 
 def _audit(args: argparse.Namespace) -> int:

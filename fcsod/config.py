@@ -176,6 +176,38 @@ class VerifySettings(_Section):
     top_k: int = Field(0, ge=0, description="Verify the K best candidates by Q and take the best that passes (0: off)")
 
 
+#: host:port of a listening socket; the host is a name, an IPv4 address or a bracketed IPv6 address.
+HOST_PORT = r"^([A-Za-z0-9.\-]+|\[[0-9A-Fa-f:.]+\]):[0-9]{1,5}$"
+
+
+def split_host_port(listen: str) -> tuple[str, int]:
+    """``"127.0.0.1:9108"`` -> ``("127.0.0.1", 9108)``; a bracketed IPv6 host loses its brackets."""
+    host, _, port = listen.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+class MetricsConfig(_Section):
+    """``[metrics]``: the Prometheus endpoint (``http://<listen>/metrics``)."""
+
+    enabled: bool = Field(False, description="Serve the daemon's metrics in Prometheus text format")
+    listen: str = Field(
+        "127.0.0.1:9108",
+        pattern=HOST_PORT,
+        description="host:port of the HTTP endpoint; loopback unless the network to the monitoring is trusted",
+    )
+
+
+class FoxgloveConfig(_Section):
+    """``[foxglove]``: a live Foxglove WebSocket server publishing the scene and status of running jobs."""
+
+    enabled: bool = Field(False, description="Run the Foxglove WebSocket server (the Foxglove app connects to it)")
+    listen: str = Field(
+        "127.0.0.1:8765",
+        pattern=HOST_PORT,
+        description="host:port of the WebSocket server; loopback unless the network to the cell is trusted",
+    )
+
+
 class DaemonConfig(_Section):
     """Every setting of ``fcsod run`` (``fcsod.toml``)."""
 
@@ -200,6 +232,8 @@ class DaemonConfig(_Section):
     verify: VerifySettings = Field(
         default_factory=VerifySettings, description="Grasp verification of every job's design"
     )
+    metrics: MetricsConfig = Field(default_factory=MetricsConfig, description="The Prometheus metrics endpoint")
+    foxglove: FoxgloveConfig = Field(default_factory=FoxgloveConfig, description="The live Foxglove server")
 
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> DaemonConfig:

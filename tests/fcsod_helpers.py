@@ -268,3 +268,48 @@ def finished(subscriber, folder_name: str, timeout: float = 90) -> dict:
         ),
         timeout,
     )
+
+
+def decode_foxglove(schema_name: str, data: bytes) -> dict:
+    """A protobuf message of foxglove-sdk's schema ``schema_name`` decoded by Google's protobuf runtime, as a dict.
+
+    The message must hold nothing the schema does not know: it is encoded
+    again from the decoded fields only and must give ``data`` back.
+    """
+    import foxglove.messages
+    from google.protobuf import descriptor_pb2, descriptor_pool, json_format, message_factory
+
+    schema = getattr(foxglove.messages, schema_name.removeprefix("foxglove.")).get_schema()
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+        pool.Add(file)
+    decoded = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name)).FromString(data)
+    # every field, empty lists and zeros included (a build scene without finger copies has no triangles)
+    fields = json_format.MessageToDict(
+        decoded, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
+    )
+    again = json_format.ParseDict(fields, type(decoded)())
+    assert again.SerializeToString(deterministic=True) == data, f"{schema_name}: fields the schema does not know"
+    return fields
+
+
+def foxglove_messages(record: Path) -> dict[str, list[dict]]:
+    """Every Foxglove message of an MCAP file, checked against foxglove-sdk's schema: topic -> messages as dicts.
+
+    A channel whose schema is named ``foxglove.*`` must carry the SDK's own
+    schema (the same FileDescriptorSet bytes) and protobuf messages, each of
+    which :func:`decode_foxglove` decodes.
+    """
+    import foxglove.messages
+    from mcap.reader import make_reader
+
+    found: dict[str, list[dict]] = {}
+    with open(record, "rb") as stream:
+        for schema, channel, message in make_reader(stream).iter_messages():
+            if schema is None or not schema.name.startswith("foxglove."):
+                continue
+            sdk = getattr(foxglove.messages, schema.name.removeprefix("foxglove.")).get_schema()
+            assert (schema.encoding, channel.message_encoding) == ("protobuf", "protobuf"), channel.topic
+            assert schema.data == sdk.data, f"{channel.topic}: not the schema of foxglove-sdk's {schema.name}"
+            found.setdefault(channel.topic, []).append(decode_foxglove(schema.name, message.data))
+    return found

@@ -10,6 +10,7 @@ package turns its results into files. Submodules:
 - :mod:`~fcso.output.sets_page`: the finger-sets sections, the job page and the terminal's pick plan
 - :mod:`~fcso.output.render`: drawing meshes off screen (matplotlib's Agg canvas): views, layers, panels, PNG
 - :mod:`~fcso.output.pictures`: the pictures of the design pages
+- :mod:`~fcso.output.viewer`: the pages' interactive 3D view (three.js and GLB meshes, inlined)
 - :mod:`~fcso.output.verification_page`: the verification section (fcso.sim) and its files
 - :mod:`~fcso.output.read`: reading an output folder back
 - :mod:`~fcso.output.picture_process`: a process that draws the pictures beside the design

@@ -29,6 +29,7 @@ from .layout import REPORT_HTML, write_atomic
 from .read import read_design_folder
 from .sets_page import finger_sets_section
 from .table import SCENARIO_GROUPS, quality_columns, scenario_labels
+from .viewer import VIEW_FACES, column_major, glb_base64, grasp_view, points_base64, viewer_section
 
 #: ``draw(inputs, progress)``: a page's pictures, name -> PNG bytes (:func:`pictures`).
 DrawPictures = Callable[["ReportInputs", "Progress | None"], dict[str, bytes]]
@@ -215,6 +216,7 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
     body = [
         "<h1>FCSO design report</h1>",
         _summary(report, chosen),
+        *viewer_section(viewer_scene(inputs, titles)),
         image(images["gripper"], "gripper", "both fingers closed on the first part"),
         "<h2>Finger and fingerpad</h2>",
         image(images["finger"], "finger", "the finger with its fingerpad"),
@@ -271,6 +273,43 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
         *closing_sections(report.warnings, report.settings.model_dump_json(indent=2), report.timings_s),
     ]
     return html_page(f"FCSO report: {', '.join(p.name for p in report.parts)}", body)
+
+
+def viewer_scene(inputs: ReportInputs, titles: list[str]) -> dict:
+    """The interactive view's data (:func:`fcso.output.viewer.viewer_section`): each grasp of the chosen candidate with
+    both fingers seated and the contact samples, then the finger alone with its pocket.
+    """
+    to_pad = np.linalg.inv(inputs.pad_to_finger)
+    part_faces = max(VIEW_FACES["part"], VIEW_FACES["parts"] // len(inputs.grasps))
+    scene = {
+        "meshes": {
+            "finger": glb_base64(inputs.finger, VIEW_FACES["finger"]),
+            "fingerpad": glb_base64(inputs.fingerpad, VIEW_FACES["fingerpad"]),
+        },
+        "points": {},
+        "views": [],
+    }
+    for m, grasp in enumerate(inputs.grasps):
+        scene["meshes"][f"part-{m}"] = glb_base64(grasp.mesh, part_faces)
+        fingers, contact = [], []
+        for placement in grasp.placements:
+            to_rest = np.linalg.inv(placement.frame)
+            seated = np.eye(4)
+            seated[0, 3] = placement.offset_mm
+            fingers.append(to_rest @ seated @ to_pad)
+            contact.append(trimesh.transform_points(placement.samples.points[placement.contact], to_rest))
+        scene["points"][f"contact-{m}"] = points_base64(np.concatenate(contact))
+        scene["views"].append(grasp_view(f"grasp: {titles[m]}", f"part-{m}", fingers, f"contact-{m}"))
+    scene["views"].append(
+        {
+            "title": "finger with its pocket",
+            "items": [
+                {"mesh": "finger", "group": "fingers"},
+                {"mesh": "fingerpad", "matrix": column_major(inputs.pad_to_finger), "group": "pad"},
+            ],
+        }
+    )
+    return scene
 
 
 def _placement_section(placement: dict) -> list[str]:

@@ -37,6 +37,8 @@ th, td { border: 1px solid #bbb; padding: 2px 6px; text-align: right; }
 th { background: #eef; }
 td.text, th.text { text-align: left; }
 tr.chosen td { background: #ffe4a8; font-weight: bold; }
+#fcso-3d canvas { display: block; max-width: 100%; border: 1px solid #bbb; margin: 0.5em 0; cursor: grab; }
+#fcso-3d .controls { font-size: 0.9em; }
 pre { background: #f6f6f6; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
 """
 

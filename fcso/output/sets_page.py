@@ -10,6 +10,7 @@ from ..design import flat_finger
 from ..finger import pad_to_finger
 from ..report.models import FingerSetsReport, JobReport
 from .html import closing_sections, html_page, image, text
+from .viewer import VIEW_FACES, glb_base64, viewer_section
 
 
 def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
@@ -39,6 +40,16 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
                 f"finger of set {entry.set}",
             ),
         ]
+    # each set's design report turns its grasps; this page turns the fingers side by side
+    scene = {
+        "meshes": {f"finger-{e.set}": glb_base64(f, VIEW_FACES["finger"]) for e, f in zip(sets.sets, fingers)},
+        "points": {},
+        "views": [
+            {"title": f"set {e.set}: finger", "items": [{"mesh": f"finger-{e.set}", "group": "fingers"}]}
+            for e in sets.sets
+        ],
+    }
+    body += viewer_section(scene, "The fingers in 3D")
     body += closing_sections(report.warnings, config.model_dump_json(indent=2), report.timings_s)
     return html_page(f"FCSO job: {len(sets.sets)} finger sets", body)
 

@@ -29,8 +29,9 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     ----------
     task : JobTask
     emit : callable
-        Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``
-        and finally ``("finished", state, error, [BusMessage, ...])``.
+        Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``,
+        ``("step", name, seconds)`` after each step, ``("foxglove", topic, protobuf bytes, log time ns)`` for
+        each scene, and finally ``("finished", state, error, [BusMessage, ...])``.
     """
     config = task.config
     output_root = config.output.root
@@ -56,11 +57,9 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         for step in job_steps(run):
             started = time.perf_counter()
             step(run)
-            run.log(
-                "info",
-                f"step {step.__name__.removeprefix('step_')} finished in {time.perf_counter() - started:.2f} s",
-                stage=step.__name__.removeprefix("step_"),
-            )
+            name, seconds = step.__name__.removeprefix("step_"), time.perf_counter() - started
+            run.log("info", f"step {name} finished in {seconds:.2f} s", stage=name)
+            emit(("step", name, seconds))
             recorder.flush()
     except FcsoError as exc:
         # a part that vanished is the symptom; a deleted folder is the cause

@@ -44,7 +44,6 @@ from ..record.recorder import (
     TOPIC_PLACEMENT,
     TOPIC_POSES,
     TOPIC_SAMPLES,
-    TOPIC_SCENE,
     TOPIC_SPEC,
 )
 from ..record.scene import base64_text, build_scene_update, scene_update
@@ -242,7 +241,7 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
             finger_set=number,
         ),
     )
-    recorder.write(TOPIC_SCENE, scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""))
+    run.scene(scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""))
 
 
 def step_placement(run: JobRun) -> None:
@@ -295,7 +294,7 @@ def step_placement(run: JobRun) -> None:
         run.sets.job_report = job.model_copy(update=update)
     else:
         run.result.report = job.model_copy(update=update)
-    run.recorder.write(TOPIC_SCENE, build_scene_update(placements[-1].items, report, run.build_settings))
+    run.scene(build_scene_update(placements[-1].items, report, run.build_settings))
     bus = run.task.config.bus
     summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
     summary.update(

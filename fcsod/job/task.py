@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import signal
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ from ..bus.messages import (
 )
 from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest
-from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_STATE, Recorder
+from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
 from .inputs import PartInput
 
 #: Shortest interval between two progress lines of the same stage, s.
@@ -158,6 +159,11 @@ class JobRun:
         """Record a log line and send it to the daemon's log."""
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(("log", level, message, fields))
+
+    def scene(self, update) -> None:
+        """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene`` and send it to the daemon's live server."""
+        now = time.time_ns()
+        self.emit(("foxglove", TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
 
     def record_published(self, message: BusMessage) -> None:
         """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""

@@ -179,7 +179,7 @@ def _record(path: Path, verification: VerificationReport, design: DesignUnderTes
         start = time.time_ns()
         recorder.write(TOPIC_VERIFICATION, verification, start)
         for update, at in scene_updates(verification, design, start):
-            recorder.write(TOPIC_VERIFICATION_SCENE, update, at)
+            recorder.write_foxglove(TOPIC_VERIFICATION_SCENE, update, at)
         recorder.write(TOPIC_BUS, message.record(), start)
     finally:
         recorder.finish()

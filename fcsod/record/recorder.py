@@ -38,7 +38,6 @@ from ..bus.messages import (
     OutputFilesRecord,
     PoseRecord,
     SamplesRecord,
-    SceneUpdate,
     StateChangeRecord,
 )
 
@@ -64,7 +63,8 @@ TOPIC_PLACEMENT = "/build/placement"
 TOPIC_VERIFICATION = "/verification"
 TOPIC_VERIFICATION_SCENE = "/verification/scene"
 
-#: Channel -> model of its messages.
+#: Channel -> model of its JSON messages (the Foxglove scenes, ``TOPIC_SCENE`` and ``TOPIC_VERIFICATION_SCENE``,
+#: are foxglove-sdk's protobuf messages: :meth:`Recorder.write_foxglove`).
 CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_SPEC: JobSpecRecord,
     TOPIC_INPUTS: InputHashesRecord,
@@ -77,7 +77,6 @@ CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_DESIGN: DesignRecord,
     TOPIC_GRASPS: GraspsMessage,
     TOPIC_BUS: BusRecord,
-    TOPIC_SCENE: SceneUpdate,
     TOPIC_PLACEMENT: PlacementReport,
 }
 
@@ -100,8 +99,8 @@ _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none"
 
 
 def schema_name(model: type[BaseModel]) -> str:
-    """Name of a model's MCAP schema: Foxglove's well-known name for the scene, ``fcsod.<Model>`` otherwise."""
-    return "foxglove.SceneUpdate" if model is SceneUpdate else f"fcsod.{model.__name__}"
+    """Name of a model's MCAP schema: ``fcsod.<Model>``."""
+    return f"fcsod.{model.__name__}"
 
 
 class Recorder:
@@ -151,6 +150,15 @@ class Recorder:
         self.write_raw(
             topic, schema_name(model), schema_text(model).encode(), message.model_dump_json().encode(), log_time_ns
         )
+
+    def write_foxglove(self, topic: str, message, log_time_ns: int | None = None) -> bytes:
+        """Record a foxglove-sdk message (``foxglove.messages.*``) as the SDK encodes it, under the SDK's own schema
+        (protobuf); returns the encoded message.
+        """
+        schema = message.get_schema()
+        data = message.encode()
+        self.write_raw(topic, schema.name, schema.data, data, log_time_ns, schema.encoding, schema.encoding)
+        return data
 
     def write_raw(
         self,

@@ -1,4 +1,10 @@
-"""Foxglove scenes (``foxglove.SceneUpdate``, metres) of a job: its grasps, its placed build, a verification trial."""
+"""Foxglove scenes (``foxglove.SceneUpdate``, metres) of a job: its grasps, its placed build, a verification trial.
+
+The messages are foxglove-sdk's own (``foxglove.messages``), protobuf-encoded
+by the SDK under its schema: what the Foxglove app reads natively, recorded
+into the job's MCAP by :meth:`Recorder.write_foxglove` and published live by
+the daemon's Foxglove server (:mod:`fcsod.service.foxglove_live`).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +13,20 @@ import time
 
 import numpy as np
 import trimesh
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    Duration,
+    KeyValuePair,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    Timestamp,
+    TriangleListPrimitive,
+    Vector3,
+)
 
 from fcso import DesignResult
 from fcso.output.render import decimate
@@ -16,7 +36,24 @@ from fcso.sim.verify import DesignUnderTest
 
 from ..build.build3mf import BuildItem
 from ..build.models import BuildConfig, PlacementReport
-from ..bus.messages import FoxgloveTime, SceneEntity, SceneUpdate, TriangleListPrimitive
+
+#: No rotation.
+UNROTATED = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+
+#: The pose of a primitive whose points are already in the entity's frame.
+IDENTITY = Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=UNROTATED)
+
+#: An entity that stays until replaced.
+FOREVER = Duration(sec=0, nsec=0)
+
+
+def stamp(time_ns: int) -> Timestamp:
+    """A Foxglove timestamp of ``time_ns`` (ns since the Unix epoch)."""
+    return Timestamp(sec=time_ns // 1_000_000_000, nsec=time_ns % 1_000_000_000)
+
+
+def metadata(pairs: dict[str, str]) -> list[KeyValuePair]:
+    return [KeyValuePair(key=k, value=v) for k, v in pairs.items()]
 
 
 def base64_text(data: bytes) -> str:
@@ -29,16 +66,11 @@ def triangles(
 ) -> TriangleListPrimitive:
     """``mesh`` moved by ``transform`` (mm) as a Foxglove triangle list in metres, coloured RGBA 0..1."""
     vertices = trimesh.transformations.transform_points(np.asarray(mesh.vertices), transform)
-    return TriangleListPrimitive.model_validate(
-        {
-            "pose": {
-                "position": {"x": 0.0, "y": 0.0, "z": 0.0},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
-            },
-            "points": [{"x": x, "y": y, "z": z} for x, y, z in (vertices / 1000.0).tolist()],
-            "color": dict(zip("rgba", color)),
-            "indices": np.asarray(mesh.faces).reshape(-1).tolist(),
-        }
+    return TriangleListPrimitive(
+        pose=IDENTITY,
+        points=[Point3(x=x, y=y, z=z) for x, y, z in (vertices / 1000.0).tolist()],
+        color=Color(**dict(zip("rgba", color))),
+        indices=np.asarray(mesh.faces).reshape(-1).tolist(),
     )
 
 
@@ -48,8 +80,7 @@ def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
     Scenarios are laid side by side along x so they do not overlap; entity ids
     are ``<prefix>scenario-<n>`` (the prefix names a finger set).
     """
-    now = time.time_ns()
-    stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
+    now = stamp(time.time_ns())
     to_pad = np.linalg.inv(result.pad_to_finger)
     entities, offset_x = [], 0.0
     for number, (scenario, sample_index, evaluation) in enumerate(
@@ -69,15 +100,12 @@ def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
             drawn.append(triangles(result.finger, pad_to_rest @ to_pad, (0.2, 0.4, 0.8, 0.35)))
         entities.append(
             SceneEntity(
-                timestamp=stamp,
+                timestamp=now,
                 frame_id="fcso_rest",
                 id=f"{prefix}scenario-{number}",
-                lifetime=FoxgloveTime(sec=0, nsec=0),
+                lifetime=FOREVER,
                 frame_locked=False,
-                metadata=[
-                    {"key": "part", "value": scenario.part.name},
-                    {"key": "pose_index", "value": str(scenario.pose_index)},
-                ],
+                metadata=metadata({"part": scenario.part.name, "pose_index": str(scenario.pose_index)}),
                 triangles=drawn,
             )
         )
@@ -101,34 +129,33 @@ def build_scene_update(items: list[BuildItem], report: PlacementReport, config: 
     config : BuildConfig
         The build volume.
     """
-    now = time.time_ns()
-    stamp = FoxgloveTime(sec=now // 1_000_000_000, nsec=now % 1_000_000_000)
-    identity = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
 
-    def box(lower, upper, color: tuple[float, float, float, float]) -> dict:
+    def box(lower, upper, color: tuple[float, float, float, float]) -> CubePrimitive:
         lower, upper = np.asarray(lower, dtype=float) / 1000.0, np.asarray(upper, dtype=float) / 1000.0
         centre = (lower + upper) / 2.0
-        return {
-            "pose": {**identity, "position": dict(zip("xyz", centre.tolist()))},
-            "size": dict(zip("xyz", (upper - lower).tolist())),
-            "color": dict(zip("rgba", color)),
-        }
+        return CubePrimitive(
+            pose=Pose(position=Vector3(**dict(zip("xyz", centre.tolist()))), orientation=UNROTATED),
+            size=Vector3(**dict(zip("xyz", (upper - lower).tolist()))),
+            color=Color(**dict(zip("rgba", color))),
+        )
 
     origin = np.asarray(config.origin_mm, dtype=float)
     cubes = [box(origin, origin + np.asarray(config.volume_mm), (0.5, 0.5, 0.5, 0.08))]
     cubes += [box(*placed.bounds_mm, (0.6, 0.6, 0.65, 0.8)) for placed in report.items if placed.kind == "part"]
     fingers = [triangles(item.mesh, item.transform, (0.2, 0.4, 0.8, 1.0)) for item in items if item.kind == "finger"]
     entity = SceneEntity(
-        timestamp=stamp,
+        timestamp=stamp(time.time_ns()),
         frame_id="fcso_build",
         id="build",
-        lifetime=FoxgloveTime(sec=0, nsec=0),
+        lifetime=FOREVER,
         frame_locked=False,
-        metadata=[
-            {"key": "fingers_fit", "value": str(report.fingers_fit).lower()},
-            {"key": "build_height_mm", "value": f"{report.build_height_mm:g}"},
-            {"key": "message", "value": report.message},
-        ],
+        metadata=metadata(
+            {
+                "fingers_fit": str(report.fingers_fit).lower(),
+                "build_height_mm": f"{report.build_height_mm:g}",
+                "message": report.message,
+            }
+        ),
         cubes=cubes,
         triangles=fingers,
     )
@@ -150,7 +177,6 @@ def scene_updates(verification: VerificationReport, design: DesignUnderTest, sta
     part = trimesh.Trimesh(vertices, faces, process=False)
     for snapshot in scenario.frames:
         at = start_ns + int(snapshot.time_s * 1e9)
-        stamp = FoxgloveTime(sec=at // 1_000_000_000, nsec=at % 1_000_000_000)
         drawn = [triangles(part, np.asarray(snapshot.part_pose), (0.6, 0.6, 0.65, 1.0))]
         for side in (1, -1):
             drawn.append(
@@ -161,12 +187,12 @@ def scene_updates(verification: VerificationReport, design: DesignUnderTest, sta
                 )
             )
         entity = SceneEntity(
-            timestamp=stamp,
+            timestamp=stamp(at),
             frame_id="fcso_verify",
             id="trial",
-            lifetime=FoxgloveTime(sec=0, nsec=0),
+            lifetime=FOREVER,
             frame_locked=False,
-            metadata=[{"key": "part", "value": scenario.part}, {"key": "time_s", "value": f"{snapshot.time_s:.3f}"}],
+            metadata=metadata({"part": scenario.part, "time_s": f"{snapshot.time_s:.3f}"}),
             triangles=drawn,
         )
         yield SceneUpdate(entities=[entity]), at

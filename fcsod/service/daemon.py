@@ -20,7 +20,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from .. import __version__
-from ..bus.messages import BusMessage, BusRecord, StatusMessage, utc_now
+from ..bus.messages import BusMessage, BusRecord, StatusMessage, VerificationMessage, utc_now
 from ..bus.pki import link_weaknesses
 from ..bus.ros2 import Ros2Node, node_fqn
 from ..bus.session import Bus, session_config
@@ -31,7 +31,8 @@ from ..job.process import worker_main
 from ..job.task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, JobFolderDeleted, JobTask, time_limit_error
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
-from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message
+from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message
+from .metrics import DaemonMetrics
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
 
@@ -39,6 +40,13 @@ log = logging.getLogger("fcsod")
 
 #: Longest wait of the main loop for an event, s.
 TICK_S = 0.2
+
+#: The error of a job an operator cancelled (``fcsod cancel``).
+CANCELLED_ERROR = "cancelled by the operator (fcsod cancel)"
+
+#: Folder of ``[output] root`` where ``fcsod retry`` keeps the records of the failed runs it replaces:
+#: ``attempts/<job_id>/<n>/job.mcap``.
+ATTEMPTS_DIR = "attempts"
 
 
 class StateDirBusy(Exception):
@@ -98,6 +106,8 @@ class Daemon:
         self.known: dict[Path, tuple] = {}
         self._context = multiprocessing.get_context("spawn")
         self._lock_file = None
+        self.metrics = DaemonMetrics(self.journal_path)
+        self.foxglove = None
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -139,6 +149,14 @@ class Daemon:
         self.watcher = FolderWatcher(watch.roots, watch.polling, watch.poll_interval_seconds)
         self.readiness = Readiness(watch.settle_seconds)
         self.watcher.start()
+        if self.config.metrics.enabled:
+            self.metrics.serve(self.config.metrics)
+            log.info("metrics endpoint", extra={"url": f"http://{self.config.metrics.listen}/metrics"})
+        if self.config.foxglove.enabled:
+            from .foxglove_live import FoxgloveLive
+
+            self.foxglove = FoxgloveLive(self.config.foxglove)
+            log.info("Foxglove live server", extra={"url": f"ws://{self.config.foxglove.listen}"})
         self._rescan()
         self._fill_workers()
         log.info(
@@ -188,6 +206,9 @@ class Daemon:
             self.ros2.close()
         self.bus.close()
         self.journal.close()
+        self.metrics.close()
+        if self.foxglove is not None:
+            self.foxglove.close()
         log.info("fcsod stopped")
         if self._lock_file is not None:
             self._lock_file.close()
@@ -203,14 +224,7 @@ class Daemon:
             waitables = [s.connection for s in self.slots if s.open] + [s.process.sentinel for s in self.slots]
             wait(waitables, timeout=TICK_S)
             for slot in list(self.slots):
-                self._drain(slot)
-                if not slot.process.is_alive():
-                    if slot.open:
-                        # what a dead worker sent is drained above; processes it forked may
-                        # still hold its end of the pipe open, so the end of file may never come
-                        slot.open = False
-                        slot.connection.close()
-                    self._reap(slot)
+                self._collect(slot)
             for folder in self.watcher.take_changed():
                 self.readiness.touch(folder)
             now = time.monotonic()
@@ -221,6 +235,7 @@ class Daemon:
             for ready in self.readiness.poll():
                 self._enqueue(ready.folder, ready.inputs, ready.signature)
             self._stop_overdue_and_withdrawn_jobs()
+            self._handle_requests()
             self._dispatch()
             self._fill_workers()
             if ping_interval is not None and time.monotonic() >= next_ping:
@@ -305,6 +320,17 @@ class Daemon:
             theirs.close()
             self.slots.append(WorkerSlot(process, ours))
 
+    def _collect(self, slot: WorkerSlot) -> None:
+        """Handle what the worker sent; remove it if it exited."""
+        self._drain(slot)
+        if not slot.process.is_alive():
+            if slot.open:
+                # what a dead worker sent is drained above; processes it forked may
+                # still hold its end of the pipe open, so the end of file may never come
+                slot.open = False
+                slot.connection.close()
+            self._reap(slot)
+
     def _drain(self, slot: WorkerSlot) -> None:
         """Handle every event the worker has sent."""
         while slot.open:
@@ -323,13 +349,21 @@ class Daemon:
                 _, level, message, fields = event
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             elif kind == "publish":
+                if event[1].topic.partition("/")[0] == "verification":
+                    self.metrics.verified(VerificationMessage.model_validate_json(event[1].payload).passed)
                 self._publish(event[1])
+            elif kind == "foxglove":
+                if self.foxglove is not None:
+                    self.foxglove.log_scene(event[2], event[3])
+            elif kind == "step":
+                self.metrics.stage_seconds.labels(event[1]).observe(event[2])
             elif kind == "finished":
                 self._finished(slot, *event[1:])
 
     def _finished(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
         status = StatusMessage.model_validate_json(messages[-1].payload)
         row = self.journal.mark_finished(slot.job.job_id, state, status.finished_at, error)
+        self.metrics.jobs_finished.labels(state).inc()
         slot.finished = True
         extra = {"job_id": row.job_id, "state": state, "seconds": round(time.monotonic() - slot.started, 3)}
         if error:
@@ -368,6 +402,7 @@ class Daemon:
         work_dir = self.output_root / f".tmp-{row.job_id}"
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
+        self.metrics.jobs_finished.labels("failed").inc()
         status = self._status(row)
         try:
             work_dir.mkdir(parents=True, exist_ok=True)
@@ -409,6 +444,66 @@ class Daemon:
             elif now - slot.stop_signalled_at > jobs.stop_grace_seconds:
                 slot.process.kill()
 
+    # ---------------------------------------------------------------- operator requests
+
+    def _handle_requests(self) -> None:
+        """Act on the operators' ``fcsod retry | cancel`` requests and answer each in the journal."""
+        for request in self.journal.pending_requests():
+            act = self._retry if request.action == "retry" else self._cancel
+            accepted, outcome = act(request)
+            self.journal.answer_request(request.request_id, utc_now(), accepted, outcome)
+            log.info(
+                f"operator request: {outcome}",
+                extra={"job_id": request.job_id, "action": request.action, "accepted": accepted},
+            )
+
+    def _retry(self, request: OperatorRequest) -> tuple[bool, str]:
+        """Queue a failed job again; the failed run's output folder moves to ``attempts/<job_id>/<n>/``."""
+        row = self.journal.get(request.job_id)
+        if row is None:
+            return False, f"{request.job_id}: no such job"
+        if row.state != "failed":
+            return False, f"{row.job_id} is {row.state}: only a failed job can be retried"
+        folder = Path(row.folder)
+        if not folder.is_dir():
+            return False, f"{row.job_id}: its job folder {folder} no longer exists"
+        hashed = hash_inputs(folder, job_inputs(folder), self.config.limits.max_file_bytes)
+        current = job_id(folder.name, hashed)
+        if current != row.job_id:
+            # the content is the job's identity: changed inputs are another job, which the watcher queues itself
+            return False, f"{row.job_id}: the inputs in {folder} changed since: they are job {current}"
+        previous = self.output_root / row.job_id
+        kept = None
+        if previous.exists():
+            attempts = self.output_root / ATTEMPTS_DIR / row.job_id
+            attempts.mkdir(parents=True, exist_ok=True)
+            kept = attempts / str(len(list(attempts.iterdir())) + 1)
+            os.replace(previous, kept)
+        self.journal.requeue_failed(row.job_id, utc_now())
+        self._publish(self._status(self.journal.get(row.job_id)))
+        return True, f"{row.job_id} queued again" + (f"; the failed run's record is kept in {kept}" if kept else "")
+
+    def _cancel(self, request: OperatorRequest) -> tuple[bool, str]:
+        """End a queued or running job ``failed`` with :data:`CANCELLED_ERROR`; a running job's worker is killed."""
+        row = self.journal.get(request.job_id)
+        if row is None:
+            return False, f"{request.job_id}: no such job"
+        if row.state == "queued":
+            self._fail_dead_job(row, CANCELLED_ERROR)
+            return True, f"{row.job_id} cancelled before it started"
+        running = next((s for s in self.slots if s.job is not None and s.job.job_id == row.job_id), None)
+        if row.state != "running" or running is None or running.finished:
+            return False, f"{row.job_id} is {row.state}: only a queued or running job can be cancelled"
+        # the worker is killed at once and the job failed with this error, keeping its record so far
+        running.stop_error = CANCELLED_ERROR
+        running.process.kill()
+        running.process.join()
+        self._collect(running)
+        ended = self.journal.get(row.job_id)
+        if ended.error != CANCELLED_ERROR:
+            return False, f"{row.job_id} ended {ended.state} before it could be cancelled"
+        return True, f"{row.job_id} cancelled while running"
+
     # ---------------------------------------------------------------- bus
 
     def _status(self, row: JobRow) -> BusMessage:
@@ -428,6 +523,15 @@ class Daemon:
         """Sign the message, keep it for the queryable, then publish it."""
         message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
-        self.bus.publish(message)
-        if self.ros2 is not None:
-            self.ros2.publish(message)
+        transports = [("zenoh", self.bus), ("ros2", self.ros2), ("foxglove", self.foxglove)]
+        for transport, publisher in transports:
+            if publisher is None:
+                continue
+            try:
+                publisher.publish(message)
+            except Exception as exc:  # the journal keeps the message for the queryable; the daemon goes on
+                self.metrics.publish_failures.labels(transport).inc()
+                log.error(
+                    f"cannot publish on {transport}: {type(exc).__name__}: {exc}",
+                    extra={"job_id": message.job_id, "key": message.key_expr},
+                )

@@ -1,9 +1,16 @@
 """The job journal (SQLite): job states with times and errors, and the latest bus messages of each job.
 
 queued -> running -> done | failed. The job id is the primary key, so a
-job (same folder, same content) is recorded, and therefore run, once.
+job (same folder, same content) is recorded, and therefore run, once (an
+operator's ``fcsod retry`` runs a failed one again).
 Writes commit at once (WAL, synchronous=FULL): after ``kill -9`` the
 journal holds every state change made before it.
+
+Only the daemon writes the ``jobs`` and ``messages`` tables. The operator
+commands (``fcsod retry | cancel``) only add a row to ``requests``, each in
+a transaction of its own (SQLite's locks order it with the daemon's): the
+daemon takes the requests in its loop, acts on them between its own state
+changes, and writes the outcome back into the row, which the command reads.
 """
 
 from __future__ import annotations
@@ -11,6 +18,7 @@ from __future__ import annotations
 import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from ..bus.messages import BusMessage, JobState
 
@@ -35,7 +43,19 @@ CREATE TABLE IF NOT EXISTS messages (
     file       TEXT,
     PRIMARY KEY (job_id, topic)
 );
+CREATE TABLE IF NOT EXISTS requests (
+    request_id   INTEGER PRIMARY KEY AUTOINCREMENT,
+    job_id       TEXT NOT NULL,
+    action       TEXT NOT NULL CHECK (action IN ('retry', 'cancel')),
+    requested_at TEXT NOT NULL,
+    handled_at   TEXT,
+    accepted     INTEGER,
+    outcome      TEXT
+);
 """
+
+#: What an operator can ask of the daemon about a job.
+RequestAction = Literal["retry", "cancel"]
 
 
 @dataclass
@@ -77,6 +97,19 @@ def stored_message(message: BusMessage, output_root: Path) -> StoredMessage:
         message.attachment.decode() if message.attachment is not None else None,
         design_file,
     )
+
+
+@dataclass
+class OperatorRequest:
+    """An operator's request about a job, and the daemon's answer once it handled it (times UTC ISO 8601)."""
+
+    request_id: int
+    job_id: str
+    action: RequestAction
+    requested_at: str
+    handled_at: str | None
+    accepted: bool | None
+    outcome: str | None
 
 
 class JournalCorrupt(Exception):
@@ -140,11 +173,7 @@ class Journal:
 
     def jobs(self, state: JobState | None = None) -> list[JobRow]:
         """Jobs in queue order, optionally only those in ``state``."""
-        if state is None:
-            rows = self._db.execute("SELECT * FROM jobs ORDER BY rowid").fetchall()
-        else:
-            rows = self._db.execute("SELECT * FROM jobs WHERE state = ? ORDER BY rowid", (state,)).fetchall()
-        return [JobRow(*r) for r in rows]
+        return _select_jobs(self._db, state)
 
     def mark_running(self, job_id: str, started_at: str) -> JobRow:
         """Start a run of the job (counts the attempt)."""
@@ -190,6 +219,29 @@ class Journal:
             self._db.execute("UPDATE jobs SET state = 'queued', started_at = NULL WHERE state = 'running'")
         return ids
 
+    def requeue_failed(self, job_id: str, queued_at: str) -> bool:
+        """Queue a failed job again (its attempt count is kept); False when it is not failed."""
+        with self._db:
+            cursor = self._db.execute(
+                "UPDATE jobs SET state = 'queued', queued_at = ?, started_at = NULL, finished_at = NULL, error = NULL "
+                "WHERE job_id = ? AND state = 'failed'",
+                (queued_at, job_id),
+            )
+        return cursor.rowcount == 1
+
+    def pending_requests(self) -> list[OperatorRequest]:
+        """Operator requests not handled yet, oldest first."""
+        rows = self._db.execute("SELECT * FROM requests WHERE handled_at IS NULL ORDER BY request_id").fetchall()
+        return [_request(r) for r in rows]
+
+    def answer_request(self, request_id: int, handled_at: str, accepted: bool, outcome: str) -> None:
+        """Record what the daemon did with a request."""
+        with self._db:
+            self._db.execute(
+                "UPDATE requests SET handled_at = ?, accepted = ?, outcome = ? WHERE request_id = ?",
+                (handled_at, int(accepted), outcome, request_id),
+            )
+
     def store_message(self, message: StoredMessage) -> None:
         """Keep the latest message of a topic of a job (what the queryable serves)."""
         with self._db:
@@ -217,6 +269,54 @@ def stored_messages(path: str | Path) -> list[StoredMessage]:
     finally:
         db.close()
     return [StoredMessage(*r) for r in rows]
+
+
+def submit_request(path: str | Path, job_id: str, action: RequestAction, requested_at: str) -> int:
+    """Add an operator request for the daemon (one insert in its own transaction); its id."""
+    db = connect_database(Path(path))
+    try:
+        with db:
+            db.executescript(_SCHEMA)
+        with db:
+            cursor = db.execute(
+                "INSERT INTO requests (job_id, action, requested_at) VALUES (?, ?, ?)", (job_id, action, requested_at)
+            )
+        return cursor.lastrowid
+    finally:
+        db.close()
+
+
+def read_request(path: str | Path, request_id: int) -> OperatorRequest:
+    """One request as it stands now."""
+    db = connect_database(Path(path))
+    try:
+        return _request(db.execute("SELECT * FROM requests WHERE request_id = ?", (request_id,)).fetchone())
+    finally:
+        db.close()
+
+
+def read_jobs(path: str | Path, state: JobState | None = None) -> list[JobRow]:
+    """The journal's jobs read on a connection of its own, which writes nothing (for the operator commands)."""
+    db = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True, timeout=30.0)
+    try:
+        return _select_jobs(db, state)
+    finally:
+        db.close()
+
+
+def _select_jobs(db: sqlite3.Connection, state: JobState | None) -> list[JobRow]:
+    if state is None:
+        rows = db.execute("SELECT * FROM jobs ORDER BY rowid").fetchall()
+    else:
+        rows = db.execute("SELECT * FROM jobs WHERE state = ? ORDER BY rowid", (state,)).fetchall()
+    return [JobRow(*r) for r in rows]
+
+
+def _request(row: tuple) -> OperatorRequest:
+    request_id, job_id, action, requested_at, handled_at, accepted, outcome = row
+    return OperatorRequest(
+        request_id, job_id, action, requested_at, handled_at, None if accepted is None else bool(accepted), outcome
+    )
 
 
 def connect_database(path: Path) -> sqlite3.Connection:

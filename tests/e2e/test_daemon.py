@@ -20,6 +20,7 @@ from tests.fcsod_helpers import (
     Process,
     drop_job,
     finished,
+    foxglove_messages,
     free_port,
     start_daemon,
     start_subscriber,
@@ -113,7 +114,14 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
         assert set(ALWAYS_RECORDED) | set(DESIGN_RECORDED) <= set(channels)
         for channel in channels.values():
             # JSON channels, plus the ROS 2 form of the published messages for ros2 bag play
-            expected = ("cdr", "ros2msg") if channel.topic.startswith("/fcsod/") else ("json", "jsonschema")
+            # ... and foxglove-sdk's protobuf scene
+            expected = (
+                ("cdr", "ros2msg")
+                if channel.topic.startswith("/fcsod/")
+                else ("protobuf", "protobuf")
+                if channel.topic == "/scene"
+                else ("json", "jsonschema")
+            )
             assert (channel.message_encoding, schemas[channel.schema_id].encoding) == expected, channel.topic
         assert {t for t in channels if t.startswith("/fcsod/")} == {
             "/fcsod/grasps",
@@ -132,7 +140,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     published = [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)]
     assert published == ["status", "quality", "grasps", "design", "plan", "placement", "status"]
     assert any(b.get("stage") == "screening" for b in record.of(TOPIC_LOG))
-    scene = record.of("/scene")[0]
+    scene = foxglove_messages(out / "job.mcap")["/scene"][0]
     assert len(scene["entities"][0]["triangles"]) == 5
 
     code, text = _audit(capsys, str(out / "job.mcap"), "--verify", str(out), "--inputs", str(folder))

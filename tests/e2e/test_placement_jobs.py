@@ -24,6 +24,7 @@ from tests.fcsod_helpers import (
     DATA,
     drop_job,
     finished,
+    foxglove_messages,
     free_port,
     start_daemon,
     start_subscriber,
@@ -83,7 +84,7 @@ def _record_placement(out: Path) -> dict:
     assert not record.truncated
     assert record.channels[TOPIC_PLACEMENT] == "fcsod.PlacementReport"
     (placement,) = record.of(TOPIC_PLACEMENT)
-    build_scene = record.of(TOPIC_SCENE)[-1]["entities"][0]
+    build_scene = foxglove_messages(out / "job.mcap")[TOPIC_SCENE][-1]["entities"][0]
     assert build_scene["id"] == "build" and len(build_scene["triangles"]) == placement["finger_copies_placed"]
     return placement
 

@@ -14,7 +14,15 @@ from fcsod.record.recorder import (
     VERIFICATION_RECORD_NAME,
     read_record,
 )
-from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+from tests.fcsod_helpers import (
+    drop_job,
+    finished,
+    foxglove_messages,
+    free_port,
+    start_daemon,
+    start_subscriber,
+    write_config,
+)
 
 MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\n'
 
@@ -50,7 +58,7 @@ def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
         assert "<!-- fcso verify -->" in (out / "report.html").read_text()
         record = read_record(out / VERIFICATION_RECORD_NAME)
         assert record.of(TOPIC_VERIFICATION)[0]["passed"] == body["passed"]
-        scenes = record.of(TOPIC_VERIFICATION_SCENE)
+        scenes = foxglove_messages(out / VERIFICATION_RECORD_NAME)[TOPIC_VERIFICATION_SCENE]
         assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
         assert any(b["key_expr"].endswith("/verification") for b in record.of(TOPIC_BUS))
 

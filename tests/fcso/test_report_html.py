@@ -6,6 +6,7 @@ import base64
 import io
 import re
 import shutil
+import subprocess
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -266,3 +267,59 @@ def test_a_panel_draws_in_data_coordinates_inside_its_rectangle_only():
     assert tuple(pixels[50, 300]) == (255, 0, 0)
     # data (0.25, 0.25) is a quarter into the panel from its bottom-left corner
     assert tuple(pixels[340 - 85, 210 + 52]) == (0, 0, 255)
+
+
+def chromium() -> str:
+    """Debian's Chromium (``.ci/run`` installs it); the test fails, not skips, without it."""
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    assert found, "chromium is not installed: .ci/run installs it (apt-get install chromium)"
+    return found
+
+
+def test_3d_view_renders_offline_in_headless_chromium(bunny_dir, tmp_path):
+    """The page in a real browser with no network at all: the 3D view draws the part and the fingers, no errors."""
+    page = bunny_dir / "report.html"
+    assert page.stat().st_size < 3_000_000
+    html = page.read_text(encoding="utf-8")
+    # nothing is fetched: every script is inline, every mesh and picture a data: URI or embedded text
+    assert not re.search(r"""(src|href)\s*=\s*["'](https?:)?//""", html)
+    assert html.count("three.js authors") == 1, "the viewer library is bundled once"
+    screenshot = tmp_path / "view.png"
+    # a network namespace of its own (no interfaces but loopback, down) when the kernel lets us, and a proxy that
+    # goes nowhere in any case
+    isolate = ["unshare", "--net"] if subprocess.run(["unshare", "--net", "true"]).returncode == 0 else []
+    run = subprocess.run(
+        [
+            *isolate,
+            chromium(),
+            "--headless=new",
+            "--no-sandbox",
+            "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--proxy-server=http://127.0.0.1:9",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--window-size=1240,1000",
+            "--virtual-time-budget=20000",
+            f"--screenshot={screenshot}",
+            page.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert screenshot.is_file(), run.stderr[-3000:]
+    console = [line for line in run.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+    assert not console, "\n".join(console)
+    pixels = np.asarray(Image.open(screenshot).convert("RGB")).astype(int)
+    # the canvas is the only place with the view's background colour; inside it, the fingers' blue and the part's grey
+    background = np.all(pixels == (0xF4, 0xF4, 0xF8), axis=2)
+    rows, cols = np.nonzero(background)
+    assert rows.size > 10_000, "no 3D canvas in the screenshot"
+    canvas = pixels[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1]
+    drawn = ~np.all(canvas == (0xF4, 0xF4, 0xF8), axis=2)
+    assert drawn.mean() > 0.03, "the canvas is blank"
+    blue = (canvas[..., 2] > canvas[..., 0] + 30) & drawn
+    assert blue.sum() > 500, "no finger drawn"
