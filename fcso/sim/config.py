@@ -74,6 +74,12 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this",
     )
+    choice_budget_s: float = Field(
+        600.0,
+        gt=0,
+        description="Choosing among candidates (--verify-top, the daemon's top_k): no further candidate is verified "
+        "once this much time went into the choice, s",
+    )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
     )

@@ -54,7 +54,7 @@ from ..record.scene import base64_text, build_scene_update, scene_update
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
 from .task import BUILD_NAME, FINGER_SET, PROGRESS_INTERVAL_S, JobFolderDeleted, JobRun
-from .verification import choose_by_verification, job_settings
+from .verification import choose_by_verification, job_settings, write_chosen_verification
 
 
 def step_inputs(run: JobRun) -> None:
@@ -312,7 +312,8 @@ def step_outputs(run: JobRun) -> None:
     """Write every output file into the work folder and record their hashes; record the bus messages.
 
     ``report.json`` and ``report.html`` are made here, after every step that
-    adds to the report; the meshes are those the design record holds.
+    adds to the report; the meshes are those the design record holds. The
+    delivered candidate's verification (``top_k``) is written here too.
     """
     run.files = {**sets_output_files(run.sets), **run.files}
     for name, data in run.files.items():
@@ -323,6 +324,8 @@ def step_outputs(run: JobRun) -> None:
         except OSError as exc:
             # a failed write() does not say which file it was writing
             raise OSError(exc.errno, exc.strerror, str(path)) from exc
+    # the delivered candidate's verification (top_k) joins the files before they are hashed
+    write_chosen_verification(run)
     run.recorder.write(
         TOPIC_OUTPUTS,
         OutputFilesRecord(

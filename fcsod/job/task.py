@@ -23,7 +23,15 @@ from fcso.sets import SetsResult
 
 from ..build.build3mf import Build
 from ..build.models import BuildConfig
-from ..bus.messages import BusMessage, InputFile, LogRecord, StateChangeRecord, StatusMessage, utc_now
+from ..bus.messages import (
+    BusMessage,
+    InputFile,
+    LogRecord,
+    StateChangeRecord,
+    StatusMessage,
+    VerificationMessage,
+    utc_now,
+)
 from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, Recorder
@@ -94,6 +102,51 @@ class JobTask:
 
 
 @dataclass
+class VerificationTask:
+    """What the daemon hands a worker to run a done job's verification again (a crash or a stop cut it off).
+
+    Attributes
+    ----------
+    job_id, folder : str
+        The job and its watched folder (its ``job.toml`` gives the job's ``[verify]``).
+    config : DaemonConfig
+        The daemon's settings.
+    """
+
+    job_id: str
+    folder: str
+    config: DaemonConfig
+
+
+def unfinished_verification_message(bus, job_id: str, state: str, error: str, finger_set: int | None) -> BusMessage:
+    """The message of a verification that failed or was skipped, on ``.../verification`` (or
+    ``.../verification/<set>``).
+
+    Parameters
+    ----------
+    bus : BusConfig
+    job_id : str
+    state : {'failed', 'skipped'}
+    error : str
+        Why.
+    finger_set : int or None
+        The finger set of a job of several.
+    """
+    body = VerificationMessage(
+        job_id=job_id,
+        state=state,
+        error=error,
+        passed=False,
+        file=None,
+        finger_set=finger_set,
+        scenarios=[],
+        warnings=[],
+    )
+    topic = "verification" if finger_set is None else f"verification/{finger_set}"
+    return BusMessage.json_body(bus.prefix, bus.cell, topic, body)
+
+
+@dataclass
 class JobRun:
     """The state of a running job that steps read and extend."""
 
@@ -113,6 +166,8 @@ class JobRun:
     sets: SetsResult | None = None
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
+    #: published after the done status (the verification of the delivered candidate)
+    after_done: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verified: tuple | None = None
 

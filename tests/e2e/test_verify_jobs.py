@@ -21,7 +21,7 @@ MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\n'
 
 def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
     port = free_port()
-    config = write_config(tmp_path, port, extra="[verify]\nenabled = true\ntrials = 2\n")
+    config = write_config(tmp_path, port, verify="enabled = true\ntop_k = 0\ntrials = 2")
     part = tmp_path / "ridged.stl"
     ridged_block().export(part)
     daemon = start_daemon(config)
@@ -80,6 +80,7 @@ min_retained = 0.7
 
 [verify]
 enabled = true
+top_k = 0
 trials = 2
 """
 
