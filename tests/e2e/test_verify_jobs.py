@@ -1,10 +1,13 @@
 """fcsod with [verify]: the design is done and published first, its verification follows on zenoh, in the journal and in
-MCAP.
+MCAP; a kill -9 during it runs it again after the restart, once; a time limit publishes it as failed.
 """
 
 from __future__ import annotations
 
 import json
+import signal
+import sqlite3
+import time
 
 from examples.sim_parts import ridged_block
 from fcsod.record.recorder import (
@@ -14,14 +17,101 @@ from fcsod.record.recorder import (
     VERIFICATION_RECORD_NAME,
     read_record,
 )
-from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+from tests.conftest import process_running
+from tests.fcsod_helpers import (
+    SLOW_VERIFY,
+    drop_job,
+    finished,
+    free_port,
+    start_daemon,
+    start_subscriber,
+    write_config,
+)
 
 MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\n'
 
 
-def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
+def _is(topic: str, job_id: str | None = None):
+    return lambda v: isinstance(v, dict) and v.get("topic") == topic and job_id in (None, v.get("job_id"))
+
+
+def test_kill_during_verification_then_restart_verifies_once_published_recorded_and_answered(tmp_path):
     port = free_port()
+    # the first daemon's verification runs for hours, so it is surely running when the daemon is killed;
+    # the restarted daemon's quick one finishes
+    config = write_config(tmp_path, port, verify=SLOW_VERIFY)
+    part = tmp_path / "ridged.stl"
+    ridged_block().export(part)
+    first = start_daemon(config)
+    subscriber = start_subscriber(config)
+    try:
+        drop_job(tmp_path / "watch" / "ridged", {"job.toml": MANIFEST, "ridged.stl": part})
+        done = finished(subscriber, "ridged")
+        assert done["body"]["state"] == "done", done
+        job_id = done["job_id"]
+        started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 10)
+        first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "verification: started", 60)
+    finally:
+        first.stop(signal.SIGKILL)
+        subscriber.stop()
+    # the design was published before its verification began
+    assert subscriber.wait_for(_is("design", job_id), 1)
+    deadline = time.monotonic() + 60
+    while process_running(started["worker_pid"]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not process_running(started["worker_pid"]), "the worker outlived the killed daemon"
+    out = tmp_path / "out" / job_id
+    journal = tmp_path / "state" / "journal.sqlite3"
+    with sqlite3.connect(journal) as db:
+        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",)]
+        assert db.execute("SELECT state, attempt FROM verifications").fetchall() == [("running", 1)]
+        assert db.execute("SELECT count(*) FROM messages WHERE topic = 'verification'").fetchone() == (0,)
+    assert not list(out.glob("*verification*")) and not list(out.glob(".*"))
+
     config = write_config(tmp_path, port, verify="enabled = true\ntop_k = 0\ntrials = 2")
+    second = start_daemon(config)
+    subscriber = start_subscriber(config, extra=["--no-query"])
+    try:
+        message = subscriber.wait_for(_is("verification", job_id), 240)
+        # a late joiner gets it from the journal's queryable
+        late = start_subscriber(config)
+        try:
+            answered = late.wait_for(_is("verification", job_id), 30)
+            assert answered["source"] != "live" and answered["body"] == message["body"]
+        finally:
+            late.stop()
+    finally:
+        subscriber.stop()
+        assert second.stop() == 0
+    assert any(v.get("message") == "verification started again" for v in second.json_lines())
+    # the job did not run again; its verification ran once more, and was published once
+    assert not any(v.get("message") == "job started" for v in second.json_lines())
+    assert [v["topic"] for v in subscriber.json_lines() if v.get("job_id") == job_id] == ["verification"]
+    with sqlite3.connect(journal) as db:
+        assert db.execute("SELECT state, attempt FROM jobs").fetchall() == [("done", 1)]
+        assert db.execute("SELECT state, attempt FROM verifications").fetchall() == [("done", 2)]
+    body = message["body"]
+    assert body["state"] == "done" and body["file"] == "verification.json" and len(body["scenarios"]) == 1
+    scenario = body["scenarios"][0]
+    # the carved V-grooves centre the ridged block; flat pads cannot
+    assert scenario["success_rate"] == 1.0 and scenario["flat_success_rate"] < 1.0
+
+    verification = json.loads((out / "verification.json").read_text())
+    assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
+    assert len(verification["scenarios"][0]["fcso"]["trials"]) == 2
+    assert (out / "report.html").read_text().count("<!-- fcso verify -->") == 1
+    record = read_record(out / VERIFICATION_RECORD_NAME)
+    assert [v["passed"] for v in record.of(TOPIC_VERIFICATION)] == [body["passed"]]
+    scenes = record.of(TOPIC_VERIFICATION_SCENE)
+    assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
+    assert [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)] == ["verification"]
+    assert not list(out.glob(".*")), "a temporary file was left behind"
+
+
+def test_verification_over_its_time_limit_is_published_failed_and_leaves_nothing(tmp_path):
+    port = free_port()
+    # a million trials take hours on any machine: far over the 1 s limit
+    config = write_config(tmp_path, port, verify=SLOW_VERIFY + "\ntime_limit_seconds = 1")
     part = tmp_path / "ridged.stl"
     ridged_block().export(part)
     daemon = start_daemon(config)
@@ -29,43 +119,22 @@ def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
     try:
         drop_job(tmp_path / "watch" / "ridged", {"job.toml": MANIFEST, "ridged.stl": part})
         done = finished(subscriber, "ridged")
-        assert done["body"]["state"] == "done", done
         job_id = done["job_id"]
-        message = subscriber.wait_for(
-            lambda v: isinstance(v, dict) and v.get("topic") == "verification" and v["job_id"] == job_id, 120
-        )
-        lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id]
-        # the verification follows the done status
-        topics = [v["topic"] for v in lines]
-        assert topics.index("verification") > max(i for i, v in enumerate(lines) if v["topic"] == "status")
-        body = message["body"]
-        assert body["file"] == "verification.json" and len(body["scenarios"]) == 1
-        scenario = body["scenarios"][0]
-        # the carved V-grooves centre the ridged block; flat pads cannot
-        assert scenario["success_rate"] == 1.0 and scenario["flat_success_rate"] < 1.0
-
-        out = tmp_path / "out" / job_id
-        verification = json.loads((out / "verification.json").read_text())
-        assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
-        assert "<!-- fcso verify -->" in (out / "report.html").read_text()
-        record = read_record(out / VERIFICATION_RECORD_NAME)
-        assert record.of(TOPIC_VERIFICATION)[0]["passed"] == body["passed"]
-        scenes = record.of(TOPIC_VERIFICATION_SCENE)
-        assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
-        assert any(b["key_expr"].endswith("/verification") for b in record.of(TOPIC_BUS))
-
-        # a late joiner gets it from the journal's queryable
-        late = start_subscriber(config)
-        try:
-            answered = late.wait_for(
-                lambda v: isinstance(v, dict) and v.get("topic") == "verification" and v["job_id"] == job_id, 30
-            )
-            assert answered["source"] != "live" and answered["body"] == body
-        finally:
-            late.stop()
+        message = subscriber.wait_for(_is("verification", job_id), 120)
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
+    assert done["body"]["state"] == "done", done
+    body = message["body"]
+    assert body["state"] == "failed" and not body["passed"] and body["file"] is None
+    assert "time limit exceeded" in body["error"] and "verify.time_limit_seconds (1 s)" in body["error"]
+    out = tmp_path / "out" / job_id
+    assert not list(out.glob("*verification*")) and not list(out.glob(".*"))
+    assert "<!-- fcso verify -->" not in (out / "report.html").read_text()
+    with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
+        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",)]
+        state, error = db.execute("SELECT state, error FROM verifications").fetchone()
+    assert state == "failed" and "time limit exceeded" in error
 
 
 SETS_MANIFEST = """
