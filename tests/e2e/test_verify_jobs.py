@@ -10,6 +10,7 @@ import sqlite3
 import time
 
 from examples.sim_parts import ridged_block
+from fcsod.cli import main as fcsod_main
 from fcsod.record.recorder import (
     TOPIC_BUS,
     TOPIC_VERIFICATION,
@@ -108,12 +109,14 @@ def test_kill_during_verification_then_restart_verifies_once_published_recorded_
     assert not list(out.glob(".*")), "a temporary file was left behind"
 
 
-def test_verification_over_its_time_limit_is_published_failed_and_leaves_nothing(tmp_path):
+def test_time_limit_publishes_failed_and_leaves_nothing_and_top_k_delivers_a_verified_candidate(tmp_path):
     port = free_port()
-    # a million trials take hours on any machine: far over the 1 s limit
+    # the daemon's verification: a million trials take hours on any machine, far over the 1 s limit
     config = write_config(tmp_path, port, verify=SLOW_VERIFY + "\ntime_limit_seconds = 1")
     part = tmp_path / "ridged.stl"
     ridged_block().export(part)
+    # the second job chooses among its 2 best candidates by verification, before it is done
+    choosing = MANIFEST + "\n[verify]\ntop_k = 2\ntrials = 2\n"
     daemon = start_daemon(config)
     subscriber = start_subscriber(config)
     try:
@@ -121,6 +124,10 @@ def test_verification_over_its_time_limit_is_published_failed_and_leaves_nothing
         done = finished(subscriber, "ridged")
         job_id = done["job_id"]
         message = subscriber.wait_for(_is("verification", job_id), 120)
+        drop_job(tmp_path / "watch" / "choosing", {"job.toml": choosing, "ridged.stl": part})
+        chosen_done = finished(subscriber, "choosing", timeout=240)
+        chosen_id = chosen_done["job_id"]
+        chosen_message = subscriber.wait_for(_is("verification", chosen_id), 30)
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
@@ -132,9 +139,25 @@ def test_verification_over_its_time_limit_is_published_failed_and_leaves_nothing
     assert not list(out.glob("*verification*")) and not list(out.glob(".*"))
     assert "<!-- fcso verify -->" not in (out / "report.html").read_text()
     with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
-        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",)]
-        state, error = db.execute("SELECT state, error FROM verifications").fetchone()
-    assert state == "failed" and "time limit exceeded" in error
+        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",), ("done",)]
+        # the choosing job's verification is part of the job: nothing follows its done state
+        rows = db.execute("SELECT job_id, state, error FROM verifications").fetchall()
+    assert [(r[0], r[1]) for r in rows] == [(job_id, "failed")] and "time limit exceeded" in rows[0][2]
+
+    # top_k: the first candidate by the measure passes, so it is the only one verified and is delivered
+    assert chosen_done["body"]["state"] == "done", chosen_done
+    lines = [v for v in subscriber.json_lines() if v.get("job_id") == chosen_id and v.get("source") == "live"]
+    assert [v["topic"] for v in lines][-2:] == ["status", "verification"]
+    body = chosen_message["body"]
+    assert body["state"] == "done" and body["passed"] and body["file"] == "verification.json"
+    assert body["choice"].startswith(f"candidate {body['chosen_candidate']} (rank 1 by the measure")
+    assert "the first whose every scenario passed, after 1 of 2 verified" in body["choice"]
+    assert {"verification.json", "verification.mcap", "report.html"} <= set(chosen_done["body"]["outputs"])
+    out = tmp_path / "out" / chosen_id
+    assert json.loads((out / "report.json").read_text())["best"] == body["chosen_candidate"]
+    assert "Delivered: candidate" in (out / "report.html").read_text()
+    # job.mcap vouches for the verification's files and the page with its section
+    assert fcsod_main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
 
 
 SETS_MANIFEST = """
