@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import time
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
 
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
+from fcso.geometry import box, to_trimesh
 from fcso.parts import Part
-from fcso.sim.collision import convex_pieces, zoned_pieces
+from fcso.sim.collision import convex_pieces, evict, zoned_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
@@ -158,3 +164,37 @@ def test_verification_takes_the_part_density_from_the_print_profile():
     assert with_print_density(VerifyConfig(trials=3, density_g_cm3=1.1), fdm).density_g_cm3 == pytest.approx(1.1)
     explicit = DesignConfig().updated({"print": {"profile": "fdm-pla", "density_g_cm3": 1.3}})
     assert with_print_density(VerifyConfig(), explicit).density_g_cm3 == pytest.approx(1.3)
+
+
+def _l_block() -> trimesh.Trimesh:
+    """An L-shaped block (two boxes): not convex, decomposed by CoACD in well under a second."""
+    return to_trimesh(box((0, 0, 0), (20, 10, 10)) + box((0, 0, 0), (10, 10, 20)))
+
+
+def _pieces_in_process(mesh, cache: Path) -> int:
+    return len(convex_pieces(mesh, 0.05, cache).pieces)
+
+
+def test_the_decomposition_cache_survives_concurrent_writers_damage_and_a_size_bound(tmp_path):
+    mesh, cache = _l_block(), tmp_path / "cache"
+    # two workers decompose the same mesh at once: both get the pieces, one whole entry stays, no temporary file
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        counts = pool.starmap(_pieces_in_process, [(mesh, cache), (mesh, cache)])
+    entries = sorted(cache.iterdir())
+    assert counts[0] == counts[1] >= 2 and [e.suffix for e in entries] == [".npz"]
+    first = convex_pieces(mesh, 0.05, cache)
+    assert first.cached and len(first.pieces) == counts[0]
+    # a damaged entry (a disk that filled up, a crash of an older version) is made again, not trusted
+    entries[0].write_bytes(entries[0].read_bytes()[:100])
+    again = convex_pieces(mesh, 0.05, cache)
+    assert not again.cached and len(again.pieces) == counts[0]
+    assert convex_pieces(mesh, 0.05, cache).cached
+    # beyond its size the least recently used entries go; one just used stays
+    other = convex_pieces(mesh, 0.1, cache)
+    assert not other.cached and len(list(cache.glob("*.npz"))) == 2
+    old = time.time() - 3600
+    os.utime(entries[0], (old, old))
+    assert convex_pieces(mesh, 0.1, cache).cached
+    newer = next(e for e in cache.glob("*.npz") if e != entries[0])
+    evict(cache, newer.stat().st_size)
+    assert list(cache.glob("*.npz")) == [newer]
