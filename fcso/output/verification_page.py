@@ -247,9 +247,14 @@ def verification_pictures(verification: VerificationReport, design: DesignUnderT
 
 
 def write_verification(
-    directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = ""
+    directory: str | Path,
+    verification: VerificationReport,
+    design: DesignUnderTest,
+    extra_html: str = "",
+    page_name: str = REPORT_HTML,
 ) -> list[Path]:
-    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
+    """Write ``verification.json`` and the verification section of ``report.html`` (or of the page ``page_name``,
+    made when missing) into a design's folder.
 
     Returns
     -------
@@ -260,7 +265,7 @@ def write_verification(
     target = write_atomic(
         directory / VERIFICATION_JSON, (verification.model_dump_json(indent=2) + "\n").encode("utf-8")
     )
-    page = directory / REPORT_HTML
+    page = directory / page_name
     write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
     return [target, page]
 

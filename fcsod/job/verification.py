@@ -8,7 +8,9 @@ section, ``verification.mcap``, recorded in ``job.mcap``) and its message
 follows the ``done`` status. Otherwise, with ``[verify] enabled``, the
 worker verifies the design after the job is ``done`` and its design
 published (:func:`verify_done_job`); a job of several finger sets verifies
-every set's finger, each on ``.../verification/<set>``. The daemon
+every set's finger, each on ``.../verification/<set>``. Its section goes
+into ``verification.html`` beside ``report.html``, which stays as
+``job.mcap`` vouches for it. The daemon
 journals that verification as running from the moment the job is done, so
 a crash or a stop during it runs it again after the restart from the job's
 output folder (:func:`verify_again`); its files are written only once every
@@ -66,6 +68,10 @@ def choose_by_verification(run) -> None:
     run.log("info", f"verification delivered {verification.choice}")
 
 
+#: The page of a verification made after the job is done: ``report.html`` stays as ``job.mcap`` vouches for it.
+VERIFICATION_HTML = "verification.html"
+
+
 def write_chosen_verification(run) -> None:
     """Output step: the verification of the candidate :func:`choose_by_verification` delivered, into the work folder
     (after the job's files are written, before they are hashed).
@@ -78,7 +84,7 @@ def write_chosen_verification(run) -> None:
         return
     verification, design, extra = run.verified
     message = _bus_message(run.task.config, run.task.job_id, verification, VERIFICATION_JSON, None)
-    written = _write(run.work_dir, verification, design, extra, message, run.task.config.mcap)
+    written = _write(run.work_dir, verification, design, extra, message, run.task.config.mcap, REPORT_HTML)
     for path in written:
         run.files[path.name] = path.read_bytes()
     run.record_published(message)
@@ -174,7 +180,7 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
         for out, number, name, design, verification in results:
             file = VERIFICATION_JSON if number is None else f"{set_folder(number)}/{VERIFICATION_JSON}"
             message = _bus_message(config, job_id, verification, file, number)
-            _write(out, verification, design, "", message, config.mcap)
+            _write(out, verification, design, "", message, config.mcap, VERIFICATION_HTML)
             messages.append(message)
             log(
                 "info" if verification.passed else "warning",
@@ -215,22 +221,27 @@ def _unfinished(config, job_id: str, sets: list, state: str, error: str, emit, d
 def _remove_verification_files(folder: Path) -> None:
     """Remove a verification's files (and their temporary names) from a job's folder and its set folders."""
     for path in [folder, *sorted(folder.glob("set-*"))]:
-        for name in (VERIFICATION_JSON, VERIFICATION_RECORD_NAME):
+        for name in (VERIFICATION_JSON, VERIFICATION_RECORD_NAME, VERIFICATION_HTML):
             for leftover in (path / name, path / f".{name}.tmp"):
                 leftover.unlink(missing_ok=True)
-        (path / f".{REPORT_HTML}.tmp").unlink(missing_ok=True)
 
 
 def _write(
-    out: Path, verification: VerificationReport, design: DesignUnderTest, extra: str, message: BusMessage, mcap
+    out: Path,
+    verification: VerificationReport,
+    design: DesignUnderTest,
+    extra: str,
+    message: BusMessage,
+    mcap,
+    page_name: str,
 ) -> list[Path]:
-    """``verification.mcap``, the report's section and ``verification.json`` (last: it says the verification is
-    there), each written under a temporary name and renamed; the files written."""
+    """``verification.mcap``, the verification section in the page ``page_name`` and ``verification.json`` (last: it
+    says the verification is there), each written under a temporary name and renamed; the files written."""
     record = out / VERIFICATION_RECORD_NAME
     temporary = out / f".{VERIFICATION_RECORD_NAME}.tmp"
     _record(temporary, verification, design, message, mcap)
     temporary.replace(record)
-    return [record, *reversed(write_verification(out, verification, design, extra))]
+    return [record, *reversed(write_verification(out, verification, design, extra, page_name))]
 
 
 def _settings(run) -> VerifySettings:

@@ -100,7 +100,10 @@ def test_kill_during_verification_then_restart_verifies_once_published_recorded_
     verification = json.loads((out / "verification.json").read_text())
     assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
     assert len(verification["scenarios"][0]["fcso"]["trials"]) == 2
-    assert (out / "report.html").read_text().count("<!-- fcso verify -->") == 1
+    # its section is a page of its own: report.html stays as job.mcap vouches for it
+    assert (out / "verification.html").read_text().count("<!-- fcso verify -->") == 1
+    assert "<!-- fcso verify -->" not in (out / "report.html").read_text()
+    assert fcsod_main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
     record = read_record(out / VERIFICATION_RECORD_NAME)
     assert [v["passed"] for v in record.of(TOPIC_VERIFICATION)] == [body["passed"]]
     scenes = record.of(TOPIC_VERIFICATION_SCENE)
@@ -215,7 +218,7 @@ def test_every_finger_set_of_a_job_is_verified_into_its_folder_and_on_its_key(tm
         folder = out / f"set-{number}"
         written = json.loads((folder / "verification.json").read_text())
         assert written["scenarios"][0]["fcso"]["success_rate"] == body["scenarios"][0]["success_rate"]
-        assert "<!-- fcso verify -->" in (folder / "report.html").read_text()
+        assert "<!-- fcso verify -->" in (folder / "verification.html").read_text()
         assert any(
             b["key_expr"].endswith(f"/verification/{number}")
             for b in read_record(folder / VERIFICATION_RECORD_NAME).of(TOPIC_BUS)
