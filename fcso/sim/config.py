@@ -80,6 +80,12 @@ class VerifyConfig(BaseModel):
         description="Choosing among candidates (--verify-top, the daemon's top_k): no further candidate is verified "
         "once this much time went into the choice, s",
     )
+    jobs: int = Field(
+        0,
+        ge=0,
+        description="Worker processes of the precision trials (forked; 0: every available core); the results do not "
+        "depend on it",
+    )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
     )
