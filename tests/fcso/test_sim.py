@@ -19,7 +19,7 @@ from fcso.sim.collision import convex_pieces, evict, zoned_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
-from fcso.sim.verify import finger_hull, grasp_case, part_pieces
+from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -198,3 +198,20 @@ def test_the_decomposition_cache_survives_concurrent_writers_damage_and_a_size_b
     newer = next(e for e in cache.glob("*.npz") if e != entries[0])
     evict(cache, newer.stat().st_size)
     assert list(cache.glob("*.npz")) == [newer]
+
+
+def test_trials_on_forked_workers_give_the_results_of_one_process(tmp_path):
+    case = _cube_case()
+    scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), _config(tmp_path))
+    errors = np.array([[1.5, -1.0, 2.0], [-2.0, 0.5, -3.0], [0.0, 2.0, 1.0]])
+    runs, advanced = {}, []
+    for jobs in (1, 2):
+        config = _config(tmp_path, jobs=jobs)
+        runs[jobs] = list(perturbed_runs(scene, case, errors, config, lambda jobs=jobs: advanced.append(jobs)))
+    assert advanced == [1, 1, 1, 2, 2, 2]
+    for one, forked in zip(runs[1], runs[2]):
+        assert one.held == forked.held and np.array_equal(one.part_in_gripper, forked.part_in_gripper)
+    # only the first trial keeps its frames (the report's picture)
+    assert [bool(r.frames) for r in runs[2]] == [True, False, False]
+    # the start errors matter: the trials end in different poses
+    assert not np.allclose(runs[2][0].part_in_gripper, runs[2][1].part_in_gripper)
