@@ -350,6 +350,8 @@ def perturbed_runs(
     advance : callable
         Called after every trial.
     """
+    # the workers run MuJoCo only: forked after CoACD ran here, they could not run CoACD (its OpenMP threads do not
+    # survive a fork)
     jobs = min(resolve_jobs(config.jobs), max(1, len(errors)))
     batch = 2 * jobs
     with WorkerPool((scene, case, config), jobs) as pool:
