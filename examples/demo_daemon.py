@@ -74,6 +74,15 @@ def _show(line: str) -> None:
     if topic == "status":
         extra = body.get("error") or ", ".join(body.get("outputs", []))
         print(f"  {message['key']}: {body['state']}" + (f" ({extra})" if extra else ""))
+    elif topic.partition("/")[0] == "verification":
+        if body.get("state", "done") != "done":
+            print(f"  {message['key']}: verification {body['state']}: {body.get('error')}")
+        else:
+            rates = ", ".join(
+                f"{s['part']} pose {s['pose_index']}: {s['success_rate']:.0%} (flat {s['flat_success_rate']:.0%})"
+                for s in body["scenarios"]
+            )
+            print(f"  {message['key']}: {'passed' if body['passed'] else 'did not pass'}; success {rates}")
     elif topic == "quality":
         print(
             f"  {message['key']}: Q = {body['quality_mm2']:.2f} mm², {body['candidates_evaluated']} candidates, pad "
@@ -264,6 +273,11 @@ multicast_scouting = false
 enabled = true
 domain_id = {ROS_DOMAIN_ID}
 namespace = "/demo"
+
+# every finger set's design is verified in simulation after the job is done (METHOD §12)
+[verify]
+enabled = true
+trials = 10
 """,
         encoding="utf-8",
     )
@@ -279,8 +293,9 @@ namespace = "/demo"
                 str(config),
                 "--save",
                 str(BASE / "received"),
-                "--exit-after",
-                "1",
+                # verification is on: each finger set's verification follows the job's done status
+                "--exit-after-verifications",
+                "2",
                 "--timeout",
                 "600",
                 "--zenoh-config",

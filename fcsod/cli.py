@@ -92,6 +92,12 @@ def _parser() -> argparse.ArgumentParser:
     subscribe.add_argument("--timeout", type=float, metavar="S", help="exit after S seconds")
     subscribe.add_argument("--exit-after", type=int, metavar="N", help="exit after N jobs reached done or failed")
     subscribe.add_argument(
+        "--exit-after-verifications",
+        type=int,
+        metavar="N",
+        help="exit after N verification messages (one per verified job, or per finger set of a job of several)",
+    )
+    subscribe.add_argument(
         "--zenoh-config",
         type=Path,
         metavar="FILE",
@@ -374,6 +380,7 @@ def _subscribe(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     jobs_prefix = f"{prefix}/{cell}/jobs/"
     finished: set[str] = set()
+    verified: set[tuple[str, str]] = set()
     lock = threading.Lock()
     all_done = threading.Event()
 
@@ -424,6 +431,10 @@ def _subscribe(args: argparse.Namespace) -> int:
                 finished.add(line["job_id"])
                 if args.exit_after is not None and len(finished) >= args.exit_after:
                     all_done.set()
+            if line["topic"].partition("/")[0] == "verification":
+                verified.add((line["job_id"], line["topic"]))
+                if args.exit_after_verifications is not None and len(verified) >= args.exit_after_verifications:
+                    all_done.set()
 
     # every time the daemon appears (at start, or after it or the network was down) ask it for what was missed
     ask = threading.Event()
@@ -452,7 +463,7 @@ def _subscribe(args: argparse.Namespace) -> int:
         pass
     finally:
         session.close()
-    if args.exit_after is not None and not all_done.is_set():
+    if (args.exit_after is not None or args.exit_after_verifications is not None) and not all_done.is_set():
         return EXIT_FAILED
     return EXIT_OK
 

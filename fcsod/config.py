@@ -170,10 +170,23 @@ class VerifySettings(_Section):
     """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""  # noqa: E501
 
     enabled: bool = Field(
-        False, description="Verify every done job's design in simulation (MuJoCo), after it is published"
+        True,
+        description="Verify every done job's design in simulation (MuJoCo), after it is published (and with top_k, "
+        "choose among candidates by it before)",
     )
     trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
-    top_k: int = Field(0, ge=0, description="Verify the K best candidates by Q and take the best that passes (0: off)")
+    top_k: int = Field(
+        3,
+        ge=0,
+        description="Verify up to K candidates in the order of the design's measure and deliver the first that passes "
+        "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets)",
+    )
+    time_limit_seconds: float = Field(
+        600.0,
+        gt=0,
+        description="A verification after the job is done is stopped after this (its status on the verification key "
+        "is then failed; the job stays done); choosing among top_k candidates starts no further candidate after it, s",
+    )
 
 
 #: host:port of a listening socket; the host is a name, an IPv4 address or a bracketed IPv6 address.

@@ -47,6 +47,15 @@ SLOW_SECTIONS = {
 SLOW_DESIGN = "\n".join(f"[design.{name}]\n{body}\n" for name, body in SLOW_SECTIONS.items())
 
 
+#: The daemon's ``[verify]`` of every test that does not verify: verification is on by default.
+VERIFY_OFF = "enabled = false\ntop_k = 0"
+
+#: A ``[verify]`` under which verifying one design runs for hours whatever the machine: a million precision
+#: trials, each a simulated grasp of thousands of physics steps. Tests that must catch a verification while it
+#: runs use it instead of hoping that a quick one is still running.
+SLOW_VERIFY = "enabled = true\ntop_k = 0\ntrials = 1000000"
+
+
 def slow_manifest(part_file: str) -> str:
     """A job.toml of one part designed with :data:`SLOW_SECTIONS`."""
     return f'[[parts]]\nfile = "{part_file}"\n\n' + "\n".join(
@@ -79,13 +88,15 @@ def write_config(
     bus_extra: str = "",
     design: str = FAST_DESIGN,
     reuse: bool = False,
+    verify: str = VERIFY_OFF,
 ) -> Path:
     """Write an fcsod.toml for a daemon listening on ``<scheme>/127.0.0.1:<port>`` with folders below ``base``.
 
     ``zenoh_extra`` and ``bus_extra`` are lines added to the ``[zenoh]`` and ``[bus]`` sections;
-    ``design`` the daemon's ``[design.*]`` sections (:data:`FAST_DESIGN` or :data:`SLOW_DESIGN`).
+    ``design`` the daemon's ``[design.*]`` sections (:data:`FAST_DESIGN` or :data:`SLOW_DESIGN`);
     ``reuse`` keeps finger reuse on (the daemon's default); off, tests that
-    drop the same part twice see it designed twice.
+    drop the same part twice see it designed twice;
+    ``verify`` the body of its ``[verify]`` (off unless a test verifies: it is on by default).
 
     Returns
     -------
@@ -122,6 +133,9 @@ chunk_size_bytes = 4096
 
 [reuse]
 enabled = {str(reuse).lower()}
+
+[verify]
+{verify}
 {extra}
 {design}
 """,

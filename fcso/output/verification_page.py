@@ -247,9 +247,14 @@ def verification_pictures(verification: VerificationReport, design: DesignUnderT
 
 
 def write_verification(
-    directory: str | Path, verification: VerificationReport, design: DesignUnderTest, extra_html: str = ""
+    directory: str | Path,
+    verification: VerificationReport,
+    design: DesignUnderTest,
+    extra_html: str = "",
+    page_name: str = REPORT_HTML,
 ) -> list[Path]:
-    """Write ``verification.json`` and the verification section of ``report.html`` into a design's folder.
+    """Write ``verification.json`` and the verification section of ``report.html`` (or of the page ``page_name``,
+    made when missing) into a design's folder.
 
     Returns
     -------
@@ -260,7 +265,7 @@ def write_verification(
     target = write_atomic(
         directory / VERIFICATION_JSON, (verification.model_dump_json(indent=2) + "\n").encode("utf-8")
     )
-    page = directory / REPORT_HTML
+    page = directory / page_name
     write_section(page, section_html(verification, verification_pictures(verification, design), extra_html))
     return [target, page]
 
@@ -276,8 +281,8 @@ def read_verification(directory: str | Path) -> VerificationReport | None:
 CHOSEN = ' class="chosen"'
 
 
-def ranking_html(ranking: list[RankedCandidate]) -> str:
-    """The ranking before (by Q) and after verification, and why, as an HTML fragment."""
+def ranking_html(ranking: list[RankedCandidate], choice: str | None = None) -> str:
+    """The verified candidates in the measure's order, which was delivered and why (``choice``), as an HTML fragment."""
     if not ranking:
         return ""
     rows = "".join(
@@ -287,12 +292,15 @@ def ranking_html(ranking: list[RankedCandidate]) -> str:
         f"<td>{'yes' if r.passed else 'no'}</td><td>{'&#9733;' if r.chosen else ''}</td></tr>"
         for r in ranking
     )
+    delivered = f"<p>Delivered: {html.escape(choice)}.</p>" if choice else ""
     return (
         "<h3>Choice by verification (--verify-top)</h3>"
-        "<p>The best candidates by Q, in Q order, each verified; the chosen one is the best by Q whose every scenario "
-        "reached the success threshold (or the best by Q when none did).</p>"
-        "<table><tr><th>rank by Q</th><th>candidate</th><th>Q</th><th>designed success per scenario</th>"
-        "<th>flat success</th><th>passed</th><th>chosen</th></tr>" + rows + "</table>"
+        "<p>The best candidates by the design's measure, verified in that order until one passed every scenario "
+        "(within top K and the time budget); the first that passed is delivered, or, when none did, the best of those "
+        "tried by its worst scenario's success rate.</p>"
+        + delivered
+        + "<table><tr><th>rank by measure</th><th>candidate</th><th>measure</th><th>designed success per scenario</th>"
+        "<th>flat success</th><th>passed</th><th>delivered</th></tr>" + rows + "</table>"
     )
 
 

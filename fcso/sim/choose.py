@@ -1,6 +1,8 @@
-"""Choose by truth, not only by Q: verify the K best candidates and keep the best that passes (``--verify-top K``)."""
+"""Choose by truth: verify candidates in the measure's order and deliver the first that passes (``--verify-top K``)."""
 
 from __future__ import annotations
+
+import time
 
 from ..design import DesignResult, finish_candidate
 from ..evaluate import CandidateEvaluation
@@ -44,23 +46,39 @@ def candidate_design(
 
 
 def verify_top(
-    result: DesignResult, top: int, config: VerifyConfig, progress: Progress | None = None
+    result: DesignResult,
+    top: int,
+    config: VerifyConfig,
+    progress: Progress | None = None,
 ) -> tuple[DesignResult, VerificationReport, DesignUnderTest, list[RankedCandidate]]:
-    """Verify the ``top`` best candidates by Q and choose the best Q among those whose every scenario passes.
+    """Verify candidates in the order of the design's measure (METHOD §7b) and deliver the first that passes.
 
-    When none passes, the design's own choice (best Q) stays.
+    At most ``top`` candidates are verified, one after the other, stopping
+    at the first whose every scenario passes; no further candidate is
+    started once ``config.choice_budget_s`` went on verification. When none of
+    those tried passes, the best of them by truth is delivered: the highest
+    worst-scenario success rate, then the measure's order.
+
+    Parameters
+    ----------
+    result : DesignResult
+    top : int
+        Most candidates to verify (K).
+    config : VerifyConfig
+    progress : callable, optional
 
     Returns
     -------
     result : DesignResult
-        The design with the chosen candidate (the input itself when it stays).
+        The design with the delivered candidate (the input itself when it is the design's own choice).
     verification : VerificationReport
-        The chosen candidate's verification.
+        The delivered candidate's verification; its ``choice`` says which was delivered and why.
     design : DesignUnderTest
         Its simulation inputs (for the report's pictures).
     ranking : list of RankedCandidate
-        The verified candidates in Q order with their outcome.
+        The verified candidates in the measure's order with their outcome.
     """
+    started, budget_s = time.monotonic(), config.choice_budget_s
     ranked = ranked_candidates(result.report, top)
     outcomes = []
     for rank, candidate in enumerate(ranked):
@@ -72,8 +90,14 @@ def verify_top(
         )
         verification = verify(built[0], config, progress)
         outcomes.append((rank, candidate, built, verification))
+        if verification.passed or time.monotonic() - started >= budget_s:
+            break
     passing = [o for o in outcomes if o[3].passed]
-    chosen = passing[0] if passing else outcomes[0]
+    chosen = (
+        passing[0]
+        if passing
+        else max(outcomes, key=lambda o: (min((s.fcso.success_rate for s in o[3].scenarios), default=0.0), -o[0]))
+    )
     ranking = [
         RankedCandidate(
             rank_by_quality=rank + 1,
@@ -88,18 +112,28 @@ def verify_top(
     ]
     rank, candidate, built, verification = chosen
     design = built[0]
+    why = choice_text(rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s)
     if candidate.index != result.report.best:
-        why = (
-            f"verification chose candidate {candidate.index} (rank {rank + 1} by Q, Q = {candidate.quality:.1f}) over "
-            f"candidate {result.report.best}: it is the best by Q whose every scenario reached the success threshold"
-        )
-        result = _with_candidate(result, candidate, *built[1:], why)
+        result = _with_candidate(result, candidate, *built[1:], f"verification delivered {why}")
     elif not passing:
-        verification.warnings.append(
-            f"none of the {len(outcomes)} best candidates by Q passed verification; kept the best by Q"
-        )
-    verification = verification.model_copy(update={"ranking": ranking})
+        verification.warnings.append(f"verification delivered {why}")
+    verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def choice_text(
+    rank: int, candidate: CandidateReport, tried: int, ranked: int, passed: bool, spent_s: float, budget_s: float
+) -> str:
+    """Which candidate was delivered and why, in a sentence (``verification.json``'s ``choice``)."""
+    what = f"candidate {candidate.index} (rank {rank + 1} by the measure, {candidate.quality:.1f})"
+    if passed:
+        return f"{what}: the first whose every scenario passed, after {tried} of {ranked} verified"
+    stop = (
+        f"the time budget of {budget_s:g} s ran out after {spent_s:.0f} s"
+        if tried < ranked
+        else f"all {ranked} candidates were verified"
+    )
+    return f"{what}: none of the {tried} verified passed ({stop}); the best of those by worst-scenario success rate"
 
 
 def _with_candidate(

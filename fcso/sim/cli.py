@@ -31,7 +31,7 @@ def add_design_options(parser) -> None:
         type=int,
         default=0,
         metavar="K",
-        help="verify the K best candidates by Q and choose the best that passes (0: off)",
+        help="verify up to K candidates in the order of the measure and deliver the first that passes (0: off)",
     )
 
 
@@ -94,7 +94,7 @@ def verify_design_outputs(result, args, progress) -> int:
                 # report.html is rebuilt from report.json: the pictures follow the newly chosen candidate
                 write_outputs(chosen, args.out)
                 rebuild_report(args.out)
-            extra = ranking_html(ranking)
+            extra = ranking_html(ranking, verification.choice)
         else:
             design = design_under_test(result)
             verification, extra = verify(design, config, progress), ""
@@ -103,9 +103,8 @@ def verify_design_outputs(result, args, progress) -> int:
     write_verification(args.out, verification, design, extra)
     if not args.quiet:
         print(summary(verification))
-        if verification.ranking:
-            chosen_index = next(r.index for r in verification.ranking if r.chosen)
-            print(f"chose candidate {chosen_index} among the {len(verification.ranking)} best by Q")
+        if verification.choice:
+            print(f"delivered {verification.choice}")
         print(f"wrote {args.out}/verification.json and the verification section of report.html")
     return 0
 
@@ -125,7 +124,7 @@ def restore_section(directory: Path) -> None:
     if verification is None:
         return
     _, design = load_design(directory)
-    extra = ranking_html(verification.ranking or [])
+    extra = ranking_html(verification.ranking or [], verification.choice)
     write_section(
         Path(directory) / "report.html", section_html(verification, verification_pictures(verification, design), extra)
     )

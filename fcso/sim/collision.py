@@ -3,8 +3,11 @@
 MuJoCo collides a mesh by its convex hull, so
 
 - the part and the carved fingerpad are each split into convex pieces
-  (CoACD), cached by content hash; the fidelity is the volume of the union
-  of the pieces against the mesh's own;
+  (CoACD), cached by content hash on disk (shared by candidates, jobs,
+  restarts and concurrent workers; written under a name of its own and
+  renamed, least recently used entries evicted beyond
+  :data:`CACHE_MAX_BYTES`); the fidelity is the volume of the union of
+  the pieces against the mesh's own;
 - a part is decomposed by zones (:func:`zoned_pieces`): finely where the
   pads can reach it, coarsely elsewhere. CoACD's time grows with every
   concavity of the whole part (70 s for the 20 mm xyz cube's engraved
@@ -24,6 +27,9 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
+import tempfile
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,10 +38,12 @@ import numpy as np
 import trimesh
 
 from ..geometry import box, to_manifold, to_trimesh
-from ..output.layout import write_atomic
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "coacd-4"
+#: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
+#: few kB to a few hundred kB).
+CACHE_MAX_BYTES = 500_000_000
 #: Largest deviation of the simplified surface CoACD decomposes, mm (see :func:`_decompose`).
 SIMPLIFY_TOLERANCE_MM = 0.005
 
@@ -191,16 +199,71 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
     """Pieces from the cache (key: the mesh and ``settings``) or from ``decompose()``, with their volume errors."""
     key = mesh_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), settings)
     path = None if cache_dir is None else Path(cache_dir) / f"{key}.npz"
-    if path is not None and path.exists():
-        pieces = _read_pieces(path.read_bytes())
-        cached = True
-    else:
+    pieces = None if path is None else _read_cached(path)
+    cached = pieces is not None
+    if pieces is None:
         pieces = decompose()
-        cached = False
         if path is not None:
-            write_atomic(path, _write_pieces(pieces))
+            _write_cached(path, _write_pieces(pieces))
     excess, missing = union_volume_errors(mesh, pieces)
     return ConvexPieces(pieces=pieces, volume_error=excess - missing, missing_fraction=missing, cached=cached)
+
+
+def _read_cached(path: Path) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """A cache entry's pieces, or None when it is absent or unreadable (then it is made again).
+
+    Reading marks the entry as used (its modification time), so the
+    eviction of :func:`_write_cached` removes the least recently used.
+    """
+    try:
+        pieces = _read_pieces(path.read_bytes())
+        os.utime(path)
+        return pieces
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        # absent, or removed by another worker's eviction between the two calls
+        return None
+
+
+def _write_cached(path: Path, data: bytes) -> None:
+    """Write a cache entry under a name of its own, rename it into place, then keep the cache within its size.
+
+    Several workers may write the same entry at once: each renames a whole
+    file of identical content, so a reader never sees a part of one. A
+    cache that cannot be written (full disk, read-only) costs time only.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp", delete=False) as f:
+            f.write(data)
+        os.replace(f.name, path)
+    except OSError:
+        return
+    evict(path.parent, CACHE_MAX_BYTES)
+
+
+def evict(cache_dir: Path, max_bytes: int) -> None:
+    """Remove the least recently used entries until the cache holds at most ``max_bytes``.
+
+    Parameters
+    ----------
+    cache_dir : Path
+        The cache folder (its ``*.npz`` entries).
+    max_bytes : int
+        Largest total size of the entries, bytes.
+    """
+    entries = []
+    for entry in Path(cache_dir).glob("*.npz"):
+        try:
+            stat = entry.stat()
+        except OSError:
+            continue
+        entries.append((stat.st_mtime, stat.st_size, entry))
+    total = sum(size for _, size, _ in entries)
+    for _, size, entry in sorted(entries, key=lambda e: e[0]):
+        if total <= max_bytes:
+            break
+        entry.unlink(missing_ok=True)
+        total -= size
 
 
 def _decompose(mesh: trimesh.Trimesh, threshold: float) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -74,6 +74,18 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this",
     )
+    choice_budget_s: float = Field(
+        600.0,
+        gt=0,
+        description="Choosing among candidates (--verify-top, the daemon's top_k): no further candidate is verified "
+        "once this much time went into the choice, s",
+    )
+    jobs: int = Field(
+        1,
+        ge=0,
+        description="Worker processes of the precision trials (forked; 0: every available core); the results do not "
+        "depend on it (1 by default: no gain measured on a shared 2-core machine)",
+    )
     cache_dir: Path | None = Field(
         None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
     )

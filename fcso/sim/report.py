@@ -87,11 +87,11 @@ class ScenarioVerification(_Model):
 
 
 class RankedCandidate(_Model):
-    """A candidate verified by ``--verify-top``."""
+    """A candidate verified by ``--verify-top`` (candidates are verified in the order of the design's measure)."""
 
-    rank_by_quality: int = Field(description="1 = best Q")
+    rank_by_quality: int = Field(description="1 = best by the design's measure (METHOD §7b; Q under the paper's)")
     index: int = Field(description="Candidate index (report.json candidates)")
-    quality: float = Field(description="Q, mm²")
+    quality: float = Field(description="The design's measure of the candidate (Q under the paper's measure), mm²")
     success_rates: list[float] = Field(description="Designed finger's success rate per scenario")
     flat_success_rates: list[float] = Field(description="Flat control's success rate per scenario")
     passed: bool
@@ -109,5 +109,6 @@ class VerificationReport(_Model):
     warnings: list[str]
     timings_s: dict[str, float] = Field(description="Wall time per stage, s")
     ranking: list[RankedCandidate] | None = Field(
-        None, description="--verify-top: the verified candidates in Q order and which was chosen"
+        None, description="--verify-top: the verified candidates in the measure's order and which was chosen"
     )
+    choice: str | None = Field(None, description="--verify-top: which candidate was delivered and why")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import mujoco
@@ -13,6 +13,7 @@ import trimesh
 from .. import __version__
 from ..design import DesignResult, flat_finger
 from ..finger import pad_to_finger
+from ..parallel import WorkerPool, resolve_jobs
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, convex_pieces, finger_body_hull, zoned_pieces
@@ -289,9 +290,7 @@ def verify_case(
         offset = pose_error(nominal.part_in_gripper, design_nominal, scene.part_com_mm)
         reference = nominal.part_in_gripper if nominal.held else design_nominal
         trials, pictured = [], None
-        for number, error in enumerate(errors):
-            run = run_grasp(scene, case, start_pose(case, error), config, record=number == 0)
-            advance()
+        for number, (error, run) in enumerate(zip(errors, perturbed_runs(scene, case, errors, config, advance))):
             moved, turned = pose_error(run.part_in_gripper, reference, scene.part_com_mm)
             trials.append(
                 TrialResult(
@@ -330,6 +329,54 @@ def verify_case(
         passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9,
         frames=[_snapshot(f) for f in frames],
     )
+
+
+def perturbed_runs(
+    scene, case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+) -> Iterator[TrialRun]:
+    """The precision trials of one finger, run on ``config.jobs`` forked workers (they are independent: every grasp
+    starts from a fresh state, so the results are those of one process), in order.
+
+    Trials go to the workers a few at a time, so a verification of many trials
+    holds only a few in flight and reports progress as they end.
+
+    Parameters
+    ----------
+    scene : Scene
+    case : GraspCase
+    errors : (n, 3) float
+        Start errors (x, y mm, yaw degrees) of the trials.
+    config : VerifyConfig
+    advance : callable
+        Called after every trial.
+    """
+    # the workers run MuJoCo only: forked after CoACD ran here, they could not run CoACD (its OpenMP threads do not
+    # survive a fork)
+    jobs = min(resolve_jobs(config.jobs), max(1, len(errors)))
+    batch = 2 * jobs
+    with WorkerPool((scene, case, config), jobs) as pool:
+        for start in range(0, len(errors), batch):
+            numbered = list(enumerate(errors[start : start + batch], start=start))
+            for run in pool.map(_perturbed_run, numbered):
+                advance()
+                yield run
+
+
+@dataclass
+class TrialRun:
+    """What a precision trial returns from its worker: held, final pose in the gripper (4x4, mm), the first trial's
+    frames."""
+
+    held: bool
+    part_in_gripper: np.ndarray
+    frames: list[Frame] | None
+
+
+def _perturbed_run(context, item) -> TrialRun:
+    scene, case, config = context
+    number, error = item
+    run = run_grasp(scene, case, start_pose(case, error), config, record=number == 0)
+    return TrialRun(run.held, run.part_in_gripper, run.frames if number == 0 else None)
 
 
 def _finger_result(

@@ -391,11 +391,18 @@ class VerificationMessage(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     job_id: str
-    passed: bool = Field(description="Every scenario reached the success threshold")
-    file: str = Field(description="The full result, relative to the job's output folder")
+    state: Literal["done", "failed", "skipped"] = Field(
+        "done",
+        description="done: verified (see passed); failed: the verification did not finish (time limit, error: see "
+        "error); skipped: nothing to verify (see error)",
+    )
+    error: str | None = Field(None, description="Why the verification failed or was skipped")
+    passed: bool = Field(description="Every scenario reached the success threshold (false unless state is done)")
+    file: str | None = Field(description="The full result, relative to the job's output folder (none unless done)")
     finger_set: int | None = Field(
         None, description="The finger set verified when the job has several (key .../verification/<set>)"
     )
     scenarios: list[ScenarioOutcome]
-    chosen_candidate: int | None = Field(None, description="top_k: the candidate verification chose")
+    chosen_candidate: int | None = Field(None, description="top_k: the candidate verification delivered")
+    choice: str | None = Field(None, description="top_k: which candidate was delivered and why")
     warnings: list[str]

@@ -12,7 +12,7 @@ from multiprocessing.connection import Connection
 
 from fcso.parallel import die_with_parent
 
-from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, Withdrawn
+from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, VerificationTask, Withdrawn
 
 
 def _time_limit(signum, frame) -> None:
@@ -24,7 +24,8 @@ def _withdrawn(signum, frame) -> None:
 
 
 def worker_main(connection: Connection, parent_pid: int) -> None:
-    """Entry point of a worker process: announce readiness, take one job, run it, report, exit.
+    """Entry point of a worker process: announce readiness, take one job (or a done job's verification), run it,
+    report, exit.
 
     Parameters
     ----------
@@ -42,10 +43,14 @@ def worker_main(connection: Connection, parent_pid: int) -> None:
     # the job's code (fcso's design, MuJoCo, matplotlib) loads here, before the worker says it is ready, not in the
     # daemon
     from .running import run_job
+    from .verification import verify_again
 
     connection.send(("ready", os.getpid()))
     task = connection.recv()
     if task is None:
         return
-    run_job(task, connection.send)
+    if isinstance(task, VerificationTask):
+        verify_again(task, connection.send)
+    else:
+        run_job(task, connection.send)
     connection.close()

@@ -197,6 +197,7 @@ def step_reused_outputs(run: JobRun) -> None:
         ),
     ]
     run.write_files()
+    run.record_files()
     for published in run.outgoing:
         run.record_published(published)
     run.log("info", f"finger reuse: {message}")

@@ -19,7 +19,7 @@ from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder
 from .steps import job_steps
 from .task import JobFolderDeleted, JobRun, JobTask, TimeLimitExceeded, Withdrawn, status_message, time_limit_error
-from .verification import verify_done_job
+from .verification import verification_after_done, verify_done_job
 
 
 def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
@@ -46,7 +46,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         error = io_failure(exc, Path(task.folder), output_root) or f"internal error: {type(exc).__name__}: {exc}"
         shutil.rmtree(work_dir, ignore_errors=True)
         emit(("log", "error", error, {}))
-        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)]))
+        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)], None))
         return
     run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
     recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
@@ -84,7 +84,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
             final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
             recorder.finish()
             _fsync_files(work_dir)
-            publish = [*run.outgoing, final]
+            publish = [*run.outgoing, final, *run.after_done]
         except OSError as exc:
             # the disk filled up at the very end: the job fails like any other write failure
             error = io_failure(exc, run.folder, output_root) or f"internal error: {type(exc).__name__}: {exc}"
@@ -94,9 +94,18 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
     if work_dir.is_dir():
         os.replace(work_dir, final_dir)
         _fsync_dir(output_root)
-    emit(("finished", "done" if error is None else "failed", error, publish))
-    if error is None:
-        verify_done_job(run, final_dir)
+    verification = verification_after_done(run) if error is None else None
+    emit(
+        (
+            "finished",
+            "done" if error is None else "failed",
+            error,
+            publish,
+            None if verification is None else verification.time_limit_seconds,
+        )
+    )
+    if verification is not None:
+        verify_done_job(run, final_dir, verification)
 
 
 def io_failure(exc: OSError, folder: Path, output_root: Path) -> str | None:

@@ -51,7 +51,7 @@ from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
 from .reuse import step_add_to_library, step_reuse, step_reused_outputs
 from .task import BUILD_NAME, FINGER_SET, PROGRESS_INTERVAL_S, JobFolderDeleted, JobRun
-from .verification import choose_by_verification, job_settings
+from .verification import choose_by_verification, job_settings, write_chosen_verification
 
 
 def step_inputs(run: JobRun) -> None:
@@ -311,10 +311,14 @@ def step_outputs(run: JobRun) -> None:
     """Write every output file into the work folder and record their hashes; record the bus messages.
 
     ``report.json`` and ``report.html`` are made here, after every step that
-    adds to the report; the meshes are those the design record holds.
+    adds to the report; the meshes are those the design record holds. The
+    delivered candidate's verification (``top_k``) is written here too.
     """
     run.files = {**sets_output_files(run.sets), **run.files}
     run.write_files()
+    # the delivered candidate's verification (top_k) joins the files before they are hashed
+    write_chosen_verification(run)
+    run.record_files()
     bus, report = run.task.config.bus, run.result.report
     if run.sets is not None and run.sets.report is not None:
         copies = [

@@ -32,6 +32,7 @@ from ..bus.messages import (
     OutputFilesRecord,
     StateChangeRecord,
     StatusMessage,
+    VerificationMessage,
     utc_now,
 )
 from ..bus.ros2 import record_ros2
@@ -104,6 +105,51 @@ class JobTask:
 
 
 @dataclass
+class VerificationTask:
+    """What the daemon hands a worker to run a done job's verification again (a crash or a stop cut it off).
+
+    Attributes
+    ----------
+    job_id, folder : str
+        The job and its watched folder (its ``job.toml`` gives the job's ``[verify]``).
+    config : DaemonConfig
+        The daemon's settings.
+    """
+
+    job_id: str
+    folder: str
+    config: DaemonConfig
+
+
+def unfinished_verification_message(bus, job_id: str, state: str, error: str, finger_set: int | None) -> BusMessage:
+    """The message of a verification that failed or was skipped, on ``.../verification`` (or
+    ``.../verification/<set>``).
+
+    Parameters
+    ----------
+    bus : BusConfig
+    job_id : str
+    state : {'failed', 'skipped'}
+    error : str
+        Why.
+    finger_set : int or None
+        The finger set of a job of several.
+    """
+    body = VerificationMessage(
+        job_id=job_id,
+        state=state,
+        error=error,
+        passed=False,
+        file=None,
+        finger_set=finger_set,
+        scenarios=[],
+        warnings=[],
+    )
+    topic = "verification" if finger_set is None else f"verification/{finger_set}"
+    return BusMessage.json_body(bus.prefix, bus.cell, topic, body)
+
+
+@dataclass
 class JobRun:
     """The state of a running job that steps read and extend (``reuse``: part name -> how the finger library serves
     it, :class:`~fcsod.service.fingers.ServedPart`, when it serves the whole job).
@@ -125,6 +171,8 @@ class JobRun:
     sets: SetsResult | None = None
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
+    #: published after the done status (the verification of the delivered candidate)
+    after_done: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verified: tuple | None = None
     reuse: dict | None = None
@@ -135,7 +183,7 @@ class JobRun:
         return self.sets.designs[0]
 
     def write_files(self) -> None:
-        """Write every output file into the work folder and record their hashes."""
+        """Write every output file into the work folder (:meth:`record_files` then records their hashes)."""
         for name, data in self.files.items():
             path = self.work_dir / name
             try:
@@ -144,6 +192,9 @@ class JobRun:
             except OSError as exc:
                 # a failed write() does not say which file it was writing
                 raise OSError(exc.errno, exc.strerror, str(path)) from exc
+
+    def record_files(self) -> None:
+        """Record the hashes of every output file in ``job.mcap``."""
         self.recorder.write(
             TOPIC_OUTPUTS,
             OutputFilesRecord(

@@ -1,16 +1,23 @@
-"""Grasp verification of a job's design in simulation (fcso.sim, METHOD §12), run after the job is done.
+"""Grasp verification of a job's design in simulation (fcso.sim, METHOD §12).
 
-With ``[verify] enabled`` the worker, once the job is ``done`` and its
-design published, runs the precision and holding tests, adds
-``verification.json`` and the report section to the job's output folder,
-records ``verification.mcap`` (the verification and a Foxglove scene of the
-unperturbed grasp, frame by frame) and publishes a summary on
-``<prefix>/<cell>/jobs/<job_id>/verification``. A design that does not
-pass leaves the job done, with a warning in the log and the message.
-With ``top_k > 0`` the K best candidates are verified inside the design
-step and the best by Q that passes becomes the job's design. A job of
-several finger sets verifies every set's finger, each on
-``.../verification/<set>`` (choosing among candidates is for one finger).
+With ``[verify] top_k > 0`` (a job of one finger), the design step verifies
+candidates in the order of the design's measure and delivers the first that
+passes every scenario (:func:`choose_by_verification`); its verification
+is then part of the job's output (``verification.json``, the report's
+section, ``verification.mcap``, recorded in ``job.mcap``) and its message
+follows the ``done`` status. Otherwise, with ``[verify] enabled``, the
+worker verifies the design after the job is ``done`` and its design
+published (:func:`verify_done_job`); a job of several finger sets verifies
+every set's finger, each on ``.../verification/<set>``. Its section goes
+into ``verification.html`` beside ``report.html``, which stays as
+``job.mcap`` vouches for it. The daemon
+journals that verification as running from the moment the job is done, so
+a crash or a stop during it runs it again after the restart from the job's
+output folder (:func:`verify_again`); its files are written only once every
+set is simulated, and its messages published only once they are all
+written. A verification over ``time_limit_seconds`` or that fails is
+published as ``failed`` on the verification key, with nothing of it on disk;
+the job stays done.
 """
 
 from __future__ import annotations
@@ -19,9 +26,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from fcso.output.design_page import rebuild_report
-from fcso.output.layout import set_folder
-from fcso.output.verification_page import ranking_html, write_verification
+from fcso.output.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
+from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density
 from fcso.sim.report import VerificationReport
@@ -37,6 +43,8 @@ from ..record.recorder import (
     Recorder,
 )
 from ..record.scene import scene_updates
+from .inputs import read_manifest
+from .task import TimeLimitExceeded, VerificationTask, unfinished_verification_message
 
 
 def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> VerifySettings:
@@ -45,86 +53,195 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
 
 
 def choose_by_verification(run) -> None:
-    """Design step: with ``top_k > 0``, verify the K best candidates and make the best that passes the job's design."""
+    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes."""
     settings = _settings(run)
     if settings.top_k <= 0:
         return
     chosen, verification, design, ranking = verify_top(
         run.result,
         settings.top_k,
-        with_print_density(VerifyConfig(trials=settings.trials), run.result.report.settings),
+        _verify_config(settings, run.result.report.settings),
         _progress(run.log),
     )
     run.sets.designs[0] = chosen
-    run.verified = (verification, design, ranking_html(ranking))
-    run.log("info", f"verification chose candidate {chosen.report.best} among the {len(ranking)} best by Q")
+    run.verified = (verification, design, ranking_html(ranking, verification.choice))
+    run.log("info", f"verification delivered {verification.choice}")
 
 
-def verify_done_job(run, final_dir: Path) -> None:
-    """After the job is done: verify (unless ``choose_by_verification`` did), write, record and publish.
+#: The page of a verification made after the job is done: ``report.html`` stays as ``job.mcap`` vouches for it.
+VERIFICATION_HTML = "verification.html"
 
-    A job of several finger sets verifies every set's finger: its results go
-    into the set's folder and on ``.../verification/<set>``. Never raises: a
-    failure is a warning, the job stays done.
+
+def write_chosen_verification(run) -> None:
+    """Output step: the verification of the candidate :func:`choose_by_verification` delivered, into the work folder
+    (after the job's files are written, before they are hashed).
+
+    ``verification.json``, the report's section and ``verification.mcap``
+    join the job's files (hashed in ``job.mcap`` like the others); the
+    message is published after the ``done`` status.
     """
-    settings = _settings(run)
-    if not (settings.enabled or settings.top_k > 0) or run.reuse is not None:
-        # a reused finger was verified when it was delivered
+    if run.verified is None:
         return
+    verification, design, extra = run.verified
+    message = _bus_message(run.task.config, run.task.job_id, verification, VERIFICATION_JSON, None)
+    written = _write(run.work_dir, verification, design, extra, message, run.task.config.mcap, REPORT_HTML)
+    for path in written:
+        run.files[path.name] = path.read_bytes()
+    run.record_published(message)
+    run.after_done.append(message)
+
+
+def verification_after_done(run) -> VerifySettings | None:
+    """The job's ``[verify]`` when its design is to be verified after it is done, else None."""
+    settings = _settings(run)
+    if not (settings.enabled or settings.top_k > 0) or (run.verified is not None and not run.sets.several):
+        return None
+    return settings
+
+
+def verify_done_job(run, final_dir: Path, settings: VerifySettings) -> None:
+    """After the job is done and journalled: verify every finger set's design (in memory), write, record, publish.
+
+    Ends with one ``("verified", state, error, messages)`` event.
+    """
+    several = run.sets.several
+    designs = [
+        (final_dir / set_folder(number) if several else final_dir, number if several else None, result)
+        for number, result in enumerate(run.sets.designs, start=1)
+    ]
+    _verify_designs(
+        run.task.config,
+        run.task.job_id,
+        [(out, number, lambda r=r: (design_under_test(r), r.report.settings)) for out, number, r in designs],
+        settings,
+        run.emit,
+    )
+
+
+def verify_again(task: VerificationTask, emit: Callable[[tuple], None]) -> None:
+    """Run a done job's verification again (after a crash or a stop cut it off), from its output folder.
+
+    The job's ``[verify]`` is read again from its folder's ``job.toml`` under
+    the daemon's current settings. Starts with ``("verifying", time limit
+    in s)`` and ends with one ``("verified", state, error, messages)``.
+    """
+    config = task.config
+    final_dir = config.output.root / task.job_id
+    _remove_verification_files(final_dir)
+    try:
+        manifest, _ = read_manifest(Path(task.folder), config.design, config.limits, config.build)
+        settings = job_settings(config.verify, manifest.verify)
+    except Exception as exc:  # the job folder changed or went away since the job ran
+        emit(("verifying", config.verify.time_limit_seconds))
+        _unfinished(config, task.job_id, [None], "failed", f"the job's settings cannot be read again: {exc}", emit)
+        return
+    emit(("verifying", settings.time_limit_seconds))
+    sets = sorted(final_dir.glob("set-*/report.json"))
+    folders = [(path.parent, int(path.parent.name.removeprefix("set-"))) for path in sets] or [(final_dir, None)]
+    if not (settings.enabled or settings.top_k > 0):
+        _unfinished(config, task.job_id, [n for _, n in folders], "skipped", "verification is off now", emit)
+        return
+    _verify_designs(
+        config,
+        task.job_id,
+        [(out, number, lambda out=out: _loaded(out)) for out, number in folders],
+        settings,
+        emit,
+    )
+
+
+def _loaded(folder: Path):
+    report, design = load_design(folder)
+    return design, report.settings
+
+
+def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit: Callable[[tuple], None]) -> None:
+    """Verify every design, then write each one's files, then send ``("verified", ...)`` with every message.
+
+    ``designs``: (output folder, finger set or None, callable giving the
+    DesignUnderTest and the design's settings). A time limit or a failure
+    removes whatever was written and sends a ``failed`` message per key.
+    """
 
     def log(level: str, message: str, **fields) -> None:
         # job.mcap is closed: these lines go to the daemon's log only
-        run.emit(("log", level, message, fields))
+        emit(("log", level, message, fields))
 
-    if run.sets.several:
-        for number, result in enumerate(run.sets.designs, start=1):
-            _verify_one(run, result, final_dir, set_folder(number), number, settings, log)
-    else:
-        _verify_one(run, run.result, final_dir, "", None, settings, log)
-
-
-def _verify_one(
-    run, result, final_dir: Path, folder: str, finger_set: int | None, settings: VerifySettings, log: Callable
-) -> None:
-    """Verify one finger's design, write into ``final_dir / folder``, record and publish; a failure is a warning."""
-    name = f"verification of finger set {finger_set}" if finger_set is not None else "verification"
-    out = final_dir / folder if folder else final_dir
+    started = time.perf_counter()
     try:
-        started = time.perf_counter()
-        if run.verified is not None and finger_set is None:
-            verification, design, extra = run.verified
-            # the report's pictures follow the candidate verification chose (rebuilt from report.json)
-            rebuild_report(out)
-        else:
+        results = []
+        for out, number, build in designs:
+            name = "verification" if number is None else f"verification of finger set {number}"
             log("info", f"{name}: started")
-            design = design_under_test(result)
-            verification, extra = (
-                verify(
-                    design,
-                    with_print_density(VerifyConfig(trials=settings.trials), result.report.settings),
-                    _progress(log),
-                ),
-                "",
+            design, design_settings = build()
+            verification = verify(design, _verify_config(settings, design_settings), _progress(log))
+            results.append((out, number, name, design, verification))
+        messages = []
+        for out, number, name, design, verification in results:
+            file = VERIFICATION_JSON if number is None else f"{set_folder(number)}/{VERIFICATION_JSON}"
+            message = _bus_message(config, job_id, verification, file, number)
+            _write(out, verification, design, "", message, config.mcap, VERIFICATION_HTML)
+            messages.append(message)
+            log(
+                "info" if verification.passed else "warning",
+                f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
+                f"{time.perf_counter() - started:.1f} s",
             )
-        write_verification(out, verification, design, extra)
-        bus = run.task.config.bus
-        topic = "verification" if finger_set is None else f"verification/{finger_set}"
-        file = f"{folder}/verification.json" if folder else "verification.json"
-        message = BusMessage.json_body(
-            bus.prefix, bus.cell, topic, _message(run.task.job_id, verification, file, finger_set)
+            for warning in verification.warnings:
+                log("warning", f"{name}: {warning}")
+    except TimeLimitExceeded:
+        error = (
+            f"time limit exceeded: the verification ran longer than verify.time_limit_seconds "
+            f"({settings.time_limit_seconds:g} s)"
         )
-        _record(out / VERIFICATION_RECORD_NAME, verification, design, message, run.task.config.mcap)
-        run.emit(("publish", message))
-        level = "info" if verification.passed else "warning"
-        log(
-            level,
-            f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
-            f"{time.perf_counter() - started:.1f} s",
+        _unfinished(config, job_id, [number for _, number, _ in designs], "failed", error, emit, designs)
+        return
+    except Exception as exc:  # the design is delivered; its verification failed
+        error = f"{type(exc).__name__}: {exc}"
+        _unfinished(config, job_id, [number for _, number, _ in designs], "failed", error, emit, designs)
+        return
+    emit(("verified", "done", None, messages))
+
+
+def _unfinished(config, job_id: str, sets: list, state: str, error: str, emit, designs=()) -> None:
+    """Remove what a cut-off verification wrote and send ``("verified", state, error, messages)``, one per key."""
+    for out, _, _ in designs:
+        _remove_verification_files(out)
+    emit(("log", "warning", f"verification {state}: {error}", {}))
+    emit(
+        (
+            "verified",
+            state,
+            error,
+            [unfinished_verification_message(config.bus, job_id, state, error, number) for number in sets],
         )
-        for warning in verification.warnings:
-            log("warning", f"{name}: {warning}")
-    except Exception as exc:  # the design is delivered; verification is extra
-        log("warning", f"{name} failed: {type(exc).__name__}: {exc}")
+    )
+
+
+def _remove_verification_files(folder: Path) -> None:
+    """Remove a verification's files (and their temporary names) from a job's folder and its set folders."""
+    for path in [folder, *sorted(folder.glob("set-*"))]:
+        for name in (VERIFICATION_JSON, VERIFICATION_RECORD_NAME, VERIFICATION_HTML):
+            for leftover in (path / name, path / f".{name}.tmp"):
+                leftover.unlink(missing_ok=True)
+
+
+def _write(
+    out: Path,
+    verification: VerificationReport,
+    design: DesignUnderTest,
+    extra: str,
+    message: BusMessage,
+    mcap,
+    page_name: str,
+) -> list[Path]:
+    """``verification.mcap``, the verification section in the page ``page_name`` and ``verification.json`` (last: it
+    says the verification is there), each written under a temporary name and renamed; the files written."""
+    record = out / VERIFICATION_RECORD_NAME
+    temporary = out / f".{VERIFICATION_RECORD_NAME}.tmp"
+    _record(temporary, verification, design, message, mcap)
+    temporary.replace(record)
+    return [record, *reversed(write_verification(out, verification, design, extra, page_name))]
 
 
 def _settings(run) -> VerifySettings:
@@ -143,6 +260,22 @@ def _progress(log: Callable) -> Callable[[str, int, int], None]:
         log("info", f"{stage} {done}/{total}", stage=stage, done=done, total=total)
 
     return progress
+
+
+def _verify_config(settings: VerifySettings, design_settings) -> VerifyConfig:
+    """fcso's ``[verify]`` of a job: its trials and time budget, the part density of the design's print profile."""
+    return with_print_density(
+        VerifyConfig(trials=settings.trials, choice_budget_s=settings.time_limit_seconds), design_settings
+    )
+
+
+def _bus_message(
+    config, job_id: str, verification: VerificationReport, file: str, finger_set: int | None
+) -> BusMessage:
+    """The verification's message on ``.../verification`` (or ``.../verification/<set>``)."""
+    topic = "verification" if finger_set is None else f"verification/{finger_set}"
+    body = _message(job_id, verification, file, finger_set)
+    return BusMessage.json_body(config.bus.prefix, config.bus.cell, topic, body)
 
 
 def _message(job_id: str, verification: VerificationReport, file: str, finger_set: int | None) -> VerificationMessage:
@@ -166,6 +299,7 @@ def _message(job_id: str, verification: VerificationReport, file: str, finger_se
             for s in verification.scenarios
         ],
         chosen_candidate=chosen,
+        choice=verification.choice,
         warnings=verification.warnings,
     )
 

@@ -28,7 +28,15 @@ from ..bus.signing import daemon_signer, signing_key_path
 from ..config import DaemonConfig
 from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import worker_main
-from ..job.task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, JobFolderDeleted, JobTask, time_limit_error
+from ..job.task import (
+    SIGNAL_TIME_LIMIT,
+    SIGNAL_WITHDRAWN,
+    JobFolderDeleted,
+    JobTask,
+    VerificationTask,
+    time_limit_error,
+    unfinished_verification_message,
+)
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
 from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message
@@ -83,6 +91,8 @@ class WorkerSlot:
     stop_error: str | None = None
     stop_signalled_at: float | None = None
     finished: bool = False
+    #: the job is done and its worker verifies its design until this (monotonic s); None: no verification runs
+    verify_deadline: float | None = None
     open: bool = True
     events: list = field(default_factory=list)
 
@@ -104,6 +114,8 @@ class Daemon:
         self.stopping = False
         self.slots: list[WorkerSlot] = []
         self.known: dict[Path, tuple] = {}
+        #: done jobs whose verification a crash or a stop cut off: run again first
+        self.unverified: list[str] = []
         self._context = multiprocessing.get_context("spawn")
         self._lock_file = None
         self.metrics = DaemonMetrics(self.journal_path)
@@ -127,6 +139,9 @@ class Daemon:
         self._clean_work_dirs()
         for job in self.journal.requeue_running():
             log.info("re-queued job left running by the previous run", extra={"job_id": job})
+        for row in self.journal.unfinished_verifications():
+            self.unverified.append(row.job_id)
+            log.info("re-queued the verification left running by the previous run", extra={"job_id": row.job_id})
         signal.signal(signal.SIGTERM, self._on_stop_signal)
         signal.signal(signal.SIGINT, self._on_stop_signal)
         signer, created = daemon_signer(self.config)
@@ -194,8 +209,12 @@ class Daemon:
             if slot.process.is_alive():
                 slot.process.kill()
             slot.process.join(timeout=10)
-            if slot.job is not None and not slot.finished:
+            if slot.job is not None and (not slot.finished or slot.verify_deadline is not None):
                 self._drain(slot)
+            if slot.verify_deadline is not None:
+                log.info(
+                    "stopped a verification; it will run again at the next start", extra={"job_id": slot.job.job_id}
+                )
             if slot.job is not None and not slot.finished:
                 shutil.rmtree(self.output_root / f".tmp-{slot.job.job_id}", ignore_errors=True)
                 self.journal.requeue_running()
@@ -273,6 +292,9 @@ class Daemon:
         free = self.config.jobs.concurrency - sum(1 for s in self.slots if s.job is not None)
         if not idle or free <= 0:
             return
+        while idle and free > 0 and self.unverified:
+            self._dispatch_verification(idle.pop(0), self.unverified.pop(0))
+            free -= 1
         for row in self.journal.jobs("queued"):
             if not idle or free <= 0:
                 break
@@ -288,6 +310,17 @@ class Daemon:
             log.info(
                 "job started", extra={"job_id": row.job_id, "attempt": row.attempt, "worker_pid": slot.process.pid}
             )
+
+    def _dispatch_verification(self, slot: WorkerSlot, job_id: str) -> None:
+        """Hand a done job's cut-off verification to a worker (it runs again from the job's output folder)."""
+        verification = self.journal.restart_verification(job_id, utc_now())
+        slot.job, slot.started, slot.finished = self.journal.get(job_id), time.monotonic(), True
+        slot.verify_deadline = time.monotonic() + self.config.verify.time_limit_seconds
+        slot.connection.send(VerificationTask(job_id, slot.job.folder, self.config))
+        log.info(
+            "verification started again",
+            extra={"job_id": job_id, "attempt": verification.attempt, "worker_pid": slot.process.pid},
+        )
 
     def _adopt(self, row: JobRow) -> None:
         """Finish the journal of a job whose output folder is complete (the daemon stopped between rename and
@@ -359,12 +392,23 @@ class Daemon:
                 self.metrics.stage_seconds.labels(event[1]).observe(event[2])
             elif kind == "finished":
                 self._finished(slot, *event[1:])
+            elif kind == "verifying":
+                slot.verify_deadline = time.monotonic() + event[1]
+            elif kind == "verified":
+                self._verified(slot, *event[1:])
 
-    def _finished(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
-        status = StatusMessage.model_validate_json(messages[-1].payload)
-        row = self.journal.mark_finished(slot.job.job_id, state, status.finished_at, error)
+    def _finished(
+        self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage], verify_limit_s: float | None
+    ) -> None:
+        status = next(StatusMessage.model_validate_json(m.payload) for m in reversed(messages) if m.topic == "status")
+        # a verification that follows is journalled with the done state: a crash during it runs it again
+        row = self.journal.mark_finished(
+            slot.job.job_id, state, status.finished_at, error, verifying=verify_limit_s is not None
+        )
         self.metrics.jobs_finished.labels(state).inc()
         slot.finished = True
+        if verify_limit_s is not None:
+            slot.verify_deadline = time.monotonic() + verify_limit_s
         extra = {"job_id": row.job_id, "state": state, "seconds": round(time.monotonic() - slot.started, 3)}
         if error:
             log.error(f"job failed: {error}", extra=extra)
@@ -373,10 +417,33 @@ class Daemon:
         for message in messages:
             self._publish(message)
 
+    def _verified(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
+        """A done job's verification ended: journal its state with its messages, then publish them."""
+        signed = [self.signer.sign(m) for m in messages]
+        self.journal.finish_verification(
+            slot.job.job_id, state, utc_now(), error, [stored_message(m, self.output_root) for m in signed]
+        )
+        slot.verify_deadline = None
+        log.log(
+            logging.INFO if state == "done" else logging.WARNING,
+            f"verification {state}" + (f": {error}" if error else ""),
+            extra={"job_id": slot.job.job_id, "state": state},
+        )
+        for message in signed:
+            self.bus.publish(message)
+            if self.ros2 is not None:
+                self.ros2.publish(message)
+
     def _reap(self, slot: WorkerSlot) -> None:
-        """Remove an exited worker; fail its job if it died before reporting."""
+        """Remove an exited worker; fail its job if it died before reporting (or its verification)."""
         slot.process.join()
         self.slots.remove(slot)
+        if slot.verify_deadline is not None and not self.stopping:
+            code = slot.process.exitcode
+            error = slot.stop_error or f"worker process died while verifying the design (exit code {code})"
+            message = unfinished_verification_message(self.config.bus, slot.job.job_id, "failed", error, None)
+            self._verified(slot, "failed", error, [message])
+            return
         if slot.job is None or slot.finished:
             if slot.job is None and not self.stopping:
                 log.error("worker process exited before taking a job", extra={"exit_code": slot.process.exitcode})
@@ -428,10 +495,17 @@ class Daemon:
         jobs = self.config.jobs
         now = time.monotonic()
         for slot in self.slots:
-            if slot.job is None or slot.finished or not slot.process.is_alive():
+            if slot.job is None or not slot.process.is_alive() or (slot.finished and slot.verify_deadline is None):
                 continue
             if slot.stop_signalled_at is None:
-                if now - slot.started > jobs.time_limit_seconds:
+                if slot.finished:
+                    if now <= slot.verify_deadline:
+                        continue
+                    log.warning("verification over its time limit: stopping it", extra={"job_id": slot.job.job_id})
+                    # the worker publishes the failure; this is the error if it has to be killed
+                    slot.stop_error = "time limit exceeded: the verification ran longer than verify.time_limit_seconds"
+                    stop_signal = SIGNAL_TIME_LIMIT
+                elif now - slot.started > jobs.time_limit_seconds:
                     log.warning("job over its time limit: stopping it", extra={"job_id": slot.job.job_id})
                     slot.stop_error, stop_signal = time_limit_error(jobs.time_limit_seconds), SIGNAL_TIME_LIMIT
                 elif not Path(slot.job.folder).is_dir():

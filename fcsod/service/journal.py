@@ -3,6 +3,11 @@
 queued -> running -> done | failed. The job id is the primary key, so a
 job (same folder, same content) is recorded, and therefore run, once (an
 operator's ``fcsod retry`` runs a failed one again).
+A done job whose design is verified after it is done has a verification
+row, ``running`` from the moment the job is journalled done (in the same
+transaction) until the verification is ``done``, ``failed`` or
+``skipped``: one left ``running`` by a crash or a stop runs again at the
+next start.
 Writes commit at once (WAL, synchronous=FULL): after ``kill -9`` the
 journal holds every state change made before it.
 
@@ -22,6 +27,8 @@ from typing import Literal
 
 from ..bus.messages import BusMessage, JobState
 
+VerificationState = Literal["running", "done", "failed", "skipped"]
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
     job_id      TEXT PRIMARY KEY,
@@ -29,6 +36,14 @@ CREATE TABLE IF NOT EXISTS jobs (
     state       TEXT NOT NULL CHECK (state IN ('queued', 'running', 'done', 'failed')),
     attempt     INTEGER NOT NULL DEFAULT 0,
     queued_at   TEXT,
+    started_at  TEXT,
+    finished_at TEXT,
+    error       TEXT
+);
+CREATE TABLE IF NOT EXISTS verifications (
+    job_id      TEXT PRIMARY KEY REFERENCES jobs (job_id),
+    state       TEXT NOT NULL CHECK (state IN ('running', 'done', 'failed', 'skipped')),
+    attempt     INTEGER NOT NULL DEFAULT 1,
     started_at  TEXT,
     finished_at TEXT,
     error       TEXT
@@ -67,6 +82,18 @@ class JobRow:
     state: JobState
     attempt: int
     queued_at: str | None
+    started_at: str | None
+    finished_at: str | None
+    error: str | None
+
+
+@dataclass
+class VerificationRow:
+    """The verification of one done job as the journal has it (times are UTC ISO 8601)."""
+
+    job_id: str
+    state: VerificationState
+    attempt: int
     started_at: str | None
     finished_at: str | None
     error: str | None
@@ -186,14 +213,54 @@ class Journal:
             )
         return self.get(job_id)
 
-    def mark_finished(self, job_id: str, state: JobState, finished_at: str, error: str | None = None) -> JobRow:
-        """End the job as ``done`` or ``failed``."""
+    def mark_finished(
+        self, job_id: str, state: JobState, finished_at: str, error: str | None = None, verifying: bool = False
+    ) -> JobRow:
+        """End the job as ``done`` or ``failed``; with ``verifying``, its verification starts in the same
+        transaction."""
         with self._db:
             self._db.execute(
                 "UPDATE jobs SET state = ?, finished_at = ?, error = ? WHERE job_id = ?",
                 (state, finished_at, error, job_id),
             )
+            if verifying:
+                self._db.execute(
+                    "INSERT OR REPLACE INTO verifications (job_id, state, attempt, started_at) "
+                    "VALUES (?, 'running', 1, ?)",
+                    (job_id, finished_at),
+                )
         return self.get(job_id)
+
+    def verification(self, job_id: str) -> VerificationRow | None:
+        row = self._db.execute("SELECT * FROM verifications WHERE job_id = ?", (job_id,)).fetchone()
+        return VerificationRow(*row) if row else None
+
+    def unfinished_verifications(self) -> list[VerificationRow]:
+        """Verifications left ``running`` by a crash or a stop, in the order they started."""
+        rows = self._db.execute("SELECT * FROM verifications WHERE state = 'running' ORDER BY rowid").fetchall()
+        return [VerificationRow(*r) for r in rows]
+
+    def restart_verification(self, job_id: str, started_at: str) -> VerificationRow:
+        """Run a job's unfinished verification again (counts the attempt)."""
+        with self._db:
+            self._db.execute(
+                "UPDATE verifications SET attempt = attempt + 1, started_at = ?, finished_at = NULL, error = NULL "
+                "WHERE job_id = ?",
+                (started_at, job_id),
+            )
+        return self.verification(job_id)
+
+    def finish_verification(
+        self, job_id: str, state: VerificationState, finished_at: str, error: str | None, messages: list[StoredMessage]
+    ) -> None:
+        """End a job's verification and keep its messages, in one transaction (published after it)."""
+        with self._db:
+            self._db.execute(
+                "UPDATE verifications SET state = ?, finished_at = ?, error = ? WHERE job_id = ?",
+                (state, finished_at, error, job_id),
+            )
+            for message in messages:
+                self._store(message)
 
     def restore(self, row: JobRow) -> None:
         """Put a job back as it was (rebuilding the journal from the job records)."""
@@ -245,18 +312,21 @@ class Journal:
     def store_message(self, message: StoredMessage) -> None:
         """Keep the latest message of a topic of a job (what the queryable serves)."""
         with self._db:
-            self._db.execute(
-                "INSERT OR REPLACE INTO messages VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (
-                    message.job_id,
-                    message.topic,
-                    message.key_expr,
-                    message.encoding,
-                    message.payload,
-                    message.attachment,
-                    message.file,
-                ),
-            )
+            self._store(message)
+
+    def _store(self, message: StoredMessage) -> None:
+        self._db.execute(
+            "INSERT OR REPLACE INTO messages VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (
+                message.job_id,
+                message.topic,
+                message.key_expr,
+                message.encoding,
+                message.payload,
+                message.attachment,
+                message.file,
+            ),
+        )
 
 
 def stored_messages(path: str | Path) -> list[StoredMessage]:

@@ -1,12 +1,16 @@
 """fcsod with [verify]: the design is done and published first, its verification follows on zenoh, in the journal and in
-MCAP.
+MCAP; a kill -9 during it runs it again after the restart, once; a time limit publishes it as failed.
 """
 
 from __future__ import annotations
 
 import json
+import signal
+import sqlite3
+import time
 
 from examples.sim_parts import ridged_block
+from fcsod.cli import main as fcsod_main
 from fcsod.record.recorder import (
     TOPIC_BUS,
     TOPIC_VERIFICATION,
@@ -14,7 +18,9 @@ from fcsod.record.recorder import (
     VERIFICATION_RECORD_NAME,
     read_record,
 )
+from tests.conftest import process_running
 from tests.fcsod_helpers import (
+    SLOW_VERIFY,
     drop_job,
     finished,
     foxglove_messages,
@@ -27,53 +33,135 @@ from tests.fcsod_helpers import (
 MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\n'
 
 
-def test_done_job_is_verified_published_recorded_and_answered(tmp_path):
+def _is(topic: str, job_id: str | None = None):
+    return lambda v: isinstance(v, dict) and v.get("topic") == topic and job_id in (None, v.get("job_id"))
+
+
+def test_kill_during_verification_then_restart_verifies_once_published_recorded_and_answered(tmp_path):
     port = free_port()
-    config = write_config(tmp_path, port, extra="[verify]\nenabled = true\ntrials = 2\n")
+    # the first daemon's verification runs for hours, so it is surely running when the daemon is killed;
+    # the restarted daemon's quick one finishes
+    config = write_config(tmp_path, port, verify=SLOW_VERIFY)
     part = tmp_path / "ridged.stl"
     ridged_block().export(part)
-    daemon = start_daemon(config)
+    first = start_daemon(config)
     subscriber = start_subscriber(config)
     try:
         drop_job(tmp_path / "watch" / "ridged", {"job.toml": MANIFEST, "ridged.stl": part})
         done = finished(subscriber, "ridged")
         assert done["body"]["state"] == "done", done
         job_id = done["job_id"]
-        message = subscriber.wait_for(
-            lambda v: isinstance(v, dict) and v.get("topic") == "verification" and v["job_id"] == job_id, 120
-        )
-        lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id]
-        # the verification follows the done status
-        topics = [v["topic"] for v in lines]
-        assert topics.index("verification") > max(i for i, v in enumerate(lines) if v["topic"] == "status")
-        body = message["body"]
-        assert body["file"] == "verification.json" and len(body["scenarios"]) == 1
-        scenario = body["scenarios"][0]
-        # the carved V-grooves centre the ridged block; flat pads cannot
-        assert scenario["success_rate"] == 1.0 and scenario["flat_success_rate"] < 1.0
+        started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 10)
+        first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "verification: started", 60)
+    finally:
+        first.stop(signal.SIGKILL)
+        subscriber.stop()
+    # the design was published before its verification began
+    assert subscriber.wait_for(_is("design", job_id), 1)
+    deadline = time.monotonic() + 60
+    while process_running(started["worker_pid"]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not process_running(started["worker_pid"]), "the worker outlived the killed daemon"
+    out = tmp_path / "out" / job_id
+    journal = tmp_path / "state" / "journal.sqlite3"
+    with sqlite3.connect(journal) as db:
+        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",)]
+        assert db.execute("SELECT state, attempt FROM verifications").fetchall() == [("running", 1)]
+        assert db.execute("SELECT count(*) FROM messages WHERE topic = 'verification'").fetchone() == (0,)
+    assert not list(out.glob("*verification*")) and not list(out.glob(".*"))
 
-        out = tmp_path / "out" / job_id
-        verification = json.loads((out / "verification.json").read_text())
-        assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
-        assert "<!-- fcso verify -->" in (out / "report.html").read_text()
-        record = read_record(out / VERIFICATION_RECORD_NAME)
-        assert record.of(TOPIC_VERIFICATION)[0]["passed"] == body["passed"]
-        scenes = foxglove_messages(out / VERIFICATION_RECORD_NAME)[TOPIC_VERIFICATION_SCENE]
-        assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
-        assert any(b["key_expr"].endswith("/verification") for b in record.of(TOPIC_BUS))
-
+    config = write_config(tmp_path, port, verify="enabled = true\ntop_k = 0\ntrials = 2")
+    second = start_daemon(config)
+    subscriber = start_subscriber(config, extra=["--no-query"])
+    try:
+        message = subscriber.wait_for(_is("verification", job_id), 240)
         # a late joiner gets it from the journal's queryable
         late = start_subscriber(config)
         try:
-            answered = late.wait_for(
-                lambda v: isinstance(v, dict) and v.get("topic") == "verification" and v["job_id"] == job_id, 30
-            )
-            assert answered["source"] != "live" and answered["body"] == body
+            answered = late.wait_for(_is("verification", job_id), 30)
+            assert answered["source"] != "live" and answered["body"] == message["body"]
         finally:
             late.stop()
     finally:
         subscriber.stop()
+        assert second.stop() == 0
+    assert any(v.get("message") == "verification started again" for v in second.json_lines())
+    # the job did not run again; its verification ran once more, and was published once
+    assert not any(v.get("message") == "job started" for v in second.json_lines())
+    assert [v["topic"] for v in subscriber.json_lines() if v.get("job_id") == job_id] == ["verification"]
+    with sqlite3.connect(journal) as db:
+        assert db.execute("SELECT state, attempt FROM jobs").fetchall() == [("done", 1)]
+        assert db.execute("SELECT state, attempt FROM verifications").fetchall() == [("done", 2)]
+    body = message["body"]
+    assert body["state"] == "done" and body["file"] == "verification.json" and len(body["scenarios"]) == 1
+    scenario = body["scenarios"][0]
+    # the carved V-grooves centre the ridged block; flat pads cannot
+    assert scenario["success_rate"] == 1.0 and scenario["flat_success_rate"] < 1.0
+
+    verification = json.loads((out / "verification.json").read_text())
+    assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
+    assert len(verification["scenarios"][0]["fcso"]["trials"]) == 2
+    # its section is a page of its own: report.html stays as job.mcap vouches for it
+    assert (out / "verification.html").read_text().count("<!-- fcso verify -->") == 1
+    assert "<!-- fcso verify -->" not in (out / "report.html").read_text()
+    assert fcsod_main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
+    record = read_record(out / VERIFICATION_RECORD_NAME)
+    assert [v["passed"] for v in record.of(TOPIC_VERIFICATION)] == [body["passed"]]
+    scenes = foxglove_messages(out / VERIFICATION_RECORD_NAME)[TOPIC_VERIFICATION_SCENE]
+    assert len(scenes) > 10 and scenes[0]["entities"][0]["triangles"]
+    assert [b["key_expr"].rsplit("/", 1)[-1] for b in record.of(TOPIC_BUS)] == ["verification"]
+    assert not list(out.glob(".*")), "a temporary file was left behind"
+
+
+def test_time_limit_publishes_failed_and_leaves_nothing_and_top_k_delivers_a_verified_candidate(tmp_path):
+    port = free_port()
+    # the daemon's verification: a million trials take hours on any machine, far over the 1 s limit
+    config = write_config(tmp_path, port, verify=SLOW_VERIFY + "\ntime_limit_seconds = 1")
+    part = tmp_path / "ridged.stl"
+    ridged_block().export(part)
+    # the second job chooses among its 2 best candidates by verification, before it is done
+    choosing = MANIFEST + "\n[verify]\ntop_k = 2\ntrials = 2\n"
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config)
+    try:
+        drop_job(tmp_path / "watch" / "ridged", {"job.toml": MANIFEST, "ridged.stl": part})
+        done = finished(subscriber, "ridged")
+        job_id = done["job_id"]
+        message = subscriber.wait_for(_is("verification", job_id), 120)
+        drop_job(tmp_path / "watch" / "choosing", {"job.toml": choosing, "ridged.stl": part})
+        chosen_done = finished(subscriber, "choosing", timeout=240)
+        chosen_id = chosen_done["job_id"]
+        chosen_message = subscriber.wait_for(_is("verification", chosen_id), 30)
+    finally:
+        subscriber.stop()
         assert daemon.stop() == 0
+    assert done["body"]["state"] == "done", done
+    body = message["body"]
+    assert body["state"] == "failed" and not body["passed"] and body["file"] is None
+    assert "time limit exceeded" in body["error"] and "verify.time_limit_seconds (1 s)" in body["error"]
+    out = tmp_path / "out" / job_id
+    assert not list(out.glob("*verification*")) and not list(out.glob(".*"))
+    assert "<!-- fcso verify -->" not in (out / "report.html").read_text()
+    with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
+        assert db.execute("SELECT state FROM jobs").fetchall() == [("done",), ("done",)]
+        # the choosing job's verification is part of the job: nothing follows its done state
+        rows = db.execute("SELECT job_id, state, error FROM verifications").fetchall()
+    assert [(r[0], r[1]) for r in rows] == [(job_id, "failed")] and "time limit exceeded" in rows[0][2]
+
+    # top_k: the first candidate by the measure passes, so it is the only one verified and is delivered
+    assert chosen_done["body"]["state"] == "done", chosen_done
+    lines = [v for v in subscriber.json_lines() if v.get("job_id") == chosen_id and v.get("source") == "live"]
+    assert [v["topic"] for v in lines][-2:] == ["status", "verification"]
+    body = chosen_message["body"]
+    assert body["state"] == "done" and body["passed"] and body["file"] == "verification.json"
+    assert body["choice"].startswith(f"candidate {body['chosen_candidate']} (rank 1 by the measure")
+    assert "the first whose every scenario passed, after 1 of 2 verified" in body["choice"]
+    assert {"verification.json", "verification.mcap", "report.html"} <= set(chosen_done["body"]["outputs"])
+    out = tmp_path / "out" / chosen_id
+    assert json.loads((out / "report.json").read_text())["best"] == body["chosen_candidate"]
+    assert "Delivered: candidate" in (out / "report.html").read_text()
+    # job.mcap vouches for the verification's files and the page with its section
+    assert fcsod_main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
 
 
 SETS_MANIFEST = """
@@ -88,6 +176,7 @@ min_retained = 0.7
 
 [verify]
 enabled = true
+top_k = 0
 trials = 2
 """
 
@@ -130,7 +219,7 @@ def test_every_finger_set_of_a_job_is_verified_into_its_folder_and_on_its_key(tm
         folder = out / f"set-{number}"
         written = json.loads((folder / "verification.json").read_text())
         assert written["scenarios"][0]["fcso"]["success_rate"] == body["scenarios"][0]["success_rate"]
-        assert "<!-- fcso verify -->" in (folder / "report.html").read_text()
+        assert "<!-- fcso verify -->" in (folder / "verification.html").read_text()
         assert any(
             b["key_expr"].endswith(f"/verification/{number}")
             for b in read_record(folder / VERIFICATION_RECORD_NAME).of(TOPIC_BUS)

@@ -2,18 +2,24 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import time
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
 
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
+from fcso.geometry import box, to_trimesh
 from fcso.parts import Part
-from fcso.sim.collision import convex_pieces, zoned_pieces
+from fcso.sim.collision import convex_pieces, evict, zoned_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
-from fcso.sim.verify import finger_hull, grasp_case, part_pieces
+from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -158,3 +164,60 @@ def test_verification_takes_the_part_density_from_the_print_profile():
     assert with_print_density(VerifyConfig(trials=3, density_g_cm3=1.1), fdm).density_g_cm3 == pytest.approx(1.1)
     explicit = DesignConfig().updated({"print": {"profile": "fdm-pla", "density_g_cm3": 1.3}})
     assert with_print_density(VerifyConfig(), explicit).density_g_cm3 == pytest.approx(1.3)
+
+
+def _l_block() -> trimesh.Trimesh:
+    """An L-shaped block (two boxes): not convex, decomposed by CoACD in well under a second."""
+    return to_trimesh(box((0, 0, 0), (20, 10, 10)) + box((0, 0, 0), (10, 10, 20)))
+
+
+def _pieces_in_process(mesh, cache: Path) -> int:
+    return len(convex_pieces(mesh, 0.05, cache).pieces)
+
+
+def test_the_decomposition_cache_survives_concurrent_writers_damage_and_a_size_bound(tmp_path):
+    mesh, cache = _l_block(), tmp_path / "cache"
+    # two workers write the same entry at once: both get the pieces, one whole entry stays, no temporary file (a
+    # convex block: its pieces are its hull, no CoACD, whose OpenMP threads do not survive a fork of a process that
+    # ran it before)
+    block = to_trimesh(box((0, 0, 0), (20, 10, 10)))
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        counts = pool.starmap(_pieces_in_process, [(block, cache), (block, cache)])
+    assert counts == [1, 1] and [e.suffix for e in cache.iterdir()] == [".npz"]
+    assert convex_pieces(block, 0.05, cache).cached
+    (cache / next(cache.iterdir()).name).unlink()
+    first = convex_pieces(mesh, 0.05, cache)
+    assert not first.cached and len(first.pieces) >= 2
+    assert convex_pieces(mesh, 0.05, cache).cached
+    entries = sorted(cache.iterdir())
+    # a damaged entry (a disk that filled up, a crash of an older version) is made again, not trusted
+    entries[0].write_bytes(entries[0].read_bytes()[:100])
+    again = convex_pieces(mesh, 0.05, cache)
+    assert not again.cached and len(again.pieces) == len(first.pieces)
+    assert convex_pieces(mesh, 0.05, cache).cached
+    # beyond its size the least recently used entries go; one just used stays
+    other = convex_pieces(mesh, 0.1, cache)
+    assert not other.cached and len(list(cache.glob("*.npz"))) == 2
+    old = time.time() - 3600
+    os.utime(entries[0], (old, old))
+    assert convex_pieces(mesh, 0.1, cache).cached
+    newer = next(e for e in cache.glob("*.npz") if e != entries[0])
+    evict(cache, newer.stat().st_size)
+    assert list(cache.glob("*.npz")) == [newer]
+
+
+def test_trials_on_forked_workers_give_the_results_of_one_process(tmp_path):
+    case = _cube_case()
+    scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), _config(tmp_path))
+    errors = np.array([[1.5, -1.0, 2.0], [-2.0, 0.5, -3.0], [0.0, 2.0, 1.0]])
+    runs, advanced = {}, []
+    for jobs in (1, 2):
+        config = _config(tmp_path, jobs=jobs)
+        runs[jobs] = list(perturbed_runs(scene, case, errors, config, lambda jobs=jobs: advanced.append(jobs)))
+    assert advanced == [1, 1, 1, 2, 2, 2]
+    for one, forked in zip(runs[1], runs[2]):
+        assert one.held == forked.held and np.array_equal(one.part_in_gripper, forked.part_in_gripper)
+    # only the first trial keeps its frames (the report's picture)
+    assert [bool(r.frames) for r in runs[2]] == [True, False, False]
+    # the start errors matter: the trials end in different poses
+    assert not np.allclose(runs[2][0].part_in_gripper, runs[2][1].part_in_gripper)

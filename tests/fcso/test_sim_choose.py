@@ -36,6 +36,8 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     assert [r.passed for r in ranking] == [False, True]
     assert ranking[0].index == designed_best and ranking[0].success_rates == [0.0]
     assert chosen.report.best == ranking[1].index and verification.passed
+    assert verification.choice.startswith(f"candidate {ranking[1].index} (rank 2 by the measure")
+    assert any(f"verification delivered candidate {ranking[1].index}" in w for w in chosen.report.warnings)
     # the TCP is at the pad's mid-height: the chosen pad reaches down onto the vertical ridge (z < 20 mm), the designed
     # one does not
     half_pad = config.sampler.width_mm / 2.0
