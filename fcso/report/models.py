@@ -305,6 +305,22 @@ class PairConflictReport(ReportModel):
     retained: list[float] = Field(description="Worst screened E / E* of each when they share a finger")
 
 
+class PartitionAttemptReport(ReportModel):
+    """A partition whose every set was designed exactly (METHOD §11 revision 3): what screening promised, what the
+    exact sets keep.
+    """
+
+    sets: int = Field(description="Number of finger sets")
+    parts: list[list[str]] = Field(description="Distinct parts of each set, sets numbered by their first part")
+    screened_worst_retained: float = Field(description="Least screened E / E* over its graspable scenarios")
+    exact_worst_retained: float = Field(description="Least exact E / E* (its sets' exact designs)")
+    source: Literal["search", "one_finger"] = Field(
+        description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
+        "compare when min_retained was not reached"
+    )
+    chosen: bool = Field(description="The partition delivered (the best of these by the exact objective)")
+
+
 class PartitionSearchReport(ReportModel):
     """How the parts were split into sets and what bounds the split."""
 
@@ -331,6 +347,11 @@ class PartitionSearchReport(ReportModel):
         description="Pairs of parts that keep less than min_retained when they share a finger"
     )
     explanation: str | None = Field(description="Why min_retained is not reached, when it is not")
+    attempts: list[PartitionAttemptReport] = Field(
+        default_factory=list,
+        description="Every partition designed exactly, in the order designed; the search saw each one's exact figures "
+        "before proposing the next",
+    )
 
 
 class PickPart(ReportModel):

@@ -14,6 +14,7 @@ from .models import (
     FingerSetsReport,
     IdenticalPartsReport,
     PairConflictReport,
+    PartitionAttemptReport,
     PartitionSearchReport,
     PickPart,
     PickStep,
@@ -22,7 +23,7 @@ from .models import (
 )
 
 if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
-    from ..sets.partition import PartitionOutcome
+    from ..sets.partition import PartitionAttempt, PartitionOutcome
 
 
 def zero_quality_report(scenario: Scenario) -> UngraspableReport:
@@ -37,7 +38,7 @@ def _ratio(value: float, reference: float) -> float:
 
 
 def sets_report(
-    prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+    prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
 ) -> FingerSetsReport:
     """The report of the sets, their scenarios, identical parts and the pick plan."""
     settings = config.finger_sets
@@ -147,18 +148,43 @@ def sets_report(
             else round(outcome.worst_retained_bound, 6),
             blocking_pairs=blocking,
             explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
+            attempts=[_attempt_report(a, outcome, names) for a in attempts],
         ),
     )
+
+
+def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names: list[str]) -> PartitionAttemptReport:
+    labels = max(attempt.assignment) + 1
+    return PartitionAttemptReport(
+        sets=labels,
+        parts=[[names[p] for p, a in enumerate(attempt.assignment) if a == label] for label in range(labels)],
+        screened_worst_retained=round(attempt.screened_worst, 6),
+        exact_worst_retained=round(attempt.exact_worst, 6),
+        source=attempt.source,
+        chosen=attempt.assignment == outcome.assignment,
+    )
+
+
+#: What every description ends with: how the exact designs judged the search's proposals (METHOD §11 revision 3).
+_JUDGED_EXACTLY = (
+    "; every proposed partition's sets were then designed exactly and the search, seeing their exact retained "
+    "qualities, went on while they missed min_retained (at most max proposals); when min_retained was still not "
+    "reached, one finger for every part was designed too, and the best of those designed by the exact objective was "
+    "kept, so the sets never keep less in their worst scenario than that one finger"
+)
 
 
 def _search_description(outcome: PartitionOutcome, parts: int, settings) -> str:
     if outcome.method == "single_part":
         return "one distinct graspable part: one finger set"
+    return _screened_description(outcome, parts, settings) + _JUDGED_EXACTLY
+
+
+def _screened_description(outcome: PartitionOutcome, parts: int, settings) -> str:
     if outcome.method == "exhaustive":
         return (
             f"every partition of the {parts} distinct parts into at most {settings.max} sets was screened "
-            f"({outcome.set_screenings} distinct sets): the chosen one is the best under screening; its sets were "
-            f"then designed exactly"
+            f"({outcome.set_screenings} distinct sets): the proposal is the best under screening"
         )
     clique = len(outcome.conflict_clique)
     return (

@@ -4,10 +4,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from .. import __version__
 from ..config import DesignConfig
@@ -20,7 +23,7 @@ from ..report.design import part_report
 from ..report.models import DesignReport, FingerSetsReport, JobReport
 from ..report.sets import sets_report, zero_quality_report
 from .identity import identical_groups
-from .partition import search_partition
+from .partition import search_judged_exactly
 from .screening import SetScreener, SoloQuality, screening_pools, solo_quality
 
 
@@ -130,36 +133,60 @@ def design_sets(
 
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
-    # one part has one partition: nothing to screen in parallel
+    set_scenarios = [part_scenarios[u] for u in graspable]
+    exact_designs: dict[frozenset[int], DesignResult] = {}
+
+    def design_exactly(members: frozenset[int]) -> DesignResult:
+        """A set's finger by METHOD §1-9, once per set; the screener then judges the set by it."""
+        if members not in exact_designs:
+            numbers = sorted(m for p in members for m in set_scenarios[p])
+            report_progress("finger sets", len(exact_designs), len(exact_designs) + 1, f"set of {len(members)} parts")
+            made = design_prepared(subset(prepared, numbers), config, progress)
+            exact_designs[members] = made
+            kept = dict(zip(numbers, exact_retained(made, numbers, solos)))
+            screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
+        return exact_designs[members]
+
+    # no more workers than sets to screen: one part has one partition
     with WorkerPool((prepared, pools, by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
-        screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, by_area, pool)
-        outcome = search_partition(
+        screener = SetScreener(prepared, set_scenarios, solos, by_area, pool)
+        outcome, attempts = search_judged_exactly(
             screener,
             len(graspable),
             by_area,
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
+            design_exactly,
         )
+    # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
     timings["partition"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     labels = max(outcome.assignment) + 1
     designs, members = [], []
     for label in range(labels):
-        chosen = [graspable[p] for p, a in enumerate(outcome.assignment) if a == label]
+        group = frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
+        chosen = [graspable[p] for p in sorted(group)]
         numbers = sorted(m for u in chosen for m in part_scenarios[u])
-        report_progress("finger sets", label, labels, f"set {label + 1} of {labels}")
-        made = design_prepared(subset(prepared, numbers), config, progress)
+        made = design_exactly(group)
         # every grasp says which finger set makes it
-        made.report = made.report.model_copy(
-            update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+        made = dataclasses.replace(
+            made,
+            report=made.report.model_copy(
+                update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+            ),
         )
         designs.append(made)
         members.append((chosen, numbers))
     report_progress("finger sets", labels, labels, "")
     timings["finger_sets"] = time.perf_counter() - clock
-    screened = dict(zip([m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]], outcome.retained))
+    screened = dict(
+        zip(
+            [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
+            screener.partition_retained(outcome.assignment, exact=False),
+        )
+    )
     finger_sets = sets_report(
-        prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+        prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
     )
     timings = {k: round(v, 3) for k, v in timings.items()}
     if labels == 1:
@@ -184,6 +211,21 @@ def design_sets(
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)
+
+
+def exact_retained(made: DesignResult, numbers: Sequence[int], solos: Sequence[SoloQuality]) -> list[float]:
+    """``r = E / E*`` of every scenario of a set's exact design (E of the exact pocket, as METHOD §11 scores sets).
+
+    Parameters
+    ----------
+    made : DesignResult
+        The set's design, its scenarios ``numbers`` (job numbering, increasing).
+    numbers : sequence of int
+    solos : sequence of SoloQuality
+        Per job scenario.
+    """
+    areas = made.report.print_fit.exact.effective_area
+    return [float(area) / solos[m].exact_mm2 for m, area in zip(numbers, areas)]
 
 
 def _solo_task(context, number: int) -> SoloQuality:

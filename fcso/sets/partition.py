@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,7 +110,8 @@ class PartitionOutcome:
     assignment : tuple of int
         Set of every part (canonical), parts in job order.
     retained : (scenarios,) float
-        Screened ``r`` of every graspable scenario in its set.
+        ``r`` of every graspable scenario in its set: exact where the set was
+        designed exactly (:meth:`SetScreener.judge_exactly`), screened otherwise.
     method : str
         ``"single_part"``, ``"exhaustive"`` or ``"conflict_graph_colouring+local_moves"``.
     proven : bool
@@ -283,3 +285,94 @@ def _worst_parts(screener: SetScreener, assignment: tuple[int, ...], retained: n
     worst_set = assignment[owners[int(np.argmin(retained))]]
     members = [p for p in range(len(assignment)) if assignment[p] == worst_set]
     return sorted(members, key=lambda p: (float(retained[owners == p].min()), p))[:count]
+
+
+@dataclass
+class PartitionAttempt:
+    """A partition whose every set was designed exactly (METHOD §11 revision 3).
+
+    Attributes
+    ----------
+    assignment : tuple of int
+        Set of every part (canonical).
+    screened_worst : float
+        Least screened ``r`` over its graspable scenarios.
+    exact_worst : float
+        Least exact ``r`` (its sets' exact designs).
+    source : str
+        ``"search"``: proposed by the partition search; ``"one_finger"``:
+        every part in one set, designed to compare.
+    """
+
+    assignment: tuple[int, ...]
+    screened_worst: float
+    exact_worst: float
+    source: str
+
+
+def search_judged_exactly(
+    screener: SetScreener,
+    parts: int,
+    config: DesignConfig,
+    progress: Progress,
+    design_exactly: Callable[[frozenset[int]], object],
+) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
+    """The partition search of :func:`search_partition`, its proposals judged by their exact sets (METHOD §11 rev. 3).
+
+    The sets of each proposed partition are designed exactly
+    (``design_exactly`` records their exact ``r`` in ``screener``), so the next
+    search sees the exact figure of every set designed so far: a set whose
+    exact design misses ``min_retained`` no longer looks feasible, and the
+    search moves its parts or tries more sets. It stops when the exact sets
+    reach ``min_retained``, when the search proposes only sets already
+    designed, or after ``[finger_sets] max`` proposals. If ``min_retained`` is
+    then not reached, one finger for every part is designed too; the chosen
+    partition is the best of those designed by the exact objective, so it
+    never keeps less in its worst scenario than one finger does.
+
+    Parameters
+    ----------
+    screener : SetScreener
+    parts : int
+        Distinct graspable parts.
+    config : DesignConfig
+    progress : callable
+    design_exactly : callable
+        ``design_exactly(set_of_parts)``: designs the set by METHOD §1-9 and
+        calls ``screener.judge_exactly`` with its exact retained qualities.
+
+    Returns
+    -------
+    PartitionOutcome
+        Of the chosen partition, ``retained`` exact.
+    list of PartitionAttempt
+        Every partition designed, in the order designed.
+    """
+    threshold = config.finger_sets.min_retained
+    attempts: list[PartitionAttempt] = []
+
+    def attempt(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
+        for members in sets_of(assignment):
+            design_exactly(members)
+        screened = screener.partition_retained(assignment, exact=False)
+        exact = screener.partition_retained(assignment)
+        attempts.append(PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source))
+        return attempts[-1]
+
+    outcome = search_partition(screener, parts, config, progress)
+    for _ in range(config.finger_sets.max):
+        if any(a.assignment == outcome.assignment for a in attempts):
+            break
+        if attempt(outcome.assignment, "search").exact_worst >= threshold:
+            break
+        outcome = search_partition(screener, parts, config, progress)
+    single = tuple([0] * parts)
+    if max(a.exact_worst for a in attempts) < threshold and all(a.assignment != single for a in attempts):
+        attempt(single, "one_finger")
+    best = max(
+        attempts, key=lambda a: partition_key(a.assignment, screener.partition_retained(a.assignment), threshold)
+    )
+    chosen = dataclasses.replace(
+        outcome, assignment=best.assignment, retained=screener.partition_retained(best.assignment)
+    )
+    return chosen, attempts

@@ -135,6 +135,11 @@ def screen_set(
 class SetScreener:
     """Screened set designs of one job, cached by set, screened in batches over worker processes.
 
+    Sets designed exactly (METHOD §11 revision 3) are judged by their exact
+    retained qualities once :meth:`judge_exactly` has recorded them: the
+    partition search then sees the exact figure, :meth:`screened_retained`
+    still the screened one.
+
     Parameters
     ----------
     prepared : Prepared
@@ -161,10 +166,19 @@ class SetScreener:
         self.config = config
         self.pool = pool
         self.cache: dict[frozenset[int], np.ndarray] = {}
+        self.exact: dict[frozenset[int], np.ndarray] = {}
 
-    def retained(self, sets: Sequence[frozenset[int]]) -> list[dict[int, np.ndarray]]:
-        """Screened r of every scenario of every part, per set: ``{part: (scenarios,) r}``."""
-        fresh = list(dict.fromkeys(s for s in sets if s not in self.cache))
+    def judge_exactly(self, members: frozenset[int], retained: np.ndarray) -> None:
+        """Record a set's exact ``r = E / E*`` per scenario (its parts in order, their scenarios in order)."""
+        self.exact[members] = np.asarray(retained, dtype=np.float64)
+
+    def retained(self, sets: Sequence[frozenset[int]], exact: bool = True) -> list[dict[int, np.ndarray]]:
+        """r of every scenario of every part, per set: ``{part: (scenarios,) r}``.
+
+        Exact where the set was designed exactly and ``exact`` is true, screened otherwise.
+        """
+        known = self.exact if exact else {}
+        fresh = list(dict.fromkeys(s for s in sets if s not in self.cache and s not in known))
         tasks = [tuple(m for p in sorted(s) for m in self.part_scenarios[p]) for s in fresh]
         for members, task, screening in zip(fresh, tasks, self.pool.map(_screen_set_task, tasks)):
             solo = np.array([self.solos[m].screened_best_mm2 for m in task])
@@ -172,18 +186,19 @@ class SetScreener:
         result = []
         for members in sets:
             values, start = {}, 0
+            figures = known.get(members, self.cache.get(members))
             for part in sorted(members):
                 count = len(self.part_scenarios[part])
-                values[part] = self.cache[members][start : start + count]
+                values[part] = figures[start : start + count]
                 start += count
             result.append(values)
         return result
 
-    def partition_retained(self, assignment: Sequence[int]) -> np.ndarray:
-        """Screened r of every graspable scenario (parts in order) under one partition."""
+    def partition_retained(self, assignment: Sequence[int], exact: bool = True) -> np.ndarray:
+        """r of every graspable scenario (parts in order) under one partition, exact where known (``exact``)."""
         sets = sets_of(assignment)
         per_part: dict[int, np.ndarray] = {}
-        for values in self.retained(sets):
+        for values in self.retained(sets, exact):
             per_part.update(values)
         return np.concatenate([per_part[p] for p in range(len(assignment))]) if assignment else np.zeros(0)
 
