@@ -324,14 +324,21 @@ class PartitionAttemptReport(ReportModel):
 class PartitionSearchReport(ReportModel):
     """How the parts were split into sets and what bounds the split."""
 
-    method: Literal["single_set", "single_part", "exhaustive", "conflict_graph_colouring+local_moves"] = Field(
+    method: Literal["single_set", "single_part", "exhaustive", "quick_screening+colouring+local_moves"] = Field(
         description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
-        "exhaustive: every partition screened; conflict_graph_colouring+local_moves: greedy sets from pair conflicts, "
-        "improved by moving parts"
+        "exhaustive: every partition screened; quick_screening+colouring+local_moves: pairs quick-screened (one "
+        "candidate each), the conflict clique certified by set searches, greedy sets improved by moving parts, set "
+        "searches only where the quick figure falls short"
     )
     description: str = Field(description="The same in words, with what it proves")
     proven: bool = Field(
         description="The partition is the best under screening (every partition into at most max sets screened)"
+    )
+    fewest_sets_proven: bool = Field(
+        False,
+        description="The first proposal, under screening alone, reaches min_retained and no partition reaching it "
+        "under screening has fewer sets: every partition was screened, or it has lower_bound_sets sets (if a part "
+        "never keeps more of its quality in a larger set)",
     )
     sets_tried: list[int] = Field(description="Numbers of sets the search tried")
     set_screenings: int = Field(description="Distinct candidate sets screened")

@@ -24,7 +24,7 @@ from ..report.models import DesignReport, FingerSetsReport, JobReport
 from ..report.sets import sets_report, zero_quality_report
 from .identity import identical_groups
 from .partition import search_judged_exactly
-from .screening import SetScreener, SoloQuality, screening_pools, solo_quality
+from .screening import SetScreener, SoloQuality, screening_pools, solo_picks, solo_quality
 
 
 @dataclass
@@ -148,7 +148,7 @@ def design_sets(
         return exact_designs[members]
 
     # no more workers than sets to screen: one part has one partition
-    with WorkerPool((prepared, pools, by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
+    with WorkerPool((prepared, pools, solo_picks(solos), by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
         screener = SetScreener(prepared, set_scenarios, solos, by_area, pool)
         outcome, attempts = search_judged_exactly(
             screener,
