@@ -219,6 +219,8 @@ def _clique_bound(clique: list[int], pair_retained: dict, max_sets: int) -> floa
 
 #: Local moves tried per number of sets in the scaled search (a constant: the search stays linear in the parts).
 _MOVES_PER_COUNT = 24
+#: Pairs quick-screened between two progress reports.
+_PAIRS_PER_PROGRESS = 2000
 #: Rounds of certifying the conflict clique by set searches before giving up the bound.
 _CLIQUE_ROUNDS = 12
 
@@ -251,11 +253,13 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     settings = config.finger_sets
     max_sets, threshold = settings.max, settings.min_retained
     pairs = list(itertools.combinations(range(parts), 2))
-    progress("pair conflicts", 0, len(pairs), "quick screening")
-    quick = screener.quick([frozenset(p) for p in pairs])
     compatibility = np.ones((parts, parts))
-    for (i, j), values in zip(pairs, quick):
-        compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+    # in chunks, so a large job's progress line and log move while the pairs are screened
+    for start in range(0, len(pairs), _PAIRS_PER_PROGRESS):
+        progress("pair conflicts", start, len(pairs), "quick screening")
+        chunk = pairs[start : start + _PAIRS_PER_PROGRESS]
+        for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
+            compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
     progress("pair conflicts", len(pairs), len(pairs), "quick screening")
 
     pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
@@ -285,14 +289,21 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     for count in range(first, max_sets + 1):
         tried.append(count)
         progress("partition", count - first, max_sets - first + 1, f"{count} sets")
+        step = max_sets - first + 1
+
+        def moved(number: int, assignment: tuple[int, ...], count: int = count, step: int = step) -> None:
+            worst = float(screener.partition_estimate(assignment).min())
+            progress("partition", count - first, step, f"{count} sets: move {number}, worst retained {worst:.2f}")
+
         current = _greedy_assignment(compatibility, count, threshold)
-        current = _improve(screener, current, count, key, _MOVES_PER_COUNT)
+        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
         # screen in doubt: a set the quick figure leaves short gets its own search
         doubt = [
             s for s, values in zip(sets_of(current), screener.estimate(sets_of(current))) if _short(values, threshold)
         ]
+        progress("partition", count - first, step, f"{count} sets: {len(doubt)} set searches")
         screener.retained(doubt)
-        current = _improve(screener, current, count, key, _MOVES_PER_COUNT)
+        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
         seen.append(current)
         if key(current)[0] == 1:
             break
@@ -350,13 +361,15 @@ def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: floa
 
 
 def _improve(
-    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, key, moves_allowed: int
+    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, key, moves_allowed: int, moved=None
 ) -> tuple[int, ...]:
     """Move parts of the worst set to other sets (or a new one) while a move improves ``key``, at most ``moves_allowed``
-    moves.
+    moves; ``moved(number, assignment)`` hears of each.
     """
     current = assignment
-    for _ in range(moves_allowed):
+    for number in range(moves_allowed):
+        if moved is not None:
+            moved(number, current)
         if key(current)[0] == 1:
             return current
         retained = screener.partition_estimate(current)
@@ -459,10 +472,20 @@ def search_judged_exactly(
         return attempts[-1]
 
     outcome = first = search_partition(screener, parts, config, progress)
-    for _ in range(config.finger_sets.max):
+    proposals = config.finger_sets.max
+    for proposal in range(proposals):
         if any(a.assignment == outcome.assignment for a in attempts):
             break
-        if attempt(outcome.assignment, "search").exact_worst >= threshold:
+        progress("exact sets", proposal, proposals, f"proposal {proposal + 1}: {max(outcome.assignment) + 1} sets")
+        judged = attempt(outcome.assignment, "search")
+        progress(
+            "exact sets",
+            proposal + 1,
+            proposals,
+            f"proposal {proposal + 1}: worst retained screened {judged.screened_worst:.2f}, "
+            f"exact {judged.exact_worst:.2f}",
+        )
+        if judged.exact_worst >= threshold:
             break
         outcome = search_partition(screener, parts, config, progress)
     single = tuple([0] * parts)
