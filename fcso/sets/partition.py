@@ -361,15 +361,15 @@ def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: floa
 
 
 def _improve(
-    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, key, moves_allowed: int, moved=None
+    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, key, moves_allowed: int, on_move=None
 ) -> tuple[int, ...]:
     """Move parts of the worst set to other sets (or a new one) while a move improves ``key``, at most ``moves_allowed``
-    moves; ``moved(number, assignment)`` hears of each.
+    moves; ``on_move(number, assignment)`` hears of each.
     """
     current = assignment
     for number in range(moves_allowed):
-        if moved is not None:
-            moved(number, current)
+        if on_move is not None:
+            on_move(number, current)
         if key(current)[0] == 1:
             return current
         retained = screener.partition_estimate(current)
