@@ -108,7 +108,7 @@ def design_sets(
     by_area = config.updated({"quality": {"measure": "paper"}})
     report_progress("solo quality", 0, len(prepared.scenarios), "")
     # no more workers than tasks: forking costs more than one small task
-    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios))) as pool:
+    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
@@ -148,7 +148,11 @@ def design_sets(
         return exact_designs[members]
 
     # no more workers than sets to screen: one part has one partition
-    with WorkerPool((prepared, pools, solo_picks(solos), by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
+    with WorkerPool(
+        (prepared, pools, solo_picks(solos), by_area),
+        prepared.jobs if len(graspable) > 1 else 1,
+        config.compute.scheduler,
+    ) as pool:
         screener = SetScreener(prepared, set_scenarios, solos, by_area, pool)
         outcome, attempts = search_judged_exactly(
             screener,
