@@ -169,7 +169,8 @@ def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names:
 #: What every description ends with: how the exact designs judged the search's proposals (METHOD §11 revision 3).
 _JUDGED_EXACTLY = (
     "; every proposed partition's sets were then designed exactly and the search, seeing their exact retained "
-    "qualities, went on while they missed min_retained (at most max proposals); when min_retained was still not "
+    "qualities, went on while screening had promised min_retained, the exact sets missed it and max allowed more "
+    "sets (at most max proposals); when min_retained was still not "
     "reached, one finger for every part was designed too, and the best of those designed by the exact objective was "
     "kept, so the sets never keep less in their worst scenario than that one finger"
 )

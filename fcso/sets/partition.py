@@ -435,9 +435,10 @@ def search_judged_exactly(
     (``design_exactly`` records their exact ``r`` in ``screener``), so the next
     search sees the exact figure of every set designed so far: a set whose
     exact design misses ``min_retained`` no longer looks feasible, and the
-    search moves its parts or tries more sets. It stops when the exact sets
-    reach ``min_retained``, when the search proposes only sets already
-    designed, or after ``[finger_sets] max`` proposals. If ``min_retained`` is
+    search moves its parts or tries more sets. It goes on only while a
+    proposal that screening said reaches ``min_retained`` misses it exactly
+    and has fewer than ``max`` sets, and stops when the search proposes a
+    partition already designed, or after ``[finger_sets] max`` proposals. If ``min_retained`` is
     then not reached, one finger for every part is designed too; the chosen
     partition is the best of those designed by the exact objective, so it
     never keeps less in its worst scenario than one finger does.
@@ -485,7 +486,13 @@ def search_judged_exactly(
             f"proposal {proposal + 1}: worst retained screened {judged.screened_worst:.2f}, "
             f"exact {judged.exact_worst:.2f}",
         )
-        if judged.exact_worst >= threshold:
+        # METHOD §11 rev. 3: go on only where screening promised min_retained, the exact sets missed it, and max
+        # allows more sets; a proposal screening already found short is as good as the search can tell
+        if (
+            judged.exact_worst >= threshold
+            or judged.screened_worst < threshold
+            or max(outcome.assignment) + 1 >= proposals
+        ):
             break
         outcome = search_partition(screener, parts, config, progress)
     single = tuple([0] * parts)
