@@ -119,8 +119,16 @@ def test_a_provably_conflicting_pair_goes_to_two_sets(conflicting_together):
 
 def test_a_set_that_screening_accepts_and_its_exact_design_rejects_is_split():
     threshold = 0.5
-    result = design_sets([NARROWING, NARROWING_WIDER], config(finger_sets={"min_retained": threshold, "max": 2}))
+    heard = []
+    result = design_sets(
+        [NARROWING, NARROWING_WIDER],
+        config(finger_sets={"min_retained": threshold, "max": 2}),
+        progress=lambda stage, done, total, note="": heard.append((stage, note)),
+    )
     sets = result.report
+    # the progress line and the daemon's log hear of every proposal and what its exact sets keep
+    proposals = [note for stage, note in heard if stage == "exact sets" and "exact" in note]
+    assert [p.split(":")[0] for p in proposals] == ["proposal 1", "proposal 2"]
     first, second = sets.search.attempts
     # the premise: screening says one finger keeps min_retained, its exact design does not
     assert first.sets == 1 and first.screened_worst_retained >= threshold > first.exact_worst_retained
