@@ -103,7 +103,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     if search.attempts:
         tried = "".join(
             f"<tr><td>{a.sets}</td><td>{a.screened_worst_retained:.3f}</td><td>{a.exact_worst_retained:.3f}</td>"
-            f'<td class="text">{text(a.source.replace("_", " "))}</td><td class="text">{"chosen" if a.chosen else ""}'
+            f'<td class="text">{text(_attempt_source(a))}</td><td class="text">{"chosen" if a.chosen else ""}'
             f'</td><td class="text">{text(" | ".join(", ".join(p) for p in a.parts))}</td></tr>'
             for a in search.attempts
         )
@@ -148,6 +148,11 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     return section
 
 
+def _attempt_source(attempt) -> str:
+    source = attempt.source.replace("_", " ")
+    return f"{source}: not made, {attempt.failure}" if attempt.failure else source
+
+
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
 
@@ -182,6 +187,7 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
             f"{attempt.sets} set(s) ({attempt.source.replace('_', ' ')}): worst retained screened "
             f"{attempt.screened_worst_retained:.3f}, exact {attempt.exact_worst_retained:.3f}"
             + (" (chosen)" if attempt.chosen else "")
+            + (f"; not made: {attempt.failure}" if attempt.failure else "")
         )
     if sets.search.explanation:
         lines.append(f"min_retained not reached: {sets.search.explanation}")

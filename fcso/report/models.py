@@ -319,6 +319,9 @@ class PartitionAttemptReport(ReportModel):
         "compare when min_retained was not reached"
     )
     chosen: bool = Field(description="The partition delivered (the best of these by the exact objective)")
+    failure: str | None = Field(
+        None, description="Why one of its fingers could not be made (it then keeps nothing and is not delivered)"
+    )
 
 
 class PartitionSearchReport(ReportModel):

@@ -163,6 +163,7 @@ def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names:
         exact_worst_retained=round(attempt.exact_worst, 6),
         source=attempt.source,
         chosen=attempt.assignment == outcome.assignment,
+        failure=attempt.failure,
     )
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from .. import __version__
 from ..config import DesignConfig
 from ..design import DesignResult, design, design_prepared, load_batch, prepare, subset
-from ..errors import NoGraspError
+from ..errors import GeometryError, NoGraspError
 from ..parallel import WorkerPool
 from ..parts import Part
 from ..progress import Progress
@@ -135,17 +135,27 @@ def design_sets(
     pools = screening_pools(solos, config.finger_sets.screen_samples)
     set_scenarios = [part_scenarios[u] for u in graspable]
     exact_designs: dict[frozenset[int], DesignResult] = {}
+    failures: dict[frozenset[int], str] = {}
 
-    def design_exactly(members: frozenset[int]) -> DesignResult:
-        """A set's finger by METHOD §1-9, once per set; the screener then judges the set by it."""
-        if members not in exact_designs:
+    def design_exactly(members: frozenset[int]) -> str | None:
+        """A set's finger by METHOD §1-9, once per set; the screener then judges the set by it.
+
+        Returns why the finger could not be made (a pad so carved that the fused finger is not one printable body),
+        or None: such a set keeps nothing, so the search moves on from it.
+        """
+        if members not in exact_designs and members not in failures:
             numbers = sorted(m for p in members for m in set_scenarios[p])
             report_progress("finger sets", len(exact_designs), len(exact_designs) + 1, f"set of {len(members)} parts")
-            made = design_prepared(subset(prepared, numbers), config, progress)
+            try:
+                made = design_prepared(subset(prepared, numbers), config, progress)
+            except GeometryError as error:
+                failures[members] = str(error)
+                screener.judge_exactly(members, np.zeros(len(numbers)))
+                return failures[members]
             exact_designs[members] = made
             kept = dict(zip(numbers, exact_retained(made, numbers, solos)))
             screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
-        return exact_designs[members]
+        return failures.get(members)
 
     # no more workers than sets to screen: one part has one partition
     with WorkerPool(
@@ -171,7 +181,9 @@ def design_sets(
         group = frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
         chosen = [graspable[p] for p in sorted(group)]
         numbers = sorted(m for u in chosen for m in part_scenarios[u])
-        made = design_exactly(group)
+        if group in failures:  # every partition designed had a set that could not be made
+            raise GeometryError(failures[group])
+        made = exact_designs[group]
         # every grasp says which finger set makes it
         made = dataclasses.replace(
             made,

@@ -414,12 +414,15 @@ class PartitionAttempt:
     source : str
         ``"search"``: proposed by the partition search; ``"one_finger"``:
         every part in one set, designed to compare.
+    failure : str or None
+        Why a set's finger could not be made (it then keeps nothing), or None.
     """
 
     assignment: tuple[int, ...]
     screened_worst: float
     exact_worst: float
     source: str
+    failure: str | None = None
 
 
 def search_judged_exactly(
@@ -427,7 +430,7 @@ def search_judged_exactly(
     parts: int,
     config: DesignConfig,
     progress: Progress,
-    design_exactly: Callable[[frozenset[int]], object],
+    design_exactly: Callable[[frozenset[int]], str | None],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged by their exact sets (METHOD §11 rev. 3).
 
@@ -452,7 +455,8 @@ def search_judged_exactly(
     progress : callable
     design_exactly : callable
         ``design_exactly(set_of_parts)``: designs the set by METHOD §1-9 and
-        calls ``screener.judge_exactly`` with its exact retained qualities.
+        calls ``screener.judge_exactly`` with its exact retained qualities
+        (zeros when its finger cannot be made); returns why not, or None.
 
     Returns
     -------
@@ -465,11 +469,11 @@ def search_judged_exactly(
     attempts: list[PartitionAttempt] = []
 
     def attempt(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
-        for members in sets_of(assignment):
-            design_exactly(members)
+        failures = [f for f in map(design_exactly, sets_of(assignment)) if f is not None]
         screened = screener.partition_retained(assignment, exact=False)
         exact = screener.partition_retained(assignment)
-        attempts.append(PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source))
+        failure = failures[0] if failures else None
+        attempts.append(PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source, failure))
         return attempts[-1]
 
     outcome = first = search_partition(screener, parts, config, progress)
@@ -498,8 +502,13 @@ def search_judged_exactly(
     single = tuple([0] * parts)
     if max(a.exact_worst for a in attempts) < threshold and all(a.assignment != single for a in attempts):
         attempt(single, "one_finger")
+    # a partition with a finger that cannot be made is delivered only when every one designed has one
     best = max(
-        attempts, key=lambda a: partition_key(a.assignment, screener.partition_retained(a.assignment), threshold)
+        attempts,
+        key=lambda a: (
+            a.failure is None,
+            partition_key(a.assignment, screener.partition_retained(a.assignment), threshold),
+        ),
     )
     chosen = dataclasses.replace(
         outcome,
