@@ -197,7 +197,8 @@ def _screened_description(outcome: PartitionOutcome, parts: int, settings) -> st
         f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set); for "
         f"{', '.join(map(str, outcome.sets_tried))} sets, parts were placed greedily and the worst set's parts moved "
         f"while the objective improved, each set judged by its best known figure (exact, searched, else quick), sets "
-        f"short of min_retained on the quick figure searched ({outcome.set_screenings} set searches); guaranteed: the "
+        f"short of min_retained on the quick figure searched, then moves decided by searching the best three "
+        f"({outcome.set_screenings} set searches); guaranteed: the "
         f"lower bound and every figure reported; the fewest sets only when the proposal reaches min_retained with "
         f"the lower bound's number of sets; otherwise not proven optimal"
     )

@@ -219,6 +219,8 @@ def _clique_bound(clique: list[int], pair_retained: dict, max_sets: int) -> floa
 
 #: Local moves tried per number of sets in the scaled search (a constant: the search stays linear in the parts).
 _MOVES_PER_COUNT = 24
+#: Best moves by the quick figure whose sets are searched to decide a move, once the sets in doubt are searched.
+_SEARCHED_MOVES = 3
 #: Pairs quick-screened between two progress reports.
 _PAIRS_PER_PROGRESS = 2000
 #: Rounds of certifying the conflict clique by set searches before giving up the bound.
@@ -242,8 +244,10 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
-       each set: exact, searched, else quick); sets that the quick figure
-       leaves below ``min_retained`` are then searched. The first number of
+       each set: exact, searched, else quick). Sets the quick figure leaves
+       below ``min_retained`` are then searched, and the moves go on with the
+       :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
+       (a large set's quick figure is pessimistic and flat). The first number of
        sets that reaches ``min_retained`` is taken, else the best seen.
 
     Every step costs quick screenings (a set's size each) or a bounded number
@@ -284,6 +288,9 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_estimate(assignment), threshold)
 
+    def searched_key(assignment: tuple[int, ...]) -> tuple:
+        return partition_key(assignment, screener.partition_retained(assignment), threshold)
+
     tried, seen = [], []
     first = min(lower, max_sets)
     for count in range(first, max_sets + 1):
@@ -303,15 +310,15 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         ]
         progress("partition", count - first, step, f"{count} sets: {len(doubt)} set searches")
         screener.retained(doubt)
-        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
+        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        if key(current)[0] == 1:
+        if searched_key(current)[0] == 1:
             break
     progress("partition", max_sets - first + 1, max_sets - first + 1, f"{tried[-1]} sets")
-    best = max(seen, key=key)
+    best = max(seen, key=searched_key)
     return PartitionOutcome(
         assignment=best,
-        retained=screener.partition_estimate(best),
+        retained=screener.partition_retained(best),
         method="quick_screening+colouring+local_moves",
         proven=False,
         pair_retained=pair_retained,
@@ -320,7 +327,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         worst_retained_bound=_clique_bound(sorted(clique), pair_retained, max_sets),
         sets_tried=tried,
         set_screenings=len(screener.cache),
-        fewest_sets_proven=key(best)[0] == 1 and max(best) + 1 == lower,
+        fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
     )
 
 
@@ -361,16 +368,27 @@ def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: floa
 
 
 def _improve(
-    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, key, moves_allowed: int, on_move=None
+    screener: SetScreener,
+    assignment: tuple[int, ...],
+    max_sets: int,
+    key,
+    moves_allowed: int,
+    on_move=None,
+    searched_key=None,
 ) -> tuple[int, ...]:
-    """Move parts of the worst set to other sets (or a new one) while a move improves ``key``, at most ``moves_allowed``
-    moves; ``on_move(number, assignment)`` hears of each.
+    """Move parts of the worst set to other sets (or a new one) while a move improves the objective, at most
+    ``moves_allowed`` moves; ``on_move(number, assignment)`` hears of each.
+
+    Moves are ranked by ``key``; with ``searched_key``, the best :data:`_SEARCHED_MOVES` of them and the current
+    partition are compared by it instead (their sets searched): the quick figure of a large set is pessimistic and
+    flat, so it ranks moves but does not decide them.
     """
+    decide = searched_key or key
     current = assignment
     for number in range(moves_allowed):
         if on_move is not None:
             on_move(number, current)
-        if key(current)[0] == 1:
+        if decide(current)[0] == 1:
             return current
         retained = screener.partition_estimate(current)
         moves = []
@@ -384,8 +402,11 @@ def _improve(
         if not moves:
             return current
         screener.estimate(list({s for m in moves for s in sets_of(m)}))
-        best = max(moves, key=key)
-        if key(best) <= key(current):
+        ranked = sorted(moves, key=key, reverse=True)[: _SEARCHED_MOVES if searched_key else 1]
+        if searched_key:
+            screener.retained(list({s for m in ranked for s in sets_of(m)}))
+        best = max(ranked, key=decide)
+        if decide(best) <= decide(current):
             return current
         current = best
     return current
