@@ -1,8 +1,16 @@
-"""Finger sets (METHOD §11) on print jobs of 12 and 30 different parts, against one finger for all.
+"""Finger sets (METHOD §11) on print jobs of 12 and 30 different parts, against one finger for all; the curve to 200.
 
 Run from the repository root::
 
     python -m benchmarks.bench_sets [--runs N] [--only 12|30]
+    python -m benchmarks.bench_sets --curve 30 60 200 [--runs N]
+
+``--curve`` designs jobs of that many distinct parts with ``--finger-sets 4``
+(targets of issue 24: 60 parts <= 90 s, 200 parts <= 10 min and peak memory
+<= 4 GB on 2 cores, time per part growing at most like n log n) and prints,
+per job, the time, the time per part, its growth against n log n, the worst
+retained quality, the partition's time and the peak memory (this process and
+the largest worker).
 
 Each job is the fixture parts in their right units (tests/data/README.md)
 plus parametric parts made here with manifold3d (boxes, cylinders, hexagonal
@@ -22,7 +30,10 @@ D = 4). Prints, medians over N runs (the machine is shared and noisy):
 from __future__ import annotations
 
 import argparse
+import math
+import resource
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -73,9 +84,21 @@ def knob(base: float, top_scale: float) -> manifold3d.Manifold:
     )
 
 
+def plate_with_holes(side: float, holes: int) -> manifold3d.Manifold:
+    """A square plate 8 mm thick with ``holes`` round holes along its diagonal."""
+    plate = box(side, side, 8.0)
+    for number in range(holes):
+        at = side * (number + 1) / (holes + 1)
+        plate = plate - cylinder(side / (2.5 * holes + 2), 8.0).translate([at, at, 0.0])
+    return plate
+
+
 def parametric_parts(count: int) -> list[fcso.Part]:
-    """``count`` parametric parts, kinds in turn, each kind growing in size."""
-    kinds = [
+    """``count`` parametric parts. The first 36: six kinds in turn, each growing in size (the 12- and 30-part jobs).
+    Beyond: seven kinds (plates with holes added) with sizes from low-discrepancy sequences inside the gripper's 50 mm
+    opening, so large jobs stay graspable and every part differs.
+    """
+    growing = [
         ("box", lambda k: box(16.0 + 4 * k, 22.0 + 3 * k, 28.0 + 2 * k)),
         ("cylinder", lambda k: cylinder(18.0 + 4 * k, 24.0 + 3 * k)),
         ("knob-narrowing", lambda k: knob(14.0 + 2 * k, 0.7)),
@@ -83,11 +106,27 @@ def parametric_parts(count: int) -> list[fcso.Part]:
         ("hex", lambda k: hex_prism(16.0 + 4 * k, 20.0 + 4 * k)),
         ("bracket", lambda k: l_bracket(24.0 + 4 * k, 5.0, 18.0 + 2 * k)),
     ]
+    spread = [
+        ("box", lambda k, a, b: box(14 + 28 * a, 16 + 26 * b, 20 + 20 * a)),
+        ("cylinder", lambda k, a, b: cylinder(14 + 28 * a, 16 + 24 * b)),
+        ("knob-narrowing", lambda k, a, b: knob(10 + 16 * a, 0.6 + 0.3 * b)),
+        ("knob-widening", lambda k, a, b: knob(8 + 10 * a, 1.2 + 0.4 * b)),
+        ("hex", lambda k, a, b: hex_prism(14 + 26 * a, 16 + 24 * b)),
+        ("bracket", lambda k, a, b: l_bracket(20 + 22 * a, 4 + 3 * b, 14 + 24 * b)),
+        ("plate-holes", lambda k, a, b: plate_with_holes(30 + 14 * a, 1 + k % 3)),
+    ]
     parts = []
     for number in range(count):
-        name, make = kinds[number % len(kinds)]
-        size = number // len(kinds)
-        parts.append(fcso.Part(name=f"{name}-{size + 1}", path=f"{name}-{size + 1}.stl", mesh=to_trimesh(make(size))))
+        if number < 36:
+            name, make = growing[number % len(growing)]
+            size = number // len(growing)
+            mesh = to_trimesh(make(size))
+        else:
+            name, make = spread[(number - 36) % len(spread)]
+            size = 6 + (number - 36) // len(spread)
+            # golden- and silver-ratio sequences: sizes spread evenly without repeating
+            mesh = to_trimesh(make(size, (size * 0.6180339887) % 1.0, (size * 0.4142135624) % 1.0))
+        parts.append(fcso.Part(name=f"{name}-{size + 1}", path=f"{name}-{size + 1}.stl", mesh=mesh))
     return parts
 
 
@@ -164,11 +203,84 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
         print(f"  min_retained {report.min_retained:g} NOT reached; the report says: {report.search.explanation}")
 
 
+def peak_memory_mb() -> tuple[float, float]:
+    """Peak resident memory of this process and of its largest finished worker, MB (Linux reports KiB)."""
+    return (
+        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0,
+    )
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and its finished workers, s: on a shared machine, wall time / cores understates it."""
+    own, workers = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + workers.ru_utime + workers.ru_stime
+
+
+def stage_log(stage: str, done: int, total: int, note: str = "", _last=[None]) -> None:  # noqa: B006
+    """Stage changes on standard error with the time: where a long run spends it."""
+    if stage != _last[0]:
+        _last[0] = stage
+        print(f"  [{time.strftime('%H:%M:%S')}] {stage} {done}/{total} {note}", file=sys.stderr, flush=True)
+
+
+def run_curve(sizes: list[int], runs: int) -> None:
+    """The scaling curve of issue 24: time, time per part, worst retained and peak memory per job size."""
+    config = fcso.DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}})
+    targets = {60: 90.0, 200: 600.0}
+    first: tuple[int, float] | None = None
+    print(
+        "parts | whole design s (median of runs) | CPU s | s per part | growth vs n log n | partition s | sets | "
+        "worst retained | method | peak MB (main, largest worker)"
+    )
+    for parts in sizes:
+        loaded = job(parts)
+        seconds, cpu = [], []
+        for _ in range(runs):
+            started, started_cpu = time.perf_counter(), cpu_seconds()
+            result = design_sets(loaded, config, progress=stage_log)
+            seconds.append(time.perf_counter() - started)
+            cpu.append(cpu_seconds() - started_cpu)
+        median = statistics.median(seconds)
+        report = result.report
+        timings = result.job().timings_s
+        per_part = median / parts
+        if first is None:
+            first = (parts, per_part)
+        # time per part against the n log n law from the first size (1.0: exactly n log n; below: better)
+        growth = (per_part / first[1]) / (math.log(parts) / math.log(first[0]))
+        main_mb, worker_mb = peak_memory_mb()
+        target = targets.get(parts)
+        verdict = "" if target is None else f" (target <= {target:.0f} s: {'met' if median <= target else 'NOT met'})"
+        print(
+            f"{parts} | {median:.1f}{verdict} | {statistics.median(cpu):.1f} | {per_part:.2f} | {growth:.2f} | "
+            f"{timings.get('partition', 0.0):.1f} | "
+            f"{len(report.sets)} | {report.worst_retained:.3f} | {report.search.method} | "
+            f"{main_mb:.0f}, {worker_mb:.0f}",
+            flush=True,
+        )
+        print(
+            f"    timings {timings}; sets tried {report.search.sets_tried}, "
+            f"lower bound {report.search.lower_bound_sets}, "
+            f"{report.search.set_screenings} set searches; attempts "
+            + "; ".join(
+                f"{a.sets} sets screened {a.screened_worst_retained:.3f} exact {a.exact_worst_retained:.3f}"
+                + (" chosen" if a.chosen else "")
+                for a in report.search.attempts
+            ),
+            flush=True,
+        )
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3, help="runs per figure (medians)")
     parser.add_argument("--only", type=int, choices=(12, 30), help="one job only")
+    parser.add_argument("--curve", type=int, nargs="+", help="job sizes (distinct parts) of the scaling curve")
     args = parser.parse_args(argv)
+    if args.curve:
+        run_curve(args.curve, args.runs)
+        return
     for parts, target in ((12, 60.0), (30, 180.0)):
         if args.only in (None, parts):
             run_case(parts, args.runs, target)

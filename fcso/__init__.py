@@ -10,7 +10,15 @@ __version__ = "0.1.0"
 
 from .config import DesignConfig, load_config  # noqa: E402
 from .design import DesignResult, design  # noqa: E402
-from .errors import ConfigError, FcsoError, GeometryError, MeshError, NoGraspError, RepairToleranceError  # noqa: E402
+from .errors import (  # noqa: E402
+    ComputeError,
+    ConfigError,
+    FcsoError,
+    GeometryError,
+    MeshError,
+    NoGraspError,
+    RepairToleranceError,
+)
 from .output.files import output_files, write_outputs, write_set_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
@@ -18,6 +26,7 @@ from .rles import rles  # noqa: E402
 from .sets import SetsResult, design_sets  # noqa: E402
 
 __all__ = [
+    "ComputeError",
     "ConfigError",
     "DesignConfig",
     "DesignResult",

@@ -118,6 +118,12 @@ def _parser() -> argparse.ArgumentParser:
         help="worker processes (search.jobs; default: every core); results do not depend on it",
     )
     run.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the design's tasks on a Dask distributed cluster, e.g. tcp://host:8786 (compute.scheduler); "
+        "results do not depend on it",
+    )
+    run.add_argument(
         "--finger-sets",
         type=int,
         metavar="N",
@@ -189,6 +195,8 @@ def _config(args) -> DesignConfig:
         overrides.setdefault("finger", {})["mesh"] = args.finger
     if getattr(args, "jobs", None) is not None:
         overrides.setdefault("search", {})["jobs"] = args.jobs
+    if getattr(args, "scheduler", None) is not None:
+        overrides.setdefault("compute", {})["scheduler"] = args.scheduler
     if getattr(args, "finger_sets", None) is not None:
         overrides.setdefault("finger_sets", {})["max"] = args.finger_sets
     if getattr(args, "min_retained", None) is not None:

@@ -343,6 +343,17 @@ class FingerSetsConfig(_Section):
     )
 
 
+class ComputeConfig(_Section):
+    """Where a design's parallel work runs (``[compute]``)."""
+
+    scheduler: str | None = Field(
+        None,
+        description="Address of a Dask distributed scheduler, e.g. 'tcp://host:8786': the design's tasks run on its "
+        "workers (each needs this fcso installed). None: forked worker processes on this machine ([search] jobs). "
+        "The results are the same either way",
+    )
+
+
 class DesignConfig(_Section):
     """Every setting of ``fcso design``."""
 
@@ -357,10 +368,12 @@ class DesignConfig(_Section):
     print: PrintConfig = Field(default_factory=PrintConfig)
     finger_sets: FingerSetsConfig = Field(default_factory=FingerSetsConfig)
     quality: QualityConfig = Field(default_factory=QualityConfig)
+    # where the work runs changes no result: left out of dumps, so a report is the same on a cluster and locally
+    compute: ComputeConfig = Field(default_factory=ComputeConfig, exclude=True)
 
     def updated(self, overrides: dict) -> DesignConfig:
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""
-        merged = self.model_dump()
+        merged = dict(self.model_dump(), compute=self.compute.model_dump())
         for section, values in overrides.items():
             if isinstance(values, dict) and isinstance(merged.get(section), dict):
                 merged[section].update(values)

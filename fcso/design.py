@@ -175,7 +175,7 @@ def prepare(
     sample_tasks = [
         (number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)
     ]
-    with WorkerPool((scenarios, config, plate), jobs) as pool:
+    with WorkerPool((scenarios, config, plate), jobs, config.compute.scheduler) as pool:
         pieces = pool.map(_sample_task, sample_tasks)
     for number, scenario in enumerate(scenarios):
         scenario.sampler_result = _merge_sampler_results(
@@ -202,7 +202,7 @@ def prepare(
     ]
     total_samples = sum(len(s.sampler_result.samples) for s in scenarios)
     report_progress("pad geometries", 0, total_samples)
-    with WorkerPool((scenarios, config, grid, lattice), jobs) as pool:
+    with WorkerPool((scenarios, config, grid, lattice), jobs, config.compute.scheduler) as pool:
         for (number, _, _), made in zip(tasks, pool.map(_geometry_task, tasks)):
             scenarios[number].samples.extend(made)
             report_progress("pad geometries", sum(len(x.samples) for x in scenarios), total_samples)
@@ -356,7 +356,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     # their per-scenario values as they are screened instead of screening again
     keep_screens = expected <= config.search.report_candidates
     kept_screens: dict[tuple[int, ...], ScreenedCandidate] = {}
-    with WorkerPool(screen_data, jobs) as pool:
+    with WorkerPool(screen_data, jobs, config.compute.scheduler) as pool:
 
         def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
             nonlocal screened_count, best_screened
@@ -396,7 +396,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
 
     clock = time.perf_counter()
     report_progress("exact", 0, len(finalists))
-    with WorkerPool((scenarios, config), jobs) as pool:
+    with WorkerPool((scenarios, config), jobs, config.compute.scheduler) as pool:
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
     report_progress(
         "exact",

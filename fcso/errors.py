@@ -66,3 +66,7 @@ class GeometryError(FcsoError):
 
 class NoGraspError(FcsoError):
     """A grasp scenario with no valid sample, so no finger can be designed."""
+
+
+class ComputeError(FcsoError):
+    """The compute cluster a design was sent to (``[compute] scheduler``) cannot run it."""

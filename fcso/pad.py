@@ -151,9 +151,16 @@ def surface_in_pad(
     Returns
     -------
     vertices, faces : ndarray
+        Only the vertices the kept triangles use, in their order: every
+        sample keeps its own surface, and a copy of the whole part's vertex
+        array per sample grows memory with parts times samples.
     """
     local = vertices @ frame[:3, :3].T + frame[:3, 3]
-    return clip_to_box(local, faces, (0.0, 0.0, 0.0), (sampler.thickness_mm, sampler.length_mm, sampler.width_mm))
+    clipped, kept = clip_to_box(
+        local, faces, (0.0, 0.0, 0.0), (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    )
+    used, inverse = np.unique(kept, return_inverse=True)
+    return clipped[used], inverse.reshape(kept.shape).astype(kept.dtype)
 
 
 def interest_depth(intersection: manifold3d.Manifold, depth: float, full_area: float, steps: int = 64) -> float:

@@ -1,9 +1,21 @@
-"""Ordered parallel maps over forked worker processes, for the stages of a design.
+"""Ordered parallel maps for the stages of a design: forked local workers, or a Dask cluster.
 
-Workers are forked once the data they read is ready, so the design's
-samples, meshes and manifold3d solids reach them without being pickled;
-only tasks and results cross. Results come back in task order, so a design
-is the same for any number of workers.
+The one executor interface of the design's fan-out (sampling, pad
+geometries, screening, exact re-evaluations, solo qualities, set
+screenings): :class:`WorkerPool`, a context manager whose :meth:`map` calls
+a module-level function on a shared read-only context and each item.
+
+- Locally (the default, no set-up), workers are forked once the data they
+  read is ready, so the design's samples, meshes and manifold3d solids reach
+  them without being pickled; only tasks and results cross.
+- With a scheduler address (``[compute] scheduler``, CLI ``--scheduler``)
+  the context is sent once to every worker of that Dask distributed
+  cluster and the items go in batches, each a pure task (no files, no bus);
+  Dask runs a task again elsewhere when its worker dies, so a lost worker
+  costs a retry, not the job.
+
+Results come back in task order, so a design is the same for any number of
+workers and on either executor.
 """
 
 from __future__ import annotations
@@ -15,6 +27,13 @@ import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
+
+from .errors import ComputeError
+
+#: Batches per Dask worker thread in one map: enough to balance uneven tasks, few enough that each carries work.
+_DASK_BATCHES_PER_THREAD = 4
+#: Dask clients by scheduler address, opened once per process (several designs and daemons share one cluster).
+_DASK_CLIENTS: dict[str, Any] = {}
 
 # The shared data of the pool being forked: set by WorkerPool just before
 # its workers fork, read only inside them.
@@ -45,6 +64,31 @@ def _started(_) -> int:
     return os.getpid()
 
 
+def _call_batch(function: Callable[[Any, Any], Any], context: Any, items: list) -> list:
+    """One Dask task: ``function`` on a batch of items (pure: it reads the context, returns results)."""
+    return [function(context, item) for item in items]
+
+
+def dask_client(address: str):
+    """The Dask distributed client of ``address``, connected once per process.
+
+    Raises
+    ------
+    ComputeError
+        The scheduler cannot be reached (the message names the address).
+    """
+    client = _DASK_CLIENTS.get(address)
+    if client is None or client.status != "running":
+        from distributed import Client  # imported only when a cluster is asked for
+
+        try:
+            client = Client(address, set_as_default=False, timeout="20s")
+        except OSError as error:
+            raise ComputeError(f"[compute] scheduler {address}: cannot connect ({error})") from error
+        _DASK_CLIENTS[address] = client
+    return client
+
+
 def die_with_parent(parent_pid: int) -> None:
     """Have the kernel kill this process when its parent, ``parent_pid``, dies (Linux; elsewhere nothing).
 
@@ -67,21 +111,33 @@ class WorkerPool:
     Parameters
     ----------
     context : object
-        Data every task reads (inherited by fork, never pickled).
+        Data every task reads (inherited by fork, never pickled; sent once to
+        every worker of a Dask cluster).
     jobs : int
-        Worker processes.
+        Worker processes (local only).
+    scheduler : str, optional
+        Address of a Dask distributed scheduler, e.g. ``tcp://host:8786``:
+        tasks run on its workers instead of local processes.
 
     Use as a context manager; :meth:`map` returns results in task order.
     """
 
-    def __init__(self, context: Any, jobs: int):
+    def __init__(self, context: Any, jobs: int, scheduler: str | None = None):
         self.context = context
         self.jobs = jobs
+        self.scheduler = scheduler
         self._pool: ProcessPoolExecutor | None = None
+        self._client = None
+        self._context_future = None
 
     def __enter__(self) -> WorkerPool:
         global _WORKER_CONTEXT
-        if self.jobs > 1:
+        if self.scheduler:
+            self._client = dask_client(self.scheduler)
+            # once per pool, to every worker: tasks then carry only their items (in a list, or a tuple context would
+            # be scattered item by item)
+            self._context_future = self._client.scatter([self.context], broadcast=True, hash=False)[0]
+        elif self.jobs > 1:
             _WORKER_CONTEXT = self.context
             try:
                 self._pool = ProcessPoolExecutor(
@@ -100,12 +156,27 @@ class WorkerPool:
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
             self._pool = None
+        if self._context_future is not None:
+            self._context_future.release()
+            self._context_future = None
 
     def map(self, function: Callable[[Any, Any], Any], items: Sequence[Any], chunksize: int = 1) -> list:
         """``[function(context, item) for item in items]``, spread over the workers.
 
         ``function`` must be a module-level function; items and results are pickled.
         """
+        if self._client is not None and items:
+            return self._dask_map(function, list(items))
         if self._pool is None or len(items) <= 1:
             return [function(self.context, item) for item in items]
         return list(self._pool.map(_call, [(function, item) for item in items], chunksize=max(1, chunksize)))
+
+    def _dask_map(self, function: Callable[[Any, Any], Any], items: list) -> list:
+        """The map on the Dask cluster: items in contiguous batches, results gathered in order."""
+        threads = max(1, sum(self._client.nthreads().values()))
+        size = max(1, -(-len(items) // (_DASK_BATCHES_PER_THREAD * threads)))
+        futures = [
+            self._client.submit(_call_batch, function, self._context_future, items[i : i + size], pure=False)
+            for i in range(0, len(items), size)
+        ]
+        return [result for batch in self._client.gather(futures) for result in batch]

@@ -14,6 +14,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from fcso.config import (
+    ComputeConfig,
     ContactConfig,
     DesignConfig,
     FilterConfig,
@@ -235,6 +236,11 @@ class DaemonConfig(_Section):
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     mcap: McapConfig = Field(default_factory=McapConfig)
     design: DesignConfig = Field(default_factory=DesignConfig, description="Default fcso settings for every job")
+    compute: ComputeConfig = Field(
+        default_factory=ComputeConfig,
+        description="Where every job's design runs: a Dask scheduler address (tcp://host:8786) shared by several "
+        "daemons, or local worker processes (none)",
+    )
     build: BuildConfig = Field(
         default_factory=BuildConfig,
         description="Default build volume, spacing and finger copies of every job's build.3mf",

@@ -111,6 +111,20 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     ]
     if search.explanation:
         section.append(f"<p><b>Why min_retained is not reached:</b> {text(search.explanation)}.</p>")
+    if search.attempts:
+        tried = "".join(
+            f"<tr><td>{a.sets}</td><td>{a.screened_worst_retained:.3f}</td><td>{a.exact_worst_retained:.3f}</td>"
+            f'<td class="text">{text(_attempt_source(a))}</td><td class="text">{"chosen" if a.chosen else ""}'
+            f'</td><td class="text">{text(" | ".join(", ".join(p) for p in a.parts))}</td></tr>'
+            for a in search.attempts
+        )
+        section.append(
+            "<h3>Partitions designed exactly</h3>"
+            "<p>Screening proposes a partition; its sets' exact designs decide (METHOD &sect;11 revision 3).</p>"
+            '<table><tr><th>sets</th><th>screened worst retained</th><th>exact worst retained</th><th class="text">'
+            'from</th><th class="text"></th><th class="text">sets</th></tr>'
+            f"{tried}</table>"
+        )
     if search.blocking_pairs:
         pairs = "".join(
             f'<tr><td class="text">{text(p.parts[0])}</td><td '
@@ -145,6 +159,11 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     return section
 
 
+def _attempt_source(attempt) -> str:
+    source = attempt.source.replace("_", " ")
+    return f"{source}: not made, {attempt.failure}" if attempt.failure else source
+
+
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
 
@@ -174,6 +193,13 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
             lines.append(f"  pick {part.quantity} x {part.part} (poses {poses})")
     if sets.ungraspable_parts:
         lines.append("not picked (no set can grasp them): " + ", ".join(sets.ungraspable_parts))
+    for attempt in sets.search.attempts:
+        lines.append(
+            f"{attempt.sets} set(s) ({attempt.source.replace('_', ' ')}): worst retained screened "
+            f"{attempt.screened_worst_retained:.3f}, exact {attempt.exact_worst_retained:.3f}"
+            + (" (chosen)" if attempt.chosen else "")
+            + (f"; not made: {attempt.failure}" if attempt.failure else "")
+        )
     if sets.search.explanation:
         lines.append(f"min_retained not reached: {sets.search.explanation}")
     return "\n".join(lines)

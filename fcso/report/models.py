@@ -319,17 +319,43 @@ class PairConflictReport(ReportModel):
     retained: list[float] = Field(description="Worst screened E / E* of each when they share a finger")
 
 
+class PartitionAttemptReport(ReportModel):
+    """A partition whose every set was designed exactly (METHOD §11 revision 3): what screening promised, what the
+    exact sets keep.
+    """
+
+    sets: int = Field(description="Number of finger sets")
+    parts: list[list[str]] = Field(description="Distinct parts of each set, sets numbered by their first part")
+    screened_worst_retained: float = Field(description="Least screened E / E* over its graspable scenarios")
+    exact_worst_retained: float = Field(description="Least exact E / E* (its sets' exact designs)")
+    source: Literal["search", "one_finger"] = Field(
+        description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
+        "compare when min_retained was not reached"
+    )
+    chosen: bool = Field(description="The partition delivered (the best of these by the exact objective)")
+    failure: str | None = Field(
+        None, description="Why one of its fingers could not be made (it then keeps nothing and is not delivered)"
+    )
+
+
 class PartitionSearchReport(ReportModel):
     """How the parts were split into sets and what bounds the split."""
 
-    method: Literal["single_set", "single_part", "exhaustive", "conflict_graph_colouring+local_moves"] = Field(
+    method: Literal["single_set", "single_part", "exhaustive", "quick_screening+colouring+local_moves"] = Field(
         description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
-        "exhaustive: every partition screened; conflict_graph_colouring+local_moves: greedy sets from pair conflicts, "
-        "improved by moving parts"
+        "exhaustive: every partition screened; quick_screening+colouring+local_moves: pairs quick-screened (one "
+        "candidate each), the conflict clique certified by set searches, greedy sets improved by moving parts, set "
+        "searches only where the quick figure falls short"
     )
     description: str = Field(description="The same in words, with what it proves")
     proven: bool = Field(
         description="The partition is the best under screening (every partition into at most max sets screened)"
+    )
+    fewest_sets_proven: bool = Field(
+        False,
+        description="The first proposal, under screening alone, reaches min_retained and no partition reaching it "
+        "under screening has fewer sets: every partition was screened, or it has lower_bound_sets sets (if a part "
+        "never keeps more of its quality in a larger set)",
     )
     sets_tried: list[int] = Field(description="Numbers of sets the search tried")
     set_screenings: int = Field(description="Distinct candidate sets screened")
@@ -345,6 +371,11 @@ class PartitionSearchReport(ReportModel):
         description="Pairs of parts that keep less than min_retained when they share a finger"
     )
     explanation: str | None = Field(description="Why min_retained is not reached, when it is not")
+    attempts: list[PartitionAttemptReport] = Field(
+        default_factory=list,
+        description="Every partition designed exactly, in the order designed; the search saw each one's exact figures "
+        "before proposing the next",
+    )
 
 
 class PickPart(ReportModel):

@@ -4,15 +4,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..config import DesignConfig
 from ..design import DesignResult, design, design_prepared, load_batch, prepare, subset
-from ..errors import NoGraspError
+from ..errors import GeometryError, NoGraspError
 from ..parallel import WorkerPool
 from ..parts import Part
 from ..progress import Progress
@@ -20,8 +23,8 @@ from ..report.design import part_report
 from ..report.models import DesignReport, FingerSetsReport, JobReport
 from ..report.sets import sets_report, zero_quality_report
 from .identity import identical_groups
-from .partition import search_partition
-from .screening import SetScreener, SoloQuality, screening_pools, solo_quality
+from .partition import search_judged_exactly
+from .screening import SetScreener, SoloQuality, screening_pools, solo_picks, solo_quality
 
 
 @dataclass
@@ -105,7 +108,7 @@ def design_sets(
     by_area = config.updated({"quality": {"measure": "paper"}})
     report_progress("solo quality", 0, len(prepared.scenarios), "")
     # no more workers than tasks: forking costs more than one small task
-    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios))) as pool:
+    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
@@ -130,36 +133,76 @@ def design_sets(
 
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
-    # one part has one partition: nothing to screen in parallel
-    with WorkerPool((prepared, pools, by_area), prepared.jobs if len(graspable) > 1 else 1) as pool:
-        screener = SetScreener(prepared, [part_scenarios[u] for u in graspable], solos, by_area, pool)
-        outcome = search_partition(
+    set_scenarios = [part_scenarios[u] for u in graspable]
+    exact_designs: dict[frozenset[int], DesignResult] = {}
+    failures: dict[frozenset[int], str] = {}
+
+    def design_exactly(members: frozenset[int]) -> str | None:
+        """A set's finger by METHOD §1-9, once per set; the screener then judges the set by it.
+
+        Returns why the finger could not be made (a pad so carved that the fused finger is not one printable body),
+        or None: such a set keeps nothing, so the search moves on from it.
+        """
+        if members not in exact_designs and members not in failures:
+            numbers = sorted(m for p in members for m in set_scenarios[p])
+            report_progress("finger sets", len(exact_designs), len(exact_designs) + 1, f"set of {len(members)} parts")
+            try:
+                made = design_prepared(subset(prepared, numbers), config, progress)
+            except GeometryError as error:
+                failures[members] = str(error)
+                screener.judge_exactly(members, np.zeros(len(numbers)))
+                return failures[members]
+            exact_designs[members] = made
+            kept = dict(zip(numbers, exact_retained(made, numbers, solos)))
+            screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
+        return failures.get(members)
+
+    # no more workers than sets to screen: one part has one partition
+    with WorkerPool(
+        (prepared, pools, solo_picks(solos), by_area),
+        prepared.jobs if len(graspable) > 1 else 1,
+        config.compute.scheduler,
+    ) as pool:
+        screener = SetScreener(prepared, set_scenarios, solos, by_area, pool)
+        outcome, attempts = search_judged_exactly(
             screener,
             len(graspable),
             by_area,
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
+            design_exactly,
         )
+    # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
     timings["partition"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     labels = max(outcome.assignment) + 1
     designs, members = [], []
     for label in range(labels):
-        chosen = [graspable[p] for p, a in enumerate(outcome.assignment) if a == label]
+        group = frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
+        chosen = [graspable[p] for p in sorted(group)]
         numbers = sorted(m for u in chosen for m in part_scenarios[u])
-        report_progress("finger sets", label, labels, f"set {label + 1} of {labels}")
-        made = design_prepared(subset(prepared, numbers), config, progress)
+        if group in failures:  # every partition designed had a set that could not be made
+            raise GeometryError(failures[group])
+        made = exact_designs[group]
         # every grasp says which finger set makes it
-        made.report = made.report.model_copy(
-            update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+        made = dataclasses.replace(
+            made,
+            report=made.report.model_copy(
+                update={"grasps": [g.model_copy(update={"finger_set": label + 1}) for g in made.report.grasps]}
+            ),
         )
         designs.append(made)
         members.append((chosen, numbers))
     report_progress("finger sets", labels, labels, "")
     timings["finger_sets"] = time.perf_counter() - clock
-    screened = dict(zip([m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]], outcome.retained))
+    screened = dict(
+        zip(
+            [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
+            screener.partition_retained(outcome.assignment, exact=False),
+        )
+    )
     finger_sets = sets_report(
-        prepared, loaded, groups, solos, designs, members, outcome, graspable, screened, ungraspable, config
+        prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
     )
     timings = {k: round(v, 3) for k, v in timings.items()}
     if labels == 1:
@@ -184,6 +227,21 @@ def design_sets(
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)
+
+
+def exact_retained(made: DesignResult, numbers: Sequence[int], solos: Sequence[SoloQuality]) -> list[float]:
+    """``r = E / E*`` of every scenario of a set's exact design (E of the exact pocket, as METHOD §11 scores sets).
+
+    Parameters
+    ----------
+    made : DesignResult
+        The set's design, its scenarios ``numbers`` (job numbering, increasing).
+    numbers : sequence of int
+    solos : sequence of SoloQuality
+        Per job scenario.
+    """
+    areas = made.report.print_fit.exact.effective_area
+    return [float(area) / solos[m].exact_mm2 for m, area in zip(numbers, areas)]
 
 
 def _solo_task(context, number: int) -> SoloQuality:

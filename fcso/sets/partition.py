@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,9 +110,10 @@ class PartitionOutcome:
     assignment : tuple of int
         Set of every part (canonical), parts in job order.
     retained : (scenarios,) float
-        Screened ``r`` of every graspable scenario in its set.
+        ``r`` of every graspable scenario in its set: exact where the set was
+        designed exactly (:meth:`SetScreener.judge_exactly`), screened otherwise.
     method : str
-        ``"single_part"``, ``"exhaustive"`` or ``"conflict_graph_colouring+local_moves"``.
+        ``"single_part"``, ``"exhaustive"`` or ``"quick_screening+colouring+local_moves"``.
     proven : bool
         Every partition into at most ``max`` sets was screened: the choice is
         the best under screening.
@@ -127,7 +129,12 @@ class PartitionOutcome:
     sets_tried : list of int
         Numbers of sets the search tried.
     set_screenings : int
-        Distinct sets screened.
+        Distinct sets searched (:func:`screen_set`).
+    fewest_sets_proven : bool
+        By the figures the search used, the proposal reaches ``min_retained``
+        and no partition reaching it has fewer sets: every partition was
+        screened, or the proposal has as many sets as the certified conflict
+        clique has parts (if a part never keeps more in a larger set).
     """
 
     assignment: tuple[int, ...]
@@ -140,6 +147,7 @@ class PartitionOutcome:
     worst_retained_bound: float | None
     sets_tried: list[int]
     set_screenings: int
+    fewest_sets_proven: bool = False
 
 
 def search_partition(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
@@ -147,15 +155,8 @@ def search_partition(screener: SetScreener, parts: int, config: DesignConfig, pr
 
     Up to ``[finger_sets] exhaustive_parts`` parts every partition into at
     most ``max`` sets is screened and the best taken (a proof under
-    screening). Beyond, every pair of parts is screened as a set; pairs whose
-    worse part keeps less than ``min_retained`` conflict. The largest clique
-    of conflicting parts bounds the number of sets from below (assuming a
-    part keeps no more of its quality in a larger set). From that many sets
-    up to ``max``: parts go greedily, most conflicted first, to the set they
-    conflict with least (a new set while any is left), then the part of the
-    worst scenario moves to the set that improves the objective most, until
-    no move does; the first number of sets that reaches ``min_retained`` is
-    taken, else the best partition seen.
+    screening). Beyond, :func:`_scaled_search`: no step costs a set search
+    per pair of parts.
 
     Parameters
     ----------
@@ -171,60 +172,177 @@ def search_partition(screener: SetScreener, parts: int, config: DesignConfig, pr
     """
     settings = config.finger_sets
     max_sets, threshold = settings.max, settings.min_retained
-    pairs = list(itertools.combinations(range(parts), 2))
-    progress("pair conflicts", 0, len(pairs), "")
-    pair_values = screener.retained([frozenset(p) for p in pairs])
-    pair_retained = {pair: (float(v[pair[0]].min()), float(v[pair[1]].min())) for pair, v in zip(pairs, pair_values)}
-    progress("pair conflicts", len(pairs), len(pairs), "")
-    conflicts = np.zeros((parts, parts), dtype=bool)
-    for (i, j), values in pair_retained.items():
-        conflicts[i, j] = conflicts[j, i] = min(values) < threshold
-    clique = max_clique(conflicts) if parts else []
-    lower = max(1, len(clique))
-    bound = None
-    if len(clique) > max_sets:
-        bound = max(min(pair_retained[pair]) for pair in itertools.combinations(clique, 2))
-
-    def outcome(assignment, method, proven, tried) -> PartitionOutcome:
-        return PartitionOutcome(
-            assignment=assignment,
-            retained=screener.partition_retained(assignment),
-            method=method,
-            proven=proven,
-            pair_retained=pair_retained,
-            lower_bound_sets=lower,
-            conflict_clique=clique,
-            worst_retained_bound=bound,
-            sets_tried=tried,
-            set_screenings=len(screener.cache),
-        )
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_retained(assignment), threshold)
 
     if parts <= 1:
-        return outcome(tuple([0] * parts), "single_part", True, [1] if parts else [])
-    if parts <= settings.exhaustive_parts:
-        candidates = list(restricted_growth(parts, max_sets))
-        progress("partition", 0, len(candidates), "every partition")
-        screener.retained(list({s for a in candidates for s in sets_of(a)}))
-        best = max(candidates, key=key)
-        progress("partition", len(candidates), len(candidates), "every partition")
-        return outcome(best, "exhaustive", True, sorted({max(a) + 1 for a in candidates}))
-
-    compatibility = np.ones((parts, parts))
+        assignment = tuple([0] * parts)
+        return PartitionOutcome(
+            assignment, screener.partition_retained(assignment), "single_part", True, {}, 1, [], None, [1], 0, True
+        )
+    if parts > settings.exhaustive_parts:
+        return _scaled_search(screener, parts, config, progress)
+    pairs = list(itertools.combinations(range(parts), 2))
+    pair_values = screener.retained([frozenset(p) for p in pairs])
+    pair_retained = {pair: (float(v[pair[0]].min()), float(v[pair[1]].min())) for pair, v in zip(pairs, pair_values)}
+    conflicts = np.zeros((parts, parts), dtype=bool)
     for (i, j), values in pair_retained.items():
-        compatibility[i, j] = compatibility[j, i] = min(values)
-    tried, seen = [], []
-    for count in range(min(lower, max_sets), max_sets + 1):
-        tried.append(count)
-        progress("partition", len(tried), max_sets - min(lower, max_sets) + 1, f"{count} sets")
-        current = _greedy_assignment(compatibility, count, threshold)
-        current = _improve(screener, current, count, threshold, key)
-        seen.append(current)
-        if key(current)[0] == 1:
+        conflicts[i, j] = conflicts[j, i] = min(values) < threshold
+    clique = max_clique(conflicts)
+    candidates = list(restricted_growth(parts, max_sets))
+    progress("partition", 0, len(candidates), "every partition")
+    screener.retained(list({s for a in candidates for s in sets_of(a)}))
+    best = max(candidates, key=key)
+    progress("partition", len(candidates), len(candidates), "every partition")
+    return PartitionOutcome(
+        assignment=best,
+        retained=screener.partition_retained(best),
+        method="exhaustive",
+        proven=True,
+        pair_retained=pair_retained,
+        lower_bound_sets=max(1, len(clique)),
+        conflict_clique=clique,
+        worst_retained_bound=_clique_bound(clique, pair_retained, max_sets),
+        sets_tried=sorted({max(a) + 1 for a in candidates}),
+        set_screenings=len(screener.cache),
+        fewest_sets_proven=key(best)[0] == 1,
+    )
+
+
+def _clique_bound(clique: list[int], pair_retained: dict, max_sets: int) -> float | None:
+    """When more parts conflict pairwise than there are sets, two share one: no worst r above their best pair."""
+    if len(clique) <= max_sets:
+        return None
+    return max(min(pair_retained[pair]) for pair in itertools.combinations(clique, 2))
+
+
+#: Local moves tried per number of sets in the scaled search (a constant: the search stays linear in the parts).
+_MOVES_PER_COUNT = 24
+#: Best moves by the quick figure whose sets are searched to decide a move, once the sets in doubt are searched.
+_SEARCHED_MOVES = 3
+#: Pairs quick-screened between two progress reports.
+_PAIRS_PER_PROGRESS = 2000
+#: Rounds of certifying the conflict clique by set searches before giving up the bound.
+_CLIQUE_ROUNDS = 12
+
+
+def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
+    """The partition search for many parts: quick screenings everywhere, set searches only where they leave doubt.
+
+    1. Every pair of parts gets a quick screening (:func:`quick_screen`: one
+       candidate, each scenario's own best sample; one screening, not a set
+       search). A pair that keeps ``min_retained`` there is compatible: that
+       candidate exists. The others are only suspected to conflict.
+    2. A clique of suspected conflicts, grown greedily (most suspected parts
+       first), has each of its pairs searched as a set (:func:`screen_set`);
+       pairs the search clears leave the clique and it is grown again. The
+       clique that remains conflicts pairwise under screening: no partition
+       reaching ``min_retained`` has fewer sets (if a part never keeps more
+       of its quality in a larger set).
+    3. From that many sets up to ``max``: parts go greedily, most suspected
+       first, to the set they suit best, then parts of the worst scenario's
+       set move while a move improves the objective (at most
+       :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
+       each set: exact, searched, else quick). Sets the quick figure leaves
+       below ``min_retained`` are then searched, and the moves go on with the
+       :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
+       (a large set's quick figure is pessimistic and flat). The first number of
+       sets that reaches ``min_retained`` is taken, else the best seen.
+
+    Every step costs quick screenings (a set's size each) or a bounded number
+    of set searches, so the work grows with the number of parts times the
+    set sizes; only step 1 visits every pair, at one screening each.
+    """
+    settings = config.finger_sets
+    max_sets, threshold = settings.max, settings.min_retained
+    pairs = list(itertools.combinations(range(parts), 2))
+    compatibility = np.ones((parts, parts))
+    # in chunks, so a large job's progress line and log move while the pairs are screened
+    for start in range(0, len(pairs), _PAIRS_PER_PROGRESS):
+        progress("pair conflicts", start, len(pairs), "quick screening")
+        chunk = pairs[start : start + _PAIRS_PER_PROGRESS]
+        for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
+            compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+    progress("pair conflicts", len(pairs), len(pairs), "quick screening")
+
+    pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
+    suspected = compatibility < threshold
+    np.fill_diagonal(suspected, False)
+    clique: list[int] = []
+    for _ in range(_CLIQUE_ROUNDS):
+        clique = sorted(_greedy_clique(suspected))
+        unsure = [pair for pair in itertools.combinations(clique, 2) if pair not in pair_retained]
+        for pair, values in zip(unsure, screener.retained([frozenset(p) for p in unsure])):
+            pair_retained[pair] = (float(values[pair[0]].min()), float(values[pair[1]].min()))
+            compatibility[pair] = compatibility[pair[::-1]] = max(compatibility[pair], min(pair_retained[pair]))
+        cleared = [pair for pair in itertools.combinations(clique, 2) if min(pair_retained[pair]) >= threshold]
+        if not cleared:
             break
-    return outcome(max(seen, key=key), "conflict_graph_colouring+local_moves", False, tried)
+        for i, j in cleared:
+            suspected[i, j] = suspected[j, i] = False
+    else:
+        clique = []  # not certified within the rounds allowed: no bound claimed
+    lower = max(1, len(clique))
+
+    def key(assignment: tuple[int, ...]) -> tuple:
+        return partition_key(assignment, screener.partition_estimate(assignment), threshold)
+
+    def searched_key(assignment: tuple[int, ...]) -> tuple:
+        return partition_key(assignment, screener.partition_retained(assignment), threshold)
+
+    tried, seen = [], []
+    first = min(lower, max_sets)
+    for count in range(first, max_sets + 1):
+        tried.append(count)
+        progress("partition", count - first, max_sets - first + 1, f"{count} sets")
+        step = max_sets - first + 1
+
+        def moved(number: int, assignment: tuple[int, ...], count: int = count, step: int = step) -> None:
+            worst = float(screener.partition_estimate(assignment).min())
+            progress("partition", count - first, step, f"{count} sets: move {number}, worst retained {worst:.2f}")
+
+        current = _greedy_assignment(compatibility, count, threshold)
+        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
+        # screen in doubt: a set the quick figure leaves short gets its own search
+        doubt = [
+            s for s, values in zip(sets_of(current), screener.estimate(sets_of(current))) if _short(values, threshold)
+        ]
+        progress("partition", count - first, step, f"{count} sets: {len(doubt)} set searches")
+        screener.retained(doubt)
+        current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
+        seen.append(current)
+        if searched_key(current)[0] == 1:
+            break
+    progress("partition", max_sets - first + 1, max_sets - first + 1, f"{tried[-1]} sets")
+    best = max(seen, key=searched_key)
+    return PartitionOutcome(
+        assignment=best,
+        retained=screener.partition_retained(best),
+        method="quick_screening+colouring+local_moves",
+        proven=False,
+        pair_retained=pair_retained,
+        lower_bound_sets=lower,
+        conflict_clique=sorted(clique),
+        worst_retained_bound=_clique_bound(sorted(clique), pair_retained, max_sets),
+        sets_tried=tried,
+        set_screenings=len(screener.cache),
+        fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
+    )
+
+
+def _short(values: dict[int, np.ndarray], threshold: float) -> bool:
+    return min(float(v.min()) for v in values.values()) < threshold
+
+
+def _greedy_clique(adjacent: np.ndarray) -> list[int]:
+    """A clique grown greedily: vertices by decreasing degree (then index), each kept if adjacent to all kept."""
+    order = sorted(range(len(adjacent)), key=lambda v: (-int(adjacent[v].sum()), v))
+    clique: list[int] = []
+    for vertex in order:
+        if all(adjacent[vertex, other] for other in clique):
+            clique.append(vertex)
+    return clique
 
 
 def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: float) -> tuple[int, ...]:
@@ -250,17 +368,31 @@ def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: floa
 
 
 def _improve(
-    screener: SetScreener, assignment: tuple[int, ...], max_sets: int, threshold: float, key
+    screener: SetScreener,
+    assignment: tuple[int, ...],
+    max_sets: int,
+    key,
+    moves_allowed: int,
+    on_move=None,
+    searched_key=None,
 ) -> tuple[int, ...]:
-    """Move parts of the worst set to other sets (or a new one) while a move improves the objective."""
+    """Move parts of the worst set to other sets (or a new one) while a move improves the objective, at most
+    ``moves_allowed`` moves; ``on_move(number, assignment)`` hears of each.
+
+    Moves are ranked by ``key``; with ``searched_key``, the best :data:`_SEARCHED_MOVES` of them and the current
+    partition are compared by it instead (their sets searched): the quick figure of a large set is pessimistic and
+    flat, so it ranks moves but does not decide them.
+    """
+    decide = searched_key or key
     current = assignment
-    for _ in range(4 * len(assignment)):
-        if key(current)[0] == 1:
+    for number in range(moves_allowed):
+        if on_move is not None:
+            on_move(number, current)
+        if decide(current)[0] == 1:
             return current
-        retained = screener.partition_retained(current)
-        worst_part = _worst_parts(screener, current, retained)
+        retained = screener.partition_estimate(current)
         moves = []
-        for part in worst_part:
+        for part in _worst_parts(screener, current, retained):
             for label in range(min(max(current) + 2, max_sets)):
                 if label != current[part]:
                     moved = list(current)
@@ -269,9 +401,12 @@ def _improve(
         moves = [m for m in dict.fromkeys(moves) if m != current]
         if not moves:
             return current
-        screener.retained(list({s for m in moves for s in sets_of(m)}))
-        best = max(moves, key=key)
-        if key(best) <= key(current):
+        screener.estimate(list({s for m in moves for s in sets_of(m)}))
+        ranked = sorted(moves, key=key, reverse=True)[: _SEARCHED_MOVES if searched_key else 1]
+        if searched_key:
+            screener.retained(list({s for m in ranked for s in sets_of(m)}))
+        best = max(ranked, key=decide)
+        if decide(best) <= decide(current):
             return current
         current = best
     return current
@@ -283,3 +418,123 @@ def _worst_parts(screener: SetScreener, assignment: tuple[int, ...], retained: n
     worst_set = assignment[owners[int(np.argmin(retained))]]
     members = [p for p in range(len(assignment)) if assignment[p] == worst_set]
     return sorted(members, key=lambda p: (float(retained[owners == p].min()), p))[:count]
+
+
+@dataclass
+class PartitionAttempt:
+    """A partition whose every set was designed exactly (METHOD §11 revision 3).
+
+    Attributes
+    ----------
+    assignment : tuple of int
+        Set of every part (canonical).
+    screened_worst : float
+        Least screened ``r`` over its graspable scenarios.
+    exact_worst : float
+        Least exact ``r`` (its sets' exact designs).
+    source : str
+        ``"search"``: proposed by the partition search; ``"one_finger"``:
+        every part in one set, designed to compare.
+    failure : str or None
+        Why a set's finger could not be made (it then keeps nothing), or None.
+    """
+
+    assignment: tuple[int, ...]
+    screened_worst: float
+    exact_worst: float
+    source: str
+    failure: str | None = None
+
+
+def search_judged_exactly(
+    screener: SetScreener,
+    parts: int,
+    config: DesignConfig,
+    progress: Progress,
+    design_exactly: Callable[[frozenset[int]], str | None],
+) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
+    """The partition search of :func:`search_partition`, its proposals judged by their exact sets (METHOD §11 rev. 3).
+
+    The sets of each proposed partition are designed exactly
+    (``design_exactly`` records their exact ``r`` in ``screener``), so the next
+    search sees the exact figure of every set designed so far: a set whose
+    exact design misses ``min_retained`` no longer looks feasible, and the
+    search moves its parts or tries more sets. It goes on only while a
+    proposal that screening said reaches ``min_retained`` misses it exactly
+    and has fewer than ``max`` sets, and stops when the search proposes a
+    partition already designed, or after ``[finger_sets] max`` proposals. If ``min_retained`` is
+    then not reached, one finger for every part is designed too; the chosen
+    partition is the best of those designed by the exact objective, so it
+    never keeps less in its worst scenario than one finger does.
+
+    Parameters
+    ----------
+    screener : SetScreener
+    parts : int
+        Distinct graspable parts.
+    config : DesignConfig
+    progress : callable
+    design_exactly : callable
+        ``design_exactly(set_of_parts)``: designs the set by METHOD §1-9 and
+        calls ``screener.judge_exactly`` with its exact retained qualities
+        (zeros when its finger cannot be made); returns why not, or None.
+
+    Returns
+    -------
+    PartitionOutcome
+        Of the chosen partition, ``retained`` exact.
+    list of PartitionAttempt
+        Every partition designed, in the order designed.
+    """
+    threshold = config.finger_sets.min_retained
+    attempts: list[PartitionAttempt] = []
+
+    def attempt(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
+        failures = [f for f in map(design_exactly, sets_of(assignment)) if f is not None]
+        screened = screener.partition_retained(assignment, exact=False)
+        exact = screener.partition_retained(assignment)
+        failure = failures[0] if failures else None
+        attempts.append(PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source, failure))
+        return attempts[-1]
+
+    outcome = first = search_partition(screener, parts, config, progress)
+    proposals = config.finger_sets.max
+    for proposal in range(proposals):
+        if any(a.assignment == outcome.assignment for a in attempts):
+            break
+        progress("exact sets", proposal, proposals, f"proposal {proposal + 1}: {max(outcome.assignment) + 1} sets")
+        judged = attempt(outcome.assignment, "search")
+        progress(
+            "exact sets",
+            proposal + 1,
+            proposals,
+            f"proposal {proposal + 1}: worst retained screened {judged.screened_worst:.2f}, "
+            f"exact {judged.exact_worst:.2f}",
+        )
+        # METHOD §11 rev. 3: go on only where screening promised min_retained, the exact sets missed it, and max
+        # allows more sets; a proposal screening already found short is as good as the search can tell
+        if (
+            judged.exact_worst >= threshold
+            or judged.screened_worst < threshold
+            or max(outcome.assignment) + 1 >= proposals
+        ):
+            break
+        outcome = search_partition(screener, parts, config, progress)
+    single = tuple([0] * parts)
+    if max(a.exact_worst for a in attempts) < threshold and all(a.assignment != single for a in attempts):
+        attempt(single, "one_finger")
+    # a partition with a finger that cannot be made is delivered only when every one designed has one
+    best = max(
+        attempts,
+        key=lambda a: (
+            a.failure is None,
+            partition_key(a.assignment, screener.partition_retained(a.assignment), threshold),
+        ),
+    )
+    chosen = dataclasses.replace(
+        outcome,
+        assignment=best.assignment,
+        retained=screener.partition_retained(best.assignment),
+        fewest_sets_proven=first.fewest_sets_proven,
+    )
+    return chosen, attempts

@@ -16,6 +16,9 @@ from ..parallel import WorkerPool
 from ..screen import screen
 from ..search import candidate_index, search
 
+#: Scenarios quick-screened per worker task (about a millisecond each).
+_QUICK_SCENARIOS_PER_TASK = 400
+
 
 @dataclass
 class SoloQuality:
@@ -132,8 +135,37 @@ def screen_set(
     return SetScreening(scenario_numbers, choice, areas, len(outcome.evaluated))
 
 
+def quick_screen(
+    prepared: Prepared, scenario_numbers: Sequence[int], picks: Sequence[int], config: DesignConfig
+) -> np.ndarray:
+    """Screened E of one candidate of a set: every scenario's own best sample (one screening, no search).
+
+    Parameters
+    ----------
+    prepared : Prepared
+    scenario_numbers : sequence of int
+        The set's scenarios.
+    picks : sequence of int
+        Per job scenario, its sample of best solo screened E.
+    config : DesignConfig
+
+    Returns
+    -------
+    (n,) float
+        Screened E per scenario, mm²: a candidate the set's search could
+        choose, so the set can keep at least this much of each.
+    """
+    chosen = [prepared.scenarios[m].samples[picks[m]].screen for m in scenario_numbers]
+    return np.array([s.effective_area for s in screen(chosen, config, prepared.lattice).scenarios], dtype=np.float64)
+
+
 class SetScreener:
     """Screened set designs of one job, cached by set, screened in batches over worker processes.
+
+    Sets designed exactly (METHOD §11 revision 3) are judged by their exact
+    retained qualities once :meth:`judge_exactly` has recorded them: the
+    partition search then sees the exact figure, :meth:`screened_retained`
+    still the screened one.
 
     Parameters
     ----------
@@ -144,7 +176,7 @@ class SetScreener:
         Per job scenario.
     config : DesignConfig
     pool : WorkerPool
-        Whose context is ``(prepared, pools, config)``.
+        Whose context is ``(prepared, pools, solo_picks(solos), config)``.
     """
 
     def __init__(
@@ -161,29 +193,76 @@ class SetScreener:
         self.config = config
         self.pool = pool
         self.cache: dict[frozenset[int], np.ndarray] = {}
+        self.quick_cache: dict[frozenset[int], np.ndarray] = {}
+        self.exact: dict[frozenset[int], np.ndarray] = {}
 
-    def retained(self, sets: Sequence[frozenset[int]]) -> list[dict[int, np.ndarray]]:
-        """Screened r of every scenario of every part, per set: ``{part: (scenarios,) r}``."""
-        fresh = list(dict.fromkeys(s for s in sets if s not in self.cache))
-        tasks = [tuple(m for p in sorted(s) for m in self.part_scenarios[p]) for s in fresh]
-        for members, task, screening in zip(fresh, tasks, self.pool.map(_screen_set_task, tasks)):
-            solo = np.array([self.solos[m].screened_best_mm2 for m in task])
-            self.cache[members] = screening.effective_area_mm2 / np.where(solo > 0, solo, 1.0)
-        result = []
-        for members in sets:
-            values, start = {}, 0
-            for part in sorted(members):
-                count = len(self.part_scenarios[part])
-                values[part] = self.cache[members][start : start + count]
-                start += count
-            result.append(values)
-        return result
+    def _scenarios(self, members: frozenset[int]) -> tuple[int, ...]:
+        return tuple(m for p in sorted(members) for m in self.part_scenarios[p])
 
-    def partition_retained(self, assignment: Sequence[int]) -> np.ndarray:
-        """Screened r of every graspable scenario (parts in order) under one partition."""
+    def _ratios(self, members: frozenset[int], areas: np.ndarray) -> np.ndarray:
+        solo = np.array([self.solos[m].screened_best_mm2 for m in self._scenarios(members)])
+        return np.asarray(areas, dtype=np.float64) / np.where(solo > 0, solo, 1.0)
+
+    def _per_part(self, members: frozenset[int], figures: np.ndarray) -> dict[int, np.ndarray]:
+        values, start = {}, 0
+        for part in sorted(members):
+            count = len(self.part_scenarios[part])
+            values[part] = figures[start : start + count]
+            start += count
+        return values
+
+    def quick(self, sets: Sequence[frozenset[int]]) -> list[dict[int, np.ndarray]]:
+        """Quick r of every scenario of every part, per set (:func:`quick_screen`), batched over the workers."""
+        fresh = list(dict.fromkeys(s for s in sets if s not in self.quick_cache))
+        tasks = [self._scenarios(s) for s in fresh]
+        # a quick screening takes about a millisecond per scenario: batch them so a task carries ~100 ms or more
+        size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
+        batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
+        areas = [a for batch in self.pool.map(_quick_task, batches) for a in batch]
+        for members, area in zip(fresh, areas):
+            self.quick_cache[members] = self._ratios(members, area)
+        return [self._per_part(members, self.quick_cache[members]) for members in sets]
+
+    def estimate(self, sets: Sequence[frozenset[int]]) -> list[dict[int, np.ndarray]]:
+        """The best r known of every scenario, per set, without a set search: exact, else screened, else quick."""
+        self.quick([s for s in sets if s not in self.exact and s not in self.cache])
+        return [
+            self._per_part(members, self.exact.get(members, self.cache.get(members, self.quick_cache.get(members))))
+            for members in sets
+        ]
+
+    def partition_estimate(self, assignment: Sequence[int]) -> np.ndarray:
+        """:meth:`estimate` of every graspable scenario (parts in order) under one partition."""
+        per_part: dict[int, np.ndarray] = {}
+        for values in self.estimate(sets_of(assignment)):
+            per_part.update(values)
+        return np.concatenate([per_part[p] for p in range(len(assignment))]) if assignment else np.zeros(0)
+
+    def judge_exactly(self, members: frozenset[int], retained: np.ndarray) -> None:
+        """Record a set's exact ``r = E / E*`` per scenario (its parts in order, their scenarios in order)."""
+        self.exact[members] = np.asarray(retained, dtype=np.float64)
+
+    def retained(self, sets: Sequence[frozenset[int]], exact: bool = True) -> list[dict[int, np.ndarray]]:
+        """r of every scenario of every part, per set: ``{part: (scenarios,) r}``.
+
+        Exact where the set was designed exactly and ``exact`` is true, screened otherwise.
+        """
+        known = self.exact if exact else {}
+        fresh = list(dict.fromkeys(s for s in sets if s not in self.cache and s not in known))
+        self.quick(fresh)
+        tasks = [self._scenarios(s) for s in fresh]
+        for members, screening in zip(fresh, self.pool.map(_screen_set_task, tasks)):
+            searched = self._ratios(members, screening.effective_area_mm2)
+            quick = self.quick_cache[members]
+            # the search ranks by Q = min E; the quick candidate may keep a better worst r: a set keeps the better
+            self.cache[members] = max(searched, quick, key=lambda r: (round(float(r.min()), 9), float(r.mean())))
+        return [self._per_part(members, known.get(members, self.cache.get(members))) for members in sets]
+
+    def partition_retained(self, assignment: Sequence[int], exact: bool = True) -> np.ndarray:
+        """r of every graspable scenario (parts in order) under one partition, exact where known (``exact``)."""
         sets = sets_of(assignment)
         per_part: dict[int, np.ndarray] = {}
-        for values in self.retained(sets):
+        for values in self.retained(sets, exact):
             per_part.update(values)
         return np.concatenate([per_part[p] for p in range(len(assignment))]) if assignment else np.zeros(0)
 
@@ -198,5 +277,15 @@ def sets_of(assignment: Sequence[int]) -> list[frozenset[int]]:
 
 
 def _screen_set_task(context, scenario_numbers: tuple[int, ...]) -> SetScreening:
-    prepared, pools, config = context
+    prepared, pools, picks, config = context
     return screen_set(prepared, scenario_numbers, pools, config)
+
+
+def _quick_task(context, batch: list[tuple[int, ...]]) -> list[np.ndarray]:
+    prepared, pools, picks, config = context
+    return [quick_screen(prepared, numbers, picks, config) for numbers in batch]
+
+
+def solo_picks(solos: Sequence[SoloQuality]) -> list[int]:
+    """Per scenario, its sample of best solo screened E (the first of equals)."""
+    return [int(np.argmax(s.screened_mm2)) if len(s.screened_mm2) else 0 for s in solos]

@@ -61,7 +61,8 @@ def step_inputs(run: JobRun) -> None:
     run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
     try:
         run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
-        run.settings = run.manifest.design_config(config.design)
+        # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere
+        run.settings = run.manifest.design_config(config.design).updated({"compute": config.compute.model_dump()})
         run.build_settings = run.manifest.build_config(config.build)
         run.parts = check_parts(run.folder, run.manifest, config.limits)
     finally:
