@@ -162,7 +162,7 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
         single = design_sets(loaded, single_config).designs[0]
         single_seconds.append(time.perf_counter() - started)
     report = result.report
-    stars = {(s.part, s.pose_index): s.solo_effective_area for s in report.scenarios}
+    stars = {(s.part, s.pose_index): s.solo_quality for s in report.scenarios}
     single_retained = retained_of_single(single, stars)
     sets_median = statistics.median(sets_seconds)
     print(

@@ -58,7 +58,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     """HTML of the finger sets, the pick plan, every scenario's E, E* and retained, and how the split was found."""
     reached = "reached" if sets.min_retained_reached else "<b>not reached</b>"
     rows = "".join(
-        f'<tr><td>{s.set}</td><td class="text">{text(", ".join(s.parts))}</td><td>{s.quality:.1f}</td>'
+        f'<tr><td>{s.set}</td><td class="text">{text(", ".join(s.parts))}</td><td>{s.quality:.3g}</td>'
         f'<td>{s.worst_retained:.3f}</td><td>{s.mean_retained:.3f}</td><td class="text">{s.pad_case}</td><td '
         f'class="text">{text(s.folder)}</td></tr>'
         for s in sets.sets
@@ -72,7 +72,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
     )
     scenarios = "".join(
         f'<tr><td class="text">{text(s.part)}</td><td>{s.pose_index}</td><td>{s.set if s.set is not None else "-"}</td>'
-        f"<td>{s.effective_area:.1f}</td><td>{s.solo_effective_area:.1f}</td><td>{_number(s.retained)}</td><td>{_number(s.screened_retained)}</td></tr>"
+        f"<td>{s.quality:.3g}</td><td>{s.solo_quality:.3g}</td><td>{_number(s.retained)}</td><td>{_number(s.screened_retained)}</td></tr>"
         for s in sets.scenarios
     )
     search = sets.search
@@ -80,9 +80,9 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
         "<h2>Finger sets</h2>",
         f"<p>{len(sets.sets)} finger set(s) of at most {sets.max_sets}. Every graspable scenario should keep "
         f"retained = E / E* &ge; {sets.min_retained:g} of its solo quality E* (the best E of a finger designed for it "
-        f"alone): "
+        f"alone; E is the scenario's quality: E in mm² under the paper's measure, METHOD §7b's measure otherwise): "
         f"{reached}; worst retained {_number(sets.worst_retained)}, median {_number(sets.median_retained)}.</p>",
-        '<table><tr><th>set</th><th class="text">parts</th><th>Q (mm&sup2;)</th><th>worst retained</th><th>mean '
+        '<table><tr><th>set</th><th class="text">parts</th><th>quality</th><th>worst retained</th><th>mean '
         "retained</th>"
         f'<th class="text">pad</th><th class="text">folder</th></tr>{rows}</table>',
         "<h2>Pick plan</h2>",
@@ -92,7 +92,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
         'class="text">copies</th><th>quantity</th>'
         f'<th class="text">grasps</th></tr>{plan}</table>',
         "<h2>Scenarios</h2>",
-        '<table><tr><th class="text">part</th><th>pose</th><th>set</th><th>E (mm&sup2;)</th><th>E* (mm&sup2;)</th>'
+        '<table><tr><th class="text">part</th><th>pose</th><th>set</th><th>E (quality)</th><th>E* (solo)</th>'
         f"<th>retained</th><th>screened retained</th></tr>{scenarios}</table>",
         "<h2>How the sets were found</h2>",
         f"<p>{text(search.description)}.</p>",
@@ -185,7 +185,7 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
     ]
     for entry, step in zip(sets.sets, sets.pick_plan):
         lines.append(
-            f"set {entry.set}: mount {step.finger} (Q = {entry.quality:.1f} mm², worst retained "
+            f"set {entry.set}: mount {step.finger} (quality {entry.quality:.3g}, worst retained "
             f"{entry.worst_retained:.3f})"
         )
         for part in step.parts:

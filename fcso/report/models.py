@@ -277,11 +277,12 @@ class SetScenarioReport(ReportModel):
     part: str
     pose_index: int
     set: int | None = Field(description="Finger set serving it (1 = first); null when the scenario is ungraspable")
-    effective_area: float = Field(
-        description="E of the scenario with its set's finger (exact pocket, METHOD §6-7), mm²"
+    quality: float = Field(
+        description="E of the scenario with its set's finger as printed, read as the scenario's quality (METHOD §11): "
+        "E in mm² under the paper's measure, METHOD §7b's measure (no unit) under the capture measure"
     )
-    solo_effective_area: float = Field(
-        description="E*: best E of a design for this scenario alone (0: ungraspable), mm²"
+    solo_quality: float = Field(
+        description="E*: best quality of a design for this scenario alone (0: ungraspable), as quality"
     )
     retained: float | None = Field(description="E / E*; null when E* = 0")
     screened_retained: float | None = Field(

@@ -37,6 +37,21 @@ def _ratio(value: float, reference: float) -> float:
     return round(float(value) / float(reference), 6)
 
 
+def exact_retained(made, numbers: list[int], solos) -> list[float]:
+    """``r = E / E*`` of every scenario of a set's delivered design, ``E`` read as the scenario's quality (METHOD §11):
+    E under the paper's measure, METHOD §7b's measure under the capture measure, of the pad as printed.
+
+    Parameters
+    ----------
+    made : DesignResult
+        The set's design, its scenarios ``numbers`` (job numbering, increasing).
+    numbers : sequence of int
+    solos : sequence of SoloQuality
+        Per job scenario.
+    """
+    return [s.measure / solos[m].exact for m, s in zip(numbers, made.best.scenarios)]
+
+
 def sets_report(
     prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
 ) -> FingerSetsReport:
@@ -46,10 +61,9 @@ def sets_report(
     exact: dict[int, tuple[int, float]] = {}
     sets, pick_plan = [], []
     for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
-        areas = design_result.report.print_fit.exact.effective_area
-        for m, area in zip(numbers, areas):
-            exact[m] = (label, area)
-        retained = [area / solos[m].exact_mm2 for m, area in zip(numbers, areas)]
+        retained = exact_retained(design_result, numbers, solos)
+        for m, scenario in zip(numbers, design_result.best.scenarios):
+            exact[m] = (label, scenario.measure)
         folder = set_folder(label, several)
         sets.append(
             FingerSetReport(
@@ -81,14 +95,14 @@ def sets_report(
     scenarios = []
     for m, scenario in enumerate(prepared.scenarios):
         label, area = exact.get(m, (None, 0.0))
-        star = solos[m].exact_mm2
+        star = solos[m].exact
         scenarios.append(
             SetScenarioReport(
                 part=scenario.part.name,
                 pose_index=scenario.pose_index,
                 set=label,
-                effective_area=round(float(area), 6),
-                solo_effective_area=round(star, 6),
+                quality=round(float(area), 6),
+                solo_quality=round(star, 6),
                 retained=_ratio(area, star) if star > 0 else None,
                 screened_retained=round(float(screened[m]), 6) if m in screened else None,
             )
@@ -99,8 +113,8 @@ def sets_report(
                 part=entry.part,
                 pose_index=entry.pose_index,
                 set=None,
-                effective_area=0.0,
-                solo_effective_area=0.0,
+                quality=0.0,
+                solo_quality=0.0,
                 retained=None,
                 screened_retained=None,
             )

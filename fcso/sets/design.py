@@ -21,7 +21,7 @@ from ..parts import Part
 from ..progress import Progress
 from ..report.design import part_report
 from ..report.models import DesignReport, FingerSetsReport, JobReport
-from ..report.sets import sets_report, zero_quality_report
+from ..report.sets import exact_retained, sets_report, zero_quality_report
 from .identity import identical_groups
 from .partition import search_judged_exactly
 from .screening import SetScreener, SoloQuality, screening_pools, solo_picks, solo_quality
@@ -103,25 +103,22 @@ def design_sets(
             warnings.append(f"{names} have the same geometry: designed once as {loaded[group[0]].name}")
 
     clock = time.perf_counter()
-    # METHOD §11 judges a set by the effective area each scenario keeps of its solo best (E / E*): the solo qualities
-    # and the partition are found on E whatever ranks a set's candidates (its design below uses [quality] as asked)
-    by_area = config.updated({"quality": {"measure": "paper"}})
     report_progress("solo quality", 0, len(prepared.scenarios), "")
     # no more workers than tasks: forking costs more than one small task
-    with WorkerPool((prepared, by_area), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
+    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
     ungraspable = list(prepared.ungraspable)
     for scenario, solo in zip(prepared.scenarios, solos):
-        if solo.exact_mm2 <= 0:
+        if solo.exact <= 0:
             ungraspable.append(zero_quality_report(scenario))
             warnings.append(
                 f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left "
                 f"out"
             )
     part_scenarios = [
-        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact_mm2 > 0]
+        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact > 0]
         for u in range(len(unique))
     ]
     graspable = [u for u in range(len(unique)) if part_scenarios[u]]
@@ -159,15 +156,15 @@ def design_sets(
 
     # no more workers than sets to screen: one part has one partition
     with WorkerPool(
-        (prepared, pools, solo_picks(solos), by_area),
+        (prepared, pools, solo_picks(solos), config),
         prepared.jobs if len(graspable) > 1 else 1,
         config.compute.scheduler,
     ) as pool:
-        screener = SetScreener(prepared, set_scenarios, solos, by_area, pool)
+        screener = SetScreener(prepared, set_scenarios, solos, config, pool)
         outcome, attempts = search_judged_exactly(
             screener,
             len(graspable),
-            by_area,
+            config,
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
             design_exactly,
         )
@@ -227,21 +224,6 @@ def design_sets(
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)
-
-
-def exact_retained(made: DesignResult, numbers: Sequence[int], solos: Sequence[SoloQuality]) -> list[float]:
-    """``r = E / E*`` of every scenario of a set's exact design (E of the exact pocket, as METHOD §11 scores sets).
-
-    Parameters
-    ----------
-    made : DesignResult
-        The set's design, its scenarios ``numbers`` (job numbering, increasing).
-    numbers : sequence of int
-    solos : sequence of SoloQuality
-        Per job scenario.
-    """
-    areas = made.report.print_fit.exact.effective_area
-    return [float(area) / solos[m].exact_mm2 for m, area in zip(numbers, areas)]
 
 
 def _solo_task(context, number: int) -> SoloQuality:

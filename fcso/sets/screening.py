@@ -22,23 +22,24 @@ _QUICK_SCENARIOS_PER_TASK = 400
 
 @dataclass
 class SoloQuality:
-    """A scenario designed alone (METHOD §11).
+    """A scenario designed alone (METHOD §11): its qualities are E in mm² under the paper's measure, METHOD §7b's
+    measure (no unit) under the capture measure, as METHOD §11 reads ``E`` "as that scenario quality".
 
     Attributes
     ----------
-    screened_mm2 : (N,) float
-        Screened E of each valid sample as the scenario's only sample, mm².
-    screened_best_mm2 : float
-        Their maximum: the screened ``E*``, mm².
-    exact_mm2 : float
-        ``E*``: the best exact E among the ``search.exact_top_k`` best screened samples, mm².
+    screened : (N,) float
+        Screened quality of each valid sample as the scenario's only sample.
+    screened_best : float
+        Their maximum: the screened ``E*``.
+    exact : float
+        ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
         The sample giving ``E*``.
     """
 
-    screened_mm2: np.ndarray
-    screened_best_mm2: float
-    exact_mm2: float
+    screened: np.ndarray
+    screened_best: float
+    exact: float
     sample: int
 
 
@@ -69,7 +70,7 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
     """Per scenario, the ``size`` samples with the best solo screened E, in increasing sample order."""
-    return [np.sort(np.argsort(-s.screened_mm2, kind="stable")[:size]) for s in solos]
+    return [np.sort(np.argsort(-s.screened, kind="stable")[:size]) for s in solos]
 
 
 @dataclass
@@ -82,15 +83,15 @@ class SetScreening:
         Scenario numbers of the set (job numbering).
     choice : tuple of int
         The best screened candidate: one sample per scenario (job sample numbering).
-    effective_area_mm2 : (n,) float
-        Its screened E per scenario, mm².
+    quality : (n,) float
+        Its screened quality per scenario (E in mm² under the paper's measure, METHOD §7b's measure otherwise).
     evaluated : int
         Candidates screened.
     """
 
     scenarios: tuple[int, ...]
     choice: tuple[int, ...]
-    effective_area_mm2: np.ndarray
+    quality: np.ndarray
     evaluated: int
 
 
@@ -130,7 +131,7 @@ def screen_set(
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
     best = max(outcome.evaluated, key=lambda c: (*outcome.evaluated[c], -candidate_index(c, counts)))
-    areas = np.array([s.effective_area for s in screened(best).scenarios], dtype=np.float64)
+    areas = np.array([s.measure for s in screened(best).scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
     return SetScreening(scenario_numbers, choice, areas, len(outcome.evaluated))
 
@@ -156,7 +157,7 @@ def quick_screen(
         choose, so the set can keep at least this much of each.
     """
     chosen = [prepared.scenarios[m].samples[picks[m]].screen for m in scenario_numbers]
-    return np.array([s.effective_area for s in screen(chosen, config, prepared.lattice).scenarios], dtype=np.float64)
+    return np.array([s.measure for s in screen(chosen, config, prepared.lattice).scenarios], dtype=np.float64)
 
 
 class SetScreener:
@@ -200,7 +201,7 @@ class SetScreener:
         return tuple(m for p in sorted(members) for m in self.part_scenarios[p])
 
     def _ratios(self, members: frozenset[int], areas: np.ndarray) -> np.ndarray:
-        solo = np.array([self.solos[m].screened_best_mm2 for m in self._scenarios(members)])
+        solo = np.array([self.solos[m].screened_best for m in self._scenarios(members)])
         return np.asarray(areas, dtype=np.float64) / np.where(solo > 0, solo, 1.0)
 
     def _per_part(self, members: frozenset[int], figures: np.ndarray) -> dict[int, np.ndarray]:
@@ -252,7 +253,7 @@ class SetScreener:
         self.quick(fresh)
         tasks = [self._scenarios(s) for s in fresh]
         for members, screening in zip(fresh, self.pool.map(_screen_set_task, tasks)):
-            searched = self._ratios(members, screening.effective_area_mm2)
+            searched = self._ratios(members, screening.quality)
             quick = self.quick_cache[members]
             # the search ranks by Q = min E; the quick candidate may keep a better worst r: a set keeps the better
             self.cache[members] = max(searched, quick, key=lambda r: (round(float(r.min()), 9), float(r.mean())))
@@ -288,4 +289,4 @@ def _quick_task(context, batch: list[tuple[int, ...]]) -> list[np.ndarray]:
 
 def solo_picks(solos: Sequence[SoloQuality]) -> list[int]:
     """Per scenario, its sample of best solo screened E (the first of equals)."""
-    return [int(np.argmax(s.screened_mm2)) if len(s.screened_mm2) else 0 for s in solos]
+    return [int(np.argmax(s.screened)) if len(s.screened) else 0 for s in solos]

@@ -45,8 +45,10 @@ NARROWING_WIDER = knob_part("narrowing-wider", 15.0, 0.75)
 
 
 def config(**sections):
-    # exact pockets: the retained qualities compare solo and shared designs as METHOD §11 scores them
+    # exact pockets and the paper's measure: the retained qualities are E / E*, which the tests compute from
+    # the designs' own contact (under the capture measure METHOD §11 reads E as the scenario's measure)
     sections["finger_sets"] = {"min_retained": MIN_RETAINED, **sections.get("finger_sets", {})}
+    sections.setdefault("quality", {"measure": "paper"})
     return small_config(print={"profile": "custom"}, **sections)
 
 
@@ -110,7 +112,7 @@ def test_a_provably_conflicting_pair_goes_to_two_sets(conflicting_together):
     assert min(sets.search.blocking_pairs[0].retained) < MIN_RETAINED
     assert sets.min_retained_reached and sets.worst_retained >= MIN_RETAINED
     # E* is the solo design's quality (the widening knob's contact samples have other seeds in the job)
-    assert [s.solo_effective_area for s in sets.scenarios] == pytest.approx(solo, rel=0.03)
+    assert [s.solo_quality for s in sets.scenarios] == pytest.approx(solo, rel=0.03)
     assert [len(d.report.scenarios) for d in result.designs] == [1, 1]
     assert [step.set for step in sets.pick_plan] == [1, 2]
     assert [step.finger for step in sets.pick_plan] == ["set-1/finger.stl", "set-2/finger.stl"]
@@ -139,7 +141,7 @@ def test_a_set_that_screening_accepts_and_its_exact_design_rejects_is_split():
     assert sets.worst_retained >= first.exact_worst_retained
     # the report's worst is the exact one, read from the delivered sets' own reports
     kept = [
-        area / scenario.solo_effective_area
+        area / scenario.solo_quality
         for design, entry in zip(result.designs, sets.sets)
         for area, scenario in zip(
             design.report.print_fit.exact.effective_area, [s for s in sets.scenarios if s.set == entry.set]
