@@ -20,6 +20,7 @@ from .models import (
     PickStep,
     SetScenarioReport,
     UngraspableReport,
+    chosen_candidate,
 )
 
 if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
@@ -39,7 +40,7 @@ def _ratio(value: float, reference: float) -> float:
 
 def exact_retained(made, numbers: list[int], solos) -> list[float]:
     """``r = E / E*`` of every scenario of a set's delivered design, ``E`` read as the scenario's quality (METHOD §11):
-    E under the paper's measure, METHOD §7b's measure under the capture measure, of the pad as printed.
+    E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
 
     Parameters
     ----------
@@ -49,7 +50,9 @@ def exact_retained(made, numbers: list[int], solos) -> list[float]:
     solos : sequence of SoloQuality
         Per job scenario.
     """
-    return [s.measure / solos[m].exact for m, s in zip(numbers, made.best.scenarios)]
+    # the chosen candidate's exact evaluation, as the solo E* are evaluated (fcso.sets.screening.solo_quality)
+    chosen = chosen_candidate(made.report)
+    return [q.measure / solos[m].exact for m, q in zip(numbers, chosen.per_scenario)]
 
 
 def sets_report(
@@ -62,8 +65,8 @@ def sets_report(
     sets, pick_plan = [], []
     for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
         retained = exact_retained(design_result, numbers, solos)
-        for m, scenario in zip(numbers, design_result.best.scenarios):
-            exact[m] = (label, scenario.measure)
+        for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
+            exact[m] = (label, quality.measure)
         folder = set_folder(label, several)
         sets.append(
             FingerSetReport(

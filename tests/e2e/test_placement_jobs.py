@@ -28,7 +28,7 @@ from tests.fcsod_helpers import (
     free_port,
     start_daemon,
     start_subscriber,
-    without_flat_notes,
+    without_design_notes,
     write_config,
 )
 
@@ -94,7 +94,7 @@ def test_loose_parts_are_packed_with_the_fingers(cell, capsys):
     manifest = '[[parts]]\nfile = "cube.stl"\nquantity = 2\n\n[[parts]]\nfile = "angle_block.STL"\nunits = "inch"\n'
     drop_job(base / "watch" / "loose", {"job.toml": manifest, "cube.stl": CUBE, "angle_block.STL": ANGLE_BLOCK})
     done = finished(subscriber, "loose")
-    assert done["body"]["state"] == "done" and without_flat_notes(done["body"]["warnings"]) == [], done
+    assert done["body"]["state"] == "done" and without_design_notes(done["body"]["warnings"]) == [], done
     job_id = done["job_id"]
     out = base / "out" / job_id
     assert "build.3mf" in done["body"]["outputs"]
@@ -138,7 +138,7 @@ def test_3mf_build_keeps_its_parts_and_gets_the_fingers(cell, tmp_path):
     plate = write_build_3mf(given, tmp_path / "plate.3mf")
     drop_job(base / "watch" / "placed-build", {"plate.3mf": plate})
     done = finished(subscriber, "placed-build")
-    assert done["body"]["state"] == "done" and without_flat_notes(done["body"]["warnings"]) == [], done
+    assert done["body"]["state"] == "done" and without_design_notes(done["body"]["warnings"]) == [], done
     out = base / "out" / done["job_id"]
 
     report = json.loads((out / "report.json").read_text())
@@ -173,7 +173,7 @@ def test_fingers_that_do_not_fit_leave_the_design_delivered(cell):
 
     message = _live(subscriber, done["job_id"], "placement")["body"]
     assert message["fingers_fit"] is False and message["extra_height_needed_mm"] > 0
-    assert without_flat_notes(body["warnings"]) == [message["message"]] and "do not fit" in message["message"]
+    assert without_design_notes(body["warnings"]) == [message["message"]] and "do not fit" in message["message"]
     report = json.loads((out / "report.json").read_text())
     placement = report["placement"]
     assert (

@@ -38,6 +38,7 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
     config = fcso.DesignConfig().updated(upright_grasp_settings(mesh))
     report = fcso.design([Part(name="cube", path="featured_cube", mesh=mesh)], config).report
     hold = config.quality.hold_force_n
+    pad_area = config.sampler.length_mm * config.sampler.width_mm
     for candidate in report.candidates:
         for quality in candidate.per_scenario:
             assert 0.0 <= quality.capture <= 1.0
@@ -47,7 +48,10 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
             else:
                 assert quality.holding_n is None
                 factor = quality.capture
-            assert quality.measure == pytest.approx(factor * quality.effective_area, rel=1e-4, abs=1e-4)
+            # capture x holding in bands of 1/20, E / (E + L W) within a band (METHOD §7b, docs/method.md)
+            within = quality.effective_area / (quality.effective_area + pad_area)
+            expected = (np.floor(20 * factor + 1e-9) + within) / 20
+            assert quality.measure == pytest.approx(expected, rel=1e-4, abs=1e-4)
         assert candidate.quality == pytest.approx(min(q.measure for q in candidate.per_scenario), abs=1e-6)
     exact = [c for c in report.candidates if c.evaluation == "exact"]
     chosen = next(c for c in exact if c.index == report.best)

@@ -113,7 +113,13 @@ def test_search_finds_the_screened_optimum_on_a_real_design():
 
 
 def test_exact_numbers_are_marked_and_never_above_the_upper_bound():
-    config = small_config(sampler={"stride_mm": 8.0}, poses={"select": [0, 1]}, search={"exact_top_k": 12})
+    # the paper's Q, whose upper bound is the samples' bounds on E (the capture measure's is in its own terms)
+    config = small_config(
+        sampler={"stride_mm": 8.0},
+        poses={"select": [0, 1]},
+        search={"exact_top_k": 12, "report_candidates": 5000},
+        quality={"measure": "paper"},
+    )
     report = fcso.design([data_path("solar_tracker.stl")], config).report
     exact = [c for c in report.candidates if c.evaluation == "exact"]
     assert len(exact) == report.search.exact == 12

@@ -28,16 +28,16 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     result = fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
     designed_best, designed_grasp = result.report.best, result.report.grasps[0]
 
-    chosen, verification, _, ranking = verify_top(result, 2, VerifyConfig(trials=2, cache_dir=tmp_path))
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=tmp_path))
 
-    # the best by Q sits on the horizontal ridges and lets a displaced part slide; the second, on the vertical ridge,
-    # centres it
-    assert [r.rank_by_quality for r in ranking] == [1, 2]
-    assert [r.passed for r in ranking] == [False, True]
+    # the two best by Q sit on the horizontal ridges and let a displaced part slide; the third, on the vertical
+    # ridge, centres it, and verification stops there
+    assert [r.rank_by_quality for r in ranking] == [1, 2, 3]
+    assert [r.passed for r in ranking] == [False, False, True]
     assert ranking[0].index == designed_best and ranking[0].success_rates == [0.0]
-    assert chosen.report.best == ranking[1].index and verification.passed
-    assert verification.choice.startswith(f"candidate {ranking[1].index} (rank 2 by the measure")
-    assert any(f"verification delivered candidate {ranking[1].index}" in w for w in chosen.report.warnings)
+    assert chosen.report.best == ranking[2].index and verification.passed
+    assert verification.choice.startswith(f"candidate {ranking[2].index} (rank 3 by the measure")
+    assert any(f"verification delivered candidate {ranking[2].index}" in w for w in chosen.report.warnings)
     # the TCP is at the pad's mid-height: the chosen pad reaches down onto the vertical ridge (z < 20 mm), the designed
     # one does not
     half_pad = config.sampler.width_mm / 2.0
