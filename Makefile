@@ -22,9 +22,10 @@ lint: setup
 	$(VENV)/bin/ruff check fcso fcsod tests benchmarks examples docs/images
 	$(VENV)/bin/ruff format --check fcso fcsod tests benchmarks examples docs/images
 
-# pytest exits 5 when it collected no tests: that is a failure here.
+# pytest exits 5 when it collected no tests: that is a failure here. The test files run on every core
+# (at most 4 workers); a file's tests stay on one worker, which builds its module fixtures once.
 test: setup lint
-	$(PY) -m pytest -q; rc=$$?; \
+	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc
 

@@ -248,7 +248,16 @@ def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunni
     try:
         _daemon_says(daemon, "job already known: not run again", 30, job_id=done["job_id"])
         _daemon_says(daemon, "job already known: not run again", 30, job_id=failed["job_id"])
-        late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "design", 30)
+        # the queryable's replies come one by one: wait for every topic, not for the first (design came before
+        # plan and placement, and stopping there lost them)
+        answered = set()
+
+        def every_topic(v) -> bool:
+            if isinstance(v, dict) and v.get("source") == "query" and v.get("job_id") == done["job_id"]:
+                answered.add(v["topic"])
+            return TOPICS <= answered
+
+        late.wait_for(every_topic, 60)
     finally:
         late.stop()
         assert daemon.stop() == 0
