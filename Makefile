@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup lint test demo paper bench schema clean
+.PHONY: setup lint browser test demo paper bench schema clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -22,9 +22,14 @@ lint: setup
 	$(VENV)/bin/ruff check fcso fcsod tests benchmarks examples docs/images
 	$(VENV)/bin/ruff format --check fcso fcsod tests benchmarks examples docs/images
 
+# the report's 3D view is tested in a real headless browser: Debian's Chromium, installed when missing
+browser:
+	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium)
+
 # pytest exits 5 when it collected no tests: that is a failure here. The test files run on every core
 # (at most 4 workers); a file's tests stay on one worker, which builds its module fixtures once.
-test: setup lint
+test: setup lint browser
 	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc

@@ -270,9 +270,9 @@ def test_a_panel_draws_in_data_coordinates_inside_its_rectangle_only():
 
 
 def chromium() -> str:
-    """Debian's Chromium (``.ci/run`` installs it); the test fails, not skips, without it."""
+    """Debian's Chromium (``make test`` installs it); the test fails, not skips, without it."""
     found = shutil.which("chromium") or shutil.which("chromium-browser")
-    assert found, "chromium is not installed: .ci/run installs it (apt-get install chromium)"
+    assert found, "chromium is not installed: make test installs it (apt-get install chromium)"
     return found
 
 
