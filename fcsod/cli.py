@@ -233,17 +233,21 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
 
 
-def _journal_path(config: DaemonConfig) -> Path:
-    return config.state.dir / "journal.sqlite3"
+def _existing_journal(config: DaemonConfig) -> Path | None:
+    """The daemon's journal, or None after saying on stderr that there is none (the operator commands need it)."""
+    path = config.state.dir / "journal.sqlite3"
+    if path.is_file():
+        return path
+    print(f"fcsod: {path}: no journal (the daemon has not run with this state folder)", file=sys.stderr)
+    return None
 
 
 def _jobs(args: argparse.Namespace) -> int:
     from .service.journal import read_jobs
 
     config = load_daemon_config(args.config)
-    path = _journal_path(config)
-    if not path.is_file():
-        print(f"fcsod: {path}: no journal (the daemon has not run with this state folder)", file=sys.stderr)
+    path = _existing_journal(config)
+    if path is None:
         return EXIT_BAD_INPUT
     rows = [r for r in read_jobs(path) if not args.state or r.state in args.state]
     if args.json:
@@ -265,9 +269,8 @@ def _request(args: argparse.Namespace) -> int:
     from .service.journal import read_jobs, read_request, submit_request
 
     config = load_daemon_config(args.config)
-    path = _journal_path(config)
-    if not path.is_file():
-        print(f"fcsod: {path}: no journal (the daemon has not run with this state folder)", file=sys.stderr)
+    path = _existing_journal(config)
+    if path is None:
         return EXIT_BAD_INPUT
     matches = [r.job_id for r in read_jobs(path) if r.job_id == args.job] or [
         r.job_id for r in read_jobs(path) if r.job_id.startswith(args.job)
