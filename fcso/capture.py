@@ -115,6 +115,9 @@ def fitted_pad_heights(
                     np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
         heights = grown
     if lead_in_deg > 0 and np.isfinite(heights).any():
+        # raised to the floor first: the draft then stops where it meets the floor, a few cells
+        # out, instead of spreading below it over the whole grid (the same result, ~30x fewer passes)
+        heights = np.maximum(heights, floor_mm)
         drop = cell_mm / np.tan(np.radians(lead_in_deg))
         diagonal = drop * np.sqrt(2.0)
         for _ in range(heights.shape[0] + heights.shape[1]):
