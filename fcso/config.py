@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -265,6 +265,12 @@ class PrintConfig(_Section):
         ge=0,
         lt=60,
         description="Draft of the pocket walls, wider at the pad face and exact at depth, degrees; 0 disables",
+    )
+    lead_in_alternatives_deg: list[Annotated[float, Field(gt=0, lt=60)]] = Field(
+        [30.0, 45.0],
+        description="Wider drafts printed instead of lead_in_deg when the chosen pad captures more of the start errors "
+        "with one (METHOD §7b: by at least 2 of 20 starts; the widest capture, then the smallest angle), degrees; "
+        "only when lead_in_deg > 0; [] always prints lead_in_deg",
     )
     min_wall_mm: float | None = Field(
         None,

@@ -14,7 +14,15 @@ import trimesh
 from . import __version__
 from .config import DesignConfig
 from .errors import NoGraspError
-from .evaluate import CandidateEvaluation, SampleGeometry, Scenario, evaluate_candidate, sample_geometry, versus_flat
+from .evaluate import (
+    CandidateEvaluation,
+    SampleGeometry,
+    Scenario,
+    evaluate_candidate,
+    printed_lead_in_deg,
+    sample_geometry,
+    versus_flat,
+)
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
 from .geometry import to_manifold
 from .measure import quality_words, scenario_measure
@@ -230,6 +238,9 @@ def finish_candidate(
     ``report.json`` lists them, and the print-fit warnings.
     """
     choice = tuple(choice)
+    lead_in, why = printed_lead_in_deg(scenarios, choice, config)
+    if why is not None:
+        config = config.updated({"print": {"lead_in_deg": lead_in}})
     fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True)
     fit, sampler = config.print.resolved(), config.sampler
     exact = (
@@ -238,7 +249,7 @@ def finish_candidate(
         else fitted
     )
     thinnest = thinnest_wall_mm(fitted.fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
-    warnings: list[str] = []
+    warnings: list[str] = [] if why is None else [why]
     # the opening's ball is a polyhedron and the wall is measured by rays: 0.05 mm of slack
     if fit["min_wall_mm"] > 0 and thinnest < fit["min_wall_mm"] - 0.05:
         warnings.append(

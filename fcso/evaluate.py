@@ -304,6 +304,54 @@ def versus_flat(
     return compared
 
 
+def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig) -> tuple[float, str | None]:
+    """The draft a candidate is printed with: ``lead_in_deg``, or a wider one that captures more (METHOD §7b).
+
+    A pocket's lead-in bounds the start errors it guides in: at depth D a
+    draft opens the pocket by D tan(angle) per side, 1.07 mm at 15° and
+    D = 4 mm, under the ±2 mm of the precision test (measured: a ribbed block
+    seats 5/10 with 15°, 10/10 with 30° and 45°). A wider draft also lets a
+    part ride up and out more easily, so it is taken only when its worst
+    scenario's capture gains at least :data:`FLAT_MARGIN`; among equal
+    captures the smallest angle.
+
+    Parameters
+    ----------
+    scenarios : list of Scenario
+    choice : sequence of int
+        The candidate: one sample per scenario.
+    config : DesignConfig
+
+    Returns
+    -------
+    lead_in_deg : float
+        Degrees.
+    why : str or None
+        A sentence when a wider draft was taken.
+    """
+    lead_in = config.print.resolved()["lead_in_deg"]
+    alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
+    if lead_in <= 0 or not alternatives or config.quality.measure != "capture":
+        return lead_in, None
+    grid = ScreenGrid.for_config(config)
+    samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
+
+    def worst_capture(angle: float) -> float:
+        drafted = config.updated({"print": {"lead_in_deg": angle}})
+        landscapes = pad_landscapes([s.screen for s in samples], [s.centres_uv_mm for s in samples], grid, drafted)
+        return min(landscape.fraction for landscape in landscapes)
+
+    captures = {angle: worst_capture(angle) for angle in [lead_in, *alternatives]}
+    widest = max(captures.values())
+    if widest < captures[lead_in] + FLAT_MARGIN:
+        return lead_in, None
+    angle = min(a for a, capture in captures.items() if capture >= widest - 1e-9)
+    return angle, (
+        f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
+        f"the worst scenario's capture is {captures[angle]:.2f} against {captures[lead_in]:.2f}"
+    )
+
+
 def fitted_geometries(
     scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
 ) -> list[PadGeometry]:

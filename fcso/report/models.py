@@ -256,7 +256,9 @@ class PrintFitReport(ReportModel):
 
     profile: str
     clearance_mm: float = Field(description="Effective clearance (profile or explicit), mm")
-    lead_in_deg: float = Field(description="Effective lead-in draft, degrees")
+    lead_in_deg: float = Field(
+        description="Lead-in draft as printed: the effective lead_in_deg, or the wider alternative taken, degrees"
+    )
     min_wall_mm: float = Field(description="Effective minimum wall, mm")
     density_g_cm3: float = Field(description="Effective part material density, g/cm³")
     thinnest_wall_mm: float | None = Field(

@@ -9,6 +9,7 @@ import fcso
 from examples.sim_parts import featured_cube, plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
 from fcso.capture import pad_landscapes
 from fcso.design import prepare
+from fcso.evaluate import printed_lead_in_deg
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
@@ -86,6 +87,31 @@ def test_a_pocket_without_lead_in_jams_where_the_same_pocket_with_one_does_not()
     assert not _captured_at(jammed, 1.0) and not _captured_at(jammed, -1.0)
     assert _captured_at(guided, 1.0) and _captured_at(guided, -1.0)
     assert guided.fraction > jammed.fraction + 0.3
+
+
+def test_a_wider_lead_in_is_printed_where_the_default_draft_cannot_reach_the_start_errors():
+    # a 15 degree draft opens the rib's pocket by D tan 15 = 1.07 mm per side at the pad face, short of the
+    # test's 2 mm start errors; 45 degrees opens it by D = 4 mm
+    prepared, config = _prepared(ribbed_block(), "ribbed")
+    scenarios, rib = prepared.scenarios, _sample_at(prepared, 0.0, 5.0)
+    choice = [scenarios[0].samples.index(rib)]
+    assert not _captured_at(_landscape(prepared, config, rib), 2.0)
+    angle, why = printed_lead_in_deg(scenarios, choice, config)
+    assert angle == 45.0 and "45° instead of 15°" in why
+    drafted = config.updated({"print": {"lead_in_deg": angle}})
+    assert _captured_at(_landscape(prepared, drafted, rib), 2.0) and _captured_at(
+        _landscape(prepared, drafted, rib), -2.0
+    )
+    # only the listed drafts, and never a draft where the profile has none (the paper's exact pocket)
+    assert (
+        printed_lead_in_deg(scenarios, choice, config.updated({"print": {"lead_in_alternatives_deg": [30.0]}}))[0]
+        == 30.0
+    )
+    assert printed_lead_in_deg(scenarios, choice, config.updated({"print": {"lead_in_alternatives_deg": []}})) == (
+        15.0,
+        None,
+    )
+    assert printed_lead_in_deg(scenarios, choice, config.updated({"print": {"profile": "custom"}})) == (0.0, None)
 
 
 def test_capture_chooses_the_ridge_that_centres_where_q_chooses_the_larger_area():
