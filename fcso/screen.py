@@ -443,23 +443,24 @@ def screen(
     done = carved.pairs if carved is not None else frozenset()
     carving = carve_heights(chosen, [p for p in range(len(chosen)) if p not in done], carved)
     floor = np.float32(floor)
-    top_low, top_high = np.maximum(carving.top_mm, floor), np.maximum(carving.top_high_mm, floor)
-    second = np.maximum(carving.second_mm, floor)
     results = []
     for pair_number in range(len(chosen)):
         areas, bins, offsets = 0.0, [], []
         for index in (2 * pair_number, 2 * pair_number + 1):
             g = geometries[index]
             cell = g.point_cell
+            # the pad's heights under this geometry's points only: a few hundred cells, not the grid
+            top_low = np.maximum(carving.top_mm[cell], floor)
             if g.good:
-                others = np.where(carving.owner[cell] == index, second[cell], top_low[cell])
+                others = np.where(carving.owner[cell] == index, np.maximum(carving.second_mm[cell], floor), top_low)
                 contact = g.point_u_mm >= others - eps
                 offset = 0.0
             else:
-                above = g.point_u_mm - top_high[cell]
+                top_high = np.maximum(carving.top_high_mm[cell], floor)
+                above = g.point_u_mm - top_high
                 offset = max(float(above.max()) - eps, 0.0) if len(above) else 0.0
                 seated = g.point_u_mm - offset
-                contact = (seated >= top_low[cell] - eps) & (seated <= top_high[cell] + eps)
+                contact = (seated >= top_low - eps) & (seated <= top_high + eps)
             areas += float(contact.sum()) * g.area_per_point_mm2
             bins.append(g.point_bin[contact])
             offsets.append(offset)
