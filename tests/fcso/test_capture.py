@@ -8,7 +8,7 @@ import pytest
 import fcso
 from examples.sim_parts import featured_cube, plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
 from fcso.capture import pad_landscapes
-from fcso.design import prepare
+from fcso.design import finish_candidate, prepare
 from fcso.evaluate import printed_lead_in_deg
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
@@ -102,6 +102,9 @@ def test_a_wider_lead_in_is_printed_where_the_default_draft_cannot_reach_the_sta
     assert _captured_at(_landscape(prepared, drafted, rib), 2.0) and _captured_at(
         _landscape(prepared, drafted, rib), -2.0
     )
+    # the candidate is built and reported with it
+    _, _, print_fit, warnings = finish_candidate(scenarios, choice, config)
+    assert print_fit.lead_in_deg == 45.0 and any("45° instead of 15°" in w for w in warnings)
     # only the listed drafts, and never a draft where the profile has none (the paper's exact pocket)
     assert (
         printed_lead_in_deg(scenarios, choice, config.updated({"print": {"lead_in_alternatives_deg": [30.0]}}))[0]
