@@ -128,7 +128,9 @@ def step_reuse(run: JobRun) -> None:
         run.log("info", "finger library: not every part is served by a delivered finger; designing")
         return
     run.reuse = served
-    run.log("info", f"finger library: every part is served by finger {', '.join(_served_words(served))}")
+    run.log(
+        "info", f"finger library: every part is served by finger {', '.join(_served_words(served))}: nothing to design"
+    )
 
 
 def _fitted_parts(run: JobRun, library: FingerLibrary) -> dict[str, FittedPart] | None:
