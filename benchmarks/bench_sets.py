@@ -42,6 +42,7 @@ import numpy as np
 
 import fcso
 from fcso.geometry import to_trimesh
+from fcso.report.models import chosen_candidate
 from fcso.sets import design_sets
 
 REPO = Path(__file__).resolve().parent.parent
@@ -139,11 +140,15 @@ def job(parts: int) -> list[fcso.Part]:
 
 
 def retained_of_single(single: fcso.DesignResult, stars: dict[tuple[str, int], float]) -> np.ndarray:
-    """E / E* of every graspable scenario with one finger for all (E* from the sets run)."""
-    exact = single.report.print_fit.exact.effective_area
+    """E / E* of every graspable scenario with one finger for all (E* from the sets run).
+
+    E is read as the sets' report reads it (fcso.report.sets.exact_retained): the chosen candidate's exact measure
+    per scenario, E in mm² under the paper's measure, METHOD §7b's measure under the capture measure.
+    """
+    measures = [q.measure for q in chosen_candidate(single.report).per_scenario]
     values = [
         e / stars[(s.part, s.pose_index)]
-        for s, e in zip(single.report.scenarios, exact)
+        for s, e in zip(single.report.scenarios, measures)
         if stars.get((s.part, s.pose_index), 0) > 0
     ]
     return np.array(values)

@@ -22,6 +22,7 @@ from .errors import (  # noqa: E402
 from .output.files import output_files, write_outputs, write_set_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
+from .reuse import KeptScenario, PadFit, fit_pads  # noqa: E402
 from .rles import rles  # noqa: E402
 from .sets import SetsResult, design_sets  # noqa: E402
 
@@ -39,6 +40,9 @@ __all__ = [
     "Part",
     "design",
     "design_sets",
+    "fit_pads",
+    "KeptScenario",
+    "PadFit",
     "SetsResult",
     "write_set_outputs",
     "load_config",

@@ -111,8 +111,8 @@ class ReuseConfig(_Section):
         True,
         description=(
             "Keep every delivered finger set in the cell's library (<state.dir>/fingers.sqlite3) and serve a job whose "
-            "parts all have the geometry of parts of active library fingers with those fingers: no new finger is "
-            "designed or printed"
+            "parts all have the geometry of parts of active library fingers, or keep min_retained on them (see "
+            "similar_size_percent), with those fingers: no new finger is designed or printed"
         ),
     )
     reprint_after_jobs: int = Field(
@@ -120,6 +120,17 @@ class ReuseConfig(_Section):
         ge=1,
         description="Wear limit: a finger that served this many jobs (its own included) serves no more; the next "
         "job of its parts designs and prints a new one",
+    )
+    similar_size_percent: float = Field(
+        5.0,
+        ge=0,
+        le=100,
+        description=(
+            "A part of no delivered geometry is evaluated on the pad of a library finger (METHOD §11b) when a part the "
+            "finger serves has every bounding-box side and the volume within this percentage of its own; the finger "
+            "serves it when every scenario keeps [finger_sets] min_retained of its solo quality. 0: only parts of the "
+            "same geometry are served"
+        ),
     )
 
 

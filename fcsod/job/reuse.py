@@ -1,8 +1,12 @@
 """Finger reuse in a job (METHOD §11b): serve a job from the cell's finger library, or add the job's fingers to it.
 
 After loading, :func:`step_reuse` asks the library (:mod:`fcsod.service.fingers`)
-for delivered fingers whose parts have the geometry of every part of the job.
-When they serve it, the job designs nothing and prints no finger:
+for delivered fingers whose parts have the geometry of every part of the job;
+a part of no delivered geometry is evaluated on the pads of the fingers that
+serve parts of about its size (``[reuse] similar_size_percent``) with
+:func:`fcso.fit_pads`, and is served by the one it keeps most on, when every
+one of its scenarios keeps ``[finger_sets] min_retained`` of its solo quality.
+When they serve every part, the job designs nothing and prints no finger:
 :func:`step_reused_outputs` writes ``build.3mf`` with the parts alone, a
 ``report.json`` that names the reused fingers (:class:`ReuseReport`), and
 publishes the grasps, the placement and a pick plan whose sets name the
@@ -17,12 +21,13 @@ import io
 from pathlib import Path
 
 import trimesh
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 import fcso
+from fcso.config import DesignConfig
 from fcso.output.layout import REPORT_JSON, set_finger_path
 from fcso.report.design import part_report
-from fcso.report.models import GraspReport, PartReport, PickPart
+from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 
 from .. import __version__
 from ..build.build3mf import export_build_3mf
@@ -30,22 +35,37 @@ from ..build.placement import place_fingers
 from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now
 from ..config import DaemonConfig
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
-from ..service.fingers import LIBRARY_NAME, DeliveredFinger, DeliveredPart, FingerEntry, FingerLibrary
+from ..service.fingers import (
+    LIBRARY_NAME,
+    DeliveredFinger,
+    DeliveredPart,
+    FingerEntry,
+    FingerLibrary,
+    FittedPart,
+    ServedPart,
+)
 from .task import BUILD_NAME, FINGER_SET, JobRun
 
+#: The settings sections a pad and its evaluation depend on: a finger serves parts that are not the same only in a job
+#: with the same ones.
+PAD_SECTIONS = frozenset({"sampler", "gripper", "filter", "finger", "print", "contact", "quality"})
 
-class _Report(BaseModel):
-    model_config = ConfigDict(extra="forbid")
 
-
-class ReusedPartReport(_Report):
-    """A part of the job and the library part whose geometry it has."""
+class ReusedPartReport(ReportModel):
+    """A part of the job and why the finger serves it."""
 
     part: str = Field(description="The part in this job")
-    library_part: str = Field(description="The part of the same geometry in the job that delivered the finger")
+    library_part: str | None = Field(
+        description="The part of the same geometry in the job that delivered the finger; null when the part is not "
+        "the same and keeps min_retained on the finger"
+    )
+    worst_retained: float | None = Field(
+        description="With library_part null: the smallest E / E* of the part's scenarios on the finger (METHOD "
+        "§11b), 0..1; null for the same geometry (the delivering job's worst_retained holds)"
+    )
 
 
-class ReusedFingerReport(_Report):
+class ReusedFingerReport(ReportModel):
     """A finger from the cell's library that serves this job."""
 
     finger_id: int = Field(description="Id in the library (fcsod fingers list)")
@@ -55,10 +75,14 @@ class ReusedFingerReport(_Report):
     finger_key: str = Field(description="zenoh key the delivering job published it on")
     jobs_served: int = Field(description="Jobs it has served, this one and the delivering one included")
     reprint_after_jobs: int = Field(description="[reuse] reprint_after_jobs: the wear limit")
+    worst_retained: float = Field(
+        description="The smallest E / E* over the parts it serves in this job (the delivering job's figure for "
+        "parts of the same geometry), 0..1"
+    )
     parts: list[ReusedPartReport]
 
 
-class ReuseReport(_Report):
+class ReuseReport(ReportModel):
     """``report.json`` of a job served by fingers delivered before: nothing designed, no finger printed."""
 
     job_id: str
@@ -77,24 +101,87 @@ def library_path(config: DaemonConfig) -> Path:
     return config.state.dir / LIBRARY_NAME
 
 
+def pad_settings(config: DesignConfig) -> str:
+    """The JSON of the settings sections a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`)."""
+    return config.model_dump_json(include=set(PAD_SECTIONS))
+
+
 def step_reuse(run: JobRun) -> None:
-    """Serve the job from the finger library when every part has the geometry of a part of an active finger."""
+    """Serve the job from the finger library when every part has the geometry of a part of an active finger or keeps
+    ``min_retained`` on one."""
     config = run.task.config
     if not config.reuse.enabled or not run.loaded:
         return
+    meshes = {p.name: p.mesh for p in run.loaded}
     library = FingerLibrary(library_path(config))
     try:
-        served = library.claim(
-            config.bus.cell, run.task.job_id, {p.name: p.mesh for p in run.loaded}, config.reuse.reprint_after_jobs
-        )
+        served = library.claim(config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs)
+        if served is None and config.reuse.similar_size_percent > 0:
+            fitted = _fitted_parts(run, library)
+            if fitted is not None:
+                served = library.claim(
+                    config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs, fitted
+                )
     finally:
         library.close()
     if served is None:
         run.log("info", "finger library: not every part is served by a delivered finger; designing")
         return
     run.reuse = served
-    ids = sorted({s.finger.finger_id for s in served.values()})
-    run.log("info", f"finger library: every part is served by finger {', '.join(map(str, ids))}: nothing to design")
+    run.log(
+        "info", f"finger library: every part is served by finger {', '.join(_served_words(served))}: nothing to design"
+    )
+
+
+def _fitted_parts(run: JobRun, library: FingerLibrary) -> dict[str, FittedPart] | None:
+    """The parts of no delivered geometry, each with the library finger it keeps most on (at least ``min_retained``
+    in every scenario); None when one keeps that on none."""
+    config, settings = run.task.config, run.settings
+    near = library.near_fingers(
+        config.bus.cell,
+        run.task.job_id,
+        {p.name: p.mesh for p in run.loaded},
+        config.reuse.reprint_after_jobs,
+        pad_settings(settings),
+        config.reuse.similar_size_percent,
+    )
+    if near is None:
+        return None
+    parts = [p for p in run.loaded if p.name in near]
+    finger_ids = sorted({i for ids in near.values() for i in ids}, reverse=True)
+    run.log("info", f"finger library: evaluating finger {', '.join(map(str, finger_ids))} on {len(parts)} part(s)")
+    try:
+        fits = fcso.fit_pads(parts, [library.pad(i) for i in finger_ids], settings)
+    except fcso.FcsoError as error:
+        run.log("info", f"finger library: the parts cannot be evaluated ({error}); designing")
+        return None
+    fitted = {}
+    min_retained = settings.finger_sets.min_retained
+    for part in parts:
+        kept = [
+            (fit.part_worst_retained(part.name), finger_id, fit)
+            for finger_id, fit in zip(finger_ids, fits)
+            if finger_id in near[part.name]
+        ]
+        worst, finger_id, fit = max(kept, key=lambda k: (k[0], k[1]))
+        grasps = [s.grasp for s in fit.scenarios if s.part == part.name and s.grasp is not None]
+        run.log("info", f"finger library: {part.name} keeps {worst:.3f} (worst scenario) on finger {finger_id}")
+        if worst < min_retained or not grasps:
+            return None
+        fitted[part.name] = FittedPart(finger_id, worst, grasps)
+    return fitted
+
+
+def _served_words(served: dict[str, ServedPart]) -> list[str]:
+    """Each serving finger with how: the same parts, or the worst retained quality of the parts fitted to it."""
+    words = {}
+    for part in served.values():
+        fitted = [s.worst_retained for s in served.values() if s.finger.finger_id == part.finger.finger_id]
+        kept = [w for w in fitted if w is not None]
+        words[part.finger.finger_id] = f"{part.finger.finger_id}" + (
+            f" (parts not the same keep at worst {min(kept):.3f})" if kept else " (the same parts)"
+        )
+    return [words[i] for i in sorted(words)]
 
 
 def step_reused_outputs(run: JobRun) -> None:
@@ -125,7 +212,15 @@ def step_reused_outputs(run: JobRun) -> None:
     grasps = [g for p in run.loaded for g in served[p.name].grasps]
     run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
     min_retained = run.settings.finger_sets.min_retained
-    worst = min(f.worst_retained for f in fingers.values())
+    # a part of a delivered geometry keeps what it kept in the delivering job; another, what it keeps on the finger
+    kept = {
+        p.name: served[p.name].finger.worst_retained
+        if served[p.name].worst_retained is None
+        else served[p.name].worst_retained
+        for p in run.loaded
+    }
+    set_worst = {i: min(kept[n] for n, s in served.items() if s.finger.finger_id == i) for i in fingers}
+    worst = min(set_worst.values())
     reused = []
     plan_sets = []
     for number, entry in enumerate(fingers.values(), start=1):
@@ -140,7 +235,15 @@ def step_reused_outputs(run: JobRun) -> None:
                 finger_key=entry.design_key,
                 jobs_served=entry.jobs,
                 reprint_after_jobs=config.reuse.reprint_after_jobs,
-                parts=[ReusedPartReport(part=p.name, library_part=served[p.name].library_part) for p in parts],
+                worst_retained=set_worst[entry.finger_id],
+                parts=[
+                    ReusedPartReport(
+                        part=p.name,
+                        library_part=served[p.name].library_part,
+                        worst_retained=served[p.name].worst_retained,
+                    )
+                    for p in parts
+                ],
             )
         )
         plan_sets.append(
@@ -151,7 +254,7 @@ def step_reused_outputs(run: JobRun) -> None:
                 finger_sha256=entry.sha256,
                 finger_copies=0,
                 quality_mm2=entry.quality_mm2,
-                worst_retained=entry.worst_retained,
+                worst_retained=set_worst[entry.finger_id],
                 parts=[
                     PickPart(part=p.name, copies=[p.name], quantity=len(p.instances), grasps=served[p.name].grasps)
                     for p in parts
@@ -162,7 +265,7 @@ def step_reused_outputs(run: JobRun) -> None:
         )
     message = (
         f"every part is served by {len(fingers)} finger set(s) delivered before (library finger "
-        f"{', '.join(str(f.finger_id) for f in fingers.values())}): no finger designed, none in build.3mf"
+        f"{', '.join(_served_words(served))}; worst retained {worst:.3f}): no finger designed, none in build.3mf"
     )
     warnings = list(dict.fromkeys(w for p in run.loaded for w in p.warnings)) + placed.report.warnings
     report = ReuseReport(
@@ -234,6 +337,8 @@ def step_add_to_library(run: JobRun) -> None:
                 quality_mm2=quality,
                 worst_retained=worst,
                 parts=[DeliveredPart(name, meshes[name], grasps) for name, grasps in picks if name in meshes],
+                pad_stl=run.sets.designs[number - 1].fingerpad.export(file_type="stl"),
+                pad_settings=pad_settings(run.settings),
             )
         )
     library = FingerLibrary(library_path(config))

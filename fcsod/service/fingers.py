@@ -5,7 +5,8 @@ written the same way (WAL, every commit synced, so a ``kill -9`` loses no
 delivered finger). A finger is kept with the geometry of every part it
 serves (vertices and triangles in mm, moved so their bounding box starts at
 the origin, as :func:`fcso.sets.identity.same_geometry` compares them), the
-grasps of those parts, the finger STL and its sha256, and the jobs it served.
+grasps of those parts, the finger STL and its sha256, its pad alone (pad
+frame) with the settings the pad depends on, and the jobs it served.
 Workers of concurrent jobs open it each on their own connection; a reuse
 claims its fingers in one write transaction, so the wear count cannot be
 passed by two jobs at once.
@@ -45,6 +46,8 @@ CREATE TABLE IF NOT EXISTS fingers (
     worst_retained REAL NOT NULL,
     created_at     TEXT NOT NULL,
     retired_at     TEXT,
+    pad_stl        BLOB,
+    pad_settings   TEXT,
     UNIQUE (job_id, finger_set)
 );
 CREATE TABLE IF NOT EXISTS finger_parts (
@@ -88,7 +91,13 @@ class DeliveredPart:
 
 @dataclass
 class DeliveredFinger:
-    """One finger set a done job delivered: what the library keeps of it."""
+    """One finger set a done job delivered: what the library keeps of it.
+
+    ``pad_stl`` is the pad alone in its pad frame (:attr:`fcso.DesignResult.fingerpad`)
+    and ``pad_settings`` the JSON of the settings sections it was designed
+    with (:func:`fcsod.job.reuse.pad_settings`): with both, the finger can be
+    evaluated on parts that are not the same (:func:`fcso.fit_pads`).
+    """
 
     job_id: str
     finger_set: int
@@ -98,6 +107,8 @@ class DeliveredFinger:
     quality_mm2: float
     worst_retained: float
     parts: list[DeliveredPart]
+    pad_stl: bytes | None = None
+    pad_settings: str | None = None
 
 
 @dataclass
@@ -127,14 +138,37 @@ class ServedPart:
     ----------
     finger : FingerEntry
         The finger that serves it.
-    library_part : str
-        The part's name in the job that delivered the finger.
+    library_part : str or None
+        The part of the same geometry in the job that delivered the finger;
+        None when the part is served because it keeps ``min_retained`` on it.
     grasps : list of GraspReport
-        The delivered grasps, named for the new part, rest transforms from the new part's file frame.
+        Named for the new part, rest transforms from the new part's file
+        frame: the delivered grasps moved, or the part's best grasps on the finger.
+    worst_retained : float or None
+        With ``library_part`` None: the smallest ``E / E*`` of the part's scenarios on the finger.
     """
 
     finger: FingerEntry
-    library_part: str
+    library_part: str | None
+    grasps: list[GraspReport]
+    worst_retained: float | None = None
+
+
+@dataclass
+class FittedPart:
+    """A part of a new job that keeps at least ``min_retained`` on a library finger (:func:`fcso.fit_pads`).
+
+    Attributes
+    ----------
+    finger_id : int
+    worst_retained : float
+        The smallest ``E / E*`` of the part's scenarios on the finger.
+    grasps : list of GraspReport
+        The part's best grasps on the finger, rest transforms from its file frame.
+    """
+
+    finger_id: int
+    worst_retained: float
     grasps: list[GraspReport]
 
 
@@ -151,6 +185,12 @@ class FingerLibrary:
         self.path = Path(path)
         self._db = connect_database(self.path)
         self._db.executescript(_SCHEMA)
+        # a library written before pads were kept: its fingers serve the same parts only
+        columns = {row[1] for row in self._db.execute("PRAGMA table_info(fingers)")}
+        with self._db:
+            for column, kind in (("pad_stl", "BLOB"), ("pad_settings", "TEXT")):
+                if column not in columns:
+                    self._db.execute(f"ALTER TABLE fingers ADD COLUMN {column} {kind}")
 
     def close(self) -> None:
         self._db.close()
@@ -160,7 +200,8 @@ class FingerLibrary:
         with self._db:
             self._db.execute(
                 "INSERT OR IGNORE INTO fingers (cell, job_id, finger_set, finger_file, design_key, sha256, finger_stl, "
-                "quality_mm2, worst_retained, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "quality_mm2, worst_retained, created_at, pad_stl, pad_settings) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     cell,
                     finger.job_id,
@@ -172,6 +213,8 @@ class FingerLibrary:
                     finger.quality_mm2,
                     finger.worst_retained,
                     utc_now(),
+                    finger.pad_stl,
+                    finger.pad_settings,
                 ),
             )
             finger_id = self._db.execute(
@@ -223,7 +266,12 @@ class FingerLibrary:
         return cursor.rowcount == 1
 
     def claim(
-        self, cell: str, job_id: str, meshes: dict[str, trimesh.Trimesh], reprint_after_jobs: int
+        self,
+        cell: str,
+        job_id: str,
+        meshes: dict[str, trimesh.Trimesh],
+        reprint_after_jobs: int,
+        fitted: dict[str, FittedPart] | None = None,
     ) -> dict[str, ServedPart] | None:
         """Serve every part of a job from the library, and count the job on the fingers that serve it.
 
@@ -237,32 +285,114 @@ class FingerLibrary:
             Part name -> part mesh in mm, file frame (:func:`fcso.load_parts`).
         reprint_after_jobs : int
             A finger that served this many jobs is worn: it serves no more.
+        fitted : dict, optional
+            Part name -> a finger the part keeps ``min_retained`` on, for
+            parts that are not the same as a delivered part.
 
         Returns
         -------
         dict or None
             Part name -> how it is served; None (and nothing counted) unless
-            every part has the same geometry as a part of an active finger.
-            Each part takes the newest such finger.
+            every part has the same geometry as a part of an active finger
+            (the newest such finger serves it) or is fitted to one still active.
         """
         with self._db:
             # one write transaction: concurrent jobs see each other's claims
             self._db.execute("BEGIN IMMEDIATE")
-            entries = {e.finger_id: e for e in self.entries(cell) if e.retired_at is None and e.job_id != job_id}
-            active = [i for i, e in entries.items() if e.jobs < reprint_after_jobs or job_id in self._served(i)]
+            entries = self._active(cell, job_id, reprint_after_jobs)
             served = {}
             for name, mesh in meshes.items():
-                match = self._serving(active, mesh)
-                if match is None:
+                match = self._serving(list(entries), mesh)
+                fit = (fitted or {}).get(name)
+                if match is not None:
+                    finger_id, library_part, corner, grasps = match
+                    shift = np.asarray(mesh.vertices, dtype=np.float64).min(axis=0) - corner
+                    served[name] = ServedPart(
+                        entries[finger_id], library_part, [_moved(g, name, shift) for g in grasps]
+                    )
+                elif fit is not None and fit.finger_id in entries:
+                    grasps = [g.model_copy(update={"part": name}) for g in fit.grasps]
+                    served[name] = ServedPart(entries[fit.finger_id], None, grasps, fit.worst_retained)
+                else:
                     return None
-                finger_id, library_part, corner, grasps = match
-                shift = np.asarray(mesh.vertices, dtype=np.float64).min(axis=0) - corner
-                served[name] = ServedPart(entries[finger_id], library_part, [_moved(g, name, shift) for g in grasps])
             at = utc_now()
             for finger_id in sorted({s.finger.finger_id for s in served.values()}):
                 self._db.execute("INSERT OR IGNORE INTO served VALUES (?, ?, ?)", (finger_id, job_id, at))
                 entries[finger_id].jobs = len(self._served(finger_id))
         return served
+
+    def near_fingers(
+        self,
+        cell: str,
+        job_id: str,
+        meshes: dict[str, trimesh.Trimesh],
+        reprint_after_jobs: int,
+        pad_settings: str,
+        size_percent: float,
+    ) -> dict[str, list[int]] | None:
+        """The fingers worth evaluating for the parts no delivered part has the geometry of.
+
+        Parameters
+        ----------
+        cell, job_id, meshes, reprint_after_jobs
+            As for :meth:`claim`.
+        pad_settings : str
+            The job's pad settings (:func:`fcsod.job.reuse.pad_settings`): a
+            finger designed with others is not evaluated.
+        size_percent : float
+            A finger is evaluated for a part when one of its parts has every
+            bounding-box side (sorted) and the volume within this percentage.
+
+        Returns
+        -------
+        dict or None
+            Part name -> active fingers with a pad to evaluate it on, newest
+            first, for every part not of a delivered geometry; None when a part
+            has neither (the library cannot serve the job).
+        """
+        entries = self._active(cell, job_id, reprint_after_jobs)
+        with_pad = [
+            r[0]
+            for r in self._db.execute(
+                "SELECT finger_id FROM fingers WHERE pad_stl IS NOT NULL AND pad_settings = ? ORDER BY finger_id DESC",
+                (pad_settings,),
+            )
+            if r[0] in entries
+        ]
+        kept = [
+            (finger_id, _sides(_geometry_mesh(geometry)), volume)
+            for finger_id, geometry, volume in self._db.execute(
+                "SELECT finger_id, geometry, volume_mm3 FROM finger_parts WHERE finger_id IN ("
+                + ",".join("?" * len(with_pad))
+                + ")",
+                with_pad,
+            )
+        ]
+        near = {}
+        for name, mesh in meshes.items():
+            if self._serving(list(entries), mesh) is not None:
+                continue
+            sides, volume = _sides(mesh), float(mesh.volume)
+            fingers = {
+                finger_id
+                for finger_id, kept_sides, kept_volume in kept
+                if np.all(np.abs(sides - kept_sides) <= size_percent / 100 * kept_sides)
+                and abs(volume - kept_volume) <= size_percent / 100 * abs(kept_volume)
+            }
+            if not fingers:
+                return None
+            near[name] = sorted(fingers, reverse=True)
+        return near
+
+    def pad(self, finger_id: int) -> trimesh.Trimesh:
+        """The pad alone of a library finger, its pad frame (mm)."""
+        blob = self._db.execute("SELECT pad_stl FROM fingers WHERE finger_id = ?", (finger_id,)).fetchone()[0]
+        return trimesh.load(io.BytesIO(blob), file_type="stl")
+
+    def _active(self, cell: str, job_id: str, reprint_after_jobs: int) -> dict[int, FingerEntry]:
+        """The fingers that may serve ``job_id``: the cell's, not retired, not worn, not delivered by the job itself."""
+        entries = {e.finger_id: e for e in self.entries(cell) if e.retired_at is None and e.job_id != job_id}
+        return {i: e for i, e in entries.items() if e.jobs < reprint_after_jobs or job_id in self._served(i)}
 
     def _served(self, finger_id: int) -> set[str]:
         return {r[0] for r in self._db.execute("SELECT job_id FROM served WHERE finger_id = ?", (finger_id,))}
@@ -299,6 +429,11 @@ def _moved(grasp: GraspReport, part: str, shift: np.ndarray) -> GraspReport:
     back = np.eye(4)
     back[:3, 3] = -shift
     return grasp.model_copy(update={"part": part, "rest_transform": (rest @ back).tolist()})
+
+
+def _sides(mesh: trimesh.Trimesh) -> np.ndarray:
+    """The bounding-box sides of a mesh, sorted, mm: the same whatever axis a file puts the part along."""
+    return np.sort(np.ptp(np.asarray(mesh.vertices, dtype=np.float64), axis=0))
 
 
 def _geometry_blob(vertices: np.ndarray, faces: np.ndarray) -> bytes:

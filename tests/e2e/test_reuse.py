@@ -1,4 +1,5 @@
-"""Finger reuse through the real daemon (METHOD §11b): a repeated job mounts the delivered finger, after kill -9 too."""
+"""Finger reuse through the real daemon (METHOD §11b): a repeated job mounts the delivered finger, after kill -9 too;
+a job of a part 1 % smaller keeps min_retained on it and mounts it too; a part 10 % smaller gets its own finger."""
 
 from __future__ import annotations
 
@@ -13,8 +14,11 @@ from fcsod.record.recorder import TOPIC_BUS, read_record
 from tests.fcsod_helpers import DATA, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"
-#: Other parts: the same file scaled, another geometry
+#: Other parts: the same file scaled, another geometry. 18 mm: every side 10 % off A's 20 mm, beyond [reuse]
+#: similar_size_percent (5 %), so A's finger is not even evaluated for it
 SMALLER_CUBE = '[[parts]]\nfile = "cube.stl"\nscale_to_mm = 18\n'
+#: Not the same geometry, 1 % smaller: within 5 % of A's cube, so A's finger is evaluated on it
+SLIGHTLY_SMALLER_CUBE = '[[parts]]\nfile = "cube.stl"\nscale_to_mm = 19.8\n'
 
 
 def _plan(subscriber, job_id: str) -> dict:
@@ -49,7 +53,11 @@ def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts
         drop_job(tmp_path / "watch" / "job-b", {"cube.stl": CUBE, "job.toml": SMALLER_CUBE})
         other = finished(subscriber, "job-b")
         assert other["body"]["state"] == "done", other["body"]["error"]
+        drop_job(tmp_path / "watch" / "job-c", {"cube.stl": CUBE, "job.toml": SLIGHTLY_SMALLER_CUBE})
+        near = finished(subscriber, "job-c")
+        assert near["body"]["state"] == "done", near["body"]["error"]
         plan_again, plan_b = _plan(subscriber, again["job_id"]), _plan(subscriber, other["job_id"])
+        plan_c = _plan(subscriber, near["job_id"])
     finally:
         subscriber.stop()
         assert daemon.stop() == 0
@@ -89,11 +97,30 @@ def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts
     part_a = json.loads((out_a / "report.json").read_text())["parts"][0]
     assert part_a["repair"]["volume_change_percent"] == 0.0 and part_a["repairs"] == []
 
-    # the library: A's finger served two jobs, B's one; a retired finger is listed as such
+    # C: not the same part, but it keeps min_retained on A's finger: A's finger, its own grasps, nothing printed
+    out_c = tmp_path / "out" / near["job_id"]
+    assert sorted(p.name for p in out_c.iterdir()) == ["build.3mf", "job.mcap", "report.json"]
+    (reused_c,) = plan_c["sets"]
+    assert (reused_c["finger_id"], reused_c["finger_sha256"], reused_c["finger_copies"]) == (1, finger_sha256, 0)
+    report_c = json.loads((out_c / "report.json").read_text())
+    (part_c,) = report_c["reused"][0]["parts"]
+    assert part_c["library_part"] is None and part_c["part"] == "cube"
+    min_retained = plan_c["min_retained"]
+    assert part_c["worst_retained"] >= min_retained and plan_c["min_retained_reached"]
+    assert plan_c["worst_retained"] == part_c["worst_retained"] == report_c["reused"][0]["worst_retained"]
+    assert f"worst retained {part_c['worst_retained']:.3f}" in report_c["message"]
+    # the grasps are the 19.8 mm part's own on the pad, not A's moved: they close on a narrower part
+    widths_a = sorted(g["closing_width_mm"] for g in plan_a["sets"][0]["parts"][0]["grasps"])
+    widths_c = sorted(g["closing_width_mm"] for g in reused_c["parts"][0]["grasps"])
+    assert len(widths_c) == len(widths_a) and all(c < a for c, a in zip(widths_c, widths_a))
+    with zipfile.ZipFile(out_c / "build.3mf") as archive:
+        assert "fcso-finger" not in archive.read("3D/3dmodel.model").decode()
+
+    # the library: A's finger served three jobs, B's one; a retired finger is listed as such
     capsys.readouterr()
     assert main(["fingers", "list", "--config", str(config)]) == 0
     listed = capsys.readouterr().out.splitlines()
-    assert listed[0].startswith("1: active, 2/100 jobs, sha256 " + finger_sha256) and listed[0].endswith("parts cube")
+    assert listed[0].startswith("1: active, 3/100 jobs, sha256 " + finger_sha256) and listed[0].endswith("parts cube")
     assert listed[1].startswith("2: active, 1/100 jobs") and listed[1].endswith("parts cube")
     assert main(["fingers", "retire", "1", "--config", str(config)]) == 0
     assert main(["fingers", "retire", "1", "--config", str(config)]) == 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import sqlite3
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import trimesh
 
 from fcso import load_part
 from fcso.report.models import GraspReport
-from fcsod.service.fingers import DeliveredFinger, DeliveredPart, FingerLibrary
+from fcsod.service.fingers import DeliveredFinger, DeliveredPart, FingerLibrary, FittedPart
 from tests.fcsod_helpers import DATA
 
 CUBE = DATA / "20mm-xyz-cube.stl"
@@ -107,3 +108,88 @@ def test_concurrent_jobs_never_pass_the_wear_limit(library):
         served = pool.starmap(_claim_in_a_process, [(str(library.path), "job-x"), (str(library.path), "job-y")])
     assert sorted(served) == [False, True]
     assert library.entries()[0].jobs == 2
+
+
+#: The pad settings a finger is kept with (any JSON: the library compares them as text)
+PAD_SETTINGS = '{"sampler": {"length_mm": 20.0}}'
+
+
+@pytest.fixture
+def library_with_pad(tmp_path, delivered_grasp):
+    cube = load_part(CUBE).mesh
+    library = FingerLibrary(tmp_path / "fingers.sqlite3")
+    library.add(
+        "cell-a",
+        DeliveredFinger(
+            job_id="job-a",
+            finger_set=1,
+            finger_file="finger.stl",
+            design_key="fcso/cell-a/jobs/job-a/design",
+            finger_stl=CUBE.read_bytes(),
+            quality_mm2=40.0,
+            worst_retained=0.9,
+            parts=[DeliveredPart("cube", cube, [delivered_grasp])],
+            # any closed mesh stands for the pad: the library keeps it as it is given
+            pad_stl=trimesh.creation.box([5.0, 20.0, 20.0]).export(file_type="stl"),
+            pad_settings=PAD_SETTINGS,
+        ),
+    )
+    yield library
+    library.close()
+
+
+def _scaled(factor: float) -> trimesh.Trimesh:
+    mesh = load_part(CUBE).mesh.copy()
+    mesh.apply_scale(factor)
+    return mesh
+
+
+def test_a_part_of_about_a_delivered_parts_size_is_evaluated_on_its_pad_and_served_when_fitted(
+    library_with_pad, delivered_grasp
+):
+    library = library_with_pad
+    near = {"near": _scaled(0.99)}
+    # 1 % smaller: every side and the volume (3 % smaller) within 5 %; not within 2 % (the volume)
+    assert library.near_fingers("cell-a", "job-b", near, 10, PAD_SETTINGS, 5.0) == {"near": [1]}
+    assert library.near_fingers("cell-a", "job-b", near, 10, PAD_SETTINGS, 2.0) is None
+    # 10 % smaller is beyond 5 %; a finger designed with other pad settings is not evaluated
+    assert library.near_fingers("cell-a", "job-b", {"far": _scaled(0.9)}, 10, PAD_SETTINGS, 5.0) is None
+    assert library.near_fingers("cell-a", "job-b", near, 10, '{"sampler": {}}', 5.0) is None
+    # a part of the delivered geometry needs no evaluation
+    same = {"cube": load_part(CUBE).mesh, "near": _scaled(0.99)}
+    assert library.near_fingers("cell-a", "job-b", same, 10, PAD_SETTINGS, 5.0) == {"near": [1]}
+    pad = library.pad(1)
+    assert pad.is_watertight and np.isclose(pad.volume, 5.0 * 20.0 * 20.0)
+
+    # unfitted, the near part is not served; fitted, it is, with its own grasps, and counts the job
+    assert library.claim("cell-a", "job-b", same, 10) is None
+    fitted = {"near": FittedPart(1, 0.8, [delivered_grasp])}
+    served = library.claim("cell-a", "job-b", same, 10, fitted)
+    assert served["near"].library_part is None and served["near"].worst_retained == 0.8
+    assert served["near"].grasps == [delivered_grasp.model_copy(update={"part": "near"})]
+    assert served["cube"].library_part == "cube" and served["cube"].worst_retained is None
+    assert library.entries()[0].jobs == 2
+    # a fit to a finger retired since is no claim
+    assert library.retire(1)
+    assert library.claim("cell-a", "job-c", same, 10, fitted) is None
+
+
+def test_a_library_written_before_pads_were_kept_gains_the_columns_and_serves_same_parts_only(tmp_path):
+    path = tmp_path / "fingers.sqlite3"
+    old = sqlite3.connect(path)
+    # the fingers table as the first library release wrote it
+    old.executescript(
+        "CREATE TABLE fingers (finger_id INTEGER PRIMARY KEY AUTOINCREMENT, cell TEXT NOT NULL, job_id TEXT NOT NULL, "
+        "finger_set INTEGER NOT NULL, finger_file TEXT NOT NULL, design_key TEXT NOT NULL, sha256 TEXT NOT NULL, "
+        "finger_stl BLOB NOT NULL, quality_mm2 REAL NOT NULL, worst_retained REAL NOT NULL, created_at TEXT NOT NULL, "
+        "retired_at TEXT, UNIQUE (job_id, finger_set));"
+        "INSERT INTO fingers VALUES (1, 'cell-a', 'job-a', 1, 'finger.stl', 'k', 'ab', x'00', 40.0, 0.9, 't', NULL);"
+    )
+    old.commit()
+    old.close()
+    library = FingerLibrary(path)
+    try:
+        assert [e.finger_id for e in library.entries()] == [1]
+        assert library.near_fingers("cell-a", "job-b", {"near": _scaled(0.99)}, 10, PAD_SETTINGS, 5.0) is None
+    finally:
+        library.close()
