@@ -8,6 +8,7 @@ contact samples, and a candidate's evaluation.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 
 import manifold3d
@@ -304,6 +305,11 @@ def versus_flat(
     return compared
 
 
+#: Printed-fit carvings made, by the id of their sample: a scenario chosen with the same sample in several designs of
+#: one job (its finger sets, the one finger they are compared with) is carved once. An entry leaves with its sample.
+_FITTED: dict[int, tuple[weakref.ref, tuple, list[PadGeometry]]] = {}
+
+
 def fitted_geometries(
     scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
 ) -> list[PadGeometry]:
@@ -313,14 +319,23 @@ def fitted_geometries(
         return [g for sample in chosen for g in sample.geometries]
     sampler = config.sampler
     size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    settings = (size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
     fitted = []
     for scenario, sample in zip(scenarios, chosen):
+        known = _FITTED.get(id(sample))
+        if known is not None and known[0]() is sample and known[1] == settings:
+            fitted.extend(known[2])
+            continue
         part = to_manifold(scenario.mesh)
+        made = []
         for geometry, frame in zip(sample.geometries, sample.frames):
             if geometry.good:
                 carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
                 geometry = dataclasses.replace(geometry, intersection=carved)
-            fitted.append(geometry)
+            made.append(geometry)
+        key = id(sample)
+        _FITTED[key] = (weakref.ref(sample, lambda _, key=key: _FITTED.pop(key, None)), settings, made)
+        fitted.extend(made)
     return fitted
 
 
