@@ -162,23 +162,75 @@ def seat(
     everything = np.vstack([s.points for s in samples]) if sum(counts) else np.zeros((0, 3))
     # one distance query for all geometries at t = 0: most never move
     initial = np.split(_signed_distance(everything, pad_vertices, pad_faces), np.cumsum(counts)[:-1])
-    return [
-        _seat_one(s, d, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm) for s, d in zip(samples, initial)
+    seatings = [
+        _seat_one(s, d, float(pad_vertices[:, 0].min()), eps_mm, max_iterations, travel_mm)
+        for s, d in zip(samples, initial)
     ]
+    return _run_together(seatings, pad_vertices, pad_faces)
 
 
-def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iterations, travel_mm=0.0) -> PadContact:
+def _run_together(seatings: list, pad_vertices: np.ndarray, pad_faces: np.ndarray) -> list[PadContact]:
+    """Drive every geometry's seating in lockstep: each round answers all their distance queries in one libigl call.
+
+    A libigl query builds its tree over the pad each time; one query per round instead of one per geometry and step
+    spares that, and every point's distance is the same as asked alone.
+    """
+    results: list[PadContact | None] = [None] * len(seatings)
+    asked: dict[int, np.ndarray] = {}
+    for number, seating in enumerate(seatings):
+        _advance(seating, number, None, asked, results)
+    while asked:
+        numbers = list(asked)
+        counts = [len(asked[n]) for n in numbers]
+        answers = np.split(
+            _signed_distance(np.vstack([asked[n] for n in numbers]), pad_vertices, pad_faces), np.cumsum(counts)[:-1]
+        )
+        asked = {}
+        for number, answer in zip(numbers, answers):
+            _advance(seatings[number], number, answer, asked, results)
+    return results
+
+
+def _advance(seating, number: int, answer: np.ndarray | None, asked: dict, results: list) -> None:
+    """Send a seating its distances; record its next query in ``asked``, or its contact in ``results`` once done."""
+    try:
+        asked[number] = seating.send(answer)
+    except StopIteration as done:
+        results[number] = done.value
+
+
+#: Points farther than this beyond the contact tolerance are left out of a seating's later distance queries, mm.
+_FAR_MARGIN_MM = 1.0
+
+
+def _seat_one(samples, distances, pad_min_u_mm, eps_mm, max_iterations, travel_mm=0.0):
+    """One geometry's seating (METHOD §6), a generator: it yields the points it needs the signed distances of and
+    returns its PadContact.
+
+    A signed distance changes by at most the distance a point moves, so a point farther than
+    ``eps + _FAR_MARGIN_MM`` from the pad, by the last distance it was measured at less the travel since, can neither
+    be the deepest nor touch: it is not queried again (closing a gap, which needs the nearest point, queries all).
+    """
     if len(samples.points) == 0:
         return PadContact(0.0, 0.0, np.zeros(0, dtype=bool))
     step_floor = eps_mm / 8.0
+    points = samples.points
+    measured = distances.copy()  # every point's distance where it was last measured
+    measured_at = np.zeros(len(points))  # the offset it was last measured at
 
-    def depths_at(offset: float) -> np.ndarray:
-        return _signed_distance(samples.points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
+    def query(offset: float):
+        """The distances at ``offset``: near points measured, far ones ``inf`` (they cannot touch)."""
+        near = np.flatnonzero(measured - np.abs(offset - measured_at) <= eps_mm + _FAR_MARGIN_MM)
+        found = yield points[near] - [offset, 0.0, 0.0]
+        measured[near], measured_at[near] = found, offset
+        result = np.full(len(points), np.inf)
+        result[near] = found
+        return result
 
     # safe steps: a sample at depth d needs at least d - eps more travel, so
     # the steps never pass the smallest feasible offset; past ``limit`` every
     # sample lies below the pad, so no offset beyond it is ever needed
-    limit = float(samples.points[:, 0].max() - pad_vertices[:, 0].min()) + eps_mm
+    limit = float(points[:, 0].max() - pad_min_u_mm) + eps_mm
     offset, infeasible = 0.0, None
     previous = None
     for _ in range(max_iterations):
@@ -195,37 +247,30 @@ def _seat_one(samples, distances, pad_vertices, pad_faces, eps_mm, max_iteration
                 step = max(step, (deepest - eps_mm) / rate)
         previous = (deepest, step)
         offset = min(offset + step, limit)
-        distances = depths_at(offset)
+        distances = yield from query(offset)
     if infeasible is not None and offset - infeasible > step_floor:
         low, high, feasible = infeasible, offset, distances
         while high - low > step_floor:
             middle = (low + high) / 2.0
-            trial = depths_at(middle)
+            trial = yield from query(middle)
             if -trial.min() <= eps_mm:
                 high, feasible = middle, trial
             else:
                 low = middle
         offset, distances = high, feasible
     if travel_mm > 0:
-        offset, distances = _close_gap(
-            samples.points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations
-        )
+        # close the gap: advance the pad toward the part (t decreasing) until contact or travel_mm
+        closest = offset - travel_mm
+        if np.isinf(distances).any():
+            distances = yield points - [offset, 0.0, 0.0]
+        for _ in range(max_iterations):
+            gap = float(distances.min())
+            if gap <= eps_mm / 8.0 or offset <= closest:
+                break
+            offset = max(offset - gap, closest)
+            distances = yield points - [offset, 0.0, 0.0]
     contact = np.abs(distances) <= eps_mm
     return PadContact(offset, float(contact.sum()) * samples.area_per_point_mm2, contact)
-
-
-def _close_gap(points, distances, offset, pad_vertices, pad_faces, eps_mm, travel_mm, max_iterations):
-    """Advance the pad toward the part (``t`` decreasing) until contact or ``travel_mm``; returns the offset and
-    distances.
-    """
-    limit = offset - travel_mm
-    for _ in range(max_iterations):
-        gap = float(distances.min())
-        if gap <= eps_mm / 8.0 or offset <= limit:
-            break
-        offset = max(offset - gap, limit)
-        distances = _signed_distance(points - [offset, 0.0, 0.0], pad_vertices, pad_faces)
-    return offset, distances
 
 
 def _signed_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -41,6 +41,9 @@ class SampleGeometry:
     screen: tuple[ScreenGeometry, ScreenGeometry]
     screened_bound: float
     centres_uv_mm: tuple[np.ndarray, np.ndarray]
+    #: Printed-fit carvings of ``geometries`` by (pad size, D, clearance, lead-in): a scenario chosen with the same
+    #: sample in several designs of one job (its finger sets, the one finger they are compared with) is carved once.
+    fitted: dict[tuple, list[PadGeometry]] = field(default_factory=dict, repr=False, compare=False)
 
 
 @dataclass
@@ -361,14 +364,22 @@ def fitted_geometries(
         return [g for sample in chosen for g in sample.geometries]
     sampler = config.sampler
     size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    settings = (size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
     fitted = []
     for scenario, sample in zip(scenarios, chosen):
+        known = sample.fitted.get(settings)
+        if known is not None:
+            fitted.extend(known)
+            continue
         part = to_manifold(scenario.mesh)
+        made = []
         for geometry, frame in zip(sample.geometries, sample.frames):
             if geometry.good:
                 carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
                 geometry = dataclasses.replace(geometry, intersection=carved)
-            fitted.append(geometry)
+            made.append(geometry)
+        sample.fitted[settings] = made
+        fitted.extend(made)
     return fitted
 
 

@@ -119,8 +119,10 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             for a in search.attempts
         )
         section.append(
-            "<h3>Partitions designed exactly</h3>"
-            "<p>Screening proposes a partition; its sets' exact designs decide (METHOD &sect;11 revision 3).</p>"
+            "<h3>Partitions judged exactly</h3>"
+            "<p>Screening proposes a partition; the exact evaluation of each set's screened best candidate judges it, "
+            "and the best proposal's sets are designed (METHOD &sect;11 revision 3); &ldquo;designed&rdquo;: the "
+            "exact figure is that of the designed fingers.</p>"
             '<table><tr><th>sets</th><th>screened worst retained</th><th>exact worst retained</th><th class="text">'
             'from</th><th class="text"></th><th class="text">sets</th></tr>'
             f"{tried}</table>"
@@ -160,7 +162,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
 
 
 def _attempt_source(attempt) -> str:
-    source = attempt.source.replace("_", " ")
+    source = attempt.source.replace("_", " ") + (", designed" if attempt.designed else "")
     return f"{source}: not made, {attempt.failure}" if attempt.failure else source
 
 
@@ -197,6 +199,7 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
         lines.append(
             f"{attempt.sets} set(s) ({attempt.source.replace('_', ' ')}): worst retained screened "
             f"{attempt.screened_worst_retained:.3f}, exact {attempt.exact_worst_retained:.3f}"
+            + (" (designed)" if attempt.designed else "")
             + (" (chosen)" if attempt.chosen else "")
             + (f"; not made: {attempt.failure}" if attempt.failure else "")
         )

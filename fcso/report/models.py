@@ -323,19 +323,27 @@ class PairConflictReport(ReportModel):
 
 
 class PartitionAttemptReport(ReportModel):
-    """A partition whose every set was designed exactly (METHOD §11 revision 3): what screening promised, what the
-    exact sets keep.
+    """A partition judged exactly (METHOD §11 revision 3): what screening promised, what its sets keep exactly (the
+    exact evaluation of each set's screened best candidate, or its sets' designs when designed).
     """
 
     sets: int = Field(description="Number of finger sets")
     parts: list[list[str]] = Field(description="Distinct parts of each set, sets numbered by their first part")
     screened_worst_retained: float = Field(description="Least screened E / E* over its graspable scenarios")
-    exact_worst_retained: float = Field(description="Least exact E / E* (its sets' exact designs)")
+    exact_worst_retained: float = Field(
+        description="Least exact E / E*: of its sets' designs when designed, else of the exact evaluation of each "
+        "set's screened best candidate"
+    )
     source: Literal["search", "one_finger"] = Field(
         description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
         "compare when min_retained was not reached"
     )
-    chosen: bool = Field(description="The partition delivered (the best of these by the exact objective)")
+    designed: bool = Field(
+        False,
+        description="Its sets were designed by METHOD §1-9: the best proposal, and one finger when that misses "
+        "min_retained",
+    )
+    chosen: bool = Field(description="The partition delivered (the best of the designed ones by the exact objective)")
     failure: str | None = Field(
         None, description="Why one of its fingers could not be made (it then keeps nothing and is not delivered)"
     )

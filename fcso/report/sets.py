@@ -179,6 +179,7 @@ def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names:
         screened_worst_retained=round(attempt.screened_worst, 6),
         exact_worst_retained=round(attempt.exact_worst, 6),
         source=attempt.source,
+        designed=attempt.designed,
         chosen=attempt.assignment == outcome.assignment,
         failure=attempt.failure,
     )
@@ -186,11 +187,12 @@ def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names:
 
 #: What every description ends with: how the exact designs judged the search's proposals (METHOD §11 revision 3).
 _JUDGED_EXACTLY = (
-    "; every proposed partition's sets were then designed exactly and the search, seeing their exact retained "
-    "qualities, went on while screening had promised min_retained, the exact sets missed it and max allowed more "
-    "sets (at most max proposals); when min_retained was still not "
-    "reached, one finger for every part was designed too, and the best of those designed by the exact objective was "
-    "kept, so the sets never keep less in their worst scenario than that one finger"
+    "; every proposed partition was then judged by the exact evaluation of each of its sets' screened best candidate, "
+    "and the search, seeing those exact retained qualities, went on while screening had promised min_retained, the "
+    "exact figures missed it and max allowed more sets (at most max proposals); the best proposal was designed by "
+    "METHOD §1-9, and when its designed sets missed min_retained, one finger for every part was designed too and the "
+    "better of the two by the exact objective kept, so the sets never keep less in their worst scenario than that "
+    "one finger"
 )
 
 

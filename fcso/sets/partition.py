@@ -422,7 +422,7 @@ def _worst_parts(screener: SetScreener, assignment: tuple[int, ...], retained: n
 
 @dataclass
 class PartitionAttempt:
-    """A partition whose every set was designed exactly (METHOD §11 revision 3).
+    """A partition judged exactly (METHOD §11 revision 3).
 
     Attributes
     ----------
@@ -431,12 +431,15 @@ class PartitionAttempt:
     screened_worst : float
         Least screened ``r`` over its graspable scenarios.
     exact_worst : float
-        Least exact ``r`` (its sets' exact designs).
+        Least exact ``r``: of its sets' designs when ``designed``, else of the exact evaluation of each set's
+        screened best candidate (:meth:`SetScreener.probe`).
     source : str
         ``"search"``: proposed by the partition search; ``"one_finger"``:
         every part in one set, designed to compare.
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
+    designed : bool
+        Its sets were designed by METHOD §1-9 (the partition delivered, and one finger when compared).
     """
 
     assignment: tuple[int, ...]
@@ -444,6 +447,7 @@ class PartitionAttempt:
     exact_worst: float
     source: str
     failure: str | None = None
+    designed: bool = False
 
 
 def search_judged_exactly(
@@ -453,19 +457,22 @@ def search_judged_exactly(
     progress: Progress,
     design_exactly: Callable[[frozenset[int]], str | None],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
-    """The partition search of :func:`search_partition`, its proposals judged by their exact sets (METHOD §11 rev. 3).
+    """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
 
-    The sets of each proposed partition are designed exactly
-    (``design_exactly`` records their exact ``r`` in ``screener``), so the next
-    search sees the exact figure of every set designed so far: a set whose
-    exact design misses ``min_retained`` no longer looks feasible, and the
-    search moves its parts or tries more sets. It goes on only while a
-    proposal that screening said reaches ``min_retained`` misses it exactly
-    and has fewer than ``max`` sets, and stops when the search proposes a
-    partition already designed, or after ``[finger_sets] max`` proposals. If ``min_retained`` is
-    then not reached, one finger for every part is designed too; the chosen
-    partition is the best of those designed by the exact objective, so it
-    never keeps less in its worst scenario than one finger does.
+    Each proposed partition's sets are judged by the exact evaluation of
+    their screened best candidates (:meth:`SetScreener.probe`, one exact
+    evaluation per set), so the next search sees the exact figure of every
+    set judged so far: a set whose exact figure misses ``min_retained`` no
+    longer looks feasible, and the search moves its parts or tries more sets.
+    It goes on only while a proposal that screening said reaches
+    ``min_retained`` misses it exactly and has fewer than ``max`` sets, and
+    stops when the search proposes a partition already judged, or after
+    ``[finger_sets] max`` proposals. The best proposal by the exact objective
+    is then designed (``design_exactly`` on each of its sets, METHOD §1-9); if
+    its designed sets miss ``min_retained`` (or a finger cannot be made), one
+    finger for every part is designed too, and the better of the two designed
+    partitions by the exact objective is chosen, so the sets never keep less
+    in their worst scenario than one finger does.
 
     Parameters
     ----------
@@ -482,19 +489,28 @@ def search_judged_exactly(
     Returns
     -------
     PartitionOutcome
-        Of the chosen partition, ``retained`` exact.
+        Of the chosen partition, ``retained`` exact (its designed sets).
     list of PartitionAttempt
-        Every partition designed, in the order designed.
+        Every partition judged, in the order judged.
     """
     threshold = config.finger_sets.min_retained
     attempts: list[PartitionAttempt] = []
 
-    def attempt(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
-        failures = [f for f in map(design_exactly, sets_of(assignment)) if f is not None]
+    def key(assignment: tuple[int, ...]) -> tuple:
+        return partition_key(assignment, screener.partition_retained(assignment), threshold)
+
+    def judge(assignment: tuple[int, ...], source: str, failure: str | None = None, designed: bool = False) -> None:
         screened = screener.partition_retained(assignment, exact=False)
         exact = screener.partition_retained(assignment)
-        failure = failures[0] if failures else None
-        attempts.append(PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source, failure))
+        # a partition designed after its probe replaces the probe's row and keeps its source
+        source = next((a.source for a in attempts if a.assignment == assignment), source)
+        judged = PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source, failure, designed)
+        attempts[:] = [a for a in attempts if a.assignment != assignment] + [judged]
+
+    def design(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
+        progress("exact sets", 0, 1, f"designing {max(assignment) + 1} set(s)")
+        failures = [f for f in map(design_exactly, sets_of(assignment)) if f is not None]
+        judge(assignment, source, failures[0] if failures else None, designed=True)
         return attempts[-1]
 
     outcome = first = search_partition(screener, parts, config, progress)
@@ -503,7 +519,9 @@ def search_judged_exactly(
         if any(a.assignment == outcome.assignment for a in attempts):
             break
         progress("exact sets", proposal, proposals, f"proposal {proposal + 1}: {max(outcome.assignment) + 1} sets")
-        judged = attempt(outcome.assignment, "search")
+        screener.probe(sets_of(outcome.assignment))
+        judge(outcome.assignment, "search")
+        judged = attempts[-1]
         progress(
             "exact sets",
             proposal + 1,
@@ -517,24 +535,23 @@ def search_judged_exactly(
             judged.exact_worst >= threshold
             or judged.screened_worst < threshold
             or max(outcome.assignment) + 1 >= proposals
+            or proposal + 1 == proposals
         ):
             break
         outcome = search_partition(screener, parts, config, progress)
+    best = design(max(attempts, key=lambda a: key(a.assignment)).assignment, "search")
     single = tuple([0] * parts)
-    if max(a.exact_worst for a in attempts) < threshold and all(a.assignment != single for a in attempts):
-        attempt(single, "one_finger")
+    if (best.failure is not None or best.exact_worst < threshold) and best.assignment != single:
+        design(single, "one_finger")
     # a partition with a finger that cannot be made is delivered only when every one designed has one
-    best = max(
-        attempts,
-        key=lambda a: (
-            a.failure is None,
-            partition_key(a.assignment, screener.partition_retained(a.assignment), threshold),
-        ),
+    chosen = max(
+        (a for a in attempts if a.designed),
+        key=lambda a: (a.failure is None, key(a.assignment)),
     )
-    chosen = dataclasses.replace(
+    outcome = dataclasses.replace(
         outcome,
-        assignment=best.assignment,
-        retained=screener.partition_retained(best.assignment),
+        assignment=chosen.assignment,
+        retained=screener.partition_retained(chosen.assignment),
         fewest_sets_proven=first.fewest_sets_proven,
     )
-    return chosen, attempts
+    return outcome, attempts

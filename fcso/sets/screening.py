@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import DesignConfig
-from ..design import Prepared, evaluate_exact, screen_choice
+from ..design import Prepared, evaluate_exact, screen_choice, subset
 from ..parallel import WorkerPool
 from ..screen import screen
 from ..search import candidate_index, search
@@ -194,6 +194,9 @@ class SetScreener:
         self.config = config
         self.pool = pool
         self.cache: dict[frozenset[int], np.ndarray] = {}
+        #: the candidate (job sample numbers, the set's scenarios in order) whose r ``cache`` holds
+        self.choices: dict[frozenset[int], tuple[int, ...]] = {}
+        self.picks = solo_picks(solos)
         self.quick_cache: dict[frozenset[int], np.ndarray] = {}
         self.exact: dict[frozenset[int], np.ndarray] = {}
 
@@ -239,6 +242,20 @@ class SetScreener:
             per_part.update(values)
         return np.concatenate([per_part[p] for p in range(len(assignment))]) if assignment else np.zeros(0)
 
+    def probe(self, sets: Sequence[frozenset[int]]) -> None:
+        """Judge sets not yet judged exactly by the exact evaluation (METHOD §6-7) of their screened best candidate.
+
+        One exact evaluation per set, the sets over the workers, instead of each set's design (a screened search and
+        ``exact_top_k`` exact evaluations): the partition search sees exact figures of real candidates of its
+        proposals, and only the partition delivered is designed.
+        """
+        fresh = list(dict.fromkeys(s for s in sets if s not in self.exact))
+        self.retained(fresh, exact=False)
+        tasks = [(self._scenarios(s), self.choices[s]) for s in fresh]
+        for members, (numbers, _), measures in zip(fresh, tasks, self.pool.map(_probe_task, tasks)):
+            solo = np.array([self.solos[m].exact for m in numbers])
+            self.judge_exactly(members, measures / np.where(solo > 0, solo, 1.0))
+
     def judge_exactly(self, members: frozenset[int], retained: np.ndarray) -> None:
         """Record a set's exact ``r = E / E*`` per scenario (its parts in order, their scenarios in order)."""
         self.exact[members] = np.asarray(retained, dtype=np.float64)
@@ -252,11 +269,15 @@ class SetScreener:
         fresh = list(dict.fromkeys(s for s in sets if s not in self.cache and s not in known))
         self.quick(fresh)
         tasks = [self._scenarios(s) for s in fresh]
-        for members, screening in zip(fresh, self.pool.map(_screen_set_task, tasks)):
+        for members, numbers, screening in zip(fresh, tasks, self.pool.map(_screen_set_task, tasks)):
             searched = self._ratios(members, screening.quality)
             quick = self.quick_cache[members]
             # the search ranks by Q = min E; the quick candidate may keep a better worst r: a set keeps the better
-            self.cache[members] = max(searched, quick, key=lambda r: (round(float(r.min()), 9), float(r.mean())))
+            ranks = [(round(float(r.min()), 9), float(r.mean())) for r in (searched, quick)]
+            if ranks[0] >= ranks[1]:
+                self.cache[members], self.choices[members] = searched, screening.choice
+            else:
+                self.cache[members], self.choices[members] = quick, tuple(self.picks[m] for m in numbers)
         return [self._per_part(members, known.get(members, self.cache.get(members))) for members in sets]
 
     def partition_retained(self, assignment: Sequence[int], exact: bool = True) -> np.ndarray:
@@ -280,6 +301,13 @@ def sets_of(assignment: Sequence[int]) -> list[frozenset[int]]:
 def _screen_set_task(context, scenario_numbers: tuple[int, ...]) -> SetScreening:
     prepared, pools, picks, config = context
     return screen_set(prepared, scenario_numbers, pools, config)
+
+
+def _probe_task(context, task: tuple[tuple[int, ...], tuple[int, ...]]) -> np.ndarray:
+    prepared, pools, picks, config = context
+    numbers, choice = task
+    evaluation = evaluate_exact(subset(prepared, numbers), choice, config)
+    return np.array([s.measure for s in evaluation.scenarios], dtype=np.float64)
 
 
 def _quick_task(context, batch: list[tuple[int, ...]]) -> list[np.ndarray]:

@@ -136,6 +136,8 @@ def test_a_set_that_screening_accepts_and_its_exact_design_rejects_is_split():
     assert first.sets == 1 and first.screened_worst_retained >= threshold > first.exact_worst_retained
     # the search went on with that knowledge instead of delivering the one finger
     assert second.sets == 2 and second.chosen and not first.chosen
+    # proposals are judged by their sets' screened best candidates; only the one delivered is designed
+    assert second.designed and not first.designed
     assert sets.min_retained_reached and sets.worst_retained >= threshold
     assert [s.parts for s in sets.sets] == [["narrowing"], ["narrowing-wider"]]
     assert sets.worst_retained >= first.exact_worst_retained
