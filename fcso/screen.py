@@ -93,7 +93,7 @@ class ScreenGrid:
         return (j * self.count_w + k).astype(np.int32)
 
 
-def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) -> np.ndarray:
+def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid, empty: float = 0.0) -> np.ndarray:
     """Top ``u`` of a surface along the ``u`` ray through every cell centre.
 
     Parameters
@@ -101,18 +101,20 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
     vertices, faces : ndarray
         The part surface inside the pad box, pad frame ``(u, v, w)``, mm.
     grid : ScreenGrid
+    empty : float
+        The height of a cell whose centre no triangle covers, mm.
 
     Returns
     -------
     (count_v * count_w,) float32
-        Largest ``u`` hit on each ray, mm; 0 where no triangle covers the cell centre.
+        Largest ``u`` hit on each ray, mm; ``empty`` where no triangle covers the cell centre.
 
     Each triangle is scanned row by row of cell centres: the row's line
     crosses the triangle's projection in one interval of ``w``, and every
     centre in it takes the height of the triangle's plane there, so only
     covered cells are visited.
     """
-    heights = np.zeros(grid.count_v * grid.count_w, dtype=np.float64)
+    heights = np.full(grid.count_v * grid.count_w, empty, dtype=np.float64)
     if len(faces) == 0:
         return heights.astype(np.float32)
     triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
