@@ -93,7 +93,7 @@ class ScreenGrid:
         return (j * self.count_w + k).astype(np.int32)
 
 
-def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid, empty: float = 0.0) -> np.ndarray:
+def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) -> np.ndarray:
     """Top ``u`` of a surface along the ``u`` ray through every cell centre.
 
     Parameters
@@ -101,20 +101,18 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid, em
     vertices, faces : ndarray
         The part surface inside the pad box, pad frame ``(u, v, w)``, mm.
     grid : ScreenGrid
-    empty : float
-        The height of a cell whose centre no triangle covers, mm.
 
     Returns
     -------
     (count_v * count_w,) float32
-        Largest ``u`` hit on each ray, mm; ``empty`` where no triangle covers the cell centre.
+        Largest ``u`` hit on each ray, mm; 0 where no triangle covers the cell centre.
 
     Each triangle is scanned row by row of cell centres: the row's line
     crosses the triangle's projection in one interval of ``w``, and every
     centre in it takes the height of the triangle's plane there, so only
     covered cells are visited.
     """
-    heights = np.full(grid.count_v * grid.count_w, empty, dtype=np.float64)
+    heights = np.zeros(grid.count_v * grid.count_w, dtype=np.float64)
     if len(faces) == 0:
         return heights.astype(np.float32)
     triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
@@ -465,7 +463,8 @@ def screen(
             areas += float(contact.sum()) * g.area_per_point_mm2
             bins.append(g.point_bin[contact])
             offsets.append(offset)
-        occupied = np.unique(np.concatenate(bins))
+        # the sorted distinct bins: a count over the lattice is cheaper than sorting the points
+        occupied = np.flatnonzero(np.bincount(np.concatenate(bins), minlength=NORMAL_BINS)).astype(np.int32)
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
         capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0

@@ -73,21 +73,6 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Refinement halves the part's CoACD threshold near the pads down to this",
     )
-    pad_cell_mm: float = Field(
-        0.2, gt=0, description="Cell of the (v, w) grid of column heights the pad's collision pieces are made from, mm"
-    )
-    pad_flatness_mm: float = Field(
-        0.02,
-        gt=0,
-        description="Neighbouring pad cells are merged into one piece when their heights lie within this of one "
-        "plane, mm",
-    )
-    pad_max_slope: float = Field(
-        2.0,
-        gt=0,
-        description="Steepest plane (mm of height per mm along the pad) a merged pad piece may have; steeper walls are "
-        "staircases of cells",
-    )
     choice_budget_s: float = Field(
         600.0,
         gt=0,

@@ -16,7 +16,7 @@ from ..finger import pad_to_finger
 from ..parallel import WorkerPool, resolve_jobs
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
-from .collision import ConvexPieces, finger_body_hull, pad_column_pieces, zoned_pieces
+from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, zoned_pieces
 from .config import VerifyConfig
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
@@ -147,7 +147,7 @@ def fitted_pieces(
     """The pad's convex pieces (from its column grid) and the part's, refined until they overlap little at the
     nominal seated grasp.
 
-    The pad's pieces are exact to its grid (:func:`pad_column_pieces`). A
+    The pad's pieces are exact to its grid (:func:`pad_prism_pieces`). A
     part piece that fills a notch of the part where a pad ridge sits shows
     as overlap of the seated part and pad (METHOD §12's fidelity). While it
     exceeds ``max_seated_penetration_mm`` the part's CoACD threshold near
@@ -162,14 +162,7 @@ def fitted_pieces(
     notes : list of str
         Warnings when the overlap could not be brought under the limit.
     """
-    pad = pad_column_pieces(
-        design.fingerpad,
-        case.pad_size_mm,
-        config.pad_cell_mm,
-        config.pad_flatness_mm,
-        config.pad_max_slope,
-        config.cache_path(),
-    )
+    pad = pad_prism_pieces(design.fingerpad, case.pad_size_mm[0], config.cache_path())
 
     def attempt(threshold: float) -> tuple[float, ConvexPieces]:
         part = part_pieces(case, config, threshold)
