@@ -36,6 +36,7 @@ from pathlib import Path
 import manifold3d
 import numpy as np
 import trimesh
+from scipy.spatial import ConvexHull
 
 from ..geometry import box, to_manifold, to_trimesh
 
@@ -244,18 +245,73 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
             sweeps.append(swept)
     columns = region - manifold3d.Manifold.batch_boolean(sweeps, manifold3d.OpType.Add) if sweeps else region
     face = columns.simplify(SIMPLIFY_TOLERANCE_MM).to_mesh64()
-    triangles = np.asarray(face.vert_properties[:, :3], dtype=np.float64)[np.asarray(face.tri_verts)]
-    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    pieces = []
+    vertices = np.asarray(face.vert_properties[:, :3], dtype=np.float64)
+    corners = np.asarray(face.tri_verts, dtype=np.int64)
+    normals = np.cross(
+        vertices[corners[:, 1]] - vertices[corners[:, 0]], vertices[corners[:, 2]] - vertices[corners[:, 0]]
+    )
     # material is entered along +u through the triangles facing -u (twice their shadow's area, mm^2); walls have none
-    for triangle in triangles[-normals[:, 0] > 2e-6]:
-        behind = triangle.copy()
+    corners, normals = corners[-normals[:, 0] > 2e-6], normals[-normals[:, 0] > 2e-6]
+    pieces = []
+    for cluster in _convex_clusters(vertices, corners, normals / np.linalg.norm(normals, axis=1, keepdims=True)):
+        top = vertices[np.unique(corners[cluster])]
+        behind = top.copy()
         behind[:, 0] = back
-        prism = manifold3d.Manifold.hull_points(np.vstack([triangle, behind])).to_mesh64()
+        prism = manifold3d.Manifold.hull_points(np.vstack([top, behind])).to_mesh64()
         pieces.append(
             (np.asarray(prism.vert_properties[:, :3], dtype=np.float64), np.asarray(prism.tri_verts, dtype=np.int64))
         )
     return pieces
+
+
+def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndarray) -> list[list[int]]:
+    """Triangles of a surface grouped into coplanar, edge-connected clusters whose shadow on ``u = 0`` is convex.
+
+    Greedy: a cluster grows from its first triangle by neighbours of the
+    same plane while the hull of its shadow has the area of its triangles'
+    shadows. The prism under such a cluster is convex; a flat face or a
+    planar wall of a pocket is one piece instead of one per triangle.
+    """
+    shadow_area = (
+        np.abs(
+            np.cross(
+                vertices[corners[:, 1], 1:] - vertices[corners[:, 0], 1:],
+                vertices[corners[:, 2], 1:] - vertices[corners[:, 0], 1:],
+            )
+        )
+        / 2.0
+    )
+    neighbours: dict[tuple[int, int], list[int]] = {}
+    for index, (a, b, c) in enumerate(corners):
+        for edge in ((a, b), (b, c), (c, a)):
+            neighbours.setdefault((min(edge), max(edge)), []).append(index)
+    adjacent = [set() for _ in corners]
+    for sharing in neighbours.values():
+        for index in sharing:
+            adjacent[index].update(t for t in sharing if t != index)
+    taken = np.zeros(len(corners), dtype=bool)
+    clusters = []
+    for seed in range(len(corners)):
+        if taken[seed]:
+            continue
+        taken[seed] = True
+        cluster, area = [seed], float(shadow_area[seed])
+        frontier = [t for t in adjacent[seed] if normals[t] @ normals[seed] > 1.0 - 1e-9]
+        while frontier:
+            candidate = frontier.pop()
+            if taken[candidate]:
+                continue
+            points = vertices[np.unique(corners[cluster + [candidate]]), 1:]
+            grown = area + float(shadow_area[candidate])
+            if ConvexHull(points).volume <= grown * (1.0 + 1e-9) + 1e-9:
+                taken[candidate] = True
+                cluster.append(candidate)
+                area = grown
+                frontier.extend(
+                    t for t in adjacent[candidate] if not taken[t] and normals[t] @ normals[seed] > 1.0 - 1e-9
+                )
+        clusters.append(cluster)
+    return clusters
 
 
 def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: Path | None) -> ConvexPieces:
