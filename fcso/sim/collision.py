@@ -272,15 +272,8 @@ def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndar
     shadows. The prism under such a cluster is convex; a flat face or a
     planar wall of a pocket is one piece instead of one per triangle.
     """
-    shadow_area = (
-        np.abs(
-            np.cross(
-                vertices[corners[:, 1], 1:] - vertices[corners[:, 0], 1:],
-                vertices[corners[:, 2], 1:] - vertices[corners[:, 0], 1:],
-            )
-        )
-        / 2.0
-    )
+    first, second = (vertices[corners[:, k], 1:] - vertices[corners[:, 0], 1:] for k in (1, 2))
+    shadow_area = np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]) / 2.0
     neighbours: dict[tuple[int, int], list[int]] = {}
     for index, (a, b, c) in enumerate(corners):
         for edge in ((a, b), (b, c), (c, a)):
