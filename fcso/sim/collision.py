@@ -170,11 +170,16 @@ def zoned_pieces(
         f"{np.round(to_zones, 6).tolist()} {np.round(fine_boxes, 4).tolist()}"
     )
     return _cached_pieces(
-        mesh, settings, lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold), cache_dir
+        mesh,
+        settings,
+        lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold, cache_dir),
+        cache_dir,
     )
 
 
-def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list[tuple[np.ndarray, np.ndarray]]:
+def _zoned(
+    mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold, cache_dir
+) -> list[tuple[np.ndarray, np.ndarray]]:
     moved = mesh.copy()
     moved.apply_transform(to_zones)
     part = to_manifold(moved)
@@ -201,7 +206,8 @@ def _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold) -> list
         for component in material.decompose():
             if component.volume() < 1e-6:
                 continue
-            for vertices, faces in _decompose(to_trimesh(component), fine_threshold if fine else coarse_threshold):
+            threshold = fine_threshold if fine else coarse_threshold
+            for vertices, faces in _cell_pieces(to_trimesh(component), threshold, cache_dir):
                 pieces.append((vertices @ back[:3, :3].T + back[:3, 3], faces))
     return pieces
 
@@ -315,6 +321,23 @@ def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndar
                 )
         clusters.append(cluster)
     return clusters
+
+
+def _cell_pieces(
+    material: trimesh.Trimesh, threshold: float, cache_dir: Path | None
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """CoACD pieces of the material in one cell of :func:`zoned_pieces`, cached on their own: a refinement of the
+    fine cells (:func:`fcso.sim.verify.fitted_pieces`) reuses the coarse cells' pieces instead of making them again.
+    """
+    if cache_dir is None:
+        return _decompose(material, threshold)
+    key = mesh_key(np.asarray(material.vertices), np.asarray(material.faces), f"cell {float(threshold)!r}")
+    path = Path(cache_dir) / f"{key}.npz"
+    pieces = _read_cached(path)
+    if pieces is None:
+        pieces = _decompose(material, threshold)
+        _write_cached(path, _write_pieces(pieces))
+    return pieces
 
 
 def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: Path | None) -> ConvexPieces:

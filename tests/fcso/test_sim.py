@@ -201,6 +201,11 @@ def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
     assert max(_stands_out_mm(v, cube) for v in outside) > 1.0
     assert -0.001 < zoned.volume_error and zoned.missing_fraction < 0.001
     assert zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path).cached
+    # one entry per cell (the zone's and the one beyond it) and one for the whole; a finer threshold in the zone (a
+    # refinement) makes the zone's cell and the whole again, and reuses the coarse cell's pieces
+    assert len(list(tmp_path.glob("*.npz"))) == 3
+    refined = zoned_pieces(cube, np.eye(4), zone, 0.025, 0.5, tmp_path)
+    assert not refined.cached and len(list(tmp_path.glob("*.npz"))) == 5
 
 
 def test_verification_takes_the_part_density_from_the_print_profile():
