@@ -6,10 +6,10 @@ MuJoCo collides a mesh by its convex hull, so
   (:func:`pad_prism_pieces`): the pad is ``{u >= H(v, w)}`` over its
   ``(v, w)`` face, carved along ``u``, with ``H`` piecewise linear, so the
   prism between each facet of its face and its back face is convex and the
-  prisms are the pad exactly (neighbouring facets share a prism while
-  their union stays convex: a flat face, a planar wall, a ridge). No
-  decomposition is searched: the bunny's pad takes a few seconds instead
-  of minutes of CoACD, and CoACD's pad pieces no longer bridge pockets;
+  prisms are the pad exactly (coplanar facets share a prism while their
+  shadow stays convex). No decomposition is searched: the bunny's pad takes
+  a few seconds instead of minutes of CoACD, and the seated overlap that
+  CoACD's pad pieces made (they bridged pockets by up to 1 mm) is gone;
 - the part is split into convex pieces (CoACD) by zones
   (:func:`zoned_pieces`): finely where the pads can reach it, coarsely
   elsewhere. CoACD's time grows with every concavity of the whole part
@@ -57,9 +57,6 @@ CACHE_VERSION = "coacd-4"
 CACHE_MAX_BYTES = 500_000_000
 #: Largest deviation of the simplified surface CoACD decomposes, mm (see :func:`_decompose`).
 SIMPLIFY_TOLERANCE_MM = 0.005
-#: Pad prisms are merged while their hull stands out of them by at most this on average, mm (float rounding of a
-#: flat or convex union; a concave one stands out by far more).
-MERGE_SLACK_MM = 1e-5
 
 
 @dataclass
@@ -270,9 +267,9 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
         vertices[corners[:, 1]] - vertices[corners[:, 0]], vertices[corners[:, 2]] - vertices[corners[:, 0]]
     )
     # material is entered along +u through the triangles facing -u (twice their shadow's area, mm^2); walls have none
-    corners = corners[-normals[:, 0] > 2e-6]
+    corners, normals = corners[-normals[:, 0] > 2e-6], normals[-normals[:, 0] > 2e-6]
     pieces = []
-    for cluster in _convex_clusters(vertices, corners, back):
+    for cluster in _convex_clusters(vertices, corners, normals / np.linalg.norm(normals, axis=1, keepdims=True)):
         top = vertices[np.unique(corners[cluster])]
         behind = top.copy()
         behind[:, 0] = back
@@ -283,18 +280,16 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     return pieces
 
 
-def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, back_mm: float) -> list[list[int]]:
-    """Triangles of a pad's face grouped into edge-connected clusters whose prism down to ``u = back_mm`` is convex.
+def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndarray) -> list[list[int]]:
+    """Triangles of a surface grouped into coplanar, edge-connected clusters whose shadow on ``u = 0`` is convex.
 
-    Greedy: a cluster grows from its first triangle by neighbours while the
-    hull of its prisms has their volume (within :data:`MERGE_SLACK_MM` times
-    their shadow's area): a flat face, a planar wall or a ridge of the pad
-    is one piece instead of one per triangle; a valley (where a part's ridge
-    sits) separates pieces.
+    Greedy: a cluster grows from its first triangle by neighbours of the
+    same plane while the hull of its shadow has the area of its triangles'
+    shadows. The prism under such a cluster is convex; a flat face or a
+    planar wall of a pocket is one piece instead of one per triangle.
     """
     first, second = (vertices[corners[:, k], 1:] - vertices[corners[:, 0], 1:] for k in (1, 2))
     shadow_area = np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]) / 2.0
-    prism_volume = shadow_area * (back_mm - vertices[corners, 0].mean(axis=1))
     neighbours: dict[tuple[int, int], list[int]] = {}
     for index, (a, b, c) in enumerate(corners):
         for edge in ((a, b), (b, c), (c, a)):
@@ -309,21 +304,21 @@ def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, back_mm: float) 
         if taken[seed]:
             continue
         taken[seed] = True
-        cluster, area, volume = [seed], float(shadow_area[seed]), float(prism_volume[seed])
-        frontier = list(adjacent[seed])
+        cluster, area = [seed], float(shadow_area[seed])
+        frontier = [t for t in adjacent[seed] if normals[t] @ normals[seed] > 1.0 - 1e-9]
         while frontier:
             candidate = frontier.pop()
             if taken[candidate]:
                 continue
-            top = vertices[np.unique(corners[cluster + [candidate]])]
-            behind = top.copy()
-            behind[:, 0] = back_mm
-            grown_area, grown_volume = area + float(shadow_area[candidate]), volume + float(prism_volume[candidate])
-            if ConvexHull(np.vstack([top, behind])).volume <= grown_volume + MERGE_SLACK_MM * grown_area:
+            points = vertices[np.unique(corners[cluster + [candidate]]), 1:]
+            grown = area + float(shadow_area[candidate])
+            if ConvexHull(points).volume <= grown * (1.0 + 1e-9) + 1e-9:
                 taken[candidate] = True
                 cluster.append(candidate)
-                area, volume = grown_area, grown_volume
-                frontier.extend(t for t in adjacent[candidate] if not taken[t])
+                area = grown
+                frontier.extend(
+                    t for t in adjacent[candidate] if not taken[t] and normals[t] @ normals[seed] > 1.0 - 1e-9
+                )
         clusters.append(cluster)
     return clusters
 
