@@ -29,8 +29,8 @@ MuJoCo collides it prism by prism of its grid, 10x slower than the pieces
 and with hundreds of contacts per step. Boxes over a ``(v, w)`` grid of
 column heights, merged where their heights lie on one plane, were tried
 for this module: a staircase off the pad by half a cell at every ridge
-(the paper cube's median error 0.09 mm against 0.004 mm with exact
-pieces) and 1000-5000 pieces for the bunny's pad (0.2-0.05 mm cells).
+(the paper cube's median error 0.09 mm against 0.02 mm with the
+prisms) and 1000-5000 pieces for the bunny's pad (0.2-0.05 mm cells).
 Merging prisms across a convex crease too (a ridge as one piece, the
 bunny's pad in 261 pieces instead of 346) made MuJoCo's contacts less
 exact: the sanity tests' fingers closed 0.27 mm past their seat.
