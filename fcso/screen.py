@@ -463,8 +463,7 @@ def screen(
             areas += float(contact.sum()) * g.area_per_point_mm2
             bins.append(g.point_bin[contact])
             offsets.append(offset)
-        # the sorted distinct bins: a count over the lattice is cheaper than sorting the points
-        occupied = np.flatnonzero(np.bincount(np.concatenate(bins), minlength=NORMAL_BINS)).astype(np.int32)
+        occupied = np.unique(np.concatenate(bins))
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
         capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0
