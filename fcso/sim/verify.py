@@ -144,10 +144,10 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
-    """The pad's convex pieces (from its column grid) and the part's, refined until they overlap little at the
+    """The pad's convex pieces (prisms under its face) and the part's, refined until they overlap little at the
     nominal seated grasp.
 
-    The pad's pieces are exact to its grid (:func:`pad_prism_pieces`). A
+    The pad's pieces are exact (:func:`pad_prism_pieces`). A
     part piece that fills a notch of the part where a pad ridge sits shows
     as overlap of the seated part and pad (METHOD §12's fidelity). While it
     exceeds ``max_seated_penetration_mm`` the part's CoACD threshold near
@@ -172,9 +172,10 @@ def fitted_pieces(
     threshold = config.decomposition_threshold
     penetration, part = attempt(threshold)
     while penetration > config.max_seated_penetration_mm:
-        finer = [threshold / 2.0**times for times in range(1, 8)]
+        halvings = int(np.floor(np.log2(threshold / config.min_decomposition_threshold)))
         refined = None
-        for candidate in (t for t in finer if t >= config.min_decomposition_threshold):
+        # coarse before fine: CoACD's time grows fast as the threshold shrinks
+        for candidate in (threshold / 2.0**times for times in range(1, halvings + 1)):
             tried = attempt(candidate)
             if tried[0] < 0.9 * penetration:
                 refined, threshold = tried, candidate
