@@ -54,8 +54,7 @@ class VerifyConfig(BaseModel):
     decomposition_threshold: float = Field(
         0.05,
         gt=0,
-        description="CoACD concavity threshold of the pad and of the part near the pads (fraction of each decomposed "
-        "cell's size)",
+        description="CoACD concavity threshold of the part near the pads (fraction of each decomposed cell's size)",
     )
     coarse_decomposition_threshold: float = Field(
         0.1,
@@ -66,13 +65,13 @@ class VerifyConfig(BaseModel):
     max_seated_penetration_mm: float = Field(
         0.2,
         gt=0,
-        description="Largest overlap of part and pad pieces at the nominal seated grasp before the decompositions are "
-        "refined, mm",
+        description="Largest overlap of part and pad pieces at the nominal seated grasp before the part's "
+        "decomposition near the pads is refined, mm",
     )
     min_decomposition_threshold: float = Field(
         0.01,
         gt=0,
-        description="Refinement halves the pad's and the part's (near the pads) CoACD thresholds down to this",
+        description="Refinement halves the part's CoACD threshold near the pads down to this",
     )
     choice_budget_s: float = Field(
         600.0,

@@ -16,7 +16,7 @@ from ..finger import pad_to_finger
 from ..parallel import WorkerPool, resolve_jobs
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
-from .collision import ConvexPieces, convex_pieces, finger_body_hull, zoned_pieces
+from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, zoned_pieces
 from .config import VerifyConfig
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
@@ -144,15 +144,17 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
-    """The part's and the pad's convex pieces, refined until they overlap little at the nominal seated grasp.
+    """The pad's convex pieces (prisms under its face) and the part's, refined until they overlap little at the
+    nominal seated grasp.
 
-    A convex piece that bridges a pad pocket, or fills a notch of the part
-    where a pad ridge sits, shows as overlap of the seated part and pad
-    (METHOD §12's fidelity). While it exceeds ``max_seated_penetration_mm``
-    the pad's CoACD threshold is halved, or else the part's threshold near
-    the pads (both take seconds: the part is decomposed by zones), down to
-    ``min_decomposition_threshold``, until a threshold reduces the overlap
-    by a tenth. Refinements are cached like any decomposition.
+    The pad's pieces are exact (:func:`pad_prism_pieces`). A
+    part piece that fills a notch of the part where a pad ridge sits shows
+    as overlap of the seated part and pad (METHOD §12's fidelity). While it
+    exceeds ``max_seated_penetration_mm`` the part's CoACD threshold near
+    the pads is halved (a refinement is kept when it reduces the overlap by
+    a tenth; one halving can split a bridging piece badly, so finer ones are
+    tried too), down to ``min_decomposition_threshold``. Refinements are
+    cached like any decomposition.
 
     Returns
     -------
@@ -160,31 +162,25 @@ def fitted_pieces(
     notes : list of str
         Warnings when the overlap could not be brought under the limit.
     """
-    thresholds = {"pad": config.decomposition_threshold, "part": config.decomposition_threshold}
+    pad = pad_prism_pieces(design.fingerpad, case.pad_size_mm[0], config.cache_path())
 
-    def attempt(pad_threshold: float, part_threshold: float) -> tuple[float, ConvexPieces, ConvexPieces]:
-        part = part_pieces(case, config, part_threshold)
-        pad = convex_pieces(design.fingerpad, pad_threshold, config.cache_path())
+    def attempt(threshold: float) -> tuple[float, ConvexPieces]:
+        part = part_pieces(case, config, threshold)
         scene = build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config)
-        return seated_penetration_mm(scene, case), part, pad
+        return seated_penetration_mm(scene, case), part
 
-    penetration, part, pad = attempt(thresholds["pad"], thresholds["part"])
+    threshold = config.decomposition_threshold
+    penetration, part = attempt(threshold)
     while penetration > config.max_seated_penetration_mm:
+        halvings = int(np.floor(np.log2(threshold / config.min_decomposition_threshold)))
         refined = None
-        # one halving can split a bridging piece badly and overlap more, so finer ones are tried too;
-        # coarse before fine (CoACD's time grows fast as the threshold shrinks), the pad before the part
-        halvings = int(np.floor(np.log2(max(thresholds.values()) / config.min_decomposition_threshold)))
-        for times, which in ((t, w) for t in range(1, halvings + 1) for w in ("pad", "part")):
-            finer = dict(thresholds, **{which: thresholds[which] / 2.0**times})
-            if finer[which] < config.min_decomposition_threshold:
-                continue
-            tried = attempt(finer["pad"], finer["part"])
+        # coarse before fine: CoACD's time grows fast as the threshold shrinks
+        for candidate in (threshold / 2.0**times for times in range(1, halvings + 1)):
+            tried = attempt(candidate)
             if tried[0] < 0.9 * penetration:
-                refined, thresholds = tried, finer
+                refined, threshold = tried, candidate
                 break
-        if refined is not None:
-            penetration, part, pad = refined
-        else:
+        if refined is None:
             return (
                 part,
                 pad,
@@ -194,6 +190,7 @@ def fitted_pieces(
                     f"resolved"
                 ],
             )
+        penetration, part = refined
     return part, pad, []
 
 

@@ -7,15 +7,16 @@ import os
 import time
 from pathlib import Path
 
+import manifold3d
 import numpy as np
 import pytest
 import trimesh
 
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
-from fcso.geometry import box, to_trimesh
+from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import Part
-from fcso.sim.collision import convex_pieces, evict, zoned_pieces
+from fcso.sim.collision import convex_pieces, evict, pad_prism_pieces, zoned_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
@@ -48,8 +49,8 @@ def ridged(tmp_path_factory):
     mesh = ridged_block()
     part = Part(name="ridged", path="ridged_block", mesh=mesh, scale=1.0, repairs=[])
     # the exact pocket: the pads close onto the seat the design scored (q = 0); the pad on the block's whole
-    # width (stride positions only): a pad centred on the block's end wraps it, and the convex pieces of that
-    # wrap stand out 0.3 mm (pad pieces from the column grid, issue "Truth in the loop", would be exact)
+    # width (stride positions only): a pad centred on the block's end would wrap it, and the pad's pieces leave
+    # out what wraps behind the part (pad_prism_pieces)
     config = DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
@@ -62,7 +63,7 @@ def ridged(tmp_path_factory):
     cache = tmp_path_factory.mktemp("cache")
     case = grasp_case(result.report, result.report.grasps[0], mesh)
     pieces = part_pieces(case, VerifyConfig(cache_dir=cache)).pieces
-    pad = convex_pieces(result.fingerpad, VerifyConfig().decomposition_threshold, cache).pieces
+    pad = pad_prism_pieces(result.fingerpad, config.sampler.thickness_mm, cache).pieces
     return case, pieces, pad, finger_hull(result.report, result.finger), result.fingerpad
 
 
@@ -133,8 +134,54 @@ def test_collision_pieces_hug_the_part_and_the_pad(ridged):
     case, pieces, pad, _, fingerpad = ridged
     for meshes, target in ((pieces, case.part), (pad, fingerpad)):
         for vertices, _ in meshes:
-            # CoACD's pieces stand out up to ~0.12 mm here; its voxel preprocessing made it 0.3-0.8 mm
-            assert _stands_out_mm(vertices, target) <= 0.15
+            # CoACD's part pieces stand out up to ~0.12 mm here (its voxel preprocessing made it 0.3-0.8 mm); the
+            # pad's prisms by the 0.005 mm of the pad's simplification at most
+            assert _stands_out_mm(vertices, target) <= (0.15 if target is case.part else 0.01)
+
+
+def _union(pieces) -> manifold3d.Manifold:
+    return manifold3d.Manifold.batch_boolean(
+        [manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)) for v, _ in pieces], manifold3d.OpType.Add
+    )
+
+
+def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
+    """The pad's pieces fill the carved pad (a V-groove, a round pocket with its curved wall, a square one) and
+    nothing else, and the same pieces come back from the cache.
+    """
+    pad_box = box((0.0, 0.0, 0.0), (5.0, 20.0, 20.0))
+    groove = manifold3d.Manifold.hull_points(
+        np.array([[-1, 3, -1], [-1, 9, -1], [3, 6, -1], [-1, 3, 21], [-1, 9, 21], [3, 6, 21.0]])
+    )
+    round_pocket = manifold3d.Manifold.cylinder(4.0, 3.0, 3.0, 48).rotate((0.0, 90.0, 0.0)).translate((-1.0, 14.0, 6.0))
+    square_pocket = box((-1.0, 12.0, 12.0), (2.0, 18.0, 18.0))
+    carved = to_trimesh(pad_box - groove - round_pocket - square_pocket)
+    made = pad_prism_pieces(carved, 5.0, tmp_path)
+    read = pad_prism_pieces(carved, 5.0, tmp_path)
+    assert not made.cached and read.cached and len(read.pieces) == len(made.pieces)
+    # the curved wall alone needs a prism per facet; every flat face is one
+    assert len(read.pieces) < 120
+    union = _union(read.pieces)
+    # trimesh measures the carved mesh on its own
+    assert union.volume() == pytest.approx(carved.volume, rel=1e-5)
+    # no piece pokes out of the pad, and no two overlap (their volumes add up to their union's)
+    assert (union - to_manifold(carved)).volume() <= 1e-6 * carved.volume
+    total = sum(manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)).volume() for v, _ in read.pieces)
+    assert total == pytest.approx(union.volume(), rel=1e-6)
+    assert abs(read.volume_error) < 1e-5 and read.missing_fraction < 1e-5
+
+
+def test_pad_prisms_leave_out_what_the_part_overhangs(tmp_path):
+    """A pad with material in front of a cavity (the part reaches behind it) is its columns: the material in front
+    goes, as the design's column heights leave it out, and the volume error says so.
+    """
+    cavity = box((2.0, -1.0, 8.0), (3.0, 21.0, 12.0))
+    carved = to_trimesh(box((0.0, 0.0, 0.0), (5.0, 20.0, 20.0)) - cavity)
+    pieces = pad_prism_pieces(carved, 5.0, None)
+    # 5 x 20 x 20 less the cavity and the 2 mm in front of it (3 x 20 x 4 mm)
+    assert _union(pieces.pieces).volume() == pytest.approx(2000.0 - 240.0, rel=1e-6)
+    assert carved.volume == pytest.approx(2000.0 - 80.0)
+    assert pieces.missing_fraction == pytest.approx(160.0 / 1920.0, rel=1e-4)
 
 
 def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
@@ -154,6 +201,11 @@ def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
     assert max(_stands_out_mm(v, cube) for v in outside) > 1.0
     assert -0.001 < zoned.volume_error and zoned.missing_fraction < 0.001
     assert zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path).cached
+    # one entry per cell (the zone's and the one beyond it) and one for the whole; a finer threshold in the zone (a
+    # refinement) makes the zone's cell and the whole again, and reuses the coarse cell's pieces
+    assert len(list(tmp_path.glob("*.npz"))) == 3
+    refined = zoned_pieces(cube, np.eye(4), zone, 0.025, 0.5, tmp_path)
+    assert not refined.cached and len(list(tmp_path.glob("*.npz"))) == 5
 
 
 def test_verification_takes_the_part_density_from_the_print_profile():
