@@ -244,6 +244,7 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
         raise GeometryError(f"manifold3d refused the solid snapped to float32: {snapped.status()}")
     data = to_trimesh(snapped).export(file_type="stl")
     written = trimesh.load(io.BytesIO(data), file_type="stl", process=True)
+    written = _without_flaps(written)
     return WrittenMesh(
         mesh=written,
         watertight=bool(written.is_watertight),
@@ -251,6 +252,29 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
         bodies=len(written.split(only_watertight=False)) if len(written.faces) else 0,
         volume_mm3=float(written.volume),
     )
+
+
+#: A piece of a written mesh enclosing less than this is a flap of zero thickness, not material, mm³.
+FLAP_VOLUME_MM3 = 1e-6
+
+
+def _without_flaps(written: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The written mesh without flaps: pieces of zero volume beside one watertight body.
+
+    Two vertices manifold3d keeps apart can round to one float32 point; a
+    sheet between them then reads back as a separate two-triangle flap of
+    zero area and volume (the demo's cube and solar tracker on one finger,
+    10 mm pads). It holds no material, so it is left out of the file; a
+    piece with volume is never dropped.
+    """
+    pieces = written.split(only_watertight=False)
+    if len(pieces) < 2:
+        return written
+    solids = [p for p in pieces if abs(float(p.volume)) >= FLAP_VOLUME_MM3]
+    if len(solids) != 1 or not solids[0].is_watertight:
+        return written
+    data = solids[0].export(file_type="stl")
+    return trimesh.load(io.BytesIO(data), file_type="stl", process=True)
 
 
 def print_ready(solid: manifold3d.Manifold, what: str) -> WrittenMesh:
