@@ -72,6 +72,22 @@ def _fill(path: Path, leave_bytes: int) -> Path:
     return filler
 
 
+def _every_topic_answered(job_id: str):
+    """A ``wait_for`` predicate true once the queryable answered every topic of ``job_id``.
+
+    The replies come one by one: waiting for the first one (design) and stopping there lost those after it (plan,
+    placement, grasps).
+    """
+    answered = set()
+
+    def every_topic(v) -> bool:
+        if isinstance(v, dict) and v.get("source") == "query" and v.get("job_id") == job_id:
+            answered.add(v["topic"])
+        return TOPICS <= answered
+
+    return every_topic
+
+
 @pytest.mark.parametrize(
     "free_bytes", [96 * 1024, 0], ids=["full-while-writing-outputs", "full-before-the-record-starts"]
 )
@@ -182,9 +198,7 @@ def test_zenoh_router_down_at_start_then_up_late_subscriber_gets_every_result(tm
             ],
         )
         try:
-            late.wait_for(
-                lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "design", 30
-            )
+            late.wait_for(_every_topic_answered(done["job_id"]), 60)
         finally:
             late.stop()
     finally:
@@ -248,16 +262,7 @@ def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunni
     try:
         _daemon_says(daemon, "job already known: not run again", 30, job_id=done["job_id"])
         _daemon_says(daemon, "job already known: not run again", 30, job_id=failed["job_id"])
-        # the queryable's replies come one by one: wait for every topic, not for the first (design came before
-        # plan and placement, and stopping there lost them)
-        answered = set()
-
-        def every_topic(v) -> bool:
-            if isinstance(v, dict) and v.get("source") == "query" and v.get("job_id") == done["job_id"]:
-                answered.add(v["topic"])
-            return TOPICS <= answered
-
-        late.wait_for(every_topic, 60)
+        late.wait_for(_every_topic_answered(done["job_id"]), 60)
     finally:
         late.stop()
         assert daemon.stop() == 0
