@@ -7,8 +7,8 @@ configs with mTLS and access control, the message-signing key), starts
 ``fcsod subscribe`` with the controller's certificate (the cell controller's
 view, every message's signature checked), drops the bundled batch
 ``examples/jobs/batch-demo`` into the watch folder file by file, shows what
-the subscriber receives (the job needs two finger sets: each set's finger on
-``.../design/<set>`` and the pick plan on ``.../plan``, as the cell gets them), shows that a client without a
+the subscriber receives (each finger set's finger on ``.../design/<set>`` and the
+pick plan on ``.../plan``, as the cell gets them), shows that a client without a
 certificate is
 refused, audits the job's MCAP record and stops the daemon. ``[ros2]`` is
 enabled: a zenoh session of the demo with the controller's certificate,
