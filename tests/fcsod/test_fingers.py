@@ -41,10 +41,9 @@ def delivered_grasp() -> GraspReport:
     return _grasp(load_part(CUBE).mesh)
 
 
-@pytest.fixture
-def library(tmp_path, delivered_grasp):
-    cube = load_part(CUBE).mesh
-    library = FingerLibrary(tmp_path / "fingers.sqlite3")
+def _library_with_job_a(folder, grasp: GraspReport, **pad) -> FingerLibrary:
+    """A library holding job A's finger for the cube in cell-a (``pad``: its kept pad, when given)."""
+    library = FingerLibrary(folder / "fingers.sqlite3")
     library.add(
         "cell-a",
         DeliveredFinger(
@@ -55,9 +54,16 @@ def library(tmp_path, delivered_grasp):
             finger_stl=CUBE.read_bytes(),
             quality_mm2=40.0,
             worst_retained=0.9,
-            parts=[DeliveredPart("cube", cube, [delivered_grasp])],
+            parts=[DeliveredPart("cube", load_part(CUBE).mesh, [grasp])],
+            **pad,
         ),
     )
+    return library
+
+
+@pytest.fixture
+def library(tmp_path, delivered_grasp):
+    library = _library_with_job_a(tmp_path, delivered_grasp)
     yield library
     library.close()
 
@@ -116,24 +122,9 @@ PAD_SETTINGS = '{"sampler": {"length_mm": 20.0}}'
 
 @pytest.fixture
 def library_with_pad(tmp_path, delivered_grasp):
-    cube = load_part(CUBE).mesh
-    library = FingerLibrary(tmp_path / "fingers.sqlite3")
-    library.add(
-        "cell-a",
-        DeliveredFinger(
-            job_id="job-a",
-            finger_set=1,
-            finger_file="finger.stl",
-            design_key="fcso/cell-a/jobs/job-a/design",
-            finger_stl=CUBE.read_bytes(),
-            quality_mm2=40.0,
-            worst_retained=0.9,
-            parts=[DeliveredPart("cube", cube, [delivered_grasp])],
-            # any closed mesh stands for the pad: the library keeps it as it is given
-            pad_stl=trimesh.creation.box([5.0, 20.0, 20.0]).export(file_type="stl"),
-            pad_settings=PAD_SETTINGS,
-        ),
-    )
+    # any closed mesh stands for the pad: the library keeps it as it is given
+    pad_stl = trimesh.creation.box([5.0, 20.0, 20.0]).export(file_type="stl")
+    library = _library_with_job_a(tmp_path, delivered_grasp, pad_stl=pad_stl, pad_settings=PAD_SETTINGS)
     yield library
     library.close()
 
