@@ -11,6 +11,10 @@ from fcso.config import DesignConfig
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).parent.parent
 
+# How long a test waits for a process, a message or a file before it fails. It is not a measure of speed: a machine ten
+# times slower than ours must pass, so it only keeps a hung process from holding the CI run until its own limit.
+HANG_GUARD_S = 1800.0
+
 
 def data_path(name: str) -> Path:
     """Path of a fixture mesh in tests/data (see tests/data/README.md for origins)."""

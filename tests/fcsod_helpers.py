@@ -14,6 +14,8 @@ import threading
 import time
 from pathlib import Path
 
+from tests.conftest import HANG_GUARD_S
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "tests" / "data"
 
@@ -179,7 +181,7 @@ class Process:
             self.lines.append(line.rstrip("\n"))
             self._queue.put(line)
 
-    def wait_for(self, predicate, timeout: float) -> dict | str:
+    def wait_for(self, predicate, timeout: float = HANG_GUARD_S) -> dict | str:
         """The first line (parsed JSON if it is) for which ``predicate`` is true; AssertionError after ``timeout`` s."""
         deadline = time.monotonic() + timeout
         seen = 0
@@ -200,7 +202,7 @@ class Process:
     def json_lines(self) -> list[dict]:
         return [v for v in map(_parse, self.lines) if isinstance(v, dict)]
 
-    def stop(self, sig: int = signal.SIGTERM, timeout: float = 20.0) -> int:
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = HANG_GUARD_S) -> int:
         """Send ``sig``, wait, kill if needed; returns the exit code."""
         if self.popen.poll() is None:
             self.popen.send_signal(sig)
@@ -223,7 +225,7 @@ def _parse(line: str):
 def start_daemon(config: Path, env: dict | None = None) -> Process:
     """Start ``fcsod run`` and wait until it logged its start."""
     daemon = Process(["run", "--config", str(config)], env=env)
-    daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "fcsod started", timeout=60)
+    daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "fcsod started")
     return daemon
 
 
@@ -231,7 +233,7 @@ def start_subscriber(config: Path, save: Path | None = None, extra: list[str] | 
     """Start ``fcsod subscribe`` and wait until it sees the daemon's liveliness token."""
     args = ["subscribe", "--config", str(config), *(["--save", str(save)] if save else []), *(extra or [])]
     subscriber = Process(args)
-    subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("daemon") == "alive", timeout=60)
+    subscriber.wait_for(lambda v: isinstance(v, dict) and v.get("daemon") == "alive")
     return subscriber
 
 
@@ -274,7 +276,7 @@ def copy_tree(source: Path, target: Path) -> None:
     shutil.copytree(source, target)
 
 
-def finished(subscriber, folder_name: str, timeout: float = 90) -> dict:
+def finished(subscriber, folder_name: str, timeout: float = HANG_GUARD_S) -> dict:
     """The done/failed status line the subscriber printed for the job of ``folder_name``."""
     return subscriber.wait_for(
         lambda v: (

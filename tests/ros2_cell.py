@@ -24,6 +24,8 @@ import time
 import zenoh
 import zenoh.ext
 
+from tests.conftest import HANG_GUARD_S
+
 
 def _emit(**fields) -> None:
     sys.stdout.write(json.dumps(fields) + "\n")
@@ -57,7 +59,7 @@ def main() -> None:
         config.insert_json5("connect/endpoints", json.dumps([args.connect]))
         config.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(config)
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + HANG_GUARD_S
     while not list(session.info.peers_zid()) and not list(session.info.routers_zid()) and time.monotonic() < deadline:
         time.sleep(0.05)
     _emit(event="peer", zids=[str(zid) for zid in [*session.info.peers_zid(), *session.info.routers_zid()]])

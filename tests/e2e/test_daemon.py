@@ -15,6 +15,7 @@ from mcap.reader import make_reader
 from fcsod.cli import main
 from fcsod.record.recorder import ALWAYS_RECORDED, DESIGN_RECORDED, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, read_record
 from tests.broken_meshes import sheet_stl
+from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import (
     DATA,
     Process,
@@ -236,7 +237,7 @@ def test_late_subscriber_gets_results_from_the_queryable(cell, cube_job):
             }
 
         # the replies need not arrive in the journal's order (zenoh consolidates them): wait for all five
-        late.wait_for(lambda v: set(replies()) == {"status", "quality", "grasps", "design", "plan", "placement"}, 30)
+        late.wait_for(lambda v: set(replies()) == {"status", "quality", "grasps", "design", "plan", "placement"})
         got = replies()
         assert got["design"]["sha256_ok"] is True
         assert got["status"]["body"]["state"] == "done"
@@ -271,7 +272,7 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
             lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", 45
         )
         assert done["job_id"] == job_id
-        assert replay.popen.wait(timeout=30) == 0
+        assert replay.popen.wait(timeout=HANG_GUARD_S) == 0
         topics = [v["topic"] for v in listener.json_lines() if v.get("job_id") == job_id]
         assert topics == ["status", "quality", "grasps", "design", "plan", "placement", "status"]
     finally:

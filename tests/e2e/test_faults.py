@@ -22,6 +22,7 @@ from fcsod.bus.pki import add_client, init_pki
 from fcsod.record.recorder import TOPIC_STATE, read_record
 from fcsod.service.journal import journal_problem
 from tests.broken_meshes import sheet_stl
+from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import (
     DATA,
     REPO,
@@ -40,7 +41,7 @@ SOLAR = DATA / "solar_tracker.stl"
 TOPICS = {"status", "quality", "grasps", "design", "plan", "placement"}
 
 
-def _daemon_says(daemon: Process, message: str, timeout: float = 90, **fields) -> dict:
+def _daemon_says(daemon: Process, message: str, timeout: float = HANG_GUARD_S, **fields) -> dict:
     return daemon.wait_for(
         lambda v: (
             isinstance(v, dict)
@@ -198,7 +199,7 @@ def test_zenoh_router_down_at_start_then_up_late_subscriber_gets_every_result(tm
             ],
         )
         try:
-            late.wait_for(_every_topic_answered(done["job_id"]), 60)
+            late.wait_for(_every_topic_answered(done["job_id"]))
         finally:
             late.stop()
     finally:
@@ -216,7 +217,9 @@ def test_zenoh_router_down_at_start_then_up_late_subscriber_gets_every_result(tm
 
 
 def _fcsod(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fcsod", *args], cwd=REPO, capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "fcsod", *args], cwd=REPO, capture_output=True, text=True, timeout=HANG_GUARD_S
+    )
 
 
 def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunning_jobs(tmp_path):
@@ -262,7 +265,7 @@ def test_corrupt_journal_stops_the_start_and_rebuild_restores_it_without_rerunni
     try:
         _daemon_says(daemon, "job already known: not run again", 30, job_id=done["job_id"])
         _daemon_says(daemon, "job already known: not run again", 30, job_id=failed["job_id"])
-        late.wait_for(_every_topic_answered(done["job_id"]), 60)
+        late.wait_for(_every_topic_answered(done["job_id"]))
     finally:
         late.stop()
         assert daemon.stop() == 0
@@ -304,7 +307,7 @@ def test_job_folder_deleted_while_its_job_runs_fails_cleanly(tmp_path):
         # a design of many minutes: still running when its folder is deleted, which withdraws it at once
         drop_job(folder, {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR})
         _daemon_says(daemon, "job started")
-        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load")
         # one job at a time: this one waits in the queue while the first runs
         drop_job(waiting, {"cube.stl": CUBE})
         _daemon_says(daemon, "job queued", folder=str(waiting))

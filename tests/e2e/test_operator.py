@@ -19,6 +19,7 @@ from websockets.sync.client import connect
 from fcsod.cli import main
 from fcsod.record.recorder import TOPIC_STATE, read_record
 from fcsod.service.daemon import CANCELLED_ERROR
+from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import (
     DATA,
     decode_foxglove,
@@ -60,7 +61,7 @@ def jobs(config, *args: str) -> dict[str, dict]:
 
 def scrape(port: int) -> dict[tuple, float]:
     """The metrics endpoint's samples, parsed by prometheus-client's parser: (name, sorted labels) -> value."""
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=30) as response:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=HANG_GUARD_S) as response:
         text = response.read().decode()
     return {
         (sample.name, tuple(sorted(sample.labels.items()))): sample.value
@@ -120,7 +121,9 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
     out = tmp_path / "out"
     daemon = start_daemon(config)
     try:
-        with connect(f"ws://127.0.0.1:{foxglove_port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30) as socket:
+        with connect(
+            f"ws://127.0.0.1:{foxglove_port}", subprotocols=["foxglove.sdk.v1"], open_timeout=HANG_GUARD_S
+        ) as socket:
             client = FoxgloveClient(socket, {"/scene", "/fcsod/status"})
             for topic in ("/scene", "/fcsod/status"):
                 daemon.wait_for(
@@ -132,8 +135,8 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
             before = scrape(metrics_port)
             # a design of many minutes (SLOW_SECTIONS in its job.toml): surely still running when cancelled
             drop_job(tmp_path / "watch" / "slow", {"job.toml": slow_manifest("solar.stl"), "solar.stl": SOLAR})
-            started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
-            daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+            started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started")
+            daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load")
             # one job at a time: the second waits in the queue behind the running one
             drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
             queued = daemon.wait_for(

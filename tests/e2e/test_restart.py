@@ -10,7 +10,7 @@ import threading
 import time
 
 from fcsod.record.recorder import TOPIC_STATE, read_record
-from tests.conftest import process_running
+from tests.conftest import HANG_GUARD_S, process_running
 from tests.fcsod_helpers import (
     DATA,
     SLOW_DESIGN,
@@ -45,7 +45,7 @@ class FakeSystemd:
             except TimeoutError:
                 continue
 
-    def wait_for(self, message: str, timeout: float) -> int:
+    def wait_for(self, message: str, timeout: float = HANG_GUARD_S) -> int:
         """Index of the first ``message`` received; AssertionError after ``timeout`` s."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -70,14 +70,14 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
 
     first = start_daemon(config, env=environment)
     try:
-        systemd.wait_for("READY=1", 60)
+        systemd.wait_for("READY=1")
         drop_job(tmp_path / "watch" / "solar", {"solar_tracker.stl": SOLAR})
-        started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
-        first.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+        started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started")
+        first.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load")
     finally:
         first.stop(signal.SIGKILL)
     job_id, worker = started["job_id"], started["worker_pid"]
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + HANG_GUARD_S
     while process_running(worker) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not process_running(worker), "the worker outlived the killed daemon"
@@ -97,11 +97,11 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
         )
         assert done["job_id"] == job_id and done["body"]["state"] == "done", done
         assert done["body"]["attempt"] == 2
-        assert systemd.wait_for("WATCHDOG=1", 60) > systemd.wait_for("READY=1", 60)
+        assert systemd.wait_for("WATCHDOG=1") > systemd.wait_for("READY=1")
     finally:
         subscriber.stop()
         assert second.stop(signal.SIGTERM) == 0
-    systemd.wait_for("STOPPING=1", 60)
+    systemd.wait_for("STOPPING=1")
     systemd.close()
 
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [job_id], "partial output left behind"
@@ -150,8 +150,8 @@ def test_worker_killed_mid_job_fails_that_job_only(tmp_path):
         drop_job(
             tmp_path / "watch" / "victim", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR}
         )
-        started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started", 60)
-        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load", 60)
+        started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started")
+        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load")
         os.kill(started["worker_pid"], signal.SIGKILL)
         failed = subscriber.wait_for(
             lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "failed", 60

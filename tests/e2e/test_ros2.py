@@ -37,7 +37,7 @@ QOS = ":1:,10:,:,:,,"
 def _start_cell(port: int, late: str | None = None) -> Process:
     args = ["--connect", f"tcp/127.0.0.1:{port}", "--domain", str(DOMAIN), *(["--late", late] if late else [])]
     cell = Process(args, module="tests.ros2_cell")
-    cell.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "ready", timeout=60)
+    cell.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "ready")
     return cell
 
 
@@ -84,8 +84,8 @@ def ros2_job(tmp_path_factory):
 
     # the daemon publishes each message natively, then on ROS 2:
     # the last of both forms of the final status closes the job
-    cell.wait_for(done_on_ros2, timeout=120)
-    cell.wait_for(done_natively, timeout=120)
+    cell.wait_for(done_on_ros2)
+    cell.wait_for(done_natively)
     finished_ns = time.time_ns()
     job_id = next(path.name for path in (base / "out").iterdir() if not path.name.startswith("."))
     yield {
@@ -206,7 +206,7 @@ def test_a_late_transient_local_subscriber_gets_the_last_job(ros2_job):
     key = f"{DOMAIN}/cell1/fcsod/grasps/geometry_msgs::msg::dds_::PoseArray_/{POSE_ARRAY_HASH}"
     late = _start_cell(ros2_job["port"], late=key)
     try:
-        value = late.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "sample", timeout=30)
+        value = late.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "sample")
     finally:
         late.stop()
     live = _samples(ros2_job["cell"], "ros2", "/grasps/")

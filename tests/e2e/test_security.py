@@ -25,6 +25,7 @@ from rosbags.typesys import Stores, get_typestore
 import fcsod
 from fcsod.bus.pki import add_client, init_pki
 from fcsod.bus.signing import generate_signing_key
+from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import (
     DATA,
     REPO,
@@ -45,7 +46,7 @@ ROS2 = f'[ros2]\nenabled = true\ndomain_id = {ROS2_DOMAIN}\nnamespace = "/cell1"
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
-def probe(config: Path, *args: str, timeout: float = 60) -> list[dict]:
+def probe(config: Path, *args: str, timeout: float = HANG_GUARD_S) -> list[dict]:
     """Run ``tests/zenoh_probe.py`` to its end; its JSON lines."""
     done = subprocess.run(
         [sys.executable, "-m", "tests.zenoh_probe", "--config", str(config), *args],
@@ -81,7 +82,7 @@ def start_probe(config: Path, *args: str) -> tuple[subprocess.Popen, list[dict]]
 def probe_output(probe: tuple[subprocess.Popen, list[dict]]) -> list[dict]:
     """Every line of a background probe, after closing its standard input (which ends it)."""
     process, lines = probe
-    out, _ = process.communicate(timeout=60)
+    out, _ = process.communicate(timeout=HANG_GUARD_S)
     return lines + [json.loads(line) for line in out.splitlines() if line.startswith("{")]
 
 
@@ -100,7 +101,7 @@ def _ros2_cell(pki: Path, name: str, late: str | None = None) -> Process:
         *(["--late", late] if late else []),
     ]
     cell = Process(args, module="tests.ros2_cell")
-    cell.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "ready", timeout=60)
+    cell.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "ready")
     return cell
 
 
@@ -190,7 +191,7 @@ def test_ros2_topics_pass_the_access_control_unsigned_to_listed_clients_only(sec
     has no signature.
     """
     listed, outsider = secure["ros2_cells"]["ctl1"], secure["ros2_cells"]["outsider"]
-    status = listed.wait_for(lambda v: isinstance(v, dict) and '"done"' in _cdr_string(v, "/fcsod/status/"), timeout=60)
+    status = listed.wait_for(lambda v: isinstance(v, dict) and '"done"' in _cdr_string(v, "/fcsod/status/"))
     assert status["key_expr"].startswith(f"{ROS2_DOMAIN}/cell1/fcsod/status/std_msgs::msg::dds_::String_/RIHS01_")
     assert len(bytes.fromhex(status["attachment"])) == 8 + 8 + 1 + 16, (
         "rmw_zenoh's attachment: sequence number, timestamp, GID"
@@ -217,7 +218,7 @@ def test_a_late_transient_local_ros2_subscriber_gets_the_last_job_through_the_ac
     (key,) = {v["key_expr"] for v in _ros2_samples(secure["ros2_cells"]["ctl1"], "grasps")}
     late = _ros2_cell(secure["pki"], "ctl2", late=key)
     try:
-        value = late.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "sample", timeout=30)
+        value = late.wait_for(lambda v: isinstance(v, dict) and v.get("event") == "sample")
     finally:
         late.stop()
     assert value["source"] == "history" and value["key_expr"] == key
@@ -300,7 +301,7 @@ def test_clients_without_a_certificate_of_the_ca_cannot_connect(secure, client):
             "5",
         ]
     )
-    assert attempt.popen.wait(timeout=60) == 2
+    assert attempt.popen.wait(timeout=HANG_GUARD_S) == 2
     attempt.stop()
     assert any("zenoh session cannot open" in line for line in attempt.lines), attempt.lines
     assert not [line for line in attempt.lines if '"topic"' in line]
@@ -444,7 +445,7 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
                 "UPDATE messages SET payload = ? WHERE job_id = ? AND topic = 'grasps'", (FORGED.encode(), job_id)
             )
         late = start_subscriber(cell["config"], extra=[*client_args(pki, "ctl1")])
-        late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status", 30)
+        late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status")
         late.stop()
     finally:
         _stop(cell)

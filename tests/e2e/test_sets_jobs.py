@@ -42,7 +42,7 @@ def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, cap
             meshes[f"{part.name}.stl"] = tmp_path / f"{part.name}.stl"
             part.mesh.export(meshes[f"{part.name}.stl"])
         drop_job(tmp_path / "watch" / "two-sets", {"job.toml": MANIFEST, **meshes})
-        done = finished(subscriber, "two-sets", timeout=180)
+        done = finished(subscriber, "two-sets")
         assert done["body"]["state"] == "done", done["body"]["error"]
         job_id = done["job_id"]
         lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
@@ -55,7 +55,7 @@ def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, cap
                     v["topic"]: v for v in late.json_lines() if v.get("source") == "query" and v.get("job_id") == job_id
                 }
 
-            late.wait_for(lambda v: {"plan", "design/1", "design/2"} <= set(replies()), 30)
+            late.wait_for(lambda v: {"plan", "design/1", "design/2"} <= set(replies()))
             got = replies()
         finally:
             late.stop()

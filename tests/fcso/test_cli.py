@@ -9,12 +9,16 @@ import pytest
 import trimesh
 
 from examples.sim_parts import holed_notched_cube
-from tests.conftest import REPO, data_path
+from tests.conftest import HANG_GUARD_S, REPO, data_path
 
 
 def fcso(*args, cwd=None):
     return subprocess.run(
-        [sys.executable, "-m", "fcso.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=600
+        [sys.executable, "-m", "fcso.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=HANG_GUARD_S,
     )
 
 

@@ -6,11 +6,16 @@ import sys
 
 from examples.sim_parts import ridged_block
 from fcso.sim.report import VerificationReport
+from tests.conftest import HANG_GUARD_S
 
 
 def fcso(*args, env=None):
     return subprocess.run(
-        [sys.executable, "-m", "fcso.cli", *map(str, args)], capture_output=True, text=True, timeout=900, env=env
+        [sys.executable, "-m", "fcso.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+        env=env,
     )
 
 

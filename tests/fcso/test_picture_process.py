@@ -14,7 +14,7 @@ import pytest
 from fcso import design, load_part
 from fcso.output.design_page import pictures, report_inputs
 from fcso.output.picture_process import PictureProcess, PictureProcessError
-from tests.conftest import REPO, data_path, process_running, small_config
+from tests.conftest import HANG_GUARD_S, REPO, data_path, process_running, small_config
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +84,7 @@ def test_workers_and_the_picture_process_die_with_a_killed_command(tmp_path):
     assert len(children) == 3
     holder.kill()
     holder.wait()
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + HANG_GUARD_S
     while time.monotonic() < deadline and any(process_running(pid) for pid in children):
         time.sleep(0.1)
     assert not any(process_running(pid) for pid in children)

@@ -19,6 +19,7 @@ from fcso.cli import ProgressLine, main
 from fcso.output.design_page import load_report_inputs
 from fcso.output.render import CONTACT_COLOUR, PICTURE_SIZES
 from fcso.report.models import DesignReport, ranked_candidates
+from tests.conftest import HANG_GUARD_S
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"
@@ -308,7 +309,7 @@ def test_3d_view_renders_offline_in_headless_chromium(bunny_dir, tmp_path):
         ],
         capture_output=True,
         text=True,
-        timeout=180,
+        timeout=HANG_GUARD_S,
     )
     assert screenshot.is_file(), run.stderr[-3000:]
     console = [line for line in run.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]

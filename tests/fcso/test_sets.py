@@ -20,7 +20,7 @@ import fcso
 from fcso.geometry import to_trimesh
 from fcso.output.sets_page import pick_plan_text
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
-from tests.conftest import REPO, small_config
+from tests.conftest import HANG_GUARD_S, REPO, small_config
 
 MIN_RETAINED = 0.7
 
@@ -200,7 +200,7 @@ def test_cli_identical_parts_once_ungraspable_listed_and_one_folder_per_set(tmp_
         ],
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=HANG_GUARD_S,
         cwd=REPO,
     )
     assert run.returncode == 0, run.stderr
@@ -228,7 +228,11 @@ def test_cli_identical_parts_once_ungraspable_listed_and_one_folder_per_set(tmp_
     assert "Pick plan" in page and page.count('data-kind="finger"') == 2
     (out / "report.html").unlink()
     rebuilt = subprocess.run(
-        [sys.executable, "-m", "fcso.cli", "report", out], capture_output=True, text=True, timeout=600, cwd=REPO
+        [sys.executable, "-m", "fcso.cli", "report", out],
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+        cwd=REPO,
     )
     assert rebuilt.returncode == 0, rebuilt.stderr
     assert rebuilt.stdout.split() == [
@@ -266,7 +270,7 @@ def test_one_finger_set_is_the_single_design_of_the_paper_experiment(tmp_path):
         ],
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=HANG_GUARD_S,
         cwd=REPO,
     )
     assert run.returncode == 0, run.stderr

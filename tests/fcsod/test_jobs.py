@@ -20,6 +20,7 @@ from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record,
 from fcsod.service.journal import Journal, StoredMessage, stored_messages
 from fcsod.service.systemd import notify, watchdog_interval
 from fcsod.service.watcher import FolderWatcher, Readiness
+from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import DATA
 
 CUBE = DATA / "20mm-xyz-cube.stl"
@@ -96,7 +97,7 @@ def test_watcher_reports_changed_job_folders(tmp_path, polling):
         (tmp_path / "job" / "a.stl").write_bytes(b"x")
         (tmp_path / ".hidden" / "a.stl").write_bytes(b"x")
         changed = set()
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + HANG_GUARD_S
         while (tmp_path / "job") not in changed and time.monotonic() < deadline:
             changed |= watcher.take_changed()
             time.sleep(0.1)
