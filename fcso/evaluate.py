@@ -214,7 +214,11 @@ def evaluate_candidate(
     by_capture = config.quality.measure == "capture"
     if by_capture:
         landscapes = pad_landscapes(
-            [s.screen for s in chosen], [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config
+            [s.screen for s in chosen],
+            [s.centres_uv_mm for s in chosen],
+            ScreenGrid.for_config(config),
+            config,
+            flat=flat,
         )
     results = []
     for number, (scenario, sample) in enumerate(zip(scenarios, chosen)):

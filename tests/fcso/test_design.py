@@ -9,6 +9,7 @@ import trimesh
 import fcso
 from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
 from fcso.config import DesignConfig
+from fcso.design import finish_candidate
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
@@ -92,6 +93,11 @@ def test_a_featureless_plate_gets_flat_pads_not_a_carving(tmp_path):
         [Part(name="cube", path="cube", mesh=mesh)], fcso.DesignConfig().updated(upright_grasp_settings(mesh))
     )
     assert not carved.report.finger.flat_pads and carved.best.case != "bad"
+    # its grasp on flat pads captures what the report says flat pads capture, not what its carving does
+    flat, _, _, _ = finish_candidate(carved.scenarios, carved.best.choice, carved.report.settings, flat=True)
+    assert flat.case == "bad"
+    assert flat.scenarios[0].capture.fraction == pytest.approx(carved.report.scenarios[0].flat_capture, abs=1e-6)
+    assert flat.scenarios[0].capture.fraction < carved.report.scenarios[0].capture
 
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):
