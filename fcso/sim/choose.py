@@ -57,7 +57,8 @@ def verify_top(
     at the first whose every scenario passes; no further candidate is
     started once ``config.choice_budget_s`` went on verification. When none of
     those tried passes, the best of them by truth is delivered: the highest
-    worst-scenario success rate, then the measure's order.
+    worst-scenario success rate, then the measure's order; but flat pads the
+    design chose (``report.finger.flat_pads``) are kept unless a carving passes.
 
     Parameters
     ----------
@@ -93,10 +94,13 @@ def verify_top(
         if verification.passed or time.monotonic() - started >= budget_s:
             break
     passing = [o for o in outcomes if o[3].passed]
+    # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
+    kept_flat = result.report.finger.flat_pads and not passing
+    fallback = outcomes[:1] if kept_flat else outcomes
     chosen = (
         passing[0]
         if passing
-        else max(outcomes, key=lambda o: (min((s.fcso.success_rate for s in o[3].scenarios), default=0.0), -o[0]))
+        else max(fallback, key=lambda o: (min((s.fcso.success_rate for s in o[3].scenarios), default=0.0), -o[0]))
     )
     ranking = [
         RankedCandidate(
@@ -112,7 +116,9 @@ def verify_top(
     ]
     rank, candidate, built, verification = chosen
     design = built[0]
-    why = choice_text(rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s)
+    why = choice_text(
+        rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s, kept_flat
+    )
     if candidate.index != result.report.best:
         result = _with_candidate(result, candidate, *built[1:], f"verification delivered {why}")
     elif not passing:
@@ -122,9 +128,19 @@ def verify_top(
 
 
 def choice_text(
-    rank: int, candidate: CandidateReport, tried: int, ranked: int, passed: bool, spent_s: float, budget_s: float
+    rank: int,
+    candidate: CandidateReport,
+    tried: int,
+    ranked: int,
+    passed: bool,
+    spent_s: float,
+    budget_s: float,
+    kept_flat: bool = False,
 ) -> str:
-    """Which candidate was delivered and why, in a sentence (``verification.json``'s ``choice``)."""
+    """Which candidate was delivered and why, in a sentence (``verification.json``'s ``choice``).
+
+    ``kept_flat``: the design's flat pads were kept because no carving passed.
+    """
     what = f"candidate {candidate.index} (rank {rank + 1} by the measure, {candidate.quality:.1f})"
     if passed:
         return f"{what}: the first whose every scenario passed, after {tried} of {ranked} verified"
@@ -133,7 +149,12 @@ def choice_text(
         if tried < ranked
         else f"all {ranked} candidates were verified"
     )
-    return f"{what}: none of the {tried} verified passed ({stop}); the best of those by worst-scenario success rate"
+    kept = (
+        "the design's flat pads are kept: only a carving that passes replaces them"
+        if kept_flat
+        else "the best of those by worst-scenario success rate"
+    )
+    return f"{what}: none of the {tried} verified passed ({stop}); {kept}"
 
 
 def _with_candidate(

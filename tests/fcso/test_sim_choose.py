@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 import fcso
-from examples.sim_parts import two_ridge_block, upright_grasp_settings
+from examples.sim_parts import plain_box, two_ridge_block, upright_grasp_settings
 from fcso.design import finish_candidate
 from fcso.finger import fuse
 from fcso.geometry import to_manifold
@@ -59,3 +59,23 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     exact_finger = fuse(result.flat_finger, exact_pad, sampler, config.finger.overlap_mm).mesh
     assert exact_finger.volume - chosen.finger.volume >= 0.5 * clearance * contact_area
     assert chosen.report.finger.volume_mm3 == pytest.approx(chosen.finger.volume, rel=1e-4)
+
+
+def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_passes(tmp_path):
+    sampler = {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 5.0, "penetration_mm": 4.0}
+    config = fcso.DesignConfig().updated({"poses": {"count": 1}, "sampler": sampler})
+    result = fcso.design([Part(name="plate", path="plate", mesh=plain_box(40.0, 30.0, 6.0))], config)
+    assert result.report.finger.flat_pads and result.best.case == "bad"
+
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=3, cache_dir=tmp_path))
+
+    assert ranking[0].index == result.report.best
+    passing = [r for r in ranking if r.passed]
+    if passing:
+        # a carving that passes is delivered like any other
+        assert chosen.report.best == passing[0].index and verification.passed
+    else:
+        # nothing passed: the flat pads stay, whatever success rate a carving reached
+        assert chosen is result and chosen.report.finger.flat_pads
+        assert [r.chosen for r in ranking] == [True] + [False] * (len(ranking) - 1)
+        assert verification.choice.endswith("the design's flat pads are kept: only a carving that passes replaces them")
