@@ -226,7 +226,9 @@ def _outer_hulls(part: manifold3d.Manifold, reach_boxes: np.ndarray) -> list[tup
     lower, upper = np.asarray(part.bounding_box()[:3]) - 1.0, np.asarray(part.bounding_box()[3:]) + 1.0
     planes = [
         np.unique(
-            np.clip(np.concatenate([[lower[axis], upper[axis]], reach_boxes[:, :, axis].ravel()]), lower[axis], upper[axis])
+            np.clip(
+                np.concatenate([[lower[axis], upper[axis]], reach_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]
+            )
         )
         for axis in range(3)
     ]
