@@ -139,8 +139,8 @@ def test_collision_pieces_hug_the_part_and_the_pad(ridged):
     case, pieces, pad, _, fingerpad = ridged
     for meshes, target in ((pieces, case.part), (pad, fingerpad)):
         for vertices, _ in meshes:
-            # the prisms under the part's and the pad's faces by the 0.005 mm of the meshes' simplification at most (CoACD's
-            # part pieces stood out up to ~0.12 mm here)
+            # the prisms under the part's and the pad's faces by the 0.005 mm of the meshes' simplification at most
+            # (CoACD's part pieces stood out up to ~0.12 mm here)
             assert _stands_out_mm(vertices, target) <= 0.01
 
 
