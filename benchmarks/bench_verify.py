@@ -91,8 +91,9 @@ def print_verification(name: str, verification: VerificationReport, errors: bool
         f = s.fidelity
         print(
             f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part "
-            f"{f.part_volume_error:+.2%} "
-            f"pad {f.pad_volume_error:+.2%}, seated penetration {f.seated_penetration_mm:.3f} mm"
+            f"{f.part_volume_error:+.2%} (under the shell {f.part_missing_fraction:.1%}) "
+            f"pad {f.pad_volume_error:+.2%}, seated overlap part/pad {f.seated_penetration_mm:.3f} mm "
+            f"pad/pad {f.seated_pads_overlap_mm:.3f} mm"
         )
         for label, r in (("designed", s.fcso), ("flat", s.flat)):
             print(

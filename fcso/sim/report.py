@@ -75,6 +75,11 @@ class Fidelity(_Model):
     seated_penetration_mm: float = Field(
         description="Deepest overlap of the part's pieces and the pads, part at its nominal seated grasp, mm"
     )
+    seated_pads_overlap_mm: float = Field(
+        0.0,
+        description="Deepest overlap of the two pads with each other at the nominal seated grasp (the fingers meet "
+        "before the part is seated), mm",
+    )
     decomposition_cached: bool = Field(description="The part's collision pieces came from the cache")
 
 

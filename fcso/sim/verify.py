@@ -20,7 +20,7 @@ from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_sh
 from .config import VerifyConfig
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
-from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
+from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_overlaps_mm, start_pose
 
 
 @dataclass
@@ -145,10 +145,11 @@ def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
     """The pad's convex pieces (prisms under its face) and the part's (prisms under its surface where the pads reach
-    it), and a warning when they overlap at the nominal seated grasp by more than ``max_seated_penetration_mm``.
+    it), with warnings when, at the nominal seated grasp, they overlap or the two pads overlap each other by more
+    than ``max_seated_penetration_mm``.
 
     Both are built from the meshes' own facets (:func:`pad_prism_pieces`,
-    :func:`part_shell_pieces`), so the overlap (METHOD §12's fidelity) is
+    :func:`part_shell_pieces`), so their overlap (METHOD §12's fidelity) is
     that of the meshes themselves: a design whose pad cuts into its part, or
     the simplification's few micrometres.
 
@@ -156,21 +157,23 @@ def fitted_pieces(
     -------
     part, pad : ConvexPieces
     notes : list of str
-        A warning when the overlap exceeds the limit.
+        The warnings.
     """
     pad = pad_prism_pieces(design.fingerpad, case.pad_size_mm[0], config.cache_path())
     part = part_pieces(case, config)
-    penetration = seated_penetration_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config), case)
-    if penetration <= config.max_seated_penetration_mm:
-        return part, pad, []
-    return (
-        part,
-        pad,
-        [
-            f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config))
+    notes = []
+    if part_pad > config.max_seated_penetration_mm:
+        notes.append(
+            f"{case.name}: part and pad pieces overlap {part_pad:.2f} mm at the seated grasp "
             f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not resolved"
-        ],
-    )
+        )
+    if pad_pad > config.max_seated_penetration_mm:
+        notes.append(
+            f"{case.name}: the two pads overlap each other {pad_pad:.2f} mm at the seated grasp: the fingers meet "
+            f"before the part is seated"
+        )
+    return part, pad, notes
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
@@ -248,11 +251,11 @@ def verify_case(
         Called after every simulated grasp.
     """
     errors = perturbations(config.trials, config, stream)
-    results, frames, penetration = {}, [], 0.0
+    results, frames, penetration, pads_overlap = {}, [], 0.0, 0.0
     for kind, pad_pieces in (("fcso", pad.pieces), ("flat", None)):
         scene = build_scene(case, pieces.pieces, pad_pieces, finger_hull_mm, config)
         if kind == "fcso":
-            penetration = seated_penetration_mm(scene, case)
+            penetration, pads_overlap = seated_overlaps_mm(scene)
         nominal = run_grasp(scene, case, np.eye(4), config, record=kind == "fcso")
         advance()
         design_nominal = np.linalg.inv(case.tcp)
@@ -286,6 +289,7 @@ def verify_case(
         pad_pieces=len(pad.pieces),
         pad_volume_error=round(pad.volume_error, 6),
         seated_penetration_mm=round(penetration, 4),
+        seated_pads_overlap_mm=round(pads_overlap, 4),
         decomposition_cached=pieces.cached,
     )
     part_name, _, pose = case.name.rpartition(" pose ")
