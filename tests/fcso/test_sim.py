@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing
 import os
 import time
@@ -19,7 +20,7 @@ from fcso.parts import Part
 from fcso.sim.collision import evict, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
-from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
+from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
@@ -80,6 +81,21 @@ def test_cube_between_flat_pads_stays_put(tmp_path):
     assert run.held
     moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
     assert moved <= 0.05 and turned <= 0.05
+
+
+def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
+    """The seated overlap of part and pads is the part's alone; the pads' overlap with each other is its own figure."""
+    case, config, nothing = _cube_case(), _config(tmp_path), np.zeros((0, 3))
+    # the flat pads' faces 0.5 mm inside the cube's faces
+    pressed = dataclasses.replace(case, pad_gap_mm=case.pad_gap_mm - 1.0)
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(pressed, _hull(pressed.part), None, nothing, config))
+    assert part_pad == pytest.approx(0.5, abs=0.01) and pad_pad == 0.0
+    # the pads crossing by 1 mm (both span -0.5..0.5 mm across the closing axis), the cube 100 mm away
+    away = case.part.copy()
+    away.apply_translation([100.0, 0.0, 0.0])
+    crossing = dataclasses.replace(case, part=away, pad_gap_mm=-9.0)
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(crossing, _hull(away), None, nothing, config))
+    assert part_pad == 0.0 and pad_pad == pytest.approx(1.0, abs=0.01)
 
 
 def test_part_seated_in_its_pad_does_not_move(ridged, tmp_path):
