@@ -136,16 +136,18 @@ def part_shell_pieces(
     the part's surface is the top of a prism that reaches ``shell_mm`` into
     the part along the facet's inward normal (less where the part is
     thinner: half its thickness under the facet, so no prism pokes out of a
-    thin wall); edge-connected coplanar facets share a prism while they
-    form a convex polygon. The prisms' outer faces are the surface itself:
+    thin wall); neighbouring facets share a prism while they form a convex
+    patch (normals within :data:`PATCH_BEND_DEG`, a bulge no deeper than
+    the prism; :func:`_convex_clusters`). The prisms' outer faces are the surface itself:
     they stand out of the part by nothing, so nothing bridges a concavity,
     and no decomposition is searched. The material under the shell is left
     out (a pad that pushes its contact deeper than half the shell's
     thickness would be pushed out the wrong side; see ``part_shell_mm``).
     Elsewhere the planes of the boxes' faces cut space into a grid of
     cells and the part's material in each cell outside every box is its
-    convex hull: it meets only the table (which touches the part's hull
-    anyway) and never reaches into a box.
+    convex hull: it never reaches into a box, where the pads act, and only
+    the finger bodies could meet it (the table meets the part's own hull,
+    :func:`fcso.sim.scene.build_scene`).
 
     Parameters
     ----------
@@ -176,11 +178,10 @@ def _shell(mesh, to_zones, reach_boxes, shell_mm) -> list[tuple[np.ndarray, np.n
     moved.apply_transform(to_zones)
     part = to_manifold(moved).simplify(SIMPLIFY_TOLERANCE_MM)
     back = np.linalg.inv(to_zones)
-    pieces = [
+    return [
         (vertices @ back[:3, :3].T + back[:3, 3], faces)
         for vertices, faces in _surface_prisms(part, reach_boxes, shell_mm) + _outer_hulls(part, reach_boxes)
     ]
-    return pieces
 
 
 def _surface_prisms(part: manifold3d.Manifold, reach_boxes: np.ndarray, shell_mm: float):
