@@ -230,21 +230,23 @@ def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConf
 
 
 def finish_candidate(
-    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig
+    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig, flat: bool = False
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
     """One candidate built as :func:`design` builds its choice: carved with ``[print]``'s fit, its pad kept.
+
+    ``flat`` builds flat pads on the candidate's grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
 
     Returns the fitted evaluation, its grasps and print-fit report as
     ``report.json`` lists them, and the print-fit warnings.
     """
     choice = tuple(choice)
-    lead_in, why = printed_lead_in_deg(scenarios, choice, config)
+    lead_in, why = (config.print.lead_in_deg, None) if flat else printed_lead_in_deg(scenarios, choice, config)
     if why is not None:
         config = config.updated({"print": {"lead_in_deg": lead_in}})
-    fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True)
+    fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat)
     fit, sampler = config.print.resolved(), config.sampler
     exact = (
-        evaluate_candidate(scenarios, choice, config, keep_pad=True)
+        evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
         if any(v > 0 for k, v in fit.items() if k != "density_g_cm3")
         else fitted
     )
@@ -434,6 +436,12 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
 
     clock = time.perf_counter()
     best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config)
+    compared = versus_flat(scenarios, best, exact.values(), config)
+    # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD §7b)
+    flat_pads = all(versus is not None and not versus.beats_flat for versus in compared)
+    if flat_pads:
+        best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config, flat=True)
+        compared = versus_flat(scenarios, best, exact.values(), config)
     transform = pad_to_finger(finger, config.sampler)
     fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     # a clearance deepens the pocket by c: the carving demands that much less
@@ -444,13 +452,12 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         )
     warnings.extend(fit_warnings)
     timings["finger"] = time.perf_counter() - clock
-    compared = versus_flat(scenarios, best, exact.values(), config)
     for scenario, versus in zip(scenarios, compared):
         if versus is not None and not versus.beats_flat:
             warnings.append(
                 f"{scenario.part.name} in stable pose {scenario.pose_index}: no pad captures it better than flat pads "
                 f"(capture {versus.capture.fraction:.2f} against {versus.flat.fraction:.2f} for flat ones): "
-                "the carved pad is no improvement there"
+                + ("the finger is delivered with flat pads" if flat_pads else "the carved pad is no improvement there")
             )
 
     report = DesignReport(
@@ -479,6 +486,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             bodies=fused.bodies,
             watertight=fused.watertight,
             min_pad_thickness_mm=rounded(fused.min_pad_thickness_mm),
+            flat_pads=flat_pads,
         ),
         timings_s={k: round(v, 3) for k, v in timings.items()},
         warnings=warnings,

@@ -178,18 +178,25 @@ def contact_samples(
 
 
 def evaluate_candidate(
-    scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, keep_pad: bool, fitted: bool = False
+    scenarios: list[Scenario],
+    choice: tuple[int, ...],
+    config: DesignConfig,
+    keep_pad: bool,
+    fitted: bool = False,
+    flat: bool = False,
 ) -> CandidateEvaluation:
     """Carve, seat and score one candidate (METHOD §4-7).
 
     ``fitted`` (the chosen candidate) carves with the clearance and lead-in
     of ``[print]``, removes thin walls and lets the pads close the clearance
     (:mod:`fcso.printfit`); the search ranks candidates on exact pockets.
+    ``flat`` carves nothing: flat pads (the case "bad") on the candidate's
+    grasps, the pad delivered where no carving captures better (METHOD §7b).
     """
     chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
-    geometries = [g for sample in chosen for g in sample.geometries]
+    geometries = [] if flat else [g for sample in chosen for g in sample.geometries]
     fit = config.print.resolved()
-    if fitted:
+    if fitted and not flat:
         geometries = fitted_geometries(scenarios, chosen, config)
     fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
     if fitted:
@@ -207,7 +214,11 @@ def evaluate_candidate(
     by_capture = config.quality.measure == "capture"
     if by_capture:
         landscapes = pad_landscapes(
-            [s.screen for s in chosen], [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config
+            [s.screen for s in chosen],
+            [s.centres_uv_mm for s in chosen],
+            ScreenGrid.for_config(config),
+            config,
+            flat=flat,
         )
     results = []
     for number, (scenario, sample) in enumerate(zip(scenarios, chosen)):

@@ -399,7 +399,8 @@ def _summary(report: DesignReport, chosen) -> str:
         (
             "chosen candidate",
             f"{chosen.index} (samples {chosen.samples}), {quality_words(chosen.quality, report.settings)}, "
-            f"{chosen.pad_case} pad",
+            f"{chosen.pad_case} pad"
+            + ("; delivered with flat pads: no carving captures a part better" if report.finger.flat_pads else ""),
         ),
         (
             "finger",

@@ -235,6 +235,10 @@ class FingerReport(ReportModel):
     bodies: int
     watertight: bool
     min_pad_thickness_mm: float
+    flat_pads: bool = Field(
+        description="The pads are flat: no carving tried captures any scenario better than flat pads (METHOD §7b), "
+        "so none is printed"
+    )
 
 
 class PrintFitEffect(ReportModel):

@@ -162,6 +162,7 @@ def _with_candidate(
                 bodies=fused.bodies,
                 watertight=bool(fused.mesh.is_watertight),
                 min_pad_thickness_mm=round(float(fused.min_pad_thickness_mm), 6),
+                flat_pads=False,
             ),
             "warnings": result.report.warnings + fit_warnings + [why],
         }

@@ -43,7 +43,14 @@ class VerifyConfig(BaseModel):
         1.0,
         ge=0,
         le=1,
-        description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10)",
+        description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10) "
+        "and it holds as well as flat pads",
+    )
+    hold_tolerance_n: float = Field(
+        1.0,
+        ge=0,
+        description="The designed finger holds as well as flat pads when, pushed in each direction, it slips at most "
+        "this much earlier, N (the ramp's overshoot between a slip's start and its detection)",
     )
     timestep_s: float = Field(0.0005, gt=0, description="Physics time step, s")
     open_margin_mm: float = Field(

@@ -91,7 +91,13 @@ class ScenarioVerification(_Model):
     fidelity: Fidelity
     fcso: FingerResult
     flat: FingerResult
-    passed: bool = Field(description="The designed finger's success rate reaches pass_success_rate")
+    holds_as_flat: bool = Field(
+        description="Pushed in every direction, the designed finger holds at least the flat pads' force, within "
+        "hold_tolerance_n"
+    )
+    passed: bool = Field(
+        description="The designed finger's success rate reaches pass_success_rate and it holds as well as flat pads"
+    )
     frames: list[PoseSnapshot] = Field(
         description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)"
     )

@@ -124,10 +124,16 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         clock = time.perf_counter()
         scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
         timings["simulation"] += time.perf_counter() - clock
-        if not scenario.passed:
+        if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
             warnings.append(
                 f"{case.name}: {scenario.fcso.success_rate:.0%} of precision trials succeeded "
                 f"(flat pads: {scenario.flat.success_rate:.0%}), below pass_success_rate {config.pass_success_rate:.0%}"
+            )
+        if not scenario.holds_as_flat:
+            weaker = weaker_than_flat(scenario.fcso.holding_n, scenario.flat.holding_n, config)
+            warnings.append(
+                f"{case.name}: the designed finger holds less than flat pads pushed "
+                + ", ".join(f"{name} ({mine:.1f} N against {theirs:.1f} N)" for name, (mine, theirs) in weaker.items())
             )
         scenarios.append(scenario)
     return VerificationReport(
@@ -293,15 +299,37 @@ def verify_case(
         decomposition_cached=pieces.cached,
     )
     part_name, _, pose = case.name.rpartition(" pose ")
+    holds = not weaker_than_flat(results["fcso"].holding_n, results["flat"].holding_n, config)
     return ScenarioVerification(
         part=part_name,
         pose_index=int(pose) if pose.isdigit() else 0,
         fidelity=fidelity,
         fcso=results["fcso"],
         flat=results["flat"],
-        passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9,
+        holds_as_flat=holds,
+        passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9 and holds,
         frames=[_snapshot(f) for f in frames],
     )
+
+
+def weaker_than_flat(
+    designed: dict[str, float | None], flat: dict[str, float | None], config: VerifyConfig
+) -> dict[str, tuple[float, float]]:
+    """The push directions where the designed finger slips more than ``hold_tolerance_n`` before flat pads do.
+
+    Parameters
+    ----------
+    designed, flat : dict
+        Push direction -> slip force, N (None: held at ``hold_force_n``), as :func:`fcso.sim.trials.hold_forces`.
+    config : VerifyConfig
+
+    Returns
+    -------
+    dict
+        Direction -> (designed, flat) force, N; empty when it holds as well as flat pads.
+    """
+    held = {name: tuple(config.hold_force_n if f is None else f for f in (designed[name], flat[name])) for name in flat}
+    return {name: pair for name, pair in held.items() if pair[0] < pair[1] - config.hold_tolerance_n}
 
 
 def perturbed_runs(

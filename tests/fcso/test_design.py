@@ -7,10 +7,12 @@ import pytest
 import trimesh
 
 import fcso
-from examples.sim_parts import featured_cube, upright_grasp_settings
+from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
 from fcso.config import DesignConfig
+from fcso.design import finish_candidate
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
+from fcso.output.files import write_outputs
 from fcso.parts import Part
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
@@ -61,6 +63,41 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
     (scenario,) = report.scenarios
     assert scenario.capture >= 0.8 and scenario.flat_capture <= 0.2 and scenario.beats_flat
     assert any(sample.on_feature for sample in scenario.samples)
+
+
+def test_a_featureless_plate_gets_flat_pads_not_a_carving(tmp_path):
+    # a plate's faces cage nothing: any pocket captures no more start errors than flat pads, so none is printed
+    length, width, thickness, depth = 10.0, 10.0, 5.0, 4.0
+    config = fcso.DesignConfig().updated(
+        {
+            "poses": {"count": 1},
+            "sampler": {"length_mm": length, "width_mm": width, "thickness_mm": thickness, "penetration_mm": depth},
+        }
+    )
+    result = fcso.design([Part(name="plate", path="plate", mesh=plain_box(40.0, 30.0, 6.0))], config)
+    (scenario,) = result.report.scenarios
+    assert not scenario.beats_flat and scenario.capture == scenario.flat_capture
+    assert result.report.finger.flat_pads
+    assert any("delivered with flat pads" in w for w in result.report.warnings)
+    write_outputs(result, tmp_path)
+    pad = trimesh.load_mesh(tmp_path / "fingerpad.stl")
+    # the flat pad [D, T] x [0, L] x [0, W] of METHOD §5: a box of L W (T - D)
+    assert pad.is_watertight and len(pad.faces) == 12
+    assert pad.volume == pytest.approx(length * width * (thickness - depth), rel=1e-6)
+    np.testing.assert_allclose(pad.bounds, [[depth, 0.0, 0.0], [thickness, length, width]], atol=1e-5)
+    finger = trimesh.load_mesh(tmp_path / "finger.stl")
+    assert finger.is_watertight and len(finger.split(only_watertight=False)) == 1
+    # the notched cube keeps its carving
+    mesh = featured_cube(notch_mm=8.0)
+    carved = fcso.design(
+        [Part(name="cube", path="cube", mesh=mesh)], fcso.DesignConfig().updated(upright_grasp_settings(mesh))
+    )
+    assert not carved.report.finger.flat_pads and carved.best.case != "bad"
+    # its grasp on flat pads captures what the report says flat pads capture, not what its carving does
+    flat, _, _, _ = finish_candidate(carved.scenarios, carved.best.choice, carved.report.settings, flat=True)
+    assert flat.case == "bad"
+    assert flat.scenarios[0].capture.fraction == pytest.approx(carved.report.scenarios[0].flat_capture, abs=1e-6)
+    assert flat.scenarios[0].capture.fraction < carved.report.scenarios[0].capture
 
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):

@@ -21,7 +21,7 @@ from fcso.sim.collision import evict, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
-from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs
+from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs, weaker_than_flat
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -136,6 +136,17 @@ def test_flat_pad_holding_force_rises_with_friction(tmp_path):
     for friction, force in slips.items():
         assert force == pytest.approx(2.0 * friction * 60.0, rel=0.2)
     assert slips[0.2] > 1.6 * slips[0.1]
+
+
+def test_a_finger_holds_as_well_as_flat_pads_only_in_every_direction():
+    config = VerifyConfig(hold_force_n=30.0, hold_tolerance_n=1.0)
+    flat = {"+x": 22.7, "-x": None, "+y": 22.5, "-y": None, "+z": 10.0, "-z": None}
+    # +x slips 3.4 N earlier (the holed, notched cube's pad on its corner notches); -x 2 N short of flat's hold at the
+    # test's 30 N; +y within the tolerance; +z better than flat
+    designed = {"+x": 19.3, "-x": 28.0, "+y": 22.0, "-y": None, "+z": 12.0, "-z": None}
+    assert weaker_than_flat(designed, flat, config) == {"+x": (19.3, 22.7), "-x": (28.0, 30.0)}
+    assert weaker_than_flat(flat, flat, config) == {}
+    assert weaker_than_flat({k: None for k in flat}, flat, config) == {}
 
 
 def _stands_out_mm(vertices: np.ndarray, target: trimesh.Trimesh) -> float:
