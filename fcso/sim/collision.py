@@ -57,7 +57,7 @@ from scipy.spatial import ConvexHull
 from ..geometry import box, ray_hits, to_manifold
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
-CACHE_VERSION = "shell-2"
+CACHE_VERSION = "shell-3"
 #: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
 #: few kB to a few hundred kB).
 CACHE_MAX_BYTES = 500_000_000
@@ -319,7 +319,12 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     # material is entered along +u through the triangles facing -u (twice their shadow's area, mm^2); walls have none
     corners, normals = corners[-normals[:, 0] > 2e-6], normals[-normals[:, 0] > 2e-6]
     pieces = []
-    for cluster in _convex_clusters(vertices, corners, normals / np.linalg.norm(normals, axis=1, keepdims=True)):
+    for cluster in _convex_clusters(
+        vertices,
+        corners,
+        normals / np.linalg.norm(normals, axis=1, keepdims=True),
+        seen_along=np.array([1.0, 0.0, 0.0]),
+    ):
         top = vertices[np.unique(corners[cluster])]
         behind = top.copy()
         behind[:, 0] = back
@@ -336,6 +341,7 @@ def _convex_clusters(
     normals: np.ndarray,
     min_cos: float = 1.0 - 1e-9,
     max_sag_mm: np.ndarray | None = None,
+    seen_along: np.ndarray | None = None,
 ) -> list[list[int]]:
     """Triangles of a surface grouped into edge-connected clusters that form a convex patch.
 
@@ -343,7 +349,7 @@ def _convex_clusters(
     normal is within ``arccos(min_cos)`` of the first one's while (a) every
     corner of the cluster lies under the plane of every triangle of it (the
     patch is convex, within :data:`CONVEX_TOLERANCE_MM`), and (b) the hull of
-    its corners seen along the first normal has the area of its triangles
+    its corners seen along the first normal (or ``seen_along``) has the area of its triangles
     (no notch or hole in its outline). Then the patch is the top of the hull
     of its corners and of their copies moved along the first normal, and the
     prism under it is convex. By default only coplanar triangles are grouped:
@@ -362,6 +368,9 @@ def _convex_clusters(
     max_sag_mm : (m,) float, optional
         Largest depth of a cluster's corners along its first normal (the patch's bulge): a cluster's hull reaches
         that far under its patch. None: no limit.
+    seen_along : (3,) float, optional
+        Unit direction of the outline's test instead of each cluster's first normal (a pad's prisms run along its
+        ``u`` axis).
     """
     area = np.linalg.norm(np.cross(*(vertices[corners[:, k]] - vertices[corners[:, 0]] for k in (1, 2))), axis=1) / 2
     offsets = np.einsum("ij,ij->i", normals, vertices[corners[:, 0]])
@@ -380,12 +389,13 @@ def _convex_clusters(
             continue
         taken[seed] = True
         normal = normals[seed]
-        cluster, shadow = [seed], float(area[seed])
+        seen = normal if seen_along is None else np.asarray(seen_along, dtype=np.float64)
+        cluster, shadow = [seed], float(area[seed] * abs(normal @ seen))
         frontier = [t for t in adjacent[seed] if normals[t] @ normal >= min_cos]
         if frontier:
-            # two directions across the first normal: the hull's area in them is the area seen along it
-            across = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-            in_plane = np.column_stack([across, np.cross(normal, across)])
+            # two directions across the one seen along: the hull's area in them is the area seen along it
+            across = np.cross(seen, np.eye(3)[np.argmin(np.abs(seen))])
+            in_plane = np.column_stack([across, np.cross(seen, across)])
             in_plane /= np.linalg.norm(in_plane, axis=0)
         while frontier:
             candidate = frontier.pop()
@@ -393,7 +403,7 @@ def _convex_clusters(
                 continue
             members = cluster + [candidate]
             points = vertices[np.unique(corners[members])]
-            grown = shadow + float(area[candidate] * (normals[candidate] @ normal))
+            grown = shadow + float(area[candidate] * abs(normals[candidate] @ seen))
             heights = points @ normal
             if (
                 (normals[members] @ points.T - offsets[members, None]).max() <= CONVEX_TOLERANCE_MM
