@@ -18,12 +18,16 @@ Prints
   which the method keeps the pad flat;
 - every fixture part of the demo (the batch-demo job: xyz cube and solar
   tracker with one pair of fingers) and the paper's bunny experiment
-  (poses 1 and 3): per scenario the decomposition's fidelity, the success
+  (poses 1 and 3): per scenario the collision geometry's fidelity (pieces
+  of part and pad; the volume the part's pieces add outside it and the
+  share of it under their shell; the pad's volume error; the seated
+  overlap of part and pad pieces and of the two pads), the success
   rate, median error and holding forces, designed against flat, and the
-  design's verification time with a cold and a warm decomposition cache;
+  design's verification time with a cold and a warm cache of collision
+  pieces;
 - the wall time of a one-part verification (the paper cube, ``--trials``
-  trials and the holding test) with a cold decomposition cache (median of
-  ``--runs``) and a warm one (median of ``--runs``).
+  trials and the holding test) with a cold cache (median of ``--runs``)
+  and a warm one (median of ``--runs``).
 
 The machine is shared and noisy: compare medians, not single runs.
 """
@@ -91,8 +95,9 @@ def print_verification(name: str, verification: VerificationReport, errors: bool
         f = s.fidelity
         print(
             f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part "
-            f"{f.part_volume_error:+.2%} "
-            f"pad {f.pad_volume_error:+.2%}, seated penetration {f.seated_penetration_mm:.3f} mm"
+            f"{f.part_volume_error:+.2%} (under the shell {f.part_missing_fraction:.1%}) "
+            f"pad {f.pad_volume_error:+.2%}, seated overlap part/pad {f.seated_penetration_mm:.3f} mm "
+            f"pad/pad {f.seated_pads_overlap_mm:.3f} mm"
         )
         for label, r in (("designed", s.fcso), ("flat", s.flat)):
             print(

@@ -167,7 +167,8 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
         '<table><tr><th class="text">scenario</th><th>designed: success</th><th>median / worst mm</th><th>median / '
         "worst °</th>"
         "<th>flat: success</th><th>median / worst mm</th><th>median / worst °</th>"
-        "<th>pieces part / pad</th><th>volume error part / pad</th><th>seated penetration mm</th></tr>",
+        "<th>pieces part / pad</th><th>volume error part / pad</th>"
+        "<th>seated overlap part / pad, pad / pad mm</th></tr>",
     ]
     for s in verification.scenarios:
         cells = [f'<td class="text">{html.escape(s.part)} pose {s.pose_index}</td>']
@@ -181,7 +182,7 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
         cells += [
             f"<td>{f.part_pieces} / {f.pad_pieces}</td>",
             f"<td>{f.part_volume_error:+.2%} / {f.pad_volume_error:+.2%}</td>",
-            f"<td>{f.seated_penetration_mm:.3f}</td>",
+            f"<td>{f.seated_penetration_mm:.3f} / {f.seated_pads_overlap_mm:.3f}</td>",
         ]
         lines.append("<tr>" + "".join(cells) + "</tr>")
     lines.append("</table>")

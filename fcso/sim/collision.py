@@ -10,12 +10,15 @@ MuJoCo collides a mesh by its convex hull, so
   shadow stays convex). No decomposition is searched: the bunny's pad takes
   a few seconds instead of minutes of CoACD, and the seated overlap that
   CoACD's pad pieces made (they bridged pockets by up to 1 mm) is gone;
-- the part is split into convex pieces (CoACD) by zones
-  (:func:`zoned_pieces`): finely where the pads can reach it, coarsely
-  elsewhere. CoACD's time grows with every concavity of the whole part
-  (70 s for the 20 mm xyz cube's engraved letters, > 5 min for the solar
-  tracker), while only the material the pads can touch decides seating
-  and capture; the rest meets only the table and the finger bodies;
+- the part is cut the same way where a pad can touch it
+  (:func:`part_shell_pieces`): every facet of its surface there is the top
+  of a prism 1 mm deep along the facet's inward normal (neighbouring
+  facets share one while they form a convex patch), exact to the surface,
+  hollow under it; elsewhere its material by cells is its hull. CoACD
+  decomposed it before: its pieces bridged the part's concavities (the
+  bunny's seated pad overlapped them by 0.21 mm in pose 1) and took
+  minutes on organic parts (the bunny 2262 s cold); the shell takes
+  seconds;
 - pieces are cached by content hash on disk (shared by candidates, jobs,
   restarts and concurrent workers; written under a name of its own and
   renamed, least recently used entries evicted beyond
@@ -24,7 +27,7 @@ MuJoCo collides a mesh by its convex hull, so
 - the finger body behind the pad is the convex hull of the finger's
   material behind the pad's back face.
 
-A height field of the pad's face (MuJoCo's ``hfield``) was tried first:
+A height field of the pad's face (MuJoCo's ``hfield``) was tried first for the pad:
 MuJoCo collides it prism by prism of its grid, 10x slower than the pieces
 and with hundreds of contacts per step. Boxes over a ``(v, w)`` grid of
 column heights, merged where their heights lie on one plane, were tried
@@ -51,15 +54,21 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
-from ..geometry import box, to_manifold, to_trimesh
+from ..geometry import box, ray_hits, to_manifold
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
-CACHE_VERSION = "coacd-4"
+CACHE_VERSION = "shell-3"
 #: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
 #: few kB to a few hundred kB).
 CACHE_MAX_BYTES = 500_000_000
-#: Largest deviation of the simplified surface CoACD decomposes, mm (see :func:`_decompose`).
+#: Largest deviation of the simplified surfaces the prisms are built on, mm (a pad carved with a print clearance has
+#: ~35k triangles of offset surface).
 SIMPLIFY_TOLERANCE_MM = 0.005
+#: How far a corner of a convex patch of the part's surface may stand above the plane of one of its triangles, mm
+#: (see :func:`_convex_clusters`).
+CONVEX_TOLERANCE_MM = 0.001
+#: Largest angle between the normals of the facets of one of the part's prisms, degrees (see :func:`part_shell_pieces`).
+PATCH_BEND_DEG = 30.0
 
 
 @dataclass
@@ -70,18 +79,23 @@ class ConvexPieces:
     ----------
     pieces : list of (vertices (n, 3) float, faces (m, 3) int)
         Convex meshes in the part's frame, mm.
-    volume_error : float
-        (volume of the union of the pieces - part volume) / part volume.
+    excess_fraction : float
+        Volume of the union of the pieces outside the mesh / mesh volume (how far they stand out of it).
     missing_fraction : float
-        Share of the part's volume not covered by any piece.
+        Share of the mesh's volume not covered by any piece.
     cached : bool
         Whether the pieces came from the cache.
     """
 
     pieces: list[tuple[np.ndarray, np.ndarray]]
-    volume_error: float
+    excess_fraction: float
     missing_fraction: float
     cached: bool
+
+    @property
+    def volume_error(self) -> float:
+        """(volume of the union of the pieces - mesh volume) / mesh volume."""
+        return self.excess_fraction - self.missing_fraction
 
 
 def mesh_key(vertices: np.ndarray, faces: np.ndarray, settings: str) -> str:
@@ -108,45 +122,32 @@ def mesh_key(vertices: np.ndarray, faces: np.ndarray, settings: str) -> str:
     return digest.hexdigest()
 
 
-def convex_pieces(mesh: trimesh.Trimesh, threshold: float, cache_dir: Path | None) -> ConvexPieces:
-    """Convex decomposition of a closed mesh (a part or a fingerpad), cached by content hash.
-
-    A part that is already convex (its hull's volume within 0.1 % of its
-    own) is its own hull; otherwise CoACD with the given concavity threshold.
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        Closed mesh (any frame), mm.
-    threshold : float
-        CoACD concavity threshold (fraction of the part's size).
-    cache_dir : Path or None
-        Folder of cached decompositions (created when missing); None: no cache.
-
-    Returns
-    -------
-    ConvexPieces
-    """
-    return _cached_pieces(mesh, repr(float(threshold)), lambda: _decompose(mesh, threshold), cache_dir)
-
-
-def zoned_pieces(
+def part_shell_pieces(
     mesh: trimesh.Trimesh,
     to_zones: np.ndarray,
-    fine_boxes: np.ndarray,
-    fine_threshold: float,
-    coarse_threshold: float,
+    reach_boxes: np.ndarray,
+    shell_mm: float,
     cache_dir: Path | None,
 ) -> ConvexPieces:
-    """Convex decomposition of a part, fine inside given boxes and coarse outside, cached by content hash.
+    """Convex pieces of a part from its own surface where the pads can reach it, its hull by cells elsewhere, cached
+    by content hash.
 
-    The planes of the boxes' faces cut space into a grid of cells; the
-    part's material in each cell is decomposed on its own (CoACD), with
-    ``fine_threshold`` in the cells inside a box and ``coarse_threshold``
-    elsewhere. Every piece is the hull of material within its (convex) cell,
-    so a coarse piece never reaches into a fine box, where the pads act.
-    CoACD scales its threshold to each cell's size, so the fine cells are
-    also finer in mm than a decomposition of the whole part.
+    Where a pad can touch the part (any of ``reach_boxes``), every facet of
+    the part's surface is the top of a prism that reaches ``shell_mm`` into
+    the part along the facet's inward normal (less where the part is
+    thinner: half its thickness under the facet, so no prism pokes out of a
+    thin wall); neighbouring facets share a prism while they form a convex
+    patch (normals within :data:`PATCH_BEND_DEG`, a bulge no deeper than
+    the prism; :func:`_convex_clusters`). The prisms' outer faces are the surface itself:
+    they stand out of the part by nothing, so nothing bridges a concavity,
+    and no decomposition is searched. The material under the shell is left
+    out (a pad that pushes its contact deeper than half the shell's
+    thickness would be pushed out the wrong side; see ``part_shell_mm``).
+    Elsewhere the planes of the boxes' faces cut space into a grid of
+    cells and the part's material in each cell outside every box is its
+    convex hull: it never reaches into a box, where the pads act, and only
+    the finger bodies could meet it (the table meets the part's own hull,
+    :func:`fcso.sim.scene.build_scene`).
 
     Parameters
     ----------
@@ -154,64 +155,110 @@ def zoned_pieces(
         Closed part mesh, mm.
     to_zones : (4, 4) float
         The mesh's frame to the boxes' frame.
-    fine_boxes : (k, 2, 3) float
+    reach_boxes : (k, 2, 3) float
         Lower and upper corners of the boxes (boxes' frame, mm).
-    fine_threshold, coarse_threshold : float
-        CoACD concavity thresholds inside and outside the boxes.
+    shell_mm : float
+        Depth of the prisms under the surface, mm.
     cache_dir : Path or None
-        Folder of cached decompositions; None: no cache.
+        Folder of cached pieces; None: no cache.
 
     Returns
     -------
     ConvexPieces
-        Pieces in the mesh's frame.
+        Pieces in the mesh's frame; its missing fraction is the material under the shell.
     """
     to_zones = np.asarray(to_zones, dtype=np.float64)
-    fine_boxes = np.asarray(fine_boxes, dtype=np.float64).reshape(-1, 2, 3)
-    settings = (
-        f"zoned {float(fine_threshold)!r} {float(coarse_threshold)!r} "
-        f"{np.round(to_zones, 6).tolist()} {np.round(fine_boxes, 4).tolist()}"
-    )
-    return _cached_pieces(
-        mesh,
-        settings,
-        lambda: _zoned(mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold, cache_dir),
-        cache_dir,
-    )
+    reach_boxes = np.asarray(reach_boxes, dtype=np.float64).reshape(-1, 2, 3)
+    settings = f"shell {float(shell_mm)!r} {np.round(to_zones, 6).tolist()} {np.round(reach_boxes, 4).tolist()}"
+    return _cached_pieces(mesh, settings, lambda: _shell(mesh, to_zones, reach_boxes, shell_mm), cache_dir)
 
 
-def _zoned(
-    mesh, to_zones, fine_boxes, fine_threshold, coarse_threshold, cache_dir
-) -> list[tuple[np.ndarray, np.ndarray]]:
+def _shell(mesh, to_zones, reach_boxes, shell_mm) -> list[tuple[np.ndarray, np.ndarray]]:
     moved = mesh.copy()
     moved.apply_transform(to_zones)
-    part = to_manifold(moved)
-    lower, upper = moved.bounds[0] - 1.0, moved.bounds[1] + 1.0
-    # the grid's planes: the boxes' faces inside the part's bounds
+    part = to_manifold(moved).simplify(SIMPLIFY_TOLERANCE_MM)
+    back = np.linalg.inv(to_zones)
+    return [
+        (vertices @ back[:3, :3].T + back[:3, 3], faces)
+        for vertices, faces in _surface_prisms(part, reach_boxes, shell_mm) + _outer_hulls(part, reach_boxes)
+    ]
+
+
+def _surface_prisms(part: manifold3d.Manifold, reach_boxes: np.ndarray, shell_mm: float):
+    """The prisms under the part's facets that meet a box (see :func:`part_shell_pieces`)."""
+    surface = part.to_mesh64()
+    vertices = np.asarray(surface.vert_properties[:, :3], dtype=np.float64)
+    corners = all_corners = np.asarray(surface.tri_verts, dtype=np.int64)
+    triangles = vertices[corners]
+    low, high = triangles.min(axis=1), triangles.max(axis=1)
+    reached = np.any(
+        np.all((low[:, None] <= reach_boxes[None, :, 1]) & (high[:, None] >= reach_boxes[None, :, 0]), axis=2), axis=1
+    )
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = reached & (lengths > 1e-12)
+    corners, normals = corners[keep], normals[keep] / lengths[keep, None]
+    depth = np.minimum(shell_mm, _thickness_under_mm(vertices, all_corners, vertices[corners], normals) / 2.0)
+    pieces = []
+    for cluster in _convex_clusters(vertices, corners, normals, np.cos(np.radians(PATCH_BEND_DEG)), depth):
+        top = vertices[np.unique(corners[cluster])]
+        prism = manifold3d.Manifold.hull_points(np.vstack([top, top - normals[cluster[0]] * depth[cluster].min()]))
+        mesh = prism.to_mesh64()
+        if prism.volume() > 1e-9:
+            pieces.append(
+                (np.asarray(mesh.vert_properties[:, :3], dtype=np.float64), np.asarray(mesh.tri_verts, dtype=np.int64))
+            )
+    return pieces
+
+
+def _thickness_under_mm(vertices: np.ndarray, faces: np.ndarray, triangles: np.ndarray, normals: np.ndarray):
+    """The part's thickness under each facet: the shortest distance to its other side along the inward normal from
+    the facet's centre and from points near its corners, mm (inf where no ray leaves the part).
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        The part's surface.
+    triangles : (m, 3, 3) float
+        The facets.
+    normals : (m, 3) float
+        Their outward unit normals.
+    """
+    centres = triangles.mean(axis=1)
+    starts = np.concatenate([centres[:, None], 0.8 * triangles + 0.2 * centres[:, None]], axis=1).reshape(-1, 3)
+    inward = np.repeat(-normals, 4, axis=0)
+    # start just inside the facet so the ray does not hit the facet itself
+    rays, distances = ray_hits(vertices, faces, starts + inward * 1e-3, inward)
+    thickness = np.full(len(starts), np.inf)
+    np.minimum.at(thickness, rays, distances + 1e-3)
+    return thickness.reshape(-1, 4).min(axis=1)
+
+
+def _outer_hulls(part: manifold3d.Manifold, reach_boxes: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The hull of the part's material in each cell of the grid the boxes' faces cut, outside every box."""
+    lower, upper = np.asarray(part.bounding_box()[:3]) - 1.0, np.asarray(part.bounding_box()[3:]) + 1.0
     planes = [
         np.unique(
             np.clip(
-                np.concatenate([[lower[axis], upper[axis]], fine_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]
+                np.concatenate([[lower[axis], upper[axis]], reach_boxes[:, :, axis].ravel()]), lower[axis], upper[axis]
             )
         )
         for axis in range(3)
     ]
-    back = np.linalg.inv(to_zones)
     pieces = []
     for i, j, k in np.ndindex(*(len(p) - 1 for p in planes)):
         cell_lower = np.array([planes[0][i], planes[1][j], planes[2][k]])
         cell_upper = np.array([planes[0][i + 1], planes[1][j + 1], planes[2][k + 1]])
         centre = (cell_lower + cell_upper) / 2.0
-        fine = bool(np.any(np.all((fine_boxes[:, 0] <= centre) & (centre <= fine_boxes[:, 1]), axis=1)))
-        material = part ^ box(cell_lower, cell_upper)
-        if material.is_empty():
+        if np.any(np.all((reach_boxes[:, 0] <= centre) & (centre <= reach_boxes[:, 1]), axis=1)):
             continue
-        for component in material.decompose():
+        for component in (part ^ box(cell_lower, cell_upper)).decompose():
             if component.volume() < 1e-6:
                 continue
-            threshold = fine_threshold if fine else coarse_threshold
-            for vertices, faces in _cell_pieces(to_trimesh(component), threshold, cache_dir):
-                pieces.append((vertices @ back[:3, :3].T + back[:3, 3], faces))
+            hull = component.hull().to_mesh64()
+            pieces.append(
+                (np.asarray(hull.vert_properties[:, :3], dtype=np.float64), np.asarray(hull.tri_verts, dtype=np.int64))
+            )
     return pieces
 
 
@@ -272,7 +319,12 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     # material is entered along +u through the triangles facing -u (twice their shadow's area, mm^2); walls have none
     corners, normals = corners[-normals[:, 0] > 2e-6], normals[-normals[:, 0] > 2e-6]
     pieces = []
-    for cluster in _convex_clusters(vertices, corners, normals / np.linalg.norm(normals, axis=1, keepdims=True)):
+    for cluster in _convex_clusters(
+        vertices,
+        corners,
+        normals / np.linalg.norm(normals, axis=1, keepdims=True),
+        seen_along=np.array([1.0, 0.0, 0.0]),
+    ):
         top = vertices[np.unique(corners[cluster])]
         behind = top.copy()
         behind[:, 0] = back
@@ -283,16 +335,45 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     return pieces
 
 
-def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndarray) -> list[list[int]]:
-    """Triangles of a surface grouped into coplanar, edge-connected clusters whose shadow on ``u = 0`` is convex.
+def _convex_clusters(
+    vertices: np.ndarray,
+    corners: np.ndarray,
+    normals: np.ndarray,
+    min_cos: float = 1.0 - 1e-9,
+    max_sag_mm: np.ndarray | None = None,
+    seen_along: np.ndarray | None = None,
+) -> list[list[int]]:
+    """Triangles of a surface grouped into edge-connected clusters that form a convex patch.
 
-    Greedy: a cluster grows from its first triangle by neighbours of the
-    same plane while the hull of its shadow has the area of its triangles'
-    shadows. The prism under such a cluster is convex; a flat face or a
-    planar wall of a pocket is one piece instead of one per triangle.
+    Greedy: a cluster grows from its first triangle by neighbours whose
+    normal is within ``arccos(min_cos)`` of the first one's while (a) every
+    corner of the cluster lies under the plane of every triangle of it (the
+    patch is convex, within :data:`CONVEX_TOLERANCE_MM`), and (b) the hull of
+    its corners seen along the first normal (or ``seen_along``) has the area of its triangles
+    (no notch or hole in its outline). Then the patch is the top of the hull
+    of its corners and of their copies moved along the first normal, and the
+    prism under it is convex. By default only coplanar triangles are grouped:
+    a flat face or a planar wall of a pocket is one piece instead of one per
+    triangle.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    corners : (m, 3) int
+        The triangles' vertex indices.
+    normals : (m, 3) float
+        Unit normals of the triangles.
+    min_cos : float
+        Cosine of the largest angle between the normals of a cluster's triangles and its first one's.
+    max_sag_mm : (m,) float, optional
+        Largest depth of a cluster's corners along its first normal (the patch's bulge): a cluster's hull reaches
+        that far under its patch. None: no limit.
+    seen_along : (3,) float, optional
+        Unit direction of the outline's test instead of each cluster's first normal (a pad's prisms run along its
+        ``u`` axis).
     """
-    first, second = (vertices[corners[:, k], 1:] - vertices[corners[:, 0], 1:] for k in (1, 2))
-    shadow_area = np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]) / 2.0
+    area = np.linalg.norm(np.cross(*(vertices[corners[:, k]] - vertices[corners[:, 0]] for k in (1, 2))), axis=1) / 2
+    offsets = np.einsum("ij,ij->i", normals, vertices[corners[:, 0]])
     neighbours: dict[tuple[int, int], list[int]] = {}
     for index, (a, b, c) in enumerate(corners):
         for edge in ((a, b), (b, c), (c, a)):
@@ -307,40 +388,34 @@ def _convex_clusters(vertices: np.ndarray, corners: np.ndarray, normals: np.ndar
         if taken[seed]:
             continue
         taken[seed] = True
-        cluster, area = [seed], float(shadow_area[seed])
-        frontier = [t for t in adjacent[seed] if normals[t] @ normals[seed] > 1.0 - 1e-9]
+        normal = normals[seed]
+        seen = normal if seen_along is None else np.asarray(seen_along, dtype=np.float64)
+        cluster, shadow = [seed], float(area[seed] * abs(normal @ seen))
+        frontier = [t for t in adjacent[seed] if normals[t] @ normal >= min_cos]
+        if frontier:
+            # two directions across the one seen along: the hull's area in them is the area seen along it
+            across = np.cross(seen, np.eye(3)[np.argmin(np.abs(seen))])
+            in_plane = np.column_stack([across, np.cross(seen, across)])
+            in_plane /= np.linalg.norm(in_plane, axis=0)
         while frontier:
             candidate = frontier.pop()
             if taken[candidate]:
                 continue
-            points = vertices[np.unique(corners[cluster + [candidate]]), 1:]
-            grown = area + float(shadow_area[candidate])
-            if ConvexHull(points).volume <= grown * (1.0 + 1e-9) + 1e-9:
+            members = cluster + [candidate]
+            points = vertices[np.unique(corners[members])]
+            grown = shadow + float(area[candidate] * abs(normals[candidate] @ seen))
+            heights = points @ normal
+            if (
+                (normals[members] @ points.T - offsets[members, None]).max() <= CONVEX_TOLERANCE_MM
+                and (max_sag_mm is None or np.ptp(heights) <= max_sag_mm[members].min())
+                and ConvexHull(points @ in_plane).volume <= grown * (1.0 + 1e-9) + 1e-9
+            ):
                 taken[candidate] = True
                 cluster.append(candidate)
-                area = grown
-                frontier.extend(
-                    t for t in adjacent[candidate] if not taken[t] and normals[t] @ normals[seed] > 1.0 - 1e-9
-                )
+                shadow = grown
+                frontier.extend(t for t in adjacent[candidate] if not taken[t] and normals[t] @ normal >= min_cos)
         clusters.append(cluster)
     return clusters
-
-
-def _cell_pieces(
-    material: trimesh.Trimesh, threshold: float, cache_dir: Path | None
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """CoACD pieces of the material in one cell of :func:`zoned_pieces`, cached on their own: a refinement of the
-    fine cells (:func:`fcso.sim.verify.fitted_pieces`) reuses the coarse cells' pieces instead of making them again.
-    """
-    if cache_dir is None:
-        return _decompose(material, threshold)
-    key = mesh_key(np.asarray(material.vertices), np.asarray(material.faces), f"cell {float(threshold)!r}")
-    path = Path(cache_dir) / f"{key}.npz"
-    pieces = _read_cached(path)
-    if pieces is None:
-        pieces = _decompose(material, threshold)
-        _write_cached(path, _write_pieces(pieces))
-    return pieces
 
 
 def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: Path | None) -> ConvexPieces:
@@ -354,7 +429,7 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
         if path is not None:
             _write_cached(path, _write_pieces(pieces))
     excess, missing = union_volume_errors(mesh, pieces)
-    return ConvexPieces(pieces=pieces, volume_error=excess - missing, missing_fraction=missing, cached=cached)
+    return ConvexPieces(pieces=pieces, excess_fraction=excess, missing_fraction=missing, cached=cached)
 
 
 def _read_cached(path: Path) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -412,46 +487,6 @@ def evict(cache_dir: Path, max_bytes: int) -> None:
             break
         entry.unlink(missing_ok=True)
         total -= size
-
-
-def _decompose(mesh: trimesh.Trimesh, threshold: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """CoACD pieces of a closed mesh, or its hull when it is convex.
-
-    The mesh is first simplified within :data:`SIMPLIFY_TOLERANCE_MM`
-    (manifold3d): a pad carved with a print clearance and lead-in has ~35k
-    triangles of offset surface, on which CoACD took 14 s (190 s at a
-    quarter of the threshold); simplified to ~400 triangles, 1.3 s for the
-    same pieces. The fidelity is measured against the unsimplified mesh.
-    """
-    hull = mesh.convex_hull
-    if hull.volume <= mesh.volume * 1.001:
-        return [(np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int64))]
-    import coacd
-
-    mesh = to_trimesh(to_manifold(mesh).simplify(SIMPLIFY_TOLERANCE_MM))
-
-    coacd.set_log_level("error")
-    # no preprocessing: our meshes are already closed manifolds, and CoACD's
-    # voxel remeshing inflated every piece by 0.3-0.8 mm (a carved pad's
-    # ridge then stalled on the part's pieces mm before its seat); coarser
-    # search settings than the defaults: 2-5x faster for the same pieces
-    result = coacd.run_coacd(
-        coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)),
-        threshold=threshold,
-        preprocess_mode="off",
-        resolution=1000,
-        mcts_iterations=60,
-        mcts_nodes=10,
-        seed=0,
-    )
-    pieces = []
-    for piece_vertices, piece_faces in result:
-        if len(piece_vertices) < 4:
-            continue
-        piece = trimesh.Trimesh(piece_vertices, piece_faces, process=True).convex_hull
-        if piece.volume > 1e-6:
-            pieces.append((np.asarray(piece.vertices, dtype=np.float64), np.asarray(piece.faces, dtype=np.int64)))
-    return pieces
 
 
 def _write_pieces(pieces) -> bytes:

@@ -58,27 +58,17 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Finger opening beyond the seated grasp before closing (at most the gripper's full opening), mm",
     )
-    decomposition_threshold: float = Field(
-        0.05,
+    part_shell_mm: float = Field(
+        1.0,
         gt=0,
-        description="CoACD concavity threshold of the part near the pads (fraction of each decomposed cell's size)",
-    )
-    coarse_decomposition_threshold: float = Field(
-        0.1,
-        gt=0,
-        description="CoACD concavity threshold of the part away from the pads (see pad_reach_boxes; fraction of each "
-        "cell's size)",
+        description="Depth of the part's collision prisms under its surface where the pads reach it (less where the "
+        "part is thinner), mm: a pad pushed deeper than half of it into the part would be pushed out the wrong side; "
+        "the contacts sink about 0.1-0.25 mm at 60 N and the pads move at most 0.05 mm per time step",
     )
     max_seated_penetration_mm: float = Field(
         0.2,
         gt=0,
-        description="Largest overlap of part and pad pieces at the nominal seated grasp before the part's "
-        "decomposition near the pads is refined, mm",
-    )
-    min_decomposition_threshold: float = Field(
-        0.01,
-        gt=0,
-        description="Refinement halves the part's CoACD threshold near the pads down to this",
+        description="Largest overlap of part and pad pieces at the nominal seated grasp without a warning, mm",
     )
     choice_budget_s: float = Field(
         600.0,
@@ -93,11 +83,11 @@ class VerifyConfig(BaseModel):
         "depend on it (1 by default: no gain measured on a shared 2-core machine)",
     )
     cache_dir: Path | None = Field(
-        None, description="Where part decompositions are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
+        None, description="Where collision pieces are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
     )
 
     def cache_path(self) -> Path:
-        """The decomposition cache folder."""
+        """The collision pieces' cache folder."""
         if self.cache_dir is not None:
             return Path(self.cache_dir)
         return Path(os.environ.get("FCSO_CACHE_DIR") or Path.home() / ".cache" / "fcso")

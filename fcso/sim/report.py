@@ -62,14 +62,25 @@ class Fidelity(_Model):
     """How exact the collision geometry is (METHOD §12)."""
 
     part_pieces: int = Field(description="Convex pieces of the part")
-    part_volume_error: float = Field(description="(union of pieces - part volume) / part volume")
-    part_missing_fraction: float = Field(description="Share of the part's volume outside every piece")
+    part_volume_error: float = Field(
+        description="Volume of the union of the part's pieces outside the part / part volume: where the pads reach, "
+        "none (the pieces are prisms under its surface); elsewhere the hulls by cells bridge the part's concavities"
+    )
+    part_missing_fraction: float = Field(
+        description="Share of the part's volume outside every piece: the material under the shell of prisms where "
+        "the pads reach"
+    )
     pad_pieces: int = Field(description="Convex pieces of the fingerpad")
     pad_volume_error: float = Field(description="(union of the pad's pieces - fingerpad volume) / fingerpad volume")
     seated_penetration_mm: float = Field(
         description="Deepest overlap of the part's pieces and the pads, part at its nominal seated grasp, mm"
     )
-    decomposition_cached: bool = Field(description="The part's decomposition came from the cache")
+    seated_pads_overlap_mm: float = Field(
+        0.0,
+        description="Deepest overlap of the two pads with each other at the nominal seated grasp (the fingers meet "
+        "before the part is seated), mm",
+    )
+    decomposition_cached: bool = Field(description="The part's collision pieces came from the cache")
 
 
 class ScenarioVerification(_Model):

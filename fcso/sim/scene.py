@@ -41,6 +41,15 @@ PAD_AXES = {
     1: np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T,
     -1: np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T,
 }
+#: Which geoms collide (MuJoCo's contype/conaffinity bits): the part's pieces meet the fingers; the fingers each
+#: other and the table; the part meets the table by its hull alone, which is exact against a plane and one geom
+#: instead of the many pieces under its surface (each of which would add contacts with the table).
+COLLIDES = {
+    "part": 'contype="1" conaffinity="0"',
+    "finger": 'contype="2" conaffinity="3"',
+    "table": 'contype="4" conaffinity="2"',
+    "part_hull": 'contype="8" conaffinity="4"',
+}
 #: Soft-contact parameters: a 2 ms time constant (>= 2 time steps) and a stiff impedance.
 CONTACT_SOLREF = "0.002 1"
 CONTACT_SOLIMP = "0.95 0.99 0.0005"
@@ -155,7 +164,10 @@ def build_scene(
     assets, part_geoms, finger_geoms = [], [], {1: [], -1: []}
     for k, (vertices, _) in enumerate(part_pieces):
         assets.append(f'<mesh name="part{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
-        part_geoms.append(f'<geom name="part{k}" type="mesh" mesh="part{k}" class="contact"/>')
+        part_geoms.append(f'<geom name="part{k}" type="mesh" mesh="part{k}" class="contact" {COLLIDES["part"]}/>')
+    hull = case.part.convex_hull
+    assets.append(f'<mesh name="part_hull" vertex="{_vec(np.asarray(hull.vertices) * M)}"/>')
+    part_geoms.append(f'<geom name="part_hull" type="mesh" mesh="part_hull" class="contact" {COLLIDES["part_hull"]}/>')
     if len(finger_hull_mm):
         assets.append(f'<mesh name="finger_body" vertex="{_vec(np.asarray(finger_hull_mm) * M)}"/>')
     for k, (vertices, _) in enumerate(pad_pieces or []):
@@ -164,17 +176,19 @@ def build_scene(
         geoms = finger_geoms[side]
         if pad_pieces is not None:
             geoms.extend(
-                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact"/>'
+                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact" {COLLIDES["finger"]}/>'
                 for k in range(len(pad_pieces))
             )
         else:
             geoms.append(
-                f'<geom name="pad_{name}0" type="box" class="contact" '
+                f'<geom name="pad_{name}0" type="box" class="contact" {COLLIDES["finger"]} '
                 f'pos="{_vec(np.array([(thickness + depth) / 2, length / 2, width / 2]) * M)}" '
                 f'size="{_vec(np.array([(thickness - depth) / 2, length / 2, width / 2]) * M)}"/>'
             )
         if len(finger_hull_mm):
-            geoms.append(f'<geom name="finger_{name}" type="mesh" mesh="finger_body" class="contact"/>')
+            geoms.append(
+                f'<geom name="finger_{name}" type="mesh" mesh="finger_body" class="contact" {COLLIDES["finger"]}/>'
+            )
     fingers = []
     for side, name in ((1, "plus"), (-1, "minus")):
         fingers.append(
@@ -199,7 +213,7 @@ def build_scene(
   </default>
   <asset>{"".join(assets)}</asset>
   <worldbody>
-    <geom name="table" type="plane" size="1 1 0.01" class="contact"/>
+    <geom name="table" type="plane" size="1 1 0.01" class="contact" {COLLIDES["table"]}/>
     <body name="part">
       <freejoint name="part"/>
       <inertial pos="{_vec(com * M)}" mass="{mass_kg:.9g}" fullinertia="{full_inertia}"/>

@@ -230,20 +230,30 @@ def hold_forces(scene: Scene, case: GraspCase, run: GraspRun, config: VerifyConf
     return results
 
 
-def seated_penetration_mm(scene: Scene, case: GraspCase) -> float:
-    """Deepest overlap between the part's collision pieces and the pads with the part at its nominal seated grasp,
-    mm.
+def seated_overlaps_mm(scene: Scene) -> tuple[float, float]:
+    """Deepest overlaps with the part at its nominal seated grasp (the fingers at q = 0), mm.
+
+    Returns
+    -------
+    part_pad, pad_pad : float
+        Between the part's collision pieces and the pads (0 for exact geometry), and between the two pads (the
+        fingers would meet before the part is seated: a design whose pads reach past each other, where the part is
+        thinner than they are carved).
     """
     model = scene.model
     data = mujoco.MjData(model)
     _set_part(model, data, np.eye(4))
     mujoco.mj_forward(model, data)
-    deepest = 0.0
-    pads = set(scene.pad_geoms.tolist())
+    part_pad, pad_pad = 0.0, 0.0
+    pads, part = set(scene.pad_geoms.tolist()), set(scene.part_geoms.tolist())
     for contact in data.contact[: data.ncon]:
-        if contact.geom1 in pads or contact.geom2 in pads:
-            deepest = max(deepest, -float(contact.dist) / M)
-    return deepest
+        depth = -float(contact.dist) / M
+        geoms = {contact.geom1, contact.geom2}
+        if geoms & pads and geoms & part:
+            part_pad = max(part_pad, depth)
+        elif geoms <= pads:
+            pad_pad = max(pad_pad, depth)
+    return part_pad, pad_pad
 
 
 def prescribed_step(scene: Scene, data: mujoco.MjData, raise_mm: float, speed_mm_s: float) -> None:

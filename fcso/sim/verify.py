@@ -16,11 +16,11 @@ from ..finger import pad_to_finger
 from ..parallel import WorkerPool, resolve_jobs
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
-from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, zoned_pieces
+from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, build_scene
-from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_penetration_mm, start_pose
+from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_overlaps_mm, start_pose
 
 
 @dataclass
@@ -150,69 +150,44 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
-    """The pad's convex pieces (prisms under its face) and the part's, refined until they overlap little at the
-    nominal seated grasp.
+    """The pad's convex pieces (prisms under its face) and the part's (prisms under its surface where the pads reach
+    it), with warnings when, at the nominal seated grasp, they overlap or the two pads overlap each other by more
+    than ``max_seated_penetration_mm``.
 
-    The pad's pieces are exact (:func:`pad_prism_pieces`). A
-    part piece that fills a notch of the part where a pad ridge sits shows
-    as overlap of the seated part and pad (METHOD §12's fidelity). While it
-    exceeds ``max_seated_penetration_mm`` the part's CoACD threshold near
-    the pads is halved (a refinement is kept when it reduces the overlap by
-    a tenth; one halving can split a bridging piece badly, so finer ones are
-    tried too), down to ``min_decomposition_threshold``. Refinements are
-    cached like any decomposition.
+    Both are built from the meshes' own facets (:func:`pad_prism_pieces`,
+    :func:`part_shell_pieces`), so their overlap (METHOD §12's fidelity) is
+    that of the meshes themselves: a design whose pad cuts into its part, or
+    the simplification's few micrometres.
 
     Returns
     -------
     part, pad : ConvexPieces
     notes : list of str
-        Warnings when the overlap could not be brought under the limit.
+        The warnings.
     """
     pad = pad_prism_pieces(design.fingerpad, case.pad_size_mm[0], config.cache_path())
-
-    def attempt(threshold: float) -> tuple[float, ConvexPieces]:
-        part = part_pieces(case, config, threshold)
-        scene = build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config)
-        return seated_penetration_mm(scene, case), part
-
-    threshold = config.decomposition_threshold
-    penetration, part = attempt(threshold)
-    while penetration > config.max_seated_penetration_mm:
-        halvings = int(np.floor(np.log2(threshold / config.min_decomposition_threshold)))
-        refined = None
-        # coarse before fine: CoACD's time grows fast as the threshold shrinks
-        for candidate in (threshold / 2.0**times for times in range(1, halvings + 1)):
-            tried = attempt(candidate)
-            if tried[0] < 0.9 * penetration:
-                refined, threshold = tried, candidate
-                break
-        if refined is None:
-            return (
-                part,
-                pad,
-                [
-                    f"{case.name}: part and pad pieces overlap {penetration:.2f} mm at the seated grasp "
-                    f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not "
-                    f"resolved"
-                ],
-            )
-        penetration, part = refined
-    return part, pad, []
+    part = part_pieces(case, config)
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config))
+    notes = []
+    if part_pad > config.max_seated_penetration_mm:
+        notes.append(
+            f"{case.name}: part and pad pieces overlap {part_pad:.2f} mm at the seated grasp "
+            f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not resolved"
+        )
+    if pad_pad > config.max_seated_penetration_mm:
+        notes.append(
+            f"{case.name}: the two pads overlap each other {pad_pad:.2f} mm at the seated grasp: the fingers meet "
+            f"before the part is seated"
+        )
+    return part, pad, notes
 
 
-def part_pieces(case: GraspCase, config: VerifyConfig, threshold: float | None = None) -> ConvexPieces:
-    """The part's convex pieces in its resting frame: fine where the pads can reach, coarse elsewhere
-    (:func:`pad_reach_boxes`).
-
-    ``threshold`` is the CoACD threshold near the pads (default ``decomposition_threshold``).
+def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
+    """The part's convex pieces in its resting frame: prisms under its surface where the pads can reach it, hulls by
+    cells elsewhere (:func:`pad_reach_boxes`, :func:`part_shell_pieces`).
     """
-    return zoned_pieces(
-        case.part,
-        np.linalg.inv(case.tcp),
-        pad_reach_boxes(case, config),
-        config.decomposition_threshold if threshold is None else threshold,
-        config.coarse_decomposition_threshold,
-        config.cache_path(),
+    return part_shell_pieces(
+        case.part, np.linalg.inv(case.tcp), pad_reach_boxes(case, config), config.part_shell_mm, config.cache_path()
     )
 
 
@@ -282,11 +257,11 @@ def verify_case(
         Called after every simulated grasp.
     """
     errors = perturbations(config.trials, config, stream)
-    results, frames, penetration = {}, [], 0.0
+    results, frames, penetration, pads_overlap = {}, [], 0.0, 0.0
     for kind, pad_pieces in (("fcso", pad.pieces), ("flat", None)):
         scene = build_scene(case, pieces.pieces, pad_pieces, finger_hull_mm, config)
         if kind == "fcso":
-            penetration = seated_penetration_mm(scene, case)
+            penetration, pads_overlap = seated_overlaps_mm(scene)
         nominal = run_grasp(scene, case, np.eye(4), config, record=kind == "fcso")
         advance()
         design_nominal = np.linalg.inv(case.tcp)
@@ -315,11 +290,12 @@ def verify_case(
         )
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
-        part_volume_error=round(pieces.volume_error, 6),
+        part_volume_error=round(pieces.excess_fraction, 6),
         part_missing_fraction=round(pieces.missing_fraction, 6),
         pad_pieces=len(pad.pieces),
         pad_volume_error=round(pad.volume_error, 6),
         seated_penetration_mm=round(penetration, 4),
+        seated_pads_overlap_mm=round(pads_overlap, 4),
         decomposition_cached=pieces.cached,
     )
     part_name, _, pose = case.name.rpartition(" pose ")
@@ -375,8 +351,6 @@ def perturbed_runs(
     advance : callable
         Called after every trial.
     """
-    # the workers run MuJoCo only: forked after CoACD ran here, they could not run CoACD (its OpenMP threads do not
-    # survive a fork)
     jobs = min(resolve_jobs(config.jobs), max(1, len(errors)))
     batch = 2 * jobs
     with WorkerPool((scene, case, config), jobs) as pool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing
 import os
 import time
@@ -16,10 +17,10 @@ from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import Part
-from fcso.sim.collision import convex_pieces, evict, pad_prism_pieces, zoned_pieces
+from fcso.sim.collision import evict, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
-from fcso.sim.trials import hold_forces, pose_error, run_grasp, start_pose
+from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs, weaker_than_flat
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
@@ -28,6 +29,11 @@ CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 
 
 def _config(tmp_path, **values) -> VerifyConfig:
     return VerifyConfig(cache_dir=tmp_path / "cache", **values)
+
+
+def _hull(mesh: trimesh.Trimesh) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A convex part's collision pieces: its hull."""
+    return [(np.asarray(mesh.convex_hull.vertices), np.asarray(mesh.convex_hull.faces))]
 
 
 def _cube_case(size_mm: float = 20.0) -> GraspCase:
@@ -70,11 +76,26 @@ def ridged(tmp_path_factory):
 def test_cube_between_flat_pads_stays_put(tmp_path):
     case = _cube_case()
     config = _config(tmp_path)
-    scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), config)
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
     run = run_grasp(scene, case, np.eye(4), config)
     assert run.held
     moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
     assert moved <= 0.05 and turned <= 0.05
+
+
+def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
+    """The seated overlap of part and pads is the part's alone; the pads' overlap with each other is its own figure."""
+    case, config, nothing = _cube_case(), _config(tmp_path), np.zeros((0, 3))
+    # the flat pads' faces 0.5 mm inside the cube's faces
+    pressed = dataclasses.replace(case, pad_gap_mm=case.pad_gap_mm - 1.0)
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(pressed, _hull(pressed.part), None, nothing, config))
+    assert part_pad == pytest.approx(0.5, abs=0.01) and pad_pad == 0.0
+    # the pads crossing by 1 mm (both span -0.5..0.5 mm across the closing axis), the cube 100 mm away
+    away = case.part.copy()
+    away.apply_translation([100.0, 0.0, 0.0])
+    crossing = dataclasses.replace(case, part=away, pad_gap_mm=-9.0)
+    part_pad, pad_pad = seated_overlaps_mm(build_scene(crossing, _hull(away), None, nothing, config))
+    assert part_pad == 0.0 and pad_pad == pytest.approx(1.0, abs=0.01)
 
 
 def test_part_seated_in_its_pad_does_not_move(ridged, tmp_path):
@@ -108,7 +129,7 @@ def test_flat_pad_holding_force_rises_with_friction(tmp_path):
     slips = {}
     for friction in (0.1, 0.2):
         config = _config(tmp_path, friction=friction, hold_force_n=40.0, hold_ramp_n_s=200.0, lift_mm=10.0)
-        scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), config)
+        scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
         run = run_grasp(scene, case, np.eye(4), config)
         slips[friction] = hold_forces(scene, case, run, config)["+x"]
     # Coulomb: two contacts, each 60 N normal, slip along the pads at 2 mu N
@@ -145,9 +166,9 @@ def test_collision_pieces_hug_the_part_and_the_pad(ridged):
     case, pieces, pad, _, fingerpad = ridged
     for meshes, target in ((pieces, case.part), (pad, fingerpad)):
         for vertices, _ in meshes:
-            # CoACD's part pieces stand out up to ~0.12 mm here (its voxel preprocessing made it 0.3-0.8 mm); the
-            # pad's prisms by the 0.005 mm of the pad's simplification at most
-            assert _stands_out_mm(vertices, target) <= (0.15 if target is case.part else 0.01)
+            # the prisms under the part's and the pad's faces by the 0.005 mm of the meshes' simplification at most
+            # (CoACD's part pieces stood out up to ~0.12 mm here)
+            assert _stands_out_mm(vertices, target) <= 0.01
 
 
 def _union(pieces) -> manifold3d.Manifold:
@@ -195,28 +216,36 @@ def test_pad_prisms_leave_out_what_the_part_overhangs(tmp_path):
     assert pieces.missing_fraction == pytest.approx(160.0 / 1920.0, rel=1e-4)
 
 
-def test_zoned_pieces_are_fine_in_the_box_and_never_reach_into_it(tmp_path):
-    """The part is decomposed finely where the pads act and coarsely elsewhere; no coarse piece may reach into the fine
-    zone.
+def test_part_shell_pieces_are_its_surface_where_the_pads_reach_and_hulls_elsewhere(tmp_path):
+    """Where a pad can touch the part its pieces are prisms under its own facets (no concavity bridged, no part of the
+    surface left out); elsewhere the part's material by cells is its hull, which never reaches where the pads act.
     """
     cube = featured_cube()
     # the zone of the notch in the face x = 0 (the cube spans 0..30 mm)
     zone = np.array([[[-1.0, -1.0, -1.0], [8.0, 31.0, 31.0]]])
-    zoned = zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path)
-    inside = [v for v, _ in zoned.pieces if v[:, 0].max() <= 8.0 + 1e-4]
-    outside = [v for v, _ in zoned.pieces if v[:, 0].min() >= 8.0 - 1e-4]
-    assert len(inside) + len(outside) == len(zoned.pieces) and inside and outside
-    # fine in the zone: the notch stays open (its hull would fill it by 8 mm)
-    assert max(_stands_out_mm(v, cube) for v in inside) <= 0.15
-    # coarse outside: the far notch and the hole are bridged, which a fine decomposition would not do
+    shell = part_shell_pieces(cube, np.eye(4), zone, 1.0, tmp_path)
+    outside = [v for v, _ in shell.pieces if v[:, 0].min() >= 8.0 - 1e-4]
+    prisms = [v for v, _ in shell.pieces if v[:, 0].min() < 8.0 - 1e-4]
+    assert outside and prisms
+    # the notch stays open: no prism stands out of the part (its hull would fill the notch by 8 mm) ...
+    assert max(_stands_out_mm(v, cube) for v in prisms) <= 0.01
+    # ... and every point of the surface in the zone is on a prism
+    surface, _ = trimesh.sample.sample_surface_even(cube, 4000, seed=0)
+    in_zone = surface[surface[:, 0] < 8.0]
+    union = to_trimesh(_union([(v, None) for v in prisms]))
+    import igl
+
+    distance = igl.signed_distance(in_zone, np.asarray(union.vertices), np.asarray(union.faces, dtype=np.int64))[0]
+    assert np.abs(distance).max() <= 0.01
+    # a shell 1 mm deep: the face x = 0 (cut in two by the notch) is two prisms between x = 0 and x = 1
+    assert sum(bool(np.all(np.isclose(v[:, 0], 0.0) | np.isclose(v[:, 0], 1.0))) for v in prisms) == 2
+    # outside: hulls, which bridge the far notch and the hole
     assert max(_stands_out_mm(v, cube) for v in outside) > 1.0
-    assert -0.001 < zoned.volume_error and zoned.missing_fraction < 0.001
-    assert zoned_pieces(cube, np.eye(4), zone, 0.05, 0.5, tmp_path).cached
-    # one entry per cell (the zone's and the one beyond it) and one for the whole; a finer threshold in the zone (a
-    # refinement) makes the zone's cell and the whole again, and reuses the coarse cell's pieces
-    assert len(list(tmp_path.glob("*.npz"))) == 3
-    refined = zoned_pieces(cube, np.eye(4), zone, 0.025, 0.5, tmp_path)
-    assert not refined.cached and len(list(tmp_path.glob("*.npz"))) == 5
+    # the shell leaves the material under it out (the zone holds 8/30 of the cube), and reports it
+    assert 0.1 < shell.missing_fraction < 8.0 / 30.0
+    assert part_shell_pieces(cube, np.eye(4), zone, 1.0, tmp_path).cached
+    assert not part_shell_pieces(cube, np.eye(4), zone, 0.5, tmp_path).cached
+    assert len(list(tmp_path.glob("*.npz"))) == 2
 
 
 def test_verification_takes_the_part_density_from_the_print_profile():
@@ -231,41 +260,34 @@ def test_verification_takes_the_part_density_from_the_print_profile():
     assert with_print_density(VerifyConfig(), explicit).density_g_cm3 == pytest.approx(1.3)
 
 
-def _l_block() -> trimesh.Trimesh:
-    """An L-shaped block (two boxes): not convex, decomposed by CoACD in well under a second."""
-    return to_trimesh(box((0, 0, 0), (20, 10, 10)) + box((0, 0, 0), (10, 10, 20)))
+#: The zone of the cache tests: the end x <= 8 mm of the part.
+_ZONE = np.array([[[-1.0, -1.0, -1.0], [8.0, 31.0, 31.0]]])
 
 
 def _pieces_in_process(mesh, cache: Path) -> int:
-    return len(convex_pieces(mesh, 0.05, cache).pieces)
+    return len(part_shell_pieces(mesh, np.eye(4), _ZONE, 1.0, cache).pieces)
 
 
-def test_the_decomposition_cache_survives_concurrent_writers_damage_and_a_size_bound(tmp_path):
-    mesh, cache = _l_block(), tmp_path / "cache"
-    # two workers write the same entry at once: both get the pieces, one whole entry stays, no temporary file (a
-    # convex block: its pieces are its hull, no CoACD, whose OpenMP threads do not survive a fork of a process that
-    # ran it before)
-    block = to_trimesh(box((0, 0, 0), (20, 10, 10)))
+def test_the_pieces_cache_survives_concurrent_writers_damage_and_a_size_bound(tmp_path):
+    mesh, cache = featured_cube(), tmp_path / "cache"
+    # two workers write the same entry at once: both get the pieces, one whole entry stays, no temporary file
     with multiprocessing.get_context("fork").Pool(2) as pool:
-        counts = pool.starmap(_pieces_in_process, [(block, cache), (block, cache)])
-    assert counts == [1, 1] and [e.suffix for e in cache.iterdir()] == [".npz"]
-    assert convex_pieces(block, 0.05, cache).cached
-    (cache / next(cache.iterdir()).name).unlink()
-    first = convex_pieces(mesh, 0.05, cache)
-    assert not first.cached and len(first.pieces) >= 2
-    assert convex_pieces(mesh, 0.05, cache).cached
+        counts = pool.starmap(_pieces_in_process, [(mesh, cache), (mesh, cache)])
+    assert counts[0] == counts[1] > 1 and [e.suffix for e in cache.iterdir()] == [".npz"]
+    first = part_shell_pieces(mesh, np.eye(4), _ZONE, 1.0, cache)
+    assert first.cached and len(first.pieces) == counts[0]
     entries = sorted(cache.iterdir())
     # a damaged entry (a disk that filled up, a crash of an older version) is made again, not trusted
     entries[0].write_bytes(entries[0].read_bytes()[:100])
-    again = convex_pieces(mesh, 0.05, cache)
+    again = part_shell_pieces(mesh, np.eye(4), _ZONE, 1.0, cache)
     assert not again.cached and len(again.pieces) == len(first.pieces)
-    assert convex_pieces(mesh, 0.05, cache).cached
+    assert part_shell_pieces(mesh, np.eye(4), _ZONE, 1.0, cache).cached
     # beyond its size the least recently used entries go; one just used stays
-    other = convex_pieces(mesh, 0.1, cache)
+    other = part_shell_pieces(mesh, np.eye(4), _ZONE, 0.5, cache)
     assert not other.cached and len(list(cache.glob("*.npz"))) == 2
     old = time.time() - 3600
     os.utime(entries[0], (old, old))
-    assert convex_pieces(mesh, 0.1, cache).cached
+    assert part_shell_pieces(mesh, np.eye(4), _ZONE, 0.5, cache).cached
     newer = next(e for e in cache.glob("*.npz") if e != entries[0])
     evict(cache, newer.stat().st_size)
     assert list(cache.glob("*.npz")) == [newer]
@@ -273,7 +295,7 @@ def test_the_decomposition_cache_survives_concurrent_writers_damage_and_a_size_b
 
 def test_trials_on_forked_workers_give_the_results_of_one_process(tmp_path):
     case = _cube_case()
-    scene = build_scene(case, convex_pieces(case.part, 0.05, None).pieces, None, np.zeros((0, 3)), _config(tmp_path))
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), _config(tmp_path))
     errors = np.array([[1.5, -1.0, 2.0], [-2.0, 0.5, -3.0], [0.0, 2.0, 1.0]])
     runs, advanced = {}, []
     for jobs in (1, 2):
