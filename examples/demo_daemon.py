@@ -296,8 +296,9 @@ trials = 10
                 # verification is on: each finger set's verification follows the job's done status
                 "--exit-after-verifications",
                 "2",
+                # a guard against a hung daemon, not a speed guess: the demo ends at its second verification
                 "--timeout",
-                "600",
+                "7200",
                 "--zenoh-config",
                 str(controller / "zenoh.json5"),
                 "--verify-key",
