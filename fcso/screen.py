@@ -42,6 +42,7 @@ measures the rank correlation against exact evaluation of every candidate.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -316,7 +317,9 @@ class ScreenedCandidate:
 
     Under the paper's measure that is ``Q = min E`` (METHOD §7); under the
     capture measure each scenario's E is scaled by the capture of its
-    sample's pads alone (METHOD §7b; the exact stage measures the whole pad).
+    sample's pads alone while the search ranks, by its capture on the whole
+    candidate's pad when the best are screened again (METHOD §7b,
+    :func:`fcso.design.screen_on_pad`; the exact stage measures the whole pad).
     """
 
     quality: float
@@ -418,6 +421,7 @@ def screen(
     config: DesignConfig,
     lattice: NormalLattice,
     carved: Carving | None = None,
+    captures: Sequence[float] | None = None,
 ) -> ScreenedCandidate:
     """Screen one candidate: one sample's two geometries per scenario.
 
@@ -432,6 +436,10 @@ def screen(
     carved : Carving, optional
         :func:`carve_heights` of some of these scenarios' geometries, shared by
         candidates that agree on them; the rest are carved here.
+    captures : sequence of float, optional
+        Under the capture measure, every scenario's capture on the pad the
+        whole candidate carves (:func:`fcso.design.screen_on_pad`); by default
+        the capture of each sample's pads alone (cheap, for the search).
 
     Returns
     -------
@@ -468,7 +476,12 @@ def screen(
         occupied = np.flatnonzero(np.bincount(np.concatenate(bins), minlength=NORMAL_BINS)).astype(np.int32)
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
-        capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0
+        if config.quality.measure != "capture":
+            capture = 1.0
+        elif captures is None:
+            capture = geometries[2 * pair_number].capture
+        else:
+            capture = float(captures[pair_number])
         measure = scenario_measure(capture, 1.0, effective, config)
         results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, measure))
     measures = [r.measure for r in results]

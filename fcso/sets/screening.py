@@ -10,11 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..capture import screen_on_pad
 from ..config import DesignConfig
 from ..design import Prepared, evaluate_exact, screen_choice, subset
 from ..parallel import WorkerPool
 from ..screen import screen
-from ..search import candidate_index, search
+from ..search import rerank, search
 
 #: Scenarios quick-screened per worker task (about a millisecond each).
 _QUICK_SCENARIOS_PER_TASK = 400
@@ -102,7 +103,10 @@ def screen_set(
 
     The search (:func:`fcso.search.search`) maximises the screened Q, as the
     set's own design will, ties by mean E then candidate index, within
-    ``[finger_sets] screen_evaluations`` screened candidates.
+    ``[finger_sets] screen_evaluations`` screened candidates; its
+    ``[search] pad_top_k`` best are screened again on the set's pad
+    (:func:`fcso.capture.screen_on_pad`, as the set's design does) and the
+    best of them is the set's.
 
     Parameters
     ----------
@@ -128,10 +132,21 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
+    def on_pad(choice: tuple[int, ...]):
+        return screen_on_pad(
+            [samples[i][k].screen for i, k in enumerate(choice)],
+            [samples[i][k].centres_uv_mm for i, k in enumerate(choice)],
+            config,
+            prepared.lattice,
+        )
+
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
-    best = max(outcome.evaluated, key=lambda c: (*outcome.evaluated[c], -candidate_index(c, counts)))
-    areas = np.array([s.measure for s in screened(best).scenarios], dtype=np.float64)
+    ranked = rerank(list(outcome.evaluated), outcome.evaluated, counts)
+    # the search ranked by each sample's own capture: the set keeps the best of its best on the set's pad
+    top = {c: on_pad(c) for c in ranked[: config.search.pad_top_k]}
+    best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)[0]
+    areas = np.array([s.measure for s in top[best].scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
     return SetScreening(scenario_numbers, choice, areas, len(outcome.evaluated))
 
@@ -139,7 +154,7 @@ def screen_set(
 def quick_screen(
     prepared: Prepared, scenario_numbers: Sequence[int], picks: Sequence[int], config: DesignConfig
 ) -> np.ndarray:
-    """Screened E of one candidate of a set: every scenario's own best sample (one screening, no search).
+    """Screened E of one candidate of a set: every scenario's own best sample, on the set's pad (no search).
 
     Parameters
     ----------
@@ -156,8 +171,9 @@ def quick_screen(
         Screened E per scenario, mm²: a candidate the set's search could
         choose, so the set can keep at least this much of each.
     """
-    chosen = [prepared.scenarios[m].samples[picks[m]].screen for m in scenario_numbers]
-    return np.array([s.measure for s in screen(chosen, config, prepared.lattice).scenarios], dtype=np.float64)
+    chosen = [prepared.scenarios[m].samples[picks[m]] for m in scenario_numbers]
+    screened = screen_on_pad([g.screen for g in chosen], [g.centres_uv_mm for g in chosen], config, prepared.lattice)
+    return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 
 class SetScreener:
