@@ -39,7 +39,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter
 
 from .config import DesignConfig, QualityConfig
-from .screen import NormalLattice, ScreenedCandidate, ScreenGeometry, ScreenGrid, pad_case, screen
+from .screen import ScreenGeometry, ScreenGrid, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
 YAW_STEP_DEG = 0.5
@@ -311,37 +311,3 @@ def pad_landscapes(
         )
         for pair, centres in zip(chosen, centres_uv_mm)
     ]
-
-
-def screen_on_pad(
-    chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
-    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
-    config: DesignConfig,
-    lattice: NormalLattice,
-) -> ScreenedCandidate:
-    """Screen a candidate with every scenario's capture measured on the pad the whole candidate carves.
-
-    The search screens with the capture of each sample's pads alone; on the
-    candidate's pad another scenario's pocket may take a part off its seat,
-    as the exact evaluation (:func:`fcso.evaluate.evaluate_candidate`, the
-    same :func:`pad_landscapes`) measures. Under the paper's measure this is
-    :func:`fcso.screen.screen`.
-
-    Parameters
-    ----------
-    chosen : list of (ScreenGeometry, ScreenGeometry)
-        One sample's "+" and "-" geometries per scenario.
-    centres_uv_mm : list of two (2,) float
-        Each scenario's centre of mass in the "+" and "-" pad frames, mm.
-    config : DesignConfig
-    lattice : NormalLattice
-
-    Returns
-    -------
-    ScreenedCandidate
-    """
-    captures = None
-    if config.quality.measure == "capture":
-        landscapes = pad_landscapes(chosen, centres_uv_mm, ScreenGrid.for_config(config), config)
-        captures = [landscape.fraction for landscape in landscapes]
-    return screen(chosen, config, lattice, captures=captures)

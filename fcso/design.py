@@ -12,7 +12,6 @@ import numpy as np
 import trimesh
 
 from . import __version__
-from .capture import screen_on_pad
 from .config import DesignConfig
 from .errors import NoGraspError
 from .evaluate import (
@@ -22,6 +21,7 @@ from .evaluate import (
     evaluate_candidate,
     printed_lead_in_deg,
     sample_geometry,
+    screen_on_pad,
     versus_flat,
 )
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
@@ -365,7 +365,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
     screen_data = (
         [[g.screen for g in s.samples] for s in scenarios],
-        [[g.centres_uv_mm for g in s.samples] for s in scenarios],
+        scenarios,
         config,
         lattice,
     )
@@ -600,16 +600,8 @@ def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandi
 
 
 def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
-    screens, centres, config, lattice = context
-    return [
-        screen_on_pad(
-            [screens[m][k] for m, k in enumerate(choice)],
-            [centres[m][k] for m, k in enumerate(choice)],
-            config,
-            lattice,
-        )
-        for choice in choices
-    ]
+    _, scenarios, config, lattice = context
+    return [screen_on_pad(scenarios, choice, config, lattice) for choice in choices]
 
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..capture import screen_on_pad
 from ..config import DesignConfig
 from ..design import Prepared, evaluate_exact, screen_choice, subset
+from ..evaluate import screen_on_pad
 from ..parallel import WorkerPool
 from ..screen import screen
 from ..search import rerank, search
@@ -105,7 +105,7 @@ def screen_set(
     set's own design will, ties by mean E then candidate index, within
     ``[finger_sets] screen_evaluations`` screened candidates; its
     ``[search] pad_top_k`` best are screened again on the set's pad
-    (:func:`fcso.capture.screen_on_pad`, as the set's design does) and the
+    (:func:`fcso.evaluate.screen_on_pad`, as the set's design does) and the
     best of them is the set's.
 
     Parameters
@@ -133,12 +133,8 @@ def screen_set(
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
     def on_pad(choice: tuple[int, ...]):
-        return screen_on_pad(
-            [samples[i][k].screen for i, k in enumerate(choice)],
-            [samples[i][k].centres_uv_mm for i, k in enumerate(choice)],
-            config,
-            prepared.lattice,
-        )
+        numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
+        return screen_on_pad([prepared.scenarios[m] for m in scenario_numbers], numbers, config, prepared.lattice)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
@@ -171,8 +167,8 @@ def quick_screen(
         Screened E per scenario, mm²: a candidate the set's search could
         choose, so the set can keep at least this much of each.
     """
-    chosen = [prepared.scenarios[m].samples[picks[m]] for m in scenario_numbers]
-    screened = screen_on_pad([g.screen for g in chosen], [g.centres_uv_mm for g in chosen], config, prepared.lattice)
+    scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice)
     return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import fcso
-from fcso.capture import screen_on_pad
 from fcso.design import evaluate_exact, prepare, screen_choice
+from fcso.evaluate import screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.output.sets_page import pick_plan_text
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
@@ -321,12 +321,7 @@ def test_set_screening_measures_capture_on_the_sets_pad():
     own = screen_choice(prepared, choice, cfg)
     assert [s.capture for s in own.scenarios] == [1.0, rounds[round_sample].screen[0].capture]
 
-    on_pad = screen_on_pad(
-        [hexes[hex_sample].screen, rounds[round_sample].screen],
-        [hexes[hex_sample].centres_uv_mm, rounds[round_sample].centres_uv_mm],
-        cfg,
-        prepared.lattice,
-    )
+    on_pad = screen_on_pad(prepared.scenarios, choice, cfg, prepared.lattice)
     exact = evaluate_exact(prepared, choice, cfg)
     # the round part's pad is unchanged by the hex: it keeps its own capture; the hex loses most of its own
     assert on_pad.scenarios[1].capture == rounds[round_sample].screen[0].capture
