@@ -53,6 +53,9 @@ class SampleGeometry:
     #: Printed-fit carvings of ``geometries`` by (pad size, D, clearance, lead-in): a scenario chosen with the same
     #: sample in several designs of one job (its finger sets, the one finger they are compared with) is carved once.
     fitted: dict[tuple, list[PadGeometry]] = field(default_factory=dict, repr=False, compare=False)
+    #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
+    #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
+    held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
 
 
 @dataclass
@@ -289,11 +292,12 @@ def screen_on_pad(
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)])
-        if len(normals) == 0:
-            return 0.0
-        holding = _holding(scenarios[number], sample, contacts, normals, config)
-        return min(1.0, float(holding.min()) / config.quality.hold_force_n)
+        key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
+        if key not in sample.held:
+            normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)])
+            held = _holding(scenarios[number], sample, contacts, normals, config) if len(normals) else np.zeros(1)
+            sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
+        return sample.held[key]
 
     return screen(
         screens, config, lattice, captures=[s.fraction for s in landscapes], holding=holding_share if holding else None

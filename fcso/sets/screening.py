@@ -31,7 +31,8 @@ class SoloQuality:
     screened : (N,) float
         Screened quality of each valid sample as the scenario's only sample.
     screened_best : float
-        Their maximum: the screened ``E*``.
+        The screened ``E*``: their maximum, the best sample's holding measured
+        (:func:`fcso.evaluate.screen_on_pad`) as a set's screening measures it.
     exact : float
         ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
@@ -66,7 +67,8 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
     finalists = np.argsort(-screened, kind="stable")[: config.search.exact_top_k]
     exact = [evaluate_exact(alone, (int(k),), config).quality for k in finalists]
     best = int(np.argmax(exact))
-    return SoloQuality(screened, float(screened.max()) if count else 0.0, float(exact[best]), int(finalists[best]))
+    held = screen_on_pad(alone.scenarios, (int(finalists[0]),), config, prepared.lattice, True).quality if count else 0
+    return SoloQuality(screened, float(held), float(exact[best]), int(finalists[best]))
 
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
@@ -105,8 +107,9 @@ def screen_set(
     set's own design will, ties by mean E then candidate index, within
     ``[finger_sets] screen_evaluations`` screened candidates; its
     ``[search] pad_top_k`` best are screened again on the set's pad
-    (:func:`fcso.evaluate.screen_on_pad`, as the set's design does) and the
-    best of them is the set's.
+    (:func:`fcso.evaluate.screen_on_pad`, as the set's design does), the
+    ``exact_top_k`` best of those with holding too, and the best of them is
+    the set's.
 
     Parameters
     ----------
@@ -132,17 +135,21 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
-    def on_pad(choice: tuple[int, ...]):
+    def on_pad(choice: tuple[int, ...], holding: bool = False):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
-        return screen_on_pad([prepared.scenarios[m] for m in scenario_numbers], numbers, config, prepared.lattice)
+        scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
     ranked = rerank(list(outcome.evaluated), outcome.evaluated, counts)
-    # the search ranked by each sample's own capture: the set keeps the best of its best on the set's pad
+    # the search ranked by each sample's own capture and full holding: its best are screened on the set's pad, the
+    # best of those with holding too, as the set's design re-evaluates its exact_top_k
     top = {c: on_pad(c) for c in ranked[: config.search.pad_top_k]}
-    best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)[0]
-    areas = np.array([s.measure for s in top[best].scenarios], dtype=np.float64)
+    ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)
+    held = {c: on_pad(c, holding=True) for c in ranked[: config.search.exact_top_k]}
+    best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in held.items()}, counts)[0]
+    areas = np.array([s.measure for s in held[best].scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
     return SetScreening(scenario_numbers, choice, areas, len(outcome.evaluated))
 
@@ -150,7 +157,7 @@ def screen_set(
 def quick_screen(
     prepared: Prepared, scenario_numbers: Sequence[int], picks: Sequence[int], config: DesignConfig
 ) -> np.ndarray:
-    """Screened E of one candidate of a set: every scenario's own best sample, on the set's pad (no search).
+    """Screened E of one candidate of a set: every scenario's own best sample, on the set's pad with holding.
 
     Parameters
     ----------
@@ -168,7 +175,7 @@ def quick_screen(
         choose, so the set can keep at least this much of each.
     """
     scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice)
+    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice, True)
     return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 
