@@ -31,8 +31,10 @@ class SoloQuality:
     screened : (N,) float
         Screened quality of each valid sample as the scenario's only sample.
     screened_best : float
-        The screened ``E*``: their maximum, the best sample's holding measured
-        (:func:`fcso.evaluate.screen_on_pad`) as a set's screening measures it.
+        The screened ``E*``: the best of the ``search.exact_top_k`` best
+        screened samples with their holding measured
+        (:func:`fcso.evaluate.screen_on_pad`), as a set's screening measures
+        its finalists.
     exact : float
         ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
@@ -67,8 +69,9 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
     finalists = np.argsort(-screened, kind="stable")[: config.search.exact_top_k]
     exact = [evaluate_exact(alone, (int(k),), config).quality for k in finalists]
     best = int(np.argmax(exact))
-    held = screen_on_pad(alone.scenarios, (int(finalists[0]),), config, prepared.lattice, True).quality if count else 0
-    return SoloQuality(screened, float(held), float(exact[best]), int(finalists[best]))
+    # the screened E* with holding, as a set's screening measures its finalists: the best sample may hold nothing
+    held = [screen_on_pad(alone.scenarios, (int(k),), config, prepared.lattice, True).quality for k in finalists]
+    return SoloQuality(screened, float(max(held, default=0.0)), float(exact[best]), int(finalists[best]))
 
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
