@@ -321,7 +321,7 @@ def test_set_screening_measures_capture_on_the_sets_pad():
     own = screen_choice(prepared, choice, cfg)
     assert [s.capture for s in own.scenarios] == [1.0, rounds[round_sample].screen[0].capture]
 
-    on_pad = screen_on_pad(prepared.scenarios, choice, cfg, prepared.lattice)
+    on_pad = screen_on_pad(prepared.scenarios, choice, cfg, prepared.lattice, holding=True)
     exact = evaluate_exact(prepared, choice, cfg)
     # the round part's pad is unchanged by the hex: it keeps its own capture; the hex loses most of its own
     assert on_pad.scenarios[1].capture == rounds[round_sample].screen[0].capture
