@@ -17,8 +17,9 @@ from ..parallel import WorkerPool
 from ..screen import screen
 from ..search import rerank, search
 
-#: Scenarios quick-screened per worker task (about a millisecond each).
-_QUICK_SCENARIOS_PER_TASK = 400
+#: Scenarios quick-screened per worker task: each measures its holding (six linear programs, 0.1-0.3 s, unless its
+#: sample held the same contacts before), so a few make a task of a second or so and the workers share the pairs.
+_QUICK_SCENARIOS_PER_TASK = 8
 
 
 @dataclass
@@ -241,7 +242,7 @@ class SetScreener:
         """Quick r of every scenario of every part, per set (:func:`quick_screen`), batched over the workers."""
         fresh = list(dict.fromkeys(s for s in sets if s not in self.quick_cache))
         tasks = [self._scenarios(s) for s in fresh]
-        # a quick screening takes about a millisecond per scenario: batch them so a task carries ~100 ms or more
+        # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
         areas = [a for batch in self.pool.map(_quick_task, batches) for a in batch]
