@@ -138,6 +138,13 @@ class SearchConfig(_Section):
         description="Screened candidates beyond max_exhaustive: branch and bound, then coordinate ascent from seeds",
     )
     exact_top_k: int = Field(8, ge=8, description="Best screened candidates re-evaluated exactly (METHOD §8b: k >= 8)")
+    pad_top_k: int = Field(
+        32,
+        ge=1,
+        description="Best screened candidates screened again under the capture measure with every scenario's capture "
+        "measured on the pad the whole candidate carves, as the exact evaluation measures it (METHOD §7b, §8b); the "
+        "exact_top_k are chosen among them, and a finger set's screening keeps their best",
+    )
     report_candidates: int = Field(
         1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)"
     )

@@ -21,6 +21,7 @@ from .evaluate import (
     evaluate_candidate,
     printed_lead_in_deg,
     sample_geometry,
+    screen_on_pad,
     versus_flat,
 )
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
@@ -43,11 +44,13 @@ from .report.design import (
 from .report.models import DesignReport, FingerReport, GraspReport, PrintFitReport, SearchReport, UngraspableReport
 from .sampler import SamplerResult, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
-from .search import candidate_index, quality_upper_bound, search
+from .search import candidate_index, quality_upper_bound, rerank, search
 
 #: Samples per pad-geometry task and candidates per screening task sent to a worker.
 _GEOMETRY_CHUNK = 4
 _SCREEN_CHUNK = 64
+#: Candidates per task screened on their whole pad (a few milliseconds each).
+_PAD_CHUNK = 8
 #: Sampling tasks per worker to aim for when scenarios and yaws are few.
 _SAMPLE_TASKS_PER_WORKER = 4
 
@@ -362,7 +365,12 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     budget = config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations
     expected = min(total, budget)
     screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
-    screen_data = ([[g.screen for g in s.samples] for s in scenarios], config, lattice)
+    screen_data = (
+        [[g.screen for g in s.samples] for s in scenarios],
+        scenarios,
+        config,
+        lattice,
+    )
     screened_count, best_screened = 0, 0.0
     screened_bound = quality_upper_bound(screened_bounds)
     # when every candidate the search screens is listed in the report, keep
@@ -397,6 +405,13 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]),
             reverse=True,
         )
+        if config.quality.measure == "capture":
+            # the search ranked by each sample's own capture: the best are screened again on the candidate's pad
+            top = ranked[: config.search.pad_top_k]
+            chunks = [top[i : i + _PAD_CHUNK] for i in range(0, len(top), _PAD_CHUNK)]
+            on_pad = dict(zip(top, (c for chunk in pool.map(_pad_batch, chunks) for c in chunk)))
+            kept_screens.update(on_pad)
+            ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in on_pad.items()}, counts)
         finalists = ranked[: config.search.exact_top_k]
         # the report lists each screened candidate's per-scenario values: screen those not kept again, on every core
         listed = ranked[config.search.exact_top_k : config.search.report_candidates]
@@ -580,7 +595,7 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
 
 
 def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
-    screens, config, lattice = context
+    screens, _, config, lattice = context
     # a batch of coordinate moves shares every scenario but one: carve those once
     first = choices[0]
     shared = [m for m in range(len(first)) if all(choice[m] == first[m] for choice in choices)]
@@ -590,6 +605,11 @@ def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandi
         else None
     )
     return [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
+
+
+def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
+    _, scenarios, config, lattice = context
+    return [screen_on_pad(scenarios, choice, config, lattice) for choice in choices]
 
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:

@@ -26,7 +26,16 @@ from .printfit import carve, closing_travel_mm, open_thin_walls
 from .report.models import DesignReport, chosen_candidate
 from .rles import largest_empty_cap, rles
 from .sampler import SIDES, GraspSample, SamplerResult
-from .screen import NormalLattice, ScreenGeometry, ScreenGrid, column_heights, prepare_geometry, screened_bound
+from .screen import (
+    NormalLattice,
+    ScreenedCandidate,
+    ScreenGeometry,
+    ScreenGrid,
+    column_heights,
+    prepare_geometry,
+    screen,
+    screened_bound,
+)
 
 
 @dataclass
@@ -44,6 +53,9 @@ class SampleGeometry:
     #: Printed-fit carvings of ``geometries`` by (pad size, D, clearance, lead-in): a scenario chosen with the same
     #: sample in several designs of one job (its finger sets, the one finger they are compared with) is carved once.
     fitted: dict[tuple, list[PadGeometry]] = field(default_factory=dict, repr=False, compare=False)
+    #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
+    #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
+    held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
 
 
 @dataclass
@@ -232,7 +244,7 @@ def evaluate_candidate(
         if not by_capture:
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
-        holding = _holding(scenario, sample, contacts, normals, config)
+        holding = _holding(scenario, sample, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
         measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
         results.append(
@@ -250,17 +262,73 @@ def evaluate_candidate(
     )
 
 
+def screen_on_pad(
+    scenarios: list[Scenario],
+    choice: tuple[int, ...],
+    config: DesignConfig,
+    lattice: NormalLattice,
+    holding: bool = False,
+) -> ScreenedCandidate:
+    """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
+
+    The search screens with the capture of each sample's pads alone and full
+    holding; on the candidate's pad another scenario's pocket may take a part
+    off its seat and bury its contacts. Here every scenario's capture comes
+    from the landscapes :func:`evaluate_candidate` measures (the same
+    :func:`fcso.capture.pad_landscapes`, a few milliseconds), and with
+    ``holding`` its holding from its screened contacts (the same
+    :func:`_holding`: six linear programs per scenario, tenths of a second).
+    Under the paper's measure this is :func:`fcso.screen.screen`.
+
+    Parameters
+    ----------
+    scenarios : list of Scenario
+        With their samples.
+    choice : tuple of int
+        One sample index per scenario.
+    config : DesignConfig
+    lattice : NormalLattice
+    holding : bool
+        Measure holding too (default: full holding, as the search assumes).
+
+    Returns
+    -------
+    ScreenedCandidate
+    """
+    chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
+    screens = [sample.screen for sample in chosen]
+    if config.quality.measure != "capture":
+        return screen(screens, config, lattice)
+    landscapes = pad_landscapes(screens, [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config)
+
+    def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
+        sample = chosen[number]
+        key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
+        if key not in sample.held:
+            normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)])
+            held = _holding(scenarios[number], sample, contacts, normals, config) if len(normals) else np.zeros(1)
+            sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
+        return sample.held[key]
+
+    return screen(
+        screens, config, lattice, captures=[s.fraction for s in landscapes], holding=holding_share if holding else None
+    )
+
+
 def _holding(
     scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig
 ) -> np.ndarray:
-    """The six holding forces of one seated grasp (METHOD §7b), N."""
+    """The six holding forces of one seated grasp (METHOD §7b), N.
+
+    ``contacts``: per pad, the mask of its contact samples in contact; ``normals_rest``: theirs, stacked.
+    """
     points = np.vstack(
         [
-            (np.linalg.inv(f) @ np.column_stack([s.points[c.contact], np.ones(int(c.contact.sum()))]).T).T[:, :3]
+            (np.linalg.inv(f) @ np.column_stack([s.points[c], np.ones(int(c.sum()))]).T).T[:, :3]
             for s, c, f in zip(sample.surfaces, contacts, sample.frames)
         ]
     )
-    pads = np.concatenate([np.full(int(c.contact.sum()), side) for side, c in enumerate(contacts)])
+    pads = np.concatenate([np.full(int(c.sum()), side) for side, c in enumerate(contacts)])
     density = config.print.resolved()["density_g_cm3"]
     quality = config.quality
     return holding_forces_n(
@@ -564,7 +632,7 @@ def evaluate_on_pad(
                 config.sampler.penetration_mm,
                 config.quality,
             )
-            holding = _holding(scenario, sample, result.contacts, result.contact_normals, config)
+            holding = _holding(scenario, sample, [c.contact for c in result.contacts], result.contact_normals, config)
             holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
             measure = scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
             results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)

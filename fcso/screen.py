@@ -42,6 +42,7 @@ measures the rank correlation against exact evaluation of every candidate.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -316,7 +317,10 @@ class ScreenedCandidate:
 
     Under the paper's measure that is ``Q = min E`` (METHOD §7); under the
     capture measure each scenario's E is scaled by the capture of its
-    sample's pads alone (METHOD §7b; the exact stage measures the whole pad).
+    sample's pads alone while the search ranks, by its capture on the whole
+    candidate's pad and its screened contacts' holding when the best are
+    screened again (METHOD §7b,
+    :func:`fcso.evaluate.screen_on_pad`; the exact stage measures the whole pad).
     """
 
     quality: float
@@ -418,6 +422,8 @@ def screen(
     config: DesignConfig,
     lattice: NormalLattice,
     carved: Carving | None = None,
+    captures: Sequence[float] | None = None,
+    holding: Callable[[int, tuple[np.ndarray, np.ndarray]], float] | None = None,
 ) -> ScreenedCandidate:
     """Screen one candidate: one sample's two geometries per scenario.
 
@@ -432,6 +438,14 @@ def screen(
     carved : Carving, optional
         :func:`carve_heights` of some of these scenarios' geometries, shared by
         candidates that agree on them; the rest are carved here.
+    captures : sequence of float, optional
+        Under the capture measure, every scenario's capture on the pad the
+        whole candidate carves (:func:`fcso.evaluate.screen_on_pad`); by default
+        the capture of each sample's pads alone (cheap, for the search).
+    holding : callable, optional
+        Under the capture measure, ``holding(scenario, (contact+, contact-))``:
+        the holding share of a scenario held by these screened contacts (masks
+        over each geometry's contact samples); by default 1.
 
     Returns
     -------
@@ -445,7 +459,7 @@ def screen(
     floor = np.float32(floor)
     results = []
     for pair_number in range(len(chosen)):
-        areas, bins, offsets = 0.0, [], []
+        areas, bins, offsets, contacts = 0.0, [], [], []
         for index in (2 * pair_number, 2 * pair_number + 1):
             g = geometries[index]
             cell = g.point_cell
@@ -464,12 +478,19 @@ def screen(
             areas += float(contact.sum()) * g.area_per_point_mm2
             bins.append(g.point_bin[contact])
             offsets.append(offset)
+            contacts.append(contact)
         # the sorted distinct bins: a count over the lattice is cheaper than sorting the points
         occupied = np.flatnonzero(np.bincount(np.concatenate(bins), minlength=NORMAL_BINS)).astype(np.int32)
         radius = lattice.rles(occupied)
         effective = areas / radius if areas > 0 else 0.0
-        capture = geometries[2 * pair_number].capture if config.quality.measure == "capture" else 1.0
-        measure = scenario_measure(capture, 1.0, effective, config)
+        if config.quality.measure != "capture":
+            capture = 1.0
+        elif captures is None:
+            capture = geometries[2 * pair_number].capture
+        else:
+            capture = float(captures[pair_number])
+        share = 1.0 if holding is None or config.quality.measure != "capture" else holding(pair_number, tuple(contacts))
+        measure = scenario_measure(capture, share, effective, config)
         results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, measure))
     measures = [r.measure for r in results]
     return ScreenedCandidate(float(min(measures)), float(np.mean(measures)), results, case)

@@ -52,6 +52,30 @@ def candidate_index(choice: Sequence[int], counts: Sequence[int]) -> int:
     return index
 
 
+def rerank(
+    ranked: list[tuple[int, ...]], scores: dict[tuple[int, ...], tuple[float, float]], counts: Sequence[int]
+) -> list[tuple[int, ...]]:
+    """Candidates ranked again after some were scored again.
+
+    Parameters
+    ----------
+    ranked : list of tuple of int
+        Candidates, best first.
+    scores : dict
+        ``(Q, mean)`` of some of the first candidates of ``ranked``, scored again.
+    counts : sequence of int
+        Samples per scenario (:func:`candidate_index` breaks ties).
+
+    Returns
+    -------
+    list of tuple of int
+        The candidates of ``scores`` by larger Q, then larger mean, then smaller
+        index; the other candidates after them, in their order.
+    """
+    first = sorted(scores, key=lambda c: (scores[c][0], scores[c][1], -candidate_index(c, counts)), reverse=True)
+    return first + [c for c in ranked if c not in scores]
+
+
 def quality_upper_bound(upper_bounds: Sequence[np.ndarray]) -> float:
     """An upper bound on every candidate's Q from per-sample bounds on E.
 

@@ -152,7 +152,7 @@ class ScenarioQuality(ReportModel):
     capture: float | None = Field(
         None,
         description="Share of the start errors that closing the jaws seats (METHOD §7b), 0..1; "
-        "screened: the sample's pads alone; "
+        "screened: the sample's pads alone, or the candidate's whole pad for the search.pad_top_k best; "
         "null under the paper's measure",
     )
     holding_n: list[float] | None = Field(

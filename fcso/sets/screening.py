@@ -12,12 +12,14 @@ import numpy as np
 
 from ..config import DesignConfig
 from ..design import Prepared, evaluate_exact, screen_choice, subset
+from ..evaluate import screen_on_pad
 from ..parallel import WorkerPool
 from ..screen import screen
-from ..search import candidate_index, search
+from ..search import rerank, search
 
-#: Scenarios quick-screened per worker task (about a millisecond each).
-_QUICK_SCENARIOS_PER_TASK = 400
+#: Scenarios quick-screened per worker task: each measures its holding (six linear programs, 0.1-0.3 s, unless its
+#: sample held the same contacts before), so a few make a task of a second or so and the workers share the pairs.
+_QUICK_SCENARIOS_PER_TASK = 8
 
 
 @dataclass
@@ -30,7 +32,10 @@ class SoloQuality:
     screened : (N,) float
         Screened quality of each valid sample as the scenario's only sample.
     screened_best : float
-        Their maximum: the screened ``E*``.
+        The screened ``E*``: the best of the ``search.exact_top_k`` best
+        screened samples with their holding measured
+        (:func:`fcso.evaluate.screen_on_pad`), as a set's screening measures
+        its finalists.
     exact : float
         ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
@@ -65,7 +70,9 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
     finalists = np.argsort(-screened, kind="stable")[: config.search.exact_top_k]
     exact = [evaluate_exact(alone, (int(k),), config).quality for k in finalists]
     best = int(np.argmax(exact))
-    return SoloQuality(screened, float(screened.max()) if count else 0.0, float(exact[best]), int(finalists[best]))
+    # the screened E* with holding, as a set's screening measures its finalists: the best sample may hold nothing
+    held = [screen_on_pad(alone.scenarios, (int(k),), config, prepared.lattice, True).quality for k in finalists]
+    return SoloQuality(screened, float(max(held, default=0.0)), float(exact[best]), int(finalists[best]))
 
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
@@ -102,7 +109,11 @@ def screen_set(
 
     The search (:func:`fcso.search.search`) maximises the screened Q, as the
     set's own design will, ties by mean E then candidate index, within
-    ``[finger_sets] screen_evaluations`` screened candidates.
+    ``[finger_sets] screen_evaluations`` screened candidates; its
+    ``[search] pad_top_k`` best are screened again on the set's pad
+    (:func:`fcso.evaluate.screen_on_pad`, as the set's design does), the
+    ``exact_top_k`` best of those with holding too, and the best of them is
+    the set's.
 
     Parameters
     ----------
@@ -128,10 +139,21 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
+    def on_pad(choice: tuple[int, ...], holding: bool = False):
+        numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
+        scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding)
+
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
-    best = max(outcome.evaluated, key=lambda c: (*outcome.evaluated[c], -candidate_index(c, counts)))
-    areas = np.array([s.measure for s in screened(best).scenarios], dtype=np.float64)
+    ranked = rerank(list(outcome.evaluated), outcome.evaluated, counts)
+    # the search ranked by each sample's own capture and full holding: its best are screened on the set's pad, the
+    # best of those with holding too, as the set's design re-evaluates its exact_top_k
+    top = {c: on_pad(c) for c in ranked[: config.search.pad_top_k]}
+    ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)
+    held = {c: on_pad(c, holding=True) for c in ranked[: config.search.exact_top_k]}
+    best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in held.items()}, counts)[0]
+    areas = np.array([s.measure for s in held[best].scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
     return SetScreening(scenario_numbers, choice, areas, len(outcome.evaluated))
 
@@ -139,7 +161,7 @@ def screen_set(
 def quick_screen(
     prepared: Prepared, scenario_numbers: Sequence[int], picks: Sequence[int], config: DesignConfig
 ) -> np.ndarray:
-    """Screened E of one candidate of a set: every scenario's own best sample (one screening, no search).
+    """Screened E of one candidate of a set: every scenario's own best sample, on the set's pad with holding.
 
     Parameters
     ----------
@@ -156,8 +178,9 @@ def quick_screen(
         Screened E per scenario, mm²: a candidate the set's search could
         choose, so the set can keep at least this much of each.
     """
-    chosen = [prepared.scenarios[m].samples[picks[m]].screen for m in scenario_numbers]
-    return np.array([s.measure for s in screen(chosen, config, prepared.lattice).scenarios], dtype=np.float64)
+    scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice, True)
+    return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 
 class SetScreener:
@@ -219,7 +242,7 @@ class SetScreener:
         """Quick r of every scenario of every part, per set (:func:`quick_screen`), batched over the workers."""
         fresh = list(dict.fromkeys(s for s in sets if s not in self.quick_cache))
         tasks = [self._scenarios(s) for s in fresh]
-        # a quick screening takes about a millisecond per scenario: batch them so a task carries ~100 ms or more
+        # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
         areas = [a for batch in self.pool.map(_quick_task, batches) for a in batch]

@@ -9,7 +9,7 @@ import pytest
 
 import fcso
 from fcso.design import prepare, screen_choice
-from fcso.search import candidate_index, quality_upper_bound, search
+from fcso.search import candidate_index, quality_upper_bound, rerank, search
 from tests.conftest import REPO, data_path, small_config
 
 
@@ -60,6 +60,15 @@ def test_branch_and_bound_matches_exhaustive(seed):
     if outcome.total > 1:
         assert outcome.kind == "branch_and_bound"
     assert _best(outcome.evaluated, effective_areas, counts) == _best(everything, effective_areas, counts)
+
+
+def test_rerank_orders_the_rescored_first_and_keeps_the_rest():
+    counts = (3, 3)
+    ranked = [(0, 0), (0, 1), (1, 0), (2, 2)]
+    # (0, 1) and (1, 0) tie on Q and mean: the smaller candidate index, (0, 1) = 1 against (1, 0) = 3, goes first
+    scores = {(0, 0): (0.2, 0.5), (0, 1): (0.9, 0.9), (1, 0): (0.9, 0.9)}
+    assert rerank(ranked, scores, counts) == [(0, 1), (1, 0), (0, 0), (2, 2)]
+    assert rerank(ranked, {}, counts) == ranked
 
 
 def test_exhaustive_below_the_limit_and_budget_above_it():

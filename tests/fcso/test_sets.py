@@ -17,9 +17,12 @@ import numpy as np
 import pytest
 
 import fcso
+from fcso.design import evaluate_exact, prepare, screen_choice
+from fcso.evaluate import screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.output.sets_page import pick_plan_text
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
+from fcso.sets.screening import quick_screen
 from tests.conftest import HANG_GUARD_S, REPO, small_config
 
 MIN_RETAINED = 0.7
@@ -281,3 +284,51 @@ def test_one_finger_set_is_the_single_design_of_the_paper_experiment(tmp_path):
     assert written["candidates"] == [c.model_dump() for c in expected.candidates]
     assert written["grasps"] == [g.model_dump() for g in expected.grasps]
     assert written["finger"] == expected.finger.model_dump()
+
+
+def test_set_screening_measures_capture_on_the_sets_pad():
+    """A hex prism held by two opposite vertices and a round cylinder of 7 mm radius.
+
+    Alone, the hex's V pocket (its faces at 30 degrees to the pad) centres it
+    from every start error. The cylinder's round groove is shallower than
+    that V across the whole pad (a drop of v²/2r against v tan 30°, for
+    |v| < 1.15 r), so on the pair's pad, the union of their carvings, the
+    hex lies in the cylinder's groove: the pad is the cylinder's own, the
+    cylinder keeps its own capture and the hex slides on a curve too flat to
+    beat friction. Screening each sample's pads alone misses that; the set's
+    screening must see what its exact evaluation sees.
+    """
+    hex_prism = manifold3d.Manifold.cylinder(16.0, 20.0 / np.sqrt(3.0), circular_segments=6)
+    round_part = manifold3d.Manifold.cylinder(16.0, 7.0, circular_segments=128)
+    parts = [
+        fcso.Part(name="hex", path="hex.stl", mesh=to_trimesh(hex_prism)),
+        fcso.Part(name="round", path="round.stl", mesh=to_trimesh(round_part)),
+    ]
+    cfg = small_config(print={"profile": "custom"}, search={"jobs": 1})
+    assert cfg.quality.measure == "capture"
+    prepared = prepare(parts, cfg)
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    # the hex's samples that its own pads capture best, both pads carved
+    hex_sample = next(k for k, g in enumerate(hexes) if g.screen[0].capture == 1.0 and all(x.good for x in g.screen))
+    # a sample of the round part whose carving holds the hex's on both pads: the pair's pad is the round part's
+    round_sample = next(
+        k
+        for k, g in enumerate(rounds)
+        if all(x.good for x in g.screen)
+        and all(np.all(g.screen[i].heights_mm >= hexes[hex_sample].screen[i].heights_mm) for i in (0, 1))
+    )
+    choice = (hex_sample, round_sample)
+    own = screen_choice(prepared, choice, cfg)
+    assert [s.capture for s in own.scenarios] == [1.0, rounds[round_sample].screen[0].capture]
+
+    on_pad = screen_on_pad(prepared.scenarios, choice, cfg, prepared.lattice, holding=True)
+    exact = evaluate_exact(prepared, choice, cfg)
+    # the round part's pad is unchanged by the hex: it keeps its own capture; the hex loses most of its own
+    assert on_pad.scenarios[1].capture == rounds[round_sample].screen[0].capture
+    assert on_pad.scenarios[0].capture < 0.5
+    # what the exact evaluation measures on the carved pair
+    assert [s.capture for s in on_pad.scenarios] == [s.capture.fraction for s in exact.scenarios]
+    # the quick screening of the set (every scenario's chosen sample) sees it too
+    quick = quick_screen(prepared, (0, 1), list(choice), cfg)
+    assert list(quick) == [s.measure for s in on_pad.scenarios]
+    assert quick[0] < own.scenarios[0].measure
