@@ -150,7 +150,7 @@ def main() -> None:
             row = (entry, scenario, best, designed, flat)
             rows.append(row)
             print(
-                f"{entry.name:<36} {scenario.pose_index:>4} {best.pad_case:>6} "
+                f"{entry.name:<36} {scenario.pose_index:>4} {'flat' if report.finger.flat_pads else best.pad_case:>6} "
                 f"{scenario.capture:>7.2f} {scenario.flat_capture:>5.2f} | "
                 f"{designed.success_rate:>8.0%} {designed.median_error_mm:>6.3f}mm "
                 f"{_weakest(designed.holding_n):>6.1f} | "
