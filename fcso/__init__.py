@@ -8,6 +8,11 @@ sphere of contact normals.
 
 __version__ = "0.1.0"
 
+from .parallel import fork_safe_manifold  # noqa: E402
+
+# before any Boolean of this process: workers are forked (fcso.parallel)
+fork_safe_manifold()
+
 from .config import DesignConfig, load_config  # noqa: E402
 from .design import DesignResult, design  # noqa: E402
 from .errors import (  # noqa: E402

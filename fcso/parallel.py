@@ -50,6 +50,28 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+def fork_safe_manifold() -> None:
+    """Start manifold3d's thread pool (TBB) with no worker threads, once, before this process's first Boolean.
+
+    TBB is not fork-safe: a worker forked while its parent's TBB threads
+    exist waits for them forever in its first Boolean (a design hung so in
+    ``pad_geometry``). TBB sizes its pool once, from the CPU affinity of its
+    first parallel call, so that call is made on one CPU and the affinity
+    restored: every Boolean then runs on its calling thread, and fcso's
+    parallelism is its worker processes. Elsewhere than Linux, nothing.
+    """
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    import manifold3d
+
+    cpus = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cpus)})
+    try:
+        (manifold3d.Manifold.cube([2.0, 2.0, 2.0]) - manifold3d.Manifold.sphere(1.0, 16)).volume()
+    finally:
+        os.sched_setaffinity(0, cpus)
+
+
 def resolve_jobs(jobs: int) -> int:
     """Worker processes for a ``jobs`` setting: 0 means every available core."""
     return available_cores() if jobs <= 0 else jobs
