@@ -47,6 +47,12 @@ class SamplerConfig(_Section):
         description="Besides the stride, centre pads on the part's features: the concave intervals of its extent "
         "profile along b and along the height (METHOD §3b); false is the paper's sampler",
     )
+    face_yaws: bool = Field(
+        True,
+        description="Besides yaw_deg, close square to the part's flat side faces that yaw_deg misses (a chamfer, a "
+        "hexagon's face; at most one more yaw per scenario, fcso.sampler.face_yaws); false: yaw_deg only, the "
+        "paper's sampler",
+    )
 
     @model_validator(mode="after")
     def _penetration_inside_pad(self) -> SamplerConfig:

@@ -42,7 +42,7 @@ from .report.design import (
     ungraspable_report,
 )
 from .report.models import DesignReport, FingerReport, GraspReport, PrintFitReport, SearchReport, UngraspableReport
-from .sampler import SamplerResult, sample_grasps
+from .sampler import SamplerResult, face_yaws, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
 from .search import candidate_index, quality_upper_bound, rerank, search
 
@@ -183,14 +183,22 @@ def prepare(
     # tasks of about equal size
     yaws = config.sampler.yaw_deg
     subsets = max(1, -(-_SAMPLE_TASKS_PER_WORKER * jobs // (len(scenarios) * len(yaws))))
+    # closing square to side faces the configured yaws miss (a chamfer, a hexagon's face): samples on features
+    extra_yaws = [
+        face_yaws(s.mesh, yaws, config.sampler.min_contact_area) if config.sampler.face_yaws else []
+        for s in scenarios
+    ]
     sample_tasks = [
-        (number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)
+        (number, yaw, (k, subsets), yaw in extra_yaws[number])
+        for number in range(len(scenarios))
+        for yaw in yaws + extra_yaws[number]
+        for k in range(subsets)
     ]
     with WorkerPool((scenarios, config, plate), jobs, config.compute.scheduler) as pool:
         pieces = pool.map(_sample_task, sample_tasks)
     for number, scenario in enumerate(scenarios):
         scenario.sampler_result = _merge_sampler_results(
-            [(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number]
+            [(yaw, r) for (n, yaw, _, _), r in zip(sample_tasks, pieces) if n == number]
         )
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
@@ -559,11 +567,14 @@ def _progress_with_note(progress: Progress | None) -> Progress:
     return lambda stage, done, total, note="": progress(stage, done, total, note)
 
 
-def _sample_task(context, task: tuple[int, float, tuple[int, int]]) -> SamplerResult:
+def _sample_task(context, task: tuple[int, float, tuple[int, int], bool]) -> SamplerResult:
     scenarios, config, plate = context
-    number, yaw, centres = task
+    number, yaw, centres, face_yaw = task
     sampler = config.sampler.model_copy(update={"yaw_deg": [yaw]})
-    return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
+    result = sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
+    if face_yaw:
+        result.samples = [dataclasses.replace(sample, on_feature=True) for sample in result.samples]
+    return result
 
 
 def _merge_sampler_results(results: list[tuple[float, SamplerResult]]) -> SamplerResult:
