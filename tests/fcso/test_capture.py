@@ -159,6 +159,24 @@ def test_a_cube_with_chamfered_edges_is_closed_on_square_to_its_chamfers_and_cap
     assert scenario.capture >= 0.95 and scenario.flat_capture <= 0.2
 
 
+def test_a_pad_longer_than_the_face_wraps_both_chamfers_and_is_chosen_from_the_size_list():
+    # the same cube closed along its faces only: a 20 mm pad reaches one chamfer per side (the part centres
+    # from one side), a 34 mm pad reaches past both ends of the 30 mm face and holds both chamfers (METHOD §3b)
+    mesh = holed_notched_cube()
+    config = fcso.DesignConfig().updated(
+        {"poses": {"count": 1}, "sampler": {"length_mm": [20.0, 34.0], "face_yaws": False}}
+    )
+    result = fcso.design([Part(name="chamfered", path="chamfered", mesh=mesh)], config)
+    sizes = {entry.length_mm: entry for entry in result.report.pad_sizes}
+    assert set(sizes) == {20.0, 34.0} and sizes[34.0].chosen and not sizes[20.0].chosen
+    assert result.report.settings.sampler.length_mm == 34.0
+    assert result.report.scenarios[0].capture >= 0.95
+    # the 20 mm pad's best capture: one side of the +-2 mm box and the seat's own strip
+    assert sizes[20.0].quality < 0.7
+    # the finger as written carries the longer pad: 34 mm along the pad's length
+    assert result.fingerpad.extents[1] == pytest.approx(34.0, abs=1e-3)
+
+
 def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():
     # two 10 x 10 mm flat patches squeezing a box along x, 60 N each, friction 0.4
     grid = np.stack(np.meshgrid(np.linspace(-4.5, 4.5, 10), np.linspace(-4.5, 4.5, 10)), -1).reshape(-1, 2)
