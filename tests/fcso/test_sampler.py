@@ -270,3 +270,26 @@ def test_closing_axes_square_to_side_faces_the_configured_yaws_miss():
     assert face_yaws(block_part(), [0.0, 90.0], 40.0) == []
     cylinder = to_trimesh(manifold3d.Manifold.cylinder(30.0, 15.0, circular_segments=96))
     assert face_yaws(cylinder, [0.0, 90.0], 40.0) == []
+
+
+def test_pads_that_would_meet_beside_a_thin_section_are_rejected():
+    # a fin along y standing 20 mm on a 30 x 30 x 4 mm base, closed along x; 10 mm pads, D = 3 mm. Seated on a fin
+    # thinner than 2D each pad's inner face lies D inside it, so the two pad boxes overlap. Where the fin fills
+    # that overlap both pads are carved away there; where a pad box reaches above the fin's top (24 mm) nothing
+    # fills it, both pads keep material there and the fingers meet before the part is seated.
+    def fin_part(thickness_mm: float) -> trimesh.Trimesh:
+        base = box((-15.0, -15.0, 0.0), (15.0, 15.0, 4.0))
+        fin = box((-thickness_mm / 2.0, -15.0, 4.0), (thickness_mm / 2.0, 15.0, 24.0))
+        return to_trimesh(base + fin)
+
+    sampler = dict(yaw_deg=[0.0], min_contact_area_mm2=5.0)
+    depth, width, top = PAD["penetration_mm"], PAD["width_mm"], 24.0
+    # 6.5 mm > 2D: the faces never cross, even where the pads reach above the top
+    thick = run(fin_part(6.5), **sampler)
+    assert thick.rejected["collision_pads"] == 0
+    assert any(g.h_mm + width > top and g.a_max_mm - g.a_min_mm < 7.0 for g in thick.samples)
+    # 4 mm < 2D: the pads reaching above the top are rejected, those on the fin alone are kept
+    thin = run(fin_part(4.0), **sampler)
+    assert thin.rejected["collision_pads"] > 0
+    crossing = [g for g in thin.samples if g.a_max_mm - g.a_min_mm < 2.0 * depth]
+    assert crossing and all(g.h_mm + width <= top + 1e-9 for g in crossing)
