@@ -77,10 +77,10 @@ class VerifyConfig(BaseModel):
         "once this much time went into the choice, s",
     )
     jobs: int = Field(
-        1,
+        0,
         ge=0,
-        description="Worker processes of the precision trials (forked; 0: every available core); the results do not "
-        "depend on it (1 by default: no gain measured on a shared 2-core machine)",
+        description="Worker processes of the grasps and holding pushes (forked; 0: every available core, as the "
+        "design's [search] jobs); the results do not depend on it",
     )
     cache_dir: Path | None = Field(
         None, description="Where collision pieces are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"

@@ -229,27 +229,35 @@ def hold_forces(scene: Scene, case: GraspCase, run: GraspRun, config: VerifyConf
     """
     if not run.held:
         return {name: 0.0 for name in HOLD_DIRECTIONS}
-    model = scene.model
-    dt = model.opt.timestep
+    return {name: hold_force(scene, case, run.data, name, config) for name in HOLD_DIRECTIONS}
+
+
+def hold_force(
+    scene: Scene, case: GraspCase, lifted: mujoco.MjData, direction: str, config: VerifyConfig
+) -> float | None:
+    """One direction of the holding test (:func:`hold_forces`) from the state ``lifted`` (left unchanged).
+
+    Returns
+    -------
+    float or None
+        The force (N) at which the part slipped, None when it held at ``hold_force_n``.
+    """
+    dt = scene.model.opt.timestep
     gripper = gripper_world(case.tcp, config.lift_mm)
-    results: dict[str, float | None] = {}
-    for name, direction in HOLD_DIRECTIONS.items():
-        data = copy.copy(run.data)
-        world_direction = gripper[:3, :3] @ np.asarray(direction)
-        start = np.linalg.inv(gripper) @ part_world(scene, data)
-        force, held_for, slipped_at = 0.0, 0.0, None
-        while held_for < HOLD_AT_MAX_S:
-            force = min(config.hold_force_n, force + config.hold_ramp_n_s * dt)
-            if force >= config.hold_force_n:
-                held_for += dt
-            data.xfrc_applied[scene.part_body, :3] = force * world_direction
-            prescribed_step(scene, data, config.lift_mm, 0.0)
-            moved, turned = pose_error(np.linalg.inv(gripper) @ part_world(scene, data), start, scene.part_com_mm)
-            if moved > config.slip_mm or turned > config.slip_deg:
-                slipped_at = force
-                break
-        results[name] = None if slipped_at is None else round(float(slipped_at), 3)
-    return results
+    data = copy.copy(lifted)
+    world_direction = gripper[:3, :3] @ np.asarray(HOLD_DIRECTIONS[direction])
+    start = np.linalg.inv(gripper) @ part_world(scene, data)
+    force, held_for = 0.0, 0.0
+    while held_for < HOLD_AT_MAX_S:
+        force = min(config.hold_force_n, force + config.hold_ramp_n_s * dt)
+        if force >= config.hold_force_n:
+            held_for += dt
+        data.xfrc_applied[scene.part_body, :3] = force * world_direction
+        prescribed_step(scene, data, config.lift_mm, 0.0)
+        moved, turned = pose_error(np.linalg.inv(gripper) @ part_world(scene, data), start, scene.part_com_mm)
+        if moved > config.slip_mm or turned > config.slip_deg:
+            return round(float(force), 3)
+    return None
 
 
 def seated_overlaps_mm(scene: Scene) -> tuple[float, float]:
