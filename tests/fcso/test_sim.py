@@ -17,6 +17,7 @@ from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import Part
+from fcso.sim import trials
 from fcso.sim.collision import evict, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
@@ -88,6 +89,30 @@ def test_cube_between_flat_pads_stays_put(tmp_path):
     assert run.held
     moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
     assert moved <= 0.05 and turned <= 0.05
+
+
+def test_the_skipped_steady_lift_ends_where_the_stepped_lift_ends(tmp_path, monkeypatch):
+    case = _cube_case()
+    config = _config(tmp_path)
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
+    start = start_pose(case, np.array([1.5, -1.0, 2.0]))
+    skips = []
+    skip = trials.skip_steady_lift
+    monkeypatch.setattr(trials, "skip_steady_lift", lambda *args: skips.append(args[2]) or skip(*args))
+    skipped = run_grasp(scene, case, start, config, record=True)
+    # the cube between flat pads moves with the gripper early in the 100 mm lift: most of it is skipped
+    assert len(skips) == 1 and skips[0] > 80.0
+    monkeypatch.setattr(trials, "STEADY_STEPS", 10**9)
+    stepped = run_grasp(scene, case, start, config, record=True)
+    assert skipped.held and stepped.held
+    moved, turned = pose_error(skipped.part_in_gripper, stepped.part_in_gripper, case.part.center_mass)
+    assert moved <= 0.01 and turned <= 0.01
+    # the recorded frames cover the skipped stretch as the steps would, the part rising with the gripper
+    # (stepped frames are taken at the first step at or after each frame time: up to one 1 ms step later)
+    assert [f.time_s for f in skipped.frames] == pytest.approx([f.time_s for f in stepped.frames], abs=1.5e-3)
+    for mine, theirs in zip(skipped.frames, stepped.frames):
+        assert np.allclose(mine.gripper, theirs.gripper, atol=0.2)
+        assert np.allclose(mine.part[:3, 3], theirs.part[:3, 3], atol=0.2)
 
 
 def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
