@@ -51,6 +51,8 @@ from fcso.sim.config import VerifyConfig
 from fcso.sim.verify import verify, weaker_than_flat
 
 SMALL_PADS = {"sampler": {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 5.0, "penetration_mm": 4.0}}
+#: A cell with 10 mm wide pads that may be 10 or 20 mm long (METHOD §3b's short list): the design picks the length.
+SMALL_PADS_TWO_LENGTHS = {"sampler": {**SMALL_PADS["sampler"], "length_mm": [10.0, 20.0]}}
 
 
 @dataclass
@@ -73,7 +75,12 @@ def suite(bunny: bool) -> list[SuitePart]:
         SuitePart(
             "two-ridge block (10 mm pads)", lambda: ridges, True, {**upright_grasp_settings(ridges), **SMALL_PADS}
         ),
-        SuitePart("L-part, zig-zag edge (10 mm pads)", zigzag_l_part, True, {"poses": {"count": 1}, **SMALL_PADS}),
+        SuitePart(
+            "L-part, zig-zag (10|20 x 10 mm pads)",
+            zigzag_l_part,
+            True,
+            {"poses": {"count": 1}, **SMALL_PADS_TWO_LENGTHS},
+        ),
         SuitePart("knurled knob", knurled_knob, True, {"poses": {"count": 1}}),
         SuitePart("spur gear, lying flat", spur_gear, True, {"poses": {"count": 1}}),
         SuitePart("hex prism", hex_prism, True, {"poses": {"count": 1}}),
@@ -141,6 +148,9 @@ def main() -> None:
         for number, (scenario, outcome) in enumerate(zip(report.scenarios, verification.scenarios)):
             designed, flat = outcome.fcso, outcome.flat
             notes = [] if scenario.beats_flat else ["design says: flat is as good"]
+            if len(report.pad_sizes) > 1:
+                sampler = report.settings.sampler
+                notes.append(f"{sampler.length_mm:g} x {sampler.width_mm:g} mm pads chosen")
             if ranking[0].index != best.index:
                 notes.append(
                     f"measure's first choice {ranking[0].success_rates[number]:.0%}, "

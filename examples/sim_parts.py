@@ -154,7 +154,7 @@ def upright_grasp_settings(mesh: trimesh.Trimesh, closing_axis_in_file=(1.0, 0.0
     Returns
     -------
     dict
-        ``{"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [angle]}}`` for
+        ``{"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [angle], "face_yaws": false}}`` for
         :meth:`fcso.DesignConfig.updated`.
     """
     from fcso.poses import stable_poses
@@ -163,7 +163,7 @@ def upright_grasp_settings(mesh: trimesh.Trimesh, closing_axis_in_file=(1.0, 0.0
     index = next(k for k, t in enumerate(transforms) if t[2, 2] > 0.999)
     axis = transforms[index][:3, :3] @ np.asarray(closing_axis_in_file, dtype=float)
     yaw = float(np.degrees(np.arctan2(axis[1], axis[0]))) % 180.0
-    return {"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [round(yaw, 6)]}}
+    return {"poses": {"count": 1, "select": [index]}, "sampler": {"yaw_deg": [round(yaw, 6)], "face_yaws": False}}
 
 
 def zigzag_l_part(

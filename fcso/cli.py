@@ -15,7 +15,7 @@ from .output.files import rebuild_job_report, write_set_outputs
 from .output.layout import set_folder
 from .output.picture_process import PictureProcess
 from .output.read import is_job_folder
-from .output.sets_page import pick_plan_text
+from .output.sets_page import pad_sizes_line, pick_plan_text
 from .output.table import quality_table
 from .parts import load_part, load_parts
 from .poses import stable_poses
@@ -266,6 +266,9 @@ def _report_sets(job: SetsResult, args) -> int:
             print(quality_table(report))
         if sets is not None:
             print(pick_plan_text(sets))
+        sizes = pad_sizes_line(sets.pad_sizes if sets is not None else report.pad_sizes)
+        if sizes:
+            print(sizes)
         for warning in report.warnings:
             print(f"warning: {warning}")
         if job.several:

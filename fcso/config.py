@@ -20,11 +20,23 @@ class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+#: One pad dimension, mm, or a short list of them to design with each (METHOD §3b).
+PadSize = (
+    Annotated[float, Field(gt=0)] | Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=1, max_length=4)]
+)
+
+
 class SamplerConfig(_Section):
     """Pad box size and the sliding-window grasp sampler (METHOD §3)."""
 
-    length_mm: float = Field(20.0, gt=0, description="Pad length L along the sliding axis b, mm")
-    width_mm: float = Field(20.0, gt=0, description="Pad width W along the vertical axis, mm")
+    length_mm: PadSize = Field(
+        20.0,
+        description="Pad length L along the sliding axis b, mm; a short list: every length is designed and the best "
+        "kept (METHOD §3b: a pad longer than the part's face wraps its edges)",
+    )
+    width_mm: PadSize = Field(
+        20.0, description="Pad width W along the vertical axis, mm; a short list: as length_mm, every pair is designed"
+    )
     thickness_mm: float = Field(5.0, gt=0, description="Pad thickness T along the closing axis, mm")
     penetration_mm: float = Field(4.0, gt=0, description="Penetration D of the pad into the part, 0 < D < T, mm")
     stride_mm: float | None = Field(None, gt=0, description="Sampling step along b and z, mm; default L/5")
@@ -47,6 +59,12 @@ class SamplerConfig(_Section):
         description="Besides the stride, centre pads on the part's features: the concave intervals of its extent "
         "profile along b and along the height (METHOD §3b); false is the paper's sampler",
     )
+    face_yaws: bool = Field(
+        True,
+        description="Besides yaw_deg, close square to the part's flat side faces that yaw_deg misses (a chamfer, a "
+        "hexagon's face; at most one more yaw per scenario, fcso.sampler.face_yaws); false: yaw_deg only, the "
+        "paper's sampler",
+    )
 
     @model_validator(mode="after")
     def _penetration_inside_pad(self) -> SamplerConfig:
@@ -55,6 +73,12 @@ class SamplerConfig(_Section):
                 f"penetration_mm ({self.penetration_mm}) must be smaller than thickness_mm ({self.thickness_mm})"
             )
         return self
+
+    def pad_sizes(self) -> list[tuple[float, float]]:
+        """Every (L, W) pair to design with, mm: one unless ``length_mm`` or ``width_mm`` is a list."""
+        lengths = self.length_mm if isinstance(self.length_mm, list) else [self.length_mm]
+        widths = self.width_mm if isinstance(self.width_mm, list) else [self.width_mm]
+        return [(float(length), float(width)) for length in dict.fromkeys(lengths) for width in dict.fromkeys(widths)]
 
     @property
     def stride(self) -> float:
@@ -383,6 +407,14 @@ class DesignConfig(_Section):
     quality: QualityConfig = Field(default_factory=QualityConfig)
     # where the work runs changes no result: left out of dumps, so a report is the same on a cluster and locally
     compute: ComputeConfig = Field(default_factory=ComputeConfig, exclude=True)
+
+    def pad_size_configs(self) -> list[DesignConfig]:
+        """One copy of these settings per pad size of ``[sampler]`` (:meth:`SamplerConfig.pad_sizes`), each with a
+        single length and width."""
+        return [
+            self.updated({"sampler": {"length_mm": length, "width_mm": width}})
+            for length, width in self.sampler.pad_sizes()
+        ]
 
     def updated(self, overrides: dict) -> DesignConfig:
         """Return a copy with ``{"section": {"key": value}}`` overrides applied and validated."""

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import trimesh
@@ -41,8 +42,16 @@ from .report.design import (
     scenario_report,
     ungraspable_report,
 )
-from .report.models import DesignReport, FingerReport, GraspReport, PrintFitReport, SearchReport, UngraspableReport
-from .sampler import SamplerResult, sample_grasps
+from .report.models import (
+    DesignReport,
+    FingerReport,
+    GraspReport,
+    PadSizeReport,
+    PrintFitReport,
+    SearchReport,
+    UngraspableReport,
+)
+from .sampler import SamplerResult, face_yaws, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
 from .search import candidate_index, quality_upper_bound, rerank, search
 
@@ -53,6 +62,28 @@ _SCREEN_CHUNK = 64
 _PAD_CHUNK = 8
 #: Sampling tasks per worker to aim for when scenarios and yaws are few.
 _SAMPLE_TASKS_PER_WORKER = 4
+
+#: A design of one pad size: a finger's (:class:`DesignResult`) or a job's finger sets'.
+Designed = TypeVar("Designed")
+
+
+@dataclass(frozen=True)
+class SizeScore:
+    """How one pad size's design competes with the others' (:func:`best_pad_size`).
+
+    Attributes
+    ----------
+    rank : tuple
+        Compared as a tuple: the largest is delivered.
+    quality : float
+        Reported: the design's quality (for finger sets the worst set's).
+    flat_pads : bool
+        It delivered flat pads somewhere.
+    """
+
+    rank: tuple
+    quality: float
+    flat_pads: bool
 
 
 @dataclass
@@ -183,14 +214,21 @@ def prepare(
     # tasks of about equal size
     yaws = config.sampler.yaw_deg
     subsets = max(1, -(-_SAMPLE_TASKS_PER_WORKER * jobs // (len(scenarios) * len(yaws))))
+    # closing square to side faces the configured yaws miss (a chamfer, a hexagon's face): samples on features
+    extra_yaws = [
+        face_yaws(s.mesh, yaws, config.sampler.min_contact_area) if config.sampler.face_yaws else [] for s in scenarios
+    ]
     sample_tasks = [
-        (number, yaw, (k, subsets)) for number in range(len(scenarios)) for yaw in yaws for k in range(subsets)
+        (number, yaw, (k, subsets), yaw in extra_yaws[number])
+        for number in range(len(scenarios))
+        for yaw in yaws + extra_yaws[number]
+        for k in range(subsets)
     ]
     with WorkerPool((scenarios, config, plate), jobs, config.compute.scheduler) as pool:
         pieces = pool.map(_sample_task, sample_tasks)
     for number, scenario in enumerate(scenarios):
         scenario.sampler_result = _merge_sampler_results(
-            [(yaw, r) for (n, yaw, _), r in zip(sample_tasks, pieces) if n == number]
+            [(yaw, r) for (n, yaw, _, _), r in zip(sample_tasks, pieces) if n == number]
         )
     report_progress("sampling", len(scenarios), len(scenarios))
     timings["sampling"] = time.perf_counter() - clock
@@ -303,8 +341,87 @@ def design(
         and listed in the report's ``ungraspable`` when others can be served.
     """
     config = config or DesignConfig()
-    prepared = prepare(parts, config, progress=progress, repair=repair)
-    return design_prepared(prepared, config, progress)
+
+    def design_one_size(sized: DesignConfig) -> DesignResult:
+        return design_prepared(prepare(parts, sized, progress=progress, repair=repair), sized, progress)
+
+    def score(result: DesignResult) -> SizeScore:
+        chosen = next(c for c in result.report.candidates if c.index == result.report.best)
+        flat = result.report.finger.flat_pads
+        return SizeScore((not flat, chosen.quality, chosen.mean_effective_area), chosen.quality, flat)
+
+    result, sizes = best_pad_size(config, design_one_size, score, progress)
+    result.report = result.report.model_copy(update={"pad_sizes": sizes})
+    return result
+
+
+def best_pad_size(
+    config: DesignConfig,
+    run: Callable[[DesignConfig], Designed],
+    score: Callable[[Designed], SizeScore],
+    progress: Progress | None = None,
+) -> tuple[Designed, list[PadSizeReport]]:
+    """Design with every pad size of ``[sampler]`` and keep the best (METHOD §3b).
+
+    The two fingers carry one pad box, so a size is a choice for the whole
+    design: each size is designed in full and they compete by ``score``.
+
+    Parameters
+    ----------
+    config : DesignConfig
+        Settings, ``length_mm`` / ``width_mm`` possibly lists.
+    run : callable
+        Designs with the settings of one size (:meth:`DesignConfig.pad_size_configs`).
+    score : callable
+        A result's :class:`SizeScore`: the largest rank is delivered, the first size on a tie.
+    progress : callable, optional
+        ``progress("pad size", done, total, note)`` when there are several sizes.
+
+    Returns
+    -------
+    result, sizes
+        The best size's result and every size's entry for the report.
+
+    Raises
+    ------
+    NoGraspError
+        No size can grasp any part (the first size's error).
+    """
+    report_progress = _progress_with_note(progress)
+    sized = config.pad_size_configs()
+    results: list[Designed | None] = []
+    notes: list[str | None] = []
+    for number, one in enumerate(sized):
+        if len(sized) > 1:
+            report_progress(
+                "pad size", number, len(sized), f"{one.sampler.length_mm:g} x {one.sampler.width_mm:g} mm pads"
+            )
+        try:
+            results.append(run(one))
+            notes.append(None)
+        except NoGraspError as error:
+            if len(sized) == 1:
+                raise
+            results.append(None)
+            notes.append(f"no grasp: {error}")
+    if all(r is None for r in results):
+        raise NoGraspError(f"no pad size grasps any part: {notes[0]}")
+    scores = [score(r) if r is not None else None for r in results]
+    chosen = max((k for k in range(len(sized)) if scores[k] is not None), key=lambda k: (scores[k].rank, -k))
+    if len(sized) > 1:
+        report_progress("pad size", len(sized), len(sized), "")
+    entries = [
+        PadSizeReport(
+            length_mm=one.sampler.length_mm,
+            width_mm=one.sampler.width_mm,
+            quality=rounded(scores[k].quality) if scores[k] is not None else None,
+            flat_pads=scores[k] is not None and scores[k].flat_pads,
+            chosen=k == chosen,
+            note=notes[k],
+        )
+        for k, one in enumerate(sized)
+    ]
+    return results[chosen], entries
 
 
 def subset(prepared: Prepared, scenario_numbers: Sequence[int]) -> Prepared:
@@ -559,11 +676,14 @@ def _progress_with_note(progress: Progress | None) -> Progress:
     return lambda stage, done, total, note="": progress(stage, done, total, note)
 
 
-def _sample_task(context, task: tuple[int, float, tuple[int, int]]) -> SamplerResult:
+def _sample_task(context, task: tuple[int, float, tuple[int, int], bool]) -> SamplerResult:
     scenarios, config, plate = context
-    number, yaw, centres = task
+    number, yaw, centres, face_yaw = task
     sampler = config.sampler.model_copy(update={"yaw_deg": [yaw]})
-    return sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
+    result = sample_grasps(scenarios[number].mesh, sampler, config.gripper, plate, centres)
+    if face_yaw:
+        result.samples = [dataclasses.replace(sample, on_feature=True) for sample in result.samples]
+    return result
 
 
 def _merge_sampler_results(results: list[tuple[float, SamplerResult]]) -> SamplerResult:

@@ -8,11 +8,14 @@ import numpy as np
 import trimesh
 
 from .config import GripperConfig, SamplerConfig
-from .geometry import clip_to_box, cut_at_levels, half_space_area, triangle_areas_normals
+from .geometry import box, clip_to_box, cut_at_levels, half_space_area, to_manifold, triangle_areas_normals
 from .screen import ScreenGrid, column_heights
 
 #: Rejection reasons, in the order the checks run.
-REJECTION_REASONS = ("contact", "fit", "collision_finger", "collision_descent")
+REJECTION_REASONS = ("contact", "fit", "collision_pads", "collision_finger", "collision_descent")
+#: The pads meet when the material they would share at the seat, beside the part, exceeds this share of the
+#: box where their inner faces cross.
+PADS_MEET_SHARE = 0.01
 
 #: Sides of a grasp: the "+" pad and the "-" pad.
 SIDES = (1, -1)
@@ -21,6 +24,16 @@ _INF = np.inf
 #: Resolution of the extent profiles that find features, mm, and the least dip that is one.
 PROFILE_STEP_MM = 0.25
 FEATURE_DEPTH_MM = 0.2
+#: Side faces whose normal is within this of horizontal give closing directions, degrees.
+SIDE_FACE_TILT_DEG = 15.0
+#: Closing directions of side faces are collected in bins this wide, degrees; a bin within two bins of a
+#: configured yaw adds nothing (those pads already face it).
+FACE_YAW_BIN_DEG = 5.0
+#: A direction is added when its faces make at least this share of the part's side area ...
+FACE_YAW_MIN_SHARE = 0.05
+#: ... and at most this many directions per scenario, the largest: each costs one more yaw's samples, and
+#: a symmetric part (a chamfered cube, a hexagon) offers the same grasp at each of its directions.
+MAX_FACE_YAWS = 1
 
 
 @dataclass(frozen=True)
@@ -171,6 +184,7 @@ def sample_grasps(
         b = np.cross([0.0, 0.0, 1.0], a)
         # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
+        part_local = None  # the part as a solid in (a, b, z), made when a thin section needs it
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
         positions = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
         if len(positions) == 0:
@@ -216,6 +230,17 @@ def sample_grasps(
                 if not (fits_open and fits_closed):
                     rejected["fit"] += 1
                     continue
+                # seated, each pad's inner face lies D inside the part's extent: across a section thinner than 2D
+                # the two pad boxes overlap, and where the part does not fill that overlap both pads keep material
+                # there, so the fingers meet before the part is seated (the paper's bunny by its ear: 1.4 mm)
+                if span < 2.0 * depth:
+                    if part_local is None:
+                        part_local = to_manifold(trimesh.Trimesh(local, faces, process=False))
+                    crossing = box((a_max - depth, s - length / 2.0, h), (a_min + depth, s + length / 2.0, h + width))
+                    empty_mm3 = crossing.volume() - (crossing ^ part_local).volume()
+                    if empty_mm3 > PADS_MEET_SHARE * crossing.volume():
+                        rejected["collision_pads"] += 1
+                        continue
                 closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
                 if any(
                     plate_slabs[side].meets_box(
@@ -312,6 +337,66 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
             ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
             centres[number].append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
     return np.unique(np.concatenate(centres[0])), np.unique(np.concatenate(centres[1]))
+
+
+def face_yaws(mesh: trimesh.Trimesh, configured_deg: list[float], min_area_mm2: float) -> list[float]:
+    """Closing directions normal to a part's flat side faces that the configured yaws miss (beyond METHOD §3).
+
+    The stride and feature positions of METHOD §3b slide pads along ``b``;
+    the closing axis stays at the configured yaws (the bounding-box frame's
+    0 and 90 degrees by default). A part whose side faces are not square to
+    that frame (a chamfered edge, a hexagon, a notch's flank) is then only
+    grasped obliquely, though pads square to those faces would hold a V
+    between them: measured on a 30 mm cube with chamfered vertical edges,
+    closing along the bounding box captured displaced parts from one side
+    only (6 of 10 simulated trials), closing square to the chamfers seated
+    10 of 10. Side faces (normal within :data:`SIDE_FACE_TILT_DEG` of
+    horizontal) are binned by the direction of their normal modulo 180
+    degrees, weighted by area; a bin holding at least
+    :data:`FACE_YAW_MIN_SHARE` of the side area and ``min_area_mm2`` per
+    side, away from the configured yaws, gives its area-weighted mean
+    direction of most area. Round and organic sides spread over many bins and add none.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The part in its resting frame (mm), table normal ``+z``.
+    configured_deg : list of float
+        ``[sampler] yaw_deg``.
+    min_area_mm2 : float
+        Least face area per side of a direction (the sampler's least contact area), mm².
+
+    Returns
+    -------
+    list of float
+        At most :data:`MAX_FACE_YAWS` yaws in [0, 180) degrees, largest side area first.
+    """
+    normals, areas = np.asarray(mesh.face_normals), np.asarray(mesh.area_faces)
+    side = np.abs(normals[:, 2]) < np.sin(np.radians(SIDE_FACE_TILT_DEG))
+    if not side.any():
+        return []
+    yaws = np.degrees(np.arctan2(normals[side, 1], normals[side, 0])) % 180.0
+    weights = areas[side]
+    bins = int(round(180.0 / FACE_YAW_BIN_DEG))
+    number = np.minimum((yaws / FACE_YAW_BIN_DEG).astype(int), bins - 1)
+    area = np.bincount(number, weights=weights, minlength=bins)
+    # within a bin, the direction of the most face area (0.1 degree steps): a flat face's own direction,
+    # not its mean with the facets of a round wall beside it
+    fine = np.round(yaws, 1) % 180.0
+    taken = [int(round(y / FACE_YAW_BIN_DEG)) % bins for y in np.asarray(configured_deg) % 180.0]
+    chosen: list[float] = []
+    for k in np.argsort(-area, kind="stable"):
+        if len(chosen) == MAX_FACE_YAWS or area[k] < max(FACE_YAW_MIN_SHARE * weights.sum(), 2.0 * min_area_mm2):
+            break
+        # a local maximum only: one face direction can straddle two bins
+        if area[k] < max(area[(k - 1) % bins], area[(k + 1) % bins]):
+            continue
+        if any(min((k - t) % bins, (t - k) % bins) <= 2 for t in taken):
+            continue
+        taken.append(int(k))
+        directions, at = np.unique(fine[number == k], return_inverse=True)
+        chosen.append(float(directions[np.argmax(np.bincount(at, weights=weights[number == k]))]))
+    return chosen
 
 
 def _end_dips(heights: np.ndarray) -> np.ndarray:

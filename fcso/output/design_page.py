@@ -27,7 +27,7 @@ from ..sampler import REJECTION_REASONS
 from .html import closing_sections, html_page, image, key_value_table, text
 from .layout import REPORT_HTML, write_atomic
 from .read import read_design_folder
-from .sets_page import finger_sets_section
+from .sets_page import finger_sets_section, pad_sizes_section
 from .table import SCENARIO_GROUPS, quality_columns, scenario_labels
 from .viewer import VIEW_FACES, column_major, glb_base64, grasp_view, points_base64, viewer_section
 
@@ -261,6 +261,7 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
             if len(report.candidates) > FOLDED_ROWS
             else table,
         ]
+    body += pad_sizes_section(report.pad_sizes)
     if report.print_fit is not None:
         body += _print_fit_section(report)
     if report.placement is not None:

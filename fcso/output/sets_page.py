@@ -8,7 +8,7 @@ import trimesh
 
 from ..design import flat_finger
 from ..finger import pad_to_finger
-from ..report.models import FingerSetsReport, JobReport
+from ..report.models import FingerSetsReport, JobReport, PadSizeReport
 from .html import closing_sections, html_page, image, text
 from .viewer import VIEW_FACES, glb_base64, viewer_section
 
@@ -52,6 +52,40 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
     body += viewer_section(scene, "The fingers in 3D")
     body += closing_sections(report.warnings, config.model_dump_json(indent=2), report.timings_s)
     return html_page(f"FCSO job: {len(sets.sets)} finger sets", body)
+
+
+def pad_sizes_section(sizes: list[PadSizeReport]) -> list[str]:
+    """HTML of the pad sizes designed with (METHOD §3b), the delivered one marked; nothing for a single size."""
+    if len(sizes) < 2:
+        return []
+    rows = "".join(
+        f"<tr><td>{'&#9733; ' if entry.chosen else ''}{entry.length_mm:g} x {entry.width_mm:g}</td>"
+        + (
+            f'<td>{entry.quality:.3g}</td><td class="text">{"flat pads" if entry.flat_pads else "carved"}</td>'
+            if entry.quality is not None
+            else f'<td></td><td class="text">{text(entry.note or "")}</td>'
+        )
+        + "</tr>"
+        for entry in sizes
+    )
+    return [
+        "<h2>Pad sizes</h2>",
+        "<p>Each size of <code>[sampler] length_mm</code> x <code>width_mm</code> was designed in full; the best by "
+        "the quality measure is delivered (&#9733;).</p>",
+        f'<table><tr><th>L x W (mm)</th><th>quality</th><th class="text">pads</th></tr>{rows}</table>',
+    ]
+
+
+def pad_sizes_line(sizes: list[PadSizeReport]) -> str | None:
+    """One line of text on the pad sizes designed with, or None for a single size."""
+    if len(sizes) < 2:
+        return None
+    return "pad sizes: " + ", ".join(
+        f"{e.length_mm:g} x {e.width_mm:g} mm "
+        + (f"quality {e.quality:.3g}" if e.quality is not None else "no grasp")
+        + (" (delivered)" if e.chosen else "")
+        for e in sizes
+    )
 
 
 def finger_sets_section(sets: FingerSetsReport) -> list[str]:
@@ -158,6 +192,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             )
             + "</ul>"
         )
+    section += pad_sizes_section(sets.pad_sizes)
     return section
 
 

@@ -28,6 +28,7 @@ _REJECTION_SENTENCES = {
     "contact": "no pad box holds the least contact area ({area:g} mm² per side) on both sides",
     "fit": "wherever the pads meet it, the part is too wide for the open gripper ({opening:g} mm) or too narrow to "
     "close on",
+    "collision_pads": "the two pads would meet beside a part thinner than twice their penetration",
     "collision_finger": "the finger plate behind every pad would hit the part",
     "collision_descent": "the open fingers would hit the part on their way down",
 }

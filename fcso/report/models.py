@@ -429,6 +429,23 @@ class FingerSetsReport(ReportModel):
     ungraspable: list[UngraspableReport] = Field(description="Every ungraspable scenario")
     pick_plan: list[PickStep] = Field(description="Finger sets in the order to mount them, each with the parts to pick")
     search: PartitionSearchReport
+    pad_sizes: list[PadSizeReport] = Field(
+        default_factory=list, description="Every pad size the sets were designed with and which was delivered"
+    )
+
+
+class PadSizeReport(ReportModel):
+    """One pad size of ``[sampler] length_mm`` x ``width_mm`` designed with (METHOD §3b)."""
+
+    length_mm: float = Field(description="Pad length L, mm")
+    width_mm: float = Field(description="Pad width W, mm")
+    quality: float | None = Field(
+        description="What chose among the sizes: the delivered design's quality (its worst scenario's measure), for "
+        "finger sets the worst over the sets; null when no part could be grasped with this size"
+    )
+    flat_pads: bool = Field(False, description="Its design delivered flat pads (nothing beat flat): ranked last")
+    chosen: bool = Field(description="The size delivered")
+    note: str | None = Field(None, description="Why this size gave no design")
 
 
 class DesignReport(ReportModel):
@@ -451,6 +468,10 @@ class DesignReport(ReportModel):
     warnings: list[str]
     settings: DesignConfig
     print_fit: PrintFitReport | None = Field(None, description="[print] as used and what clearance and lead-in changed")
+    pad_sizes: list[PadSizeReport] = Field(
+        default_factory=list,
+        description="Every pad size designed with and which was delivered; settings holds the delivered size",
+    )
     placement: dict | None = Field(
         None,
         description="Where the finger copies go in the job's build volume, added by fcsod (schema: "

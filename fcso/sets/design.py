@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import DesignConfig
-from ..design import DesignResult, design, design_prepared, load_batch, prepare, subset
+from ..design import DesignResult, SizeScore, best_pad_size, design, design_prepared, load_batch, prepare, subset
 from ..errors import GeometryError, NoGraspError
 from ..parallel import WorkerPool
 from ..parts import Part
@@ -88,6 +88,31 @@ def design_sets(
     config = config or DesignConfig()
     if config.finger_sets.max == 1:
         return SetsResult([design(parts, config, progress=progress, repair=repair)], None, None)
+
+    def score(result: SetsResult) -> SizeScore:
+        # retained shares are of each size's own solo qualities: sizes compete on what their fingers keep
+        qualities = [next(c for c in d.report.candidates if c.index == d.report.best).quality for d in result.designs]
+        flat = any(d.report.finger.flat_pads for d in result.designs)
+        return SizeScore(
+            (result.report.min_retained_reached, -len(result.designs), min(qualities)), min(qualities), flat
+        )
+
+    result, sizes = best_pad_size(
+        config, lambda sized: _design_sets_of_one_size(parts, sized, progress, repair), score, progress
+    )
+    finger_sets = result.report.model_copy(update={"pad_sizes": sizes})
+    if result.several:
+        return SetsResult(
+            result.designs, finger_sets, result.job_report.model_copy(update={"finger_sets": finger_sets})
+        )
+    result.designs[0].report = result.designs[0].report.model_copy(update={"finger_sets": finger_sets})
+    return SetsResult(result.designs, finger_sets, None)
+
+
+def _design_sets_of_one_size(
+    parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None, repair: bool
+) -> SetsResult:
+    """:func:`design_sets` with one pad size and ``[finger_sets] max`` above 1."""
     report_progress = progress or (lambda stage, done, total, note="": None)
     clock = time.perf_counter()
     loaded = load_batch(parts, config, repair)

@@ -57,7 +57,7 @@ from scipy.spatial import ConvexHull
 from ..geometry import box, ray_hits, to_manifold
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
-CACHE_VERSION = "shell-3"
+CACHE_VERSION = "shell-4"
 #: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
 #: few kB to a few hundred kB).
 CACHE_MAX_BYTES = 500_000_000
@@ -262,6 +262,10 @@ def _outer_hulls(part: manifold3d.Manifold, reach_boxes: np.ndarray) -> list[tup
     return pieces
 
 
+#: Pad prisms thinner than this are left out, mm (a thousandth of the finest printer's resolution).
+MIN_PIECE_WIDTH_MM = 1e-3
+
+
 def pad_prism_pieces(pad: trimesh.Trimesh, thickness_mm: float, cache_dir: Path | None) -> ConvexPieces:
     """Convex pieces of a carved pad from its own face, cached by content hash.
 
@@ -329,10 +333,25 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
         behind = top.copy()
         behind[:, 0] = back
         prism = manifold3d.Manifold.hull_points(np.vstack([top, behind])).to_mesh64()
-        pieces.append(
-            (np.asarray(prism.vert_properties[:, :3], dtype=np.float64), np.asarray(prism.tri_verts, dtype=np.int64))
+        piece = (
+            np.asarray(prism.vert_properties[:, :3], dtype=np.float64),
+            np.asarray(prism.tri_verts, dtype=np.int64),
         )
+        # under a sliver triangle of the face (a knurled knob's pad: 17 nm wide) the prism is flat, and MuJoCo
+        # refuses a flat mesh; its neighbours hold that material
+        if len(piece[1]) and hull_width_mm(*piece) >= MIN_PIECE_WIDTH_MM:
+            pieces.append(piece)
     return pieces
+
+
+def hull_width_mm(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Width of a convex piece: its least extent across any of its faces' planes, mm."""
+    normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    lengths = np.linalg.norm(normals, axis=1)
+    normals = normals[lengths > 0] / lengths[lengths > 0, None]
+    if len(normals) == 0:
+        return 0.0
+    return float(np.ptp(vertices @ normals.T, axis=0).min())
 
 
 def _convex_clusters(

@@ -30,7 +30,7 @@ from tests.fcsod_helpers import (
     write_config,
 )
 
-MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\n'
+MANIFEST = '[[parts]]\nfile = "ridged.stl"\n\n[sampler]\nyaw_deg = [0]\nface_yaws = false\n'
 
 
 def _is(topic: str, job_id: str | None = None):

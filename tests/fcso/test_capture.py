@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 import fcso
-from examples.sim_parts import featured_cube, plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
+from examples.sim_parts import (
+    featured_cube,
+    holed_notched_cube,
+    plain_box,
+    ribbed_block,
+    two_ridge_block,
+    upright_grasp_settings,
+)
 from fcso.capture import pad_landscapes
 from fcso.design import finish_candidate, prepare
 from fcso.evaluate import printed_lead_in_deg
@@ -133,6 +140,41 @@ def test_capture_chooses_the_ridge_that_centres_where_q_chooses_the_larger_area(
     assert by_capture.report.grasps[0].position_mm[2] - 5.0 < 20.0
     chosen = next(c for c in by_capture.report.candidates if c.index == by_capture.report.best)
     assert chosen.per_scenario[0].capture >= 0.8
+
+
+def test_a_cube_with_chamfered_edges_is_closed_on_square_to_its_chamfers_and_captured_from_both_sides():
+    # 30 mm cube, vertical edges chamfered 45 degrees: closing along the bounding box, a 20 mm pad reaches one
+    # chamfer per side, both on the same side of the part, so it centres displaced parts from that side only;
+    # closing square to a chamfer (45 or 135 degrees from the faces), the two faces beside it make a 90-degree V
+    # on each pad, which centres +-2 mm starts from both sides
+    mesh = holed_notched_cube()
+    result = fcso.design(
+        [Part(name="chamfered", path="chamfered", mesh=mesh)], fcso.DesignConfig().updated({"poses": {"count": 1}})
+    )
+    scenario = result.report.scenarios[0]
+    chosen = scenario.samples[next(c for c in result.report.candidates if c.index == result.report.best).samples[0]]
+    # the cube's bounding-box frame is its faces' frame (yaw 0 and 90)
+    assert min(abs(chosen.yaw_deg - 45.0), abs(chosen.yaw_deg - 135.0)) < 0.5
+    assert chosen.on_feature
+    assert scenario.capture >= 0.95 and scenario.flat_capture <= 0.2
+
+
+def test_a_pad_longer_than_the_face_wraps_both_chamfers_and_is_chosen_from_the_size_list():
+    # the same cube closed along its faces only: a 20 mm pad reaches one chamfer per side (the part centres
+    # from one side), a 34 mm pad reaches past both ends of the 30 mm face and holds both chamfers (METHOD §3b)
+    mesh = holed_notched_cube()
+    config = fcso.DesignConfig().updated(
+        {"poses": {"count": 1}, "sampler": {"length_mm": [20.0, 34.0], "face_yaws": False}}
+    )
+    result = fcso.design([Part(name="chamfered", path="chamfered", mesh=mesh)], config)
+    sizes = {entry.length_mm: entry for entry in result.report.pad_sizes}
+    assert set(sizes) == {20.0, 34.0} and sizes[34.0].chosen and not sizes[20.0].chosen
+    assert result.report.settings.sampler.length_mm == 34.0
+    assert result.report.scenarios[0].capture >= 0.95
+    # the 20 mm pad's best capture: one side of the +-2 mm box and the seat's own strip
+    assert sizes[20.0].quality < 0.7
+    # the finger as written carries the longer pad: 34 mm along the pad's length
+    assert result.fingerpad.extents[1] == pytest.approx(34.0, abs=1e-3)
 
 
 def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():

@@ -24,7 +24,8 @@ def test_verify_top_then_verify_then_report(tmp_path, monkeypatch):
     ridged_block().export(part)
     config = tmp_path / "design.toml"
     config.write_text(
-        '[poses]\ncount = 1\nselect = "most_probable"\n\n[sampler]\nyaw_deg = [0]\n\n[verify]\ntrials = 2\n'
+        '[poses]\ncount = 1\nselect = "most_probable"\n\n[sampler]\nyaw_deg = [0]\nface_yaws = false\n\n'
+        "[verify]\ntrials = 2\n"
     )
     out = tmp_path / "out"
     env = {**__import__("os").environ, "FCSO_CACHE_DIR": str(tmp_path / "cache")}

@@ -24,7 +24,7 @@ def two_part_config() -> DesignConfig:
     """The paper sampler, measure and exact pocket (METHOD §4): every candidate is listed, Q = min E, the pad keeps
     T - D and the grasps seat as the candidates were scored (the capture measure: below)."""
     return small_config(
-        sampler={"stride_mm": 6.0, "feature_positions": False},
+        sampler={"stride_mm": 6.0, "feature_positions": False, "face_yaws": False},
         quality={"measure": "paper"},
         print={"profile": "custom"},
     )

@@ -9,7 +9,7 @@ from fcso import load_part, stable_poses
 from fcso.config import DesignConfig, FingerConfig, GripperConfig, SamplerConfig, load_config
 from fcso.finger import finger_plate, load_finger, parametric_finger
 from fcso.geometry import box, to_manifold, to_trimesh
-from fcso.sampler import REJECTION_REASONS, FingerPlate, feature_centres, sample_grasps
+from fcso.sampler import REJECTION_REASONS, FingerPlate, face_yaws, feature_centres, sample_grasps
 from tests.conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
@@ -242,3 +242,54 @@ def test_pads_centre_on_notches_inside_a_face_and_at_its_ends():
     # a plain box has no notches: only its face's middle
     plain, _ = feature_centres(np.asarray(block_part().vertices), np.asarray(block_part().faces))
     assert len(plain) <= 1
+
+
+def chamfered_block(size_mm: float = 30.0, chamfer_mm: float = 6.0) -> trimesh.Trimesh:
+    """A cube resting on the table with its four vertical edges chamfered at 45 degrees (chamfer faces
+    ``chamfer_mm`` wide, normals at 45, 135, 225 and 315 degrees)."""
+    half = size_mm / 2.0
+    cube = manifold3d.Manifold.cube([size_mm, size_mm, size_mm], center=True).translate([0.0, 0.0, half])
+    # a square turned 45 degrees about z, centred on an edge, cuts a chamfer as wide as the square's side
+    cutter = manifold3d.Manifold.cube([chamfer_mm, chamfer_mm, size_mm + 2.0], center=True).rotate([0.0, 0.0, 45.0])
+    for x, y in ((-half, -half), (-half, half), (half, -half), (half, half)):
+        cube = cube - cutter.translate([x, y, half])
+    return to_trimesh(cube)
+
+
+def test_closing_axes_square_to_side_faces_the_configured_yaws_miss():
+    # by construction: the chamfers face 45 and 135 degrees (modulo 180); either diagonal holds a V
+    assert face_yaws(chamfered_block(), [0.0, 90.0], 40.0) in ([45.0], [135.0])
+    # pads already square to them: nothing to add
+    assert face_yaws(chamfered_block(), [0.0, 45.0, 90.0, 135.0], 40.0) == []
+    # chamfers narrower than the least contact area per side add nothing: 2 x 1 mm x 30 mm < 2 x 40 mm^2
+    assert face_yaws(chamfered_block(chamfer_mm=1.0), [0.0, 90.0], 40.0) == []
+    # a hexagonal prism with a corner on x: faces at 30, 90 and 150 degrees, 90 configured
+    hexagon = to_trimesh(manifold3d.Manifold.cylinder(20.0, 12.0, circular_segments=6))
+    assert face_yaws(hexagon, [0.0, 90.0], 40.0) in ([30.0], [150.0])
+    # a plain box and a round cylinder: no side face the configured yaws miss
+    assert face_yaws(block_part(), [0.0, 90.0], 40.0) == []
+    cylinder = to_trimesh(manifold3d.Manifold.cylinder(30.0, 15.0, circular_segments=96))
+    assert face_yaws(cylinder, [0.0, 90.0], 40.0) == []
+
+
+def test_pads_that_would_meet_beside_a_thin_section_are_rejected():
+    # a fin along y standing 20 mm on a 30 x 30 x 4 mm base, closed along x; 10 mm pads, D = 3 mm. Seated on a fin
+    # thinner than 2D each pad's inner face lies D inside it, so the two pad boxes overlap. Where the fin fills
+    # that overlap both pads are carved away there; where a pad box reaches above the fin's top (24 mm) nothing
+    # fills it, both pads keep material there and the fingers meet before the part is seated.
+    def fin_part(thickness_mm: float) -> trimesh.Trimesh:
+        base = box((-15.0, -15.0, 0.0), (15.0, 15.0, 4.0))
+        fin = box((-thickness_mm / 2.0, -15.0, 4.0), (thickness_mm / 2.0, 15.0, 24.0))
+        return to_trimesh(base + fin)
+
+    sampler = dict(yaw_deg=[0.0], min_contact_area_mm2=5.0)
+    depth, width, top = PAD["penetration_mm"], PAD["width_mm"], 24.0
+    # 6.5 mm > 2D: the faces never cross, even where the pads reach above the top
+    thick = run(fin_part(6.5), **sampler)
+    assert thick.rejected["collision_pads"] == 0
+    assert any(g.h_mm + width > top and g.a_max_mm - g.a_min_mm < 7.0 for g in thick.samples)
+    # 4 mm < 2D: the pads reaching above the top are rejected, those on the fin alone are kept
+    thin = run(fin_part(4.0), **sampler)
+    assert thin.rejected["collision_pads"] > 0
+    crossing = [g for g in thin.samples if g.a_max_mm - g.a_min_mm < 2.0 * depth]
+    assert crossing and all(g.h_mm + width <= top + 1e-9 for g in crossing)

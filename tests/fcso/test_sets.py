@@ -17,10 +17,12 @@ import numpy as np
 import pytest
 
 import fcso
+from examples.sim_parts import holed_notched_cube
 from fcso.design import evaluate_exact, prepare, screen_choice
 from fcso.evaluate import screen_on_pad
 from fcso.geometry import to_trimesh
-from fcso.output.sets_page import pick_plan_text
+from fcso.output.sets_page import pad_sizes_line, pick_plan_text
+from fcso.parts import Part
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
 from fcso.sets.screening import quick_screen
 from tests.conftest import HANG_GUARD_S, REPO, small_config
@@ -332,3 +334,26 @@ def test_set_screening_measures_capture_on_the_sets_pad():
     quick = quick_screen(prepared, (0, 1), list(choice), cfg)
     assert list(quick) == [s.measure for s in on_pad.scenarios]
     assert quick[0] < own.scenarios[0].measure
+
+
+def test_finger_sets_are_designed_with_every_pad_size_and_keep_the_best(tmp_path):
+    # one code path for one and several sets: with [finger_sets] max above 1, each size of the list designs the
+    # whole job and the job with the better fingers is kept; the holed cube closed along its faces is held from both
+    # sides only by a pad longer than its 30 mm face (test_capture)
+    config = fcso.DesignConfig().updated(
+        {
+            "poses": {"count": 1},
+            "sampler": {"length_mm": [20.0, 34.0], "face_yaws": False},
+            "finger_sets": {"max": 2},
+        }
+    )
+    job = design_sets([Part(name="cube", path="cube", mesh=holed_notched_cube())], config)
+    sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
+    assert set(sizes) == {20.0, 34.0} and sizes[34.0].chosen
+    assert sizes[34.0].quality > sizes[20.0].quality
+    # the delivered design and the job's report carry the chosen size
+    assert job.designs[0].report.settings.sampler.length_mm == 34.0
+    assert job.job().finger_sets.pad_sizes == job.report.pad_sizes
+    assert pad_sizes_line(job.report.pad_sizes).endswith(
+        "34 x 20 mm quality " + f"{sizes[34.0].quality:.3g} (delivered)"
+    )

@@ -18,7 +18,7 @@ from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import Part
 from fcso.sim import trials
-from fcso.sim.collision import evict, pad_prism_pieces, part_shell_pieces
+from fcso.sim.collision import MIN_PIECE_WIDTH_MM, evict, hull_width_mm, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
@@ -68,7 +68,7 @@ def ridged(tmp_path_factory):
     config = DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {"yaw_deg": [0.0], "feature_positions": False},
+            "sampler": {"yaw_deg": [0.0], "feature_positions": False, "face_yaws": False},
             "print": {"profile": "custom"},
         }
     )
@@ -233,6 +233,29 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     total = sum(manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)).volume() for v, _ in read.pieces)
     assert total == pytest.approx(union.volume(), rel=1e-6)
     assert abs(read.volume_error) < 1e-5 and read.missing_fraction < 1e-5
+
+
+def test_no_pad_prism_is_flat_under_a_sliver_of_the_face():
+    """A wall 0.01 degrees off the closing axis faces the front by a sliver: the prism under it is under 0.1 um wide,
+    which MuJoCo refuses as a flat mesh (a knurled knob's pad had such prisms, 17 nm wide). It is left out; the
+    pieces still make up the pad.
+    """
+    wall_run_mm = 4.0 * np.tan(np.radians(0.01))
+    # a step 4 mm deep across the pad, its wall leaning by 0.01 degrees
+    step = manifold3d.Manifold.hull_points(
+        np.array(
+            [[-1.0, 10.0, -1.0], [4.0, 10.0, -1.0], [-1.0, 21.0, -1.0], [4.0, 21.0, -1.0]]
+            + [[-1.0, 10.0 - wall_run_mm * 1.25, 21.0], [4.0, 10.0 + 0.0, 21.0]]
+            + [[-1.0, 21.0, 21.0], [4.0, 21.0, 21.0]]
+        )
+    )
+    carved = to_trimesh(box((0.0, 0.0, 0.0), (5.0, 20.0, 20.0)) - step)
+    pieces = pad_prism_pieces(carved, 5.0, None).pieces
+    assert pieces and min(hull_width_mm(v, f) for v, f in pieces) >= MIN_PIECE_WIDTH_MM
+    assert _union(pieces).volume() == pytest.approx(carved.volume, rel=1e-3)
+    # the width of a box is its least side; of a flat piece, nothing
+    cube = to_trimesh(box((0.0, 0.0, 0.0), (3.0, 2.0, 0.5)))
+    assert hull_width_mm(np.asarray(cube.vertices), np.asarray(cube.faces)) == pytest.approx(0.5)
 
 
 def test_pad_prisms_leave_out_what_the_part_overhangs(tmp_path):

@@ -19,6 +19,7 @@ import pytest
 import trimesh
 
 import fcso
+from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from fcso.output.files import output_files
 from tests.conftest import REPO, data_path, small_config
 
@@ -133,20 +134,7 @@ def test_the_demo_parts_on_one_finger_write_one_body_without_the_float32_flap(tm
     # the batch demo's cube and solar tracker on one finger with its manifest's 10 mm pads: two vertices that
     # manifold3d keeps apart round to one float32 point and once left a two-triangle flap of zero volume beside the
     # finger, so the design was refused
-    demo = REPO / "examples" / "jobs" / "batch-demo"
-    config = fcso.DesignConfig().updated(
-        {
-            "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {
-                "length_mm": 10.0,
-                "width_mm": 10.0,
-                "thickness_mm": 4.0,
-                "penetration_mm": 3.0,
-                "stride_mm": 10.0,
-            },
-        }
-    )
-    result = fcso.design([demo / "20mm-xyz-cube.stl", demo / "solar_tracker.stl"], config)
+    result = fcso.design(batch_demo_part_files(), batch_demo_settings())
     files = output_files(result, draw=lambda inputs, progress: collections.defaultdict(bytes))
     for file_name in ("finger.stl", "fingerpad.stl"):
         (tmp_path / file_name).write_bytes(files[file_name])
