@@ -52,7 +52,7 @@ class VerifyConfig(BaseModel):
         description="The designed finger holds as well as flat pads when, pushed in each direction, it slips at most "
         "this much earlier, N (the ramp's overshoot between a slip's start and its detection)",
     )
-    timestep_s: float = Field(0.0005, gt=0, description="Physics time step, s")
+    timestep_s: float = Field(0.001, gt=0, description="Physics time step, s")
     open_margin_mm: float = Field(
         5.0,
         gt=0,
@@ -63,7 +63,7 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Depth of the part's collision prisms under its surface where the pads reach it (less where the "
         "part is thinner), mm: a pad pushed deeper than half of it into the part would be pushed out the wrong side; "
-        "the contacts sink about 0.1-0.25 mm at 60 N and the pads move at most 0.05 mm per time step",
+        "the contacts sink about 0.1-0.25 mm at 60 N and the pads move at most 0.1 mm per 1 ms time step",
     )
     max_seated_penetration_mm: float = Field(
         0.2,
@@ -77,10 +77,10 @@ class VerifyConfig(BaseModel):
         "once this much time went into the choice, s",
     )
     jobs: int = Field(
-        1,
+        0,
         ge=0,
-        description="Worker processes of the precision trials (forked; 0: every available core); the results do not "
-        "depend on it (1 by default: no gain measured on a shared 2-core machine)",
+        description="Worker processes of the grasps and holding pushes (forked; 0: every available core, as the "
+        "design's [search] jobs); the results do not depend on it",
     )
     cache_dir: Path | None = Field(
         None, description="Where collision pieces are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"

@@ -115,6 +115,11 @@ class Scene:
     actuators: tuple[int, int]
     part_geoms: np.ndarray
     pad_geoms: np.ndarray
+    #: Unit vector (world) along which the lift joint raises the gripper.
+    lift_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    #: Address of the part's free joint in qpos and in qvel.
+    part_qpos: int = 0
+    part_dof: int = 0
 
 
 def _vec(values) -> str:
@@ -245,6 +250,9 @@ def build_scene(
         actuators=(model.actuator("plus").id, model.actuator("minus").id),
         part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
         pad_geoms=pad_geoms,
+        lift_axis=-tcp[:3, 2],
+        part_qpos=int(model.jnt_qposadr[model.joint("part").id]),
+        part_dof=int(model.jnt_dofadr[model.joint("part").id]),
     )
 
 

@@ -19,8 +19,17 @@ from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
-from .scene import GraspCase, build_scene
-from .trials import Frame, hold_forces, perturbations, pose_error, run_grasp, seated_overlaps_mm, start_pose
+from .scene import GraspCase, Scene, build_scene
+from .trials import (
+    HOLD_DIRECTIONS,
+    Frame,
+    hold_force,
+    perturbations,
+    pose_error,
+    run_grasp,
+    seated_overlaps_mm,
+    start_pose,
+)
 
 
 @dataclass
@@ -257,19 +266,23 @@ def verify_case(
         Called after every simulated grasp.
     """
     errors = perturbations(config.trials, config, stream)
-    results, frames, penetration, pads_overlap = {}, [], 0.0, 0.0
-    for kind, pad_pieces in (("fcso", pad.pieces), ("flat", None)):
-        scene = build_scene(case, pieces.pieces, pad_pieces, finger_hull_mm, config)
-        if kind == "fcso":
-            penetration, pads_overlap = seated_overlaps_mm(scene)
-        nominal = run_grasp(scene, case, np.eye(4), config, record=kind == "fcso")
-        advance()
+    scenes = {
+        "fcso": build_scene(case, pieces.pieces, pad.pieces, finger_hull_mm, config),
+        "flat": build_scene(case, pieces.pieces, None, finger_hull_mm, config),
+    }
+    penetration, pads_overlap = seated_overlaps_mm(scenes["fcso"])
+    runs = {kind: [] for kind in scenes}
+    for kind, run in simulated_grasps(scenes, case, errors, config, advance):
+        runs[kind].append(run)
+    holding = holding_tests(scenes, case, {kind: grasps[0] for kind, grasps in runs.items()}, config)
+    results = {}
+    for kind, (nominal, *perturbed) in runs.items():
         design_nominal = np.linalg.inv(case.tcp)
-        offset = pose_error(nominal.part_in_gripper, design_nominal, scene.part_com_mm)
+        offset = pose_error(nominal.part_in_gripper, design_nominal, scenes[kind].part_com_mm)
         reference = nominal.part_in_gripper if nominal.held else design_nominal
-        trials, pictured = [], None
-        for number, (error, run) in enumerate(zip(errors, perturbed_runs(scene, case, errors, config, advance))):
-            moved, turned = pose_error(run.part_in_gripper, reference, scene.part_com_mm)
+        trials = []
+        for error, run in zip(errors, perturbed):
+            moved, turned = pose_error(run.part_in_gripper, reference, scenes[kind].part_com_mm)
             trials.append(
                 TrialResult(
                     dx_mm=round(float(error[0]), 4),
@@ -281,13 +294,9 @@ def verify_case(
                     success=bool(run.held and moved <= config.success_mm and turned <= config.success_deg),
                 )
             )
-            if number == 0:
-                pictured = run.frames
-        if kind == "fcso":
-            frames = nominal.frames
-        results[kind] = _finger_result(
-            kind, nominal.held, offset, trials, hold_forces(scene, case, nominal, config), pictured
-        )
+        pictured = perturbed[0].frames if perturbed else None
+        results[kind] = _finger_result(kind, nominal.held, offset, trials, holding[kind], pictured)
+    frames = runs["fcso"][0].frames or []
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
         part_volume_error=round(pieces.excess_fraction, 6),
@@ -332,50 +341,87 @@ def weaker_than_flat(
     return {name: pair for name, pair in held.items() if pair[0] < pair[1] - config.hold_tolerance_n}
 
 
-def perturbed_runs(
-    scene, case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
-) -> Iterator[TrialRun]:
-    """The precision trials of one finger, run on ``config.jobs`` forked workers (they are independent: every grasp
-    starts from a fresh state, so the results are those of one process), in order.
+def simulated_grasps(
+    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+) -> Iterator[tuple[str, TrialRun]]:
+    """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
+    independent: every grasp starts from a fresh state, so the results are those of one process), in order.
 
-    Trials go to the workers a few at a time, so a verification of many trials
-    holds only a few in flight and reports progress as they end.
+    Grasps go to the workers a few at a time, so a verification of many
+    trials holds only a few in flight and reports progress as they end.
 
     Parameters
     ----------
-    scene : Scene
+    scenes : dict
+        Finger kind -> its scene.
     case : GraspCase
     errors : (n, 3) float
         Start errors (x, y mm, yaw degrees) of the trials.
     config : VerifyConfig
     advance : callable
-        Called after every trial.
+        Called after every grasp.
+
+    Yields
+    ------
+    kind, TrialRun
+        Per finger, in the order of ``scenes``, its nominal grasp (unperturbed, with its state after the lift for
+        the holding test; recorded for the designed finger) then its trials in the order of ``errors`` (the first
+        recorded).
     """
-    jobs = min(resolve_jobs(config.jobs), max(1, len(errors)))
+    items = [(kind, number, error) for kind in scenes for number, error in enumerate([None, *errors])]
+    jobs = min(resolve_jobs(config.jobs), len(items))
     batch = 2 * jobs
-    with WorkerPool((scene, case, config), jobs) as pool:
-        for start in range(0, len(errors), batch):
-            numbered = list(enumerate(errors[start : start + batch], start=start))
-            for run in pool.map(_perturbed_run, numbered):
+    with WorkerPool((scenes, case, config), jobs) as pool:
+        for start in range(0, len(items), batch):
+            for kind, run in pool.map(_simulated_grasp, items[start : start + batch]):
                 advance()
-                yield run
+                yield kind, run
+
+
+def holding_tests(
+    scenes: dict[str, Scene], case: GraspCase, nominals: dict[str, TrialRun], config: VerifyConfig
+) -> dict[str, dict[str, float | None]]:
+    """Every finger's holding test (:func:`fcso.sim.trials.hold_forces`) from its nominal grasp, its directions on
+    ``config.jobs`` forked workers.
+
+    Returns
+    -------
+    dict
+        Finger kind -> push direction -> slip force, N (None: held; 0.0 in every direction when not held).
+    """
+    items = [(kind, name) for kind, run in nominals.items() if run.held for name in HOLD_DIRECTIONS]
+    forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in nominals}
+    with WorkerPool((scenes, case, nominals, config), min(resolve_jobs(config.jobs), max(1, len(items)))) as pool:
+        for (kind, name), force in zip(items, pool.map(_hold_force, items)):
+            forces[kind][name] = force
+    return forces
 
 
 @dataclass
 class TrialRun:
-    """What a precision trial returns from its worker: held, final pose in the gripper (4x4, mm), the first trial's
-    frames."""
+    """What a grasp returns from its worker: held, final pose in the gripper (4x4, mm), its frames when recorded, and
+    a nominal grasp's state after the lift."""
 
     held: bool
     part_in_gripper: np.ndarray
     frames: list[Frame] | None
+    lifted: mujoco.MjData | None = None
 
 
-def _perturbed_run(context, item) -> TrialRun:
-    scene, case, config = context
-    number, error = item
-    run = run_grasp(scene, case, start_pose(case, error), config, record=number == 0)
-    return TrialRun(run.held, run.part_in_gripper, run.frames if number == 0 else None)
+def _simulated_grasp(context, item) -> tuple[str, TrialRun]:
+    scenes, case, config = context
+    kind, number, error = item
+    if number == 0:
+        run = run_grasp(scenes[kind], case, np.eye(4), config, record=kind == "fcso")
+        return kind, TrialRun(run.held, run.part_in_gripper, run.frames, run.data)
+    run = run_grasp(scenes[kind], case, start_pose(case, error), config, record=number == 1)
+    return kind, TrialRun(run.held, run.part_in_gripper, run.frames if number == 1 else None)
+
+
+def _hold_force(context, item) -> float | None:
+    scenes, case, nominals, config = context
+    kind, name = item
+    return hold_force(scenes[kind], case, nominals[kind].lifted, name, config)
 
 
 def _finger_result(

@@ -17,11 +17,19 @@ from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.parts import Part
+from fcso.sim import trials
 from fcso.sim.collision import MIN_PIECE_WIDTH_MM, evict, hull_width_mm, pad_prism_pieces, part_shell_pieces
 from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
-from fcso.sim.verify import finger_hull, grasp_case, part_pieces, perturbed_runs, weaker_than_flat
+from fcso.sim.verify import (
+    finger_hull,
+    grasp_case,
+    holding_tests,
+    part_pieces,
+    simulated_grasps,
+    weaker_than_flat,
+)
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -81,6 +89,30 @@ def test_cube_between_flat_pads_stays_put(tmp_path):
     assert run.held
     moved, turned = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
     assert moved <= 0.05 and turned <= 0.05
+
+
+def test_the_skipped_steady_lift_ends_where_the_stepped_lift_ends(tmp_path, monkeypatch):
+    case = _cube_case()
+    config = _config(tmp_path)
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
+    start = start_pose(case, np.array([1.5, -1.0, 2.0]))
+    skips = []
+    skip = trials.skip_steady_lift
+    monkeypatch.setattr(trials, "skip_steady_lift", lambda *args: skips.append(args[2]) or skip(*args))
+    skipped = run_grasp(scene, case, start, config, record=True)
+    # the cube between flat pads moves with the gripper early in the 100 mm lift: most of it is skipped
+    assert len(skips) == 1 and skips[0] > 80.0
+    monkeypatch.setattr(trials, "STEADY_STEPS", 10**9)
+    stepped = run_grasp(scene, case, start, config, record=True)
+    assert skipped.held and stepped.held
+    moved, turned = pose_error(skipped.part_in_gripper, stepped.part_in_gripper, case.part.center_mass)
+    assert moved <= 0.01 and turned <= 0.01
+    # the recorded frames cover the skipped stretch as the steps would, the part rising with the gripper
+    # (stepped frames are taken at the first step at or after each frame time: up to one 1 ms step later)
+    assert [f.time_s for f in skipped.frames] == pytest.approx([f.time_s for f in stepped.frames], abs=1.5e-3)
+    for mine, theirs in zip(skipped.frames, stepped.frames):
+        assert np.allclose(mine.gripper, theirs.gripper, atol=0.2)
+        assert np.allclose(mine.part[:3, 3], theirs.part[:3, 3], atol=0.2)
 
 
 def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
@@ -316,18 +348,26 @@ def test_the_pieces_cache_survives_concurrent_writers_damage_and_a_size_bound(tm
     assert list(cache.glob("*.npz")) == [newer]
 
 
-def test_trials_on_forked_workers_give_the_results_of_one_process(tmp_path):
+def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tmp_path):
     case = _cube_case()
-    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), _config(tmp_path))
+    # friction 0.1: pushed along the pads the cube slips at about 12 N, inside the test's 30 N
+    settings = {"lift_mm": 10.0, "friction": 0.1, "hold_ramp_n_s": 300.0}
+    scenes = {"flat": build_scene(case, _hull(case.part), None, np.zeros((0, 3)), _config(tmp_path, **settings))}
     errors = np.array([[1.5, -1.0, 2.0], [-2.0, 0.5, -3.0], [0.0, 2.0, 1.0]])
-    runs, advanced = {}, []
+    runs, holding, advanced = {}, {}, []
     for jobs in (1, 2):
-        config = _config(tmp_path, jobs=jobs)
-        runs[jobs] = list(perturbed_runs(scene, case, errors, config, lambda jobs=jobs: advanced.append(jobs)))
-    assert advanced == [1, 1, 1, 2, 2, 2]
+        config = _config(tmp_path, jobs=jobs, **settings)
+        grasps = simulated_grasps(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
+        runs[jobs] = [run for _, run in grasps]
+        holding[jobs] = holding_tests(scenes, case, {"flat": runs[jobs][0]}, config)
+    assert advanced == [1] * 4 + [2] * 4
     for one, forked in zip(runs[1], runs[2]):
         assert one.held == forked.held and np.array_equal(one.part_in_gripper, forked.part_in_gripper)
-    # only the first trial keeps its frames (the report's picture)
-    assert [bool(r.frames) for r in runs[2]] == [True, False, False]
+    assert holding[1] == holding[2]
+    # the push along the closing axis is held, the others slip: the holding test ran from the lifted state
+    assert holding[2]["flat"]["+y"] is None and holding[2]["flat"]["+x"] > 0.0
+    # the nominal grasp keeps its lifted state; only the first trial keeps its frames (the report's picture)
+    assert runs[2][0].lifted is not None and [bool(r.frames) for r in runs[2][1:]] == [True, False, False]
+    runs[2] = runs[2][1:]
     # the start errors matter: the trials end in different poses
     assert not np.allclose(runs[2][0].part_in_gripper, runs[2][1].part_in_gripper)
