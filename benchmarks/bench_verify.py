@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 import fcso
+from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, upright_grasp_settings
 from fcso.parts import Part
 from fcso.sim.config import VerifyConfig
@@ -51,7 +52,6 @@ from fcso.sim.verify import design_under_test, verify
 
 REPO = Path(__file__).resolve().parent.parent
 PARTS = REPO / "examples" / "parts"
-DEMO = REPO / "examples" / "jobs" / "batch-demo"
 
 
 def cube_design(notch_mm: float) -> fcso.DesignResult:
@@ -62,20 +62,8 @@ def cube_design(notch_mm: float) -> fcso.DesignResult:
 
 
 def demo_design() -> fcso.DesignResult:
-    """The batch-demo job's design: its parts and its manifest's settings."""
-    config = fcso.DesignConfig().updated(
-        {
-            "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {
-                "length_mm": 10.0,
-                "width_mm": 10.0,
-                "thickness_mm": 4.0,
-                "penetration_mm": 3.0,
-                "stride_mm": 10.0,
-            },
-        }
-    )
-    return fcso.design([fcso.load_part(DEMO / "20mm-xyz-cube.stl"), fcso.load_part(DEMO / "solar_tracker.stl")], config)
+    """The batch-demo job's design: its parts and its manifest's settings (one finger for both parts)."""
+    return fcso.design(batch_demo_part_files(), batch_demo_settings())
 
 
 def paper_design() -> fcso.DesignResult:
