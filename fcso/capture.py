@@ -260,8 +260,9 @@ def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.nda
     carved = np.full((grid.count_v, grid.count_w), -np.inf)
     for geometry in geometries:
         if geometry.good:
-            heights = geometry.heights_mm.reshape(grid.count_v, grid.count_w)
-            np.maximum(carved, np.where(heights > 0, heights, -np.inf), out=carved)
+            # outside its window a geometry's heights are 0: it carves nothing there
+            heights = geometry.window_heights_mm
+            np.maximum(carved[geometry.cells], np.where(heights > 0, heights, -np.inf), out=carved[geometry.cells])
     return carved
 
 
