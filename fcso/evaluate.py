@@ -20,7 +20,7 @@ from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, s
 from .geometry import to_manifold
 from .holding import holding_forces_n
 from .measure import scenario_measure
-from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, rebuilt_from_mesh, surface_in_pad
 from .parts import Part
 from .printfit import carve, closing_travel_mm, open_thin_walls
 from .report.models import DesignReport, chosen_candidate
@@ -434,31 +434,50 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     )
 
 
+def fit_key(config: DesignConfig) -> tuple | None:
+    """What a printed-fit carving depends on besides its sample: (pad size, D, clearance, lead-in); None without a
+    fit (the exact ``I_n`` are carved).
+    """
+    fit, sampler = config.print.resolved(), config.sampler
+    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+        return None
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    return size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"]
+
+
+def fitted_sample(scenario: Scenario, sample: SampleGeometry, config: DesignConfig) -> list[PadGeometry]:
+    """A sample's geometries with each good one's ``I_n`` replaced by its printed-fit carving (``fit_key`` not None).
+
+    Each carving is rebuilt from its mesh (:func:`fcso.pad.rebuilt_from_mesh`): the same solid whether it was carved
+    here or by a worker.
+    """
+    sampler, fit = config.sampler, config.print.resolved()
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    part = to_manifold(scenario.mesh)
+    made = []
+    for geometry, frame in zip(sample.geometries, sample.frames):
+        if geometry.good:
+            carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
+            geometry = dataclasses.replace(geometry, intersection=rebuilt_from_mesh(carved))
+        made.append(geometry)
+    return made
+
+
 def fitted_geometries(
     scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
 ) -> list[PadGeometry]:
-    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving."""
-    fit = config.print.resolved()
-    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving.
+
+    Carvings already made for a sample (:attr:`SampleGeometry.fitted`) are reused, new ones kept there.
+    """
+    key = fit_key(config)
+    if key is None:
         return [g for sample in chosen for g in sample.geometries]
-    sampler = config.sampler
-    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
-    settings = (size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
     fitted = []
     for scenario, sample in zip(scenarios, chosen):
-        known = sample.fitted.get(settings)
-        if known is not None:
-            fitted.extend(known)
-            continue
-        part = to_manifold(scenario.mesh)
-        made = []
-        for geometry, frame in zip(sample.geometries, sample.frames):
-            if geometry.good:
-                carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
-                geometry = dataclasses.replace(geometry, intersection=carved)
-            made.append(geometry)
-        sample.fitted[settings] = made
-        fitted.extend(made)
+        if key not in sample.fitted:
+            sample.fitted[key] = fitted_sample(scenario, sample, config)
+        fitted.extend(sample.fitted[key])
     return fitted
 
 
