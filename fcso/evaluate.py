@@ -268,6 +268,7 @@ def screen_on_pad(
     config: DesignConfig,
     lattice: NormalLattice,
     holding: bool = False,
+    captures: list[float] | None = None,
 ) -> ScreenedCandidate:
     """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
 
@@ -290,6 +291,9 @@ def screen_on_pad(
     lattice : NormalLattice
     holding : bool
         Measure holding too (default: full holding, as the search assumes).
+    captures : list of float, optional
+        Every scenario's capture on this candidate's pad when already known (the same candidate screened on its pad
+        before, without holding): its landscapes are not measured again.
 
     Returns
     -------
@@ -299,7 +303,9 @@ def screen_on_pad(
     screens = [sample.screen for sample in chosen]
     if config.quality.measure != "capture":
         return screen(screens, config, lattice)
-    landscapes = pad_landscapes(screens, [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config)
+    if captures is None:
+        grid = ScreenGrid.for_config(config)
+        captures = [s.fraction for s in pad_landscapes(screens, [s.centres_uv_mm for s in chosen], grid, config)]
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
@@ -310,9 +316,7 @@ def screen_on_pad(
             sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
         return sample.held[key]
 
-    return screen(
-        screens, config, lattice, captures=[s.fraction for s in landscapes], holding=holding_share if holding else None
-    )
+    return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
 
 
 def _holding(

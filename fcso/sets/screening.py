@@ -71,7 +71,18 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
     exact = [evaluate_exact(alone, (int(k),), config).quality for k in finalists]
     best = int(np.argmax(exact))
     # the screened E* with holding, as a set's screening measures its finalists: the best sample may hold nothing
-    held = [screen_on_pad(alone.scenarios, (int(k),), config, prepared.lattice, True).quality for k in finalists]
+    # a sample's capture on its own pad is the one it was prepared with
+    held = [
+        screen_on_pad(
+            alone.scenarios,
+            (int(k),),
+            config,
+            prepared.lattice,
+            True,
+            [alone.scenarios[0].samples[k].screen[0].capture],
+        ).quality
+        for k in finalists
+    ]
     return SoloQuality(screened, float(max(held, default=0.0)), float(exact[best]), int(finalists[best]))
 
 
@@ -139,10 +150,10 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
-    def on_pad(choice: tuple[int, ...], holding: bool = False):
+    def on_pad(choice: tuple[int, ...], holding: bool = False, captures: list[float] | None = None):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
         scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding)
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
@@ -151,7 +162,11 @@ def screen_set(
     # best of those with holding too, as the set's design re-evaluates its exact_top_k
     top = {c: on_pad(c) for c in ranked[: config.search.pad_top_k]}
     ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)
-    held = {c: on_pad(c, holding=True) for c in ranked[: config.search.exact_top_k]}
+    # the pad_top_k were screened on their pads: their captures stand, only holding is new
+    held = {
+        c: on_pad(c, True, [s.capture for s in top[c].scenarios] if c in top else None)
+        for c in ranked[: config.search.exact_top_k]
+    }
     best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in held.items()}, counts)[0]
     areas = np.array([s.measure for s in held[best].scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
