@@ -40,12 +40,18 @@ class SoloQuality:
         ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
         The sample giving ``E*``.
+    held : dict
+        Per sample index, the holding shares its finalists' screenings
+        measured (:attr:`fcso.evaluate.SampleGeometry.held`), for the
+        process that forks the next workers: a part's contacts in a pair are
+        often its contacts alone, and holding is six linear programmes.
     """
 
     screened: np.ndarray
     screened_best: float
     exact: float
     sample: int
+    held: dict[int, dict[tuple, float]] = dataclasses.field(default_factory=dict, repr=False)
 
 
 def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig) -> SoloQuality:
@@ -83,7 +89,25 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
         ).quality
         for k in finalists
     ]
-    return SoloQuality(screened, float(max(held, default=0.0)), float(exact[best]), int(finalists[best]))
+    samples = alone.scenarios[0].samples
+    return SoloQuality(
+        screened,
+        float(max(held, default=0.0)),
+        float(exact[best]),
+        int(finalists[best]),
+        {int(k): dict(samples[k].held) for k in finalists if samples[k].held},
+    )
+
+
+def keep_held(prepared: Prepared, held: dict[tuple[int, int], dict[tuple, float]]) -> None:
+    """Record holding shares measured in worker processes on ``prepared``'s samples (``(scenario, sample)`` keys).
+
+    Workers forked later, and a Dask cluster's context sent later, start with them: the same contacts are not
+    measured again. A share depends only on its key (the contacts and settings), so a design is the same with or
+    without them.
+    """
+    for (number, index), entries in held.items():
+        prepared.scenarios[number].samples[index].held.update(entries)
 
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
@@ -260,7 +284,10 @@ class SetScreener:
         # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
-        areas = [a for batch in self.pool.map(_quick_task, batches) for a in batch]
+        areas = []
+        for batch_areas, held in self.pool.map(_quick_task, batches):
+            areas.extend(batch_areas)
+            keep_held(self.prepared, held)
         for members, area in zip(fresh, areas):
             self.quick_cache[members] = self._ratios(members, area)
         return [self._per_part(members, self.quick_cache[members]) for members in sets]
@@ -348,9 +375,14 @@ def _probe_task(context, task: tuple[tuple[int, ...], tuple[int, ...]]) -> np.nd
     return np.array([s.measure for s in evaluation.scenarios], dtype=np.float64)
 
 
-def _quick_task(context, batch: list[tuple[int, ...]]) -> list[np.ndarray]:
+def _quick_task(
+    context, batch: list[tuple[int, ...]]
+) -> tuple[list[np.ndarray], dict[tuple[int, int], dict[tuple, float]]]:
+    """Quick screenings of a batch of sets, and the holding shares their samples know afterwards (:func:`keep_held`)."""
     prepared, pools, picks, config = context
-    return [quick_screen(prepared, numbers, picks, config) for numbers in batch]
+    areas = [quick_screen(prepared, numbers, picks, config) for numbers in batch]
+    touched = {(m, picks[m]) for numbers in batch for m in numbers}
+    return areas, {key: dict(prepared.scenarios[key[0]].samples[key[1]].held) for key in sorted(touched)}
 
 
 def solo_picks(solos: Sequence[SoloQuality]) -> list[int]:
