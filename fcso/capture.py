@@ -180,7 +180,11 @@ def capture_landscape(
     levers = []
     for sign, heights, (u_c, v_c) in zip((1.0, -1.0), part_mm, centres_uv_mm):
         heights = np.asarray(heights, dtype=np.float64)[:, rows_w]
-        part = np.where(heights > 0, heights, -np.inf)
+        # a row of w the part never enters leaves every gap infinite: only the others are read (at least one, so
+        # a part outside the box still gives infinite gaps)
+        entered = (heights > 0).any(axis=0)
+        entered[np.argmax(entered)] = True
+        part = np.where(heights[:, entered] > 0, heights[:, entered], -np.inf)
         # the shift along v of every start in cells: the clearance per column is known for whole
         # cells and interpolated between them, so the landscape has no steps of a cell's rounding
         shift = (sign * offsets[:, None] + yaws[None, :] * (depth_mm - u_c)) / cell_mm
@@ -188,7 +192,7 @@ def capture_landscape(
         fraction = (shift - whole)[:, :, None]
         lowest, highest = int(whole.min()), int(whole.max()) + 1
         source_rows = np.clip(np.arange(count_v)[None, :] - np.arange(lowest, highest + 1)[:, None], 0, count_v - 1)
-        per_shift = np.min(pad_mm[None, :, :] - part[source_rows], axis=2)
+        per_shift = np.min(pad_mm[None, :, entered] - part[source_rows], axis=2)
         with np.errstate(invalid="ignore"):
             shifted = (1.0 - fraction) * per_shift[whole - lowest] + fraction * per_shift[whole + 1 - lowest]
         shifted = np.where(np.isnan(shifted), np.inf, shifted)
@@ -260,8 +264,9 @@ def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.nda
     carved = np.full((grid.count_v, grid.count_w), -np.inf)
     for geometry in geometries:
         if geometry.good:
-            heights = geometry.heights_mm.reshape(grid.count_v, grid.count_w)
-            np.maximum(carved, np.where(heights > 0, heights, -np.inf), out=carved)
+            # outside its window a geometry's heights are 0: it carves nothing there
+            heights = geometry.window_heights_mm
+            np.maximum(carved[geometry.cells], np.where(heights > 0, heights, -np.inf), out=carved[geometry.cells])
     return carved
 
 

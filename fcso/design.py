@@ -20,6 +20,8 @@ from .evaluate import (
     SampleGeometry,
     Scenario,
     evaluate_candidate,
+    fit_key,
+    fitted_sample,
     printed_lead_in_deg,
     sample_geometry,
     screen_on_pad,
@@ -28,6 +30,7 @@ from .evaluate import (
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
 from .geometry import to_manifold
 from .measure import quality_words, scenario_measure
+from .pad import PadGeometry
 from .parallel import WorkerPool, resolve_jobs
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
@@ -271,11 +274,12 @@ def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConf
 
 
 def finish_candidate(
-    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig, flat: bool = False
+    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig, flat: bool = False, jobs: int = 1
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
     """One candidate built as :func:`design` builds its choice: carved with ``[print]``'s fit, its pad kept.
 
     ``flat`` builds flat pads on the candidate's grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
+    ``jobs`` workers carve the printed-fit pockets of its samples (``[compute] scheduler``'s when set).
 
     Returns the fitted evaluation, its grasps and print-fit report as
     ``report.json`` lists them, and the print-fit warnings.
@@ -284,6 +288,17 @@ def finish_candidate(
     lead_in, why = (config.print.lead_in_deg, None) if flat else printed_lead_in_deg(scenarios, choice, config)
     if why is not None:
         config = config.updated({"print": {"lead_in_deg": lead_in}})
+    key = fit_key(config)
+    missing = (
+        []
+        if flat or key is None
+        else [(m, k) for m, k in enumerate(choice) if key not in scenarios[m].samples[k].fitted]
+    )
+    if len(missing) > 1:
+        # two Minkowski sums per good geometry, a second or so each: a large set's finger carves on every core
+        with WorkerPool((scenarios, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
+            for (m, k), made in zip(missing, pool.map(_fit_task, missing)):
+                scenarios[m].samples[k].fitted[key] = made
     fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat)
     fit, sampler = config.print.resolved(), config.sampler
     exact = (
@@ -567,7 +582,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     timings["exact"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config)
+    best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config, jobs=jobs)
     compared = versus_flat(scenarios, best, exact.values(), config)
     # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD §7b)
     flat_pads = all(versus is not None and not versus.beats_flat for versus in compared)
@@ -734,6 +749,12 @@ def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidat
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
     return [(c.quality, c.mean_effective_area) for c in _screen_batch(context, choices)]
+
+
+def _fit_task(context, task: tuple[int, int]) -> list[PadGeometry]:
+    scenarios, config = context
+    number, index = task
+    return fitted_sample(scenarios[number], scenarios[number].samples[index], config)
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:

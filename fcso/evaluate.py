@@ -20,7 +20,7 @@ from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, s
 from .geometry import to_manifold
 from .holding import holding_forces_n
 from .measure import scenario_measure
-from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, rebuilt_from_mesh, surface_in_pad
 from .parts import Part
 from .printfit import carve, closing_travel_mm, open_thin_walls
 from .report.models import DesignReport, chosen_candidate
@@ -40,12 +40,22 @@ from .screen import (
 
 @dataclass
 class SampleGeometry:
-    """A valid sample with everything candidate evaluation needs from it."""
+    """A valid sample with everything candidate evaluation needs from it.
+
+    Its contact samples (:attr:`surfaces`) are drawn again from each pad
+    geometry's surface whenever asked, with the seeds they were first drawn
+    with (:func:`contact_seed`): the same points, and a job of thousands
+    of samples does not keep them (a third of a sample's arrays), as only
+    the candidates evaluated exactly and the holding of screened finalists
+    read them.
+    """
 
     sample: GraspSample
     frames: tuple[np.ndarray, np.ndarray]
     geometries: tuple[PadGeometry, PadGeometry]
-    surfaces: tuple[SurfaceSamples, SurfaceSamples]
+    #: Each geometry's :func:`contact_seed`, and the density of its samples, per mm².
+    surface_seeds: tuple[tuple[int, ...], tuple[int, ...]]
+    surface_density_per_mm2: float
     effective_area_bound: float
     screen: tuple[ScreenGeometry, ScreenGeometry]
     screened_bound: float
@@ -56,6 +66,14 @@ class SampleGeometry:
     #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
     #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def surfaces(self) -> tuple[SurfaceSamples, SurfaceSamples]:
+        """The contact samples of the "+" and "-" geometries, pad frames (drawn anew: read once per use)."""
+        return tuple(
+            sample_surface(g.surface_vertices, g.surface_faces, self.surface_density_per_mm2, list(seed))
+            for g, seed in zip(self.geometries, self.surface_seeds)
+        )
 
 
 @dataclass
@@ -124,9 +142,10 @@ def sample_geometry(
     frames = tuple(sample.pad_frame(side, config.sampler) for side in SIDES)
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     geometries = tuple(pad_geometry(part_manifold, vertices, faces, f, config.sampler, config.filter) for f in frames)
+    seeds = tuple(contact_seed(config, *seed, side_number) for side_number in range(len(geometries)))
     surfaces = tuple(
-        contact_samples(g.surface_vertices, g.surface_faces, config, *seed, side_number)
-        for side_number, g in enumerate(geometries)
+        sample_surface(g.surface_vertices, g.surface_faces, config.contact.sample_density_per_mm2, list(s))
+        for g, s in zip(geometries, seeds)
     )
     # contact points and normals are subsets of these samples, so A <= the sampled
     # area and RLES >= the RLES of all sampled normals: E can never exceed this
@@ -155,12 +174,28 @@ def sample_geometry(
         sample=sample,
         frames=frames,
         geometries=geometries,
-        surfaces=surfaces,
+        surface_seeds=seeds,
+        surface_density_per_mm2=config.contact.sample_density_per_mm2,
         effective_area_bound=float(bound),
         screen=screens,
         screened_bound=scenario_measure(screens[0].capture, 1.0, screened_bound(screens, lattice), config),
         centres_uv_mm=centres,
     )
+
+
+def contact_seed(config: DesignConfig, scenario_number: int, sample_index: int, side_number: int) -> tuple[int, ...]:
+    """The seed of one pad geometry's contact samples: ``(contact.seed, scenario, sample, side)``.
+
+    So a report can be rebuilt with exactly the samples the design used.
+
+    Parameters
+    ----------
+    config : DesignConfig
+    scenario_number, sample_index, side_number : int
+        Position of the scenario in the design, of the sample in the scenario,
+        and the side (0: "+", 1: "-").
+    """
+    return (config.contact.seed, scenario_number, sample_index, side_number)
 
 
 def contact_samples(
@@ -171,10 +206,7 @@ def contact_samples(
     sample_index: int,
     side_number: int,
 ) -> SurfaceSamples:
-    """The design's surface samples of one pad geometry.
-
-    The seed is ``[contact.seed, scenario, sample, side]`` so a report can be
-    rebuilt with exactly the samples the design used.
+    """The design's surface samples of one pad geometry (seeded by :func:`contact_seed`).
 
     Parameters
     ----------
@@ -182,10 +214,9 @@ def contact_samples(
         Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
     config : DesignConfig
     scenario_number, sample_index, side_number : int
-        Position of the scenario in the design, of the sample in the scenario,
-        and the side (0: "+", 1: "-").
+        As for :func:`contact_seed`.
     """
-    seed = [config.contact.seed, scenario_number, sample_index, side_number]
+    seed = list(contact_seed(config, scenario_number, sample_index, side_number))
     return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
 
 
@@ -221,8 +252,8 @@ def evaluate_candidate(
     vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
     faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
     travel = closing_travel_mm(fit["clearance_mm"]) if fitted else 0.0
-    surfaces = [surface for sample in chosen for surface in sample.surfaces]
-    seated = iter(seat(surfaces, vertices, faces, config.contact.eps_mm, travel_mm=travel))
+    drawn = [sample.surfaces for sample in chosen]
+    seated = iter(seat([s for pair in drawn for s in pair], vertices, faces, config.contact.eps_mm, travel_mm=travel))
     by_capture = config.quality.measure == "capture"
     if by_capture:
         landscapes = pad_landscapes(
@@ -233,18 +264,16 @@ def evaluate_candidate(
             flat=flat,
         )
     results = []
-    for number, (scenario, sample) in enumerate(zip(scenarios, chosen)):
+    for number, (scenario, sample, surfaces) in enumerate(zip(scenarios, chosen, drawn)):
         contacts = (next(seated), next(seated))
-        normals = np.vstack(
-            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
-        )
+        normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
         area = float(sum(c.contact_area_mm2 for c in contacts))
         radius = rles(normals) if len(normals) else 2.0
         effective = area / radius if area > 0 else 0.0
         if not by_capture:
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
-        holding = _holding(scenario, sample, [c.contact for c in contacts], normals, config)
+        holding = _holding(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
         measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
         results.append(
@@ -268,6 +297,7 @@ def screen_on_pad(
     config: DesignConfig,
     lattice: NormalLattice,
     holding: bool = False,
+    captures: list[float] | None = None,
 ) -> ScreenedCandidate:
     """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
 
@@ -290,6 +320,9 @@ def screen_on_pad(
     lattice : NormalLattice
     holding : bool
         Measure holding too (default: full holding, as the search assumes).
+    captures : list of float, optional
+        Every scenario's capture on this candidate's pad when already known (the same candidate screened on its pad
+        before, without holding): its landscapes are not measured again.
 
     Returns
     -------
@@ -299,33 +332,44 @@ def screen_on_pad(
     screens = [sample.screen for sample in chosen]
     if config.quality.measure != "capture":
         return screen(screens, config, lattice)
-    landscapes = pad_landscapes(screens, [s.centres_uv_mm for s in chosen], ScreenGrid.for_config(config), config)
+    if captures is None:
+        grid = ScreenGrid.for_config(config)
+        captures = [s.fraction for s in pad_landscapes(screens, [s.centres_uv_mm for s in chosen], grid, config)]
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
         key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
         if key not in sample.held:
-            normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)])
-            held = _holding(scenarios[number], sample, contacts, normals, config) if len(normals) else np.zeros(1)
+            surfaces = sample.surfaces
+            normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
+            held = (
+                _holding(scenarios[number], sample, surfaces, contacts, normals, config)
+                if len(normals)
+                else np.zeros(1)
+            )
             sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
         return sample.held[key]
 
-    return screen(
-        screens, config, lattice, captures=[s.fraction for s in landscapes], holding=holding_share if holding else None
-    )
+    return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
 
 
 def _holding(
-    scenario: Scenario, sample: SampleGeometry, contacts, normals_rest: np.ndarray, config: DesignConfig
+    scenario: Scenario,
+    sample: SampleGeometry,
+    surfaces: tuple[SurfaceSamples, SurfaceSamples],
+    contacts,
+    normals_rest: np.ndarray,
+    config: DesignConfig,
 ) -> np.ndarray:
     """The six holding forces of one seated grasp (METHOD §7b), N.
 
-    ``contacts``: per pad, the mask of its contact samples in contact; ``normals_rest``: theirs, stacked.
+    ``surfaces``: the sample's contact samples (:attr:`SampleGeometry.surfaces`); ``contacts``: per pad, the mask of
+    its contact samples in contact; ``normals_rest``: theirs, stacked.
     """
     points = np.vstack(
         [
             (np.linalg.inv(f) @ np.column_stack([s.points[c], np.ones(int(c.sum()))]).T).T[:, :3]
-            for s, c, f in zip(sample.surfaces, contacts, sample.frames)
+            for s, c, f in zip(surfaces, contacts, sample.frames)
         ]
     )
     pads = np.concatenate([np.full(int(c.sum()), side) for side, c in enumerate(contacts)])
@@ -434,31 +478,50 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     )
 
 
+def fit_key(config: DesignConfig) -> tuple | None:
+    """What a printed-fit carving depends on besides its sample: (pad size, D, clearance, lead-in); None without a
+    fit (the exact ``I_n`` are carved).
+    """
+    fit, sampler = config.print.resolved(), config.sampler
+    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+        return None
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    return size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"]
+
+
+def fitted_sample(scenario: Scenario, sample: SampleGeometry, config: DesignConfig) -> list[PadGeometry]:
+    """A sample's geometries with each good one's ``I_n`` replaced by its printed-fit carving (``fit_key`` not None).
+
+    Each carving is rebuilt from its mesh (:func:`fcso.pad.rebuilt_from_mesh`): the same solid whether it was carved
+    here or by a worker.
+    """
+    sampler, fit = config.sampler, config.print.resolved()
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    part = to_manifold(scenario.mesh)
+    made = []
+    for geometry, frame in zip(sample.geometries, sample.frames):
+        if geometry.good:
+            carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
+            geometry = dataclasses.replace(geometry, intersection=rebuilt_from_mesh(carved))
+        made.append(geometry)
+    return made
+
+
 def fitted_geometries(
     scenarios: list[Scenario], chosen: list[SampleGeometry], config: DesignConfig
 ) -> list[PadGeometry]:
-    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving."""
-    fit = config.print.resolved()
-    if fit["clearance_mm"] <= 0 and fit["lead_in_deg"] <= 0:
+    """The chosen samples' geometries with each good one's ``I_n`` replaced by its printed-fit carving.
+
+    Carvings already made for a sample (:attr:`SampleGeometry.fitted`) are reused, new ones kept there.
+    """
+    key = fit_key(config)
+    if key is None:
         return [g for sample in chosen for g in sample.geometries]
-    sampler = config.sampler
-    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
-    settings = (size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
     fitted = []
     for scenario, sample in zip(scenarios, chosen):
-        known = sample.fitted.get(settings)
-        if known is not None:
-            fitted.extend(known)
-            continue
-        part = to_manifold(scenario.mesh)
-        made = []
-        for geometry, frame in zip(sample.geometries, sample.frames):
-            if geometry.good:
-                carved = carve(part, frame, size, sampler.penetration_mm, fit["clearance_mm"], fit["lead_in_deg"])
-                geometry = dataclasses.replace(geometry, intersection=carved)
-            made.append(geometry)
-        sample.fitted[settings] = made
-        fitted.extend(made)
+        if key not in sample.fitted:
+            sample.fitted[key] = fitted_sample(scenario, sample, config)
+        fitted.extend(sample.fitted[key])
     return fitted
 
 
@@ -605,13 +668,13 @@ def evaluate_on_pad(
     if not scenario.samples:
         return None
     travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
-    surfaces = [surface for sample in scenario.samples for surface in sample.surfaces]
-    seated = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
+    drawn = [sample.surfaces for sample in scenario.samples]
+    seated = seat([s for pair in drawn for s in pair], pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
     results = []
     for index, sample in enumerate(scenario.samples):
         contacts = (seated[2 * index], seated[2 * index + 1])
         normals = np.vstack(
-            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(sample.surfaces, contacts, sample.frames)]
+            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(drawn[index], contacts, sample.frames)]
         )
         area = float(sum(c.contact_area_mm2 for c in contacts))
         radius = rles(normals) if len(normals) else 2.0
@@ -632,7 +695,9 @@ def evaluate_on_pad(
                 config.sampler.penetration_mm,
                 config.quality,
             )
-            holding = _holding(scenario, sample, [c.contact for c in result.contacts], result.contact_normals, config)
+            holding = _holding(
+                scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
+            )
             holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
             measure = scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
             results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)

@@ -59,6 +59,15 @@ class PadGeometry:
         self.__dict__.update(state)
 
 
+def rebuilt_from_mesh(solid: manifold3d.Manifold) -> manifold3d.Manifold:
+    """``solid`` rebuilt from its own mesh, as a worker's result arrives (:meth:`PadGeometry.__setstate__`).
+
+    manifold3d's later Booleans triangulate a solid's history differently from
+    its mesh, and a design must not depend on where its geometries were made.
+    """
+    return _from_mesh_arrays(*_mesh_arrays(solid))
+
+
 def _mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
     mesh = solid.to_mesh64()
     return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
@@ -118,10 +127,7 @@ def pad_geometry(
         flat = abs(dominant[0]) >= np.cos(np.radians(filter_config.cluster_angle_deg))
         good, basis = not flat, "normals"
     return PadGeometry(
-        # rebuilt from its mesh, as a worker's result arrives (PadGeometry.__setstate__):
-        # manifold3d's later Booleans triangulate a solid's history differently
-        # from its mesh, and a design must not depend on where its geometries were made
-        intersection=_from_mesh_arrays(*_mesh_arrays(intersection)),
+        intersection=rebuilt_from_mesh(intersection),
         surface_vertices=surface_vertices,
         surface_faces=surface_faces,
         volume_mm3=volume,

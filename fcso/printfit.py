@@ -201,7 +201,11 @@ def carve(
     outer = box((-1.0,) * 3, tuple(x + 1.0 for x in size_mm))
     carved = local ^ outer
     if lead_in_deg > 0:
-        carved = carved + draft(local ^ pad_box, outer, depth_mm + clearance_mm, lead_in_deg)
+        # the grown part's facets carry slivers where the ball's copies meet (a 1 800-triangle solar tracker): the
+        # cone's sum runs over every facet, so merging them first halves the draft's time for a change of volume
+        # under 1e-4 mm³
+        inside = (local ^ pad_box).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
+        carved = carved + draft(inside, outer, depth_mm + clearance_mm, lead_in_deg)
     return carved
 
 
@@ -258,7 +262,10 @@ def open_thin_walls(
     if min_wall_mm <= 0 or thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
         return pad
     kernel = manifold3d.Manifold.hull_points(ball_points(min_wall_mm / 2.0))
-    backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm)
+    # the pad's facets carry the carvings' slivers too, and the erosion sums the kernel over every one of them
+    # (13 s for a 960-triangle pad of the 12-part job, 7 s simplified: 476 triangles)
+    backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm).as_original()
+    backed = backed.simplify(SIMPLIFY_TOLERANCE_MM)
     # the erosion's facets carry slivers far below any printer's resolution, and the
     # dilation sums the kernel over every one of them: merge them first
     eroded = backed.minkowski_difference(kernel).as_original().simplify(SIMPLIFY_TOLERANCE_MM)

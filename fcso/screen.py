@@ -166,12 +166,22 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
 class ScreenGeometry:
     """One pad geometry ``I_n`` of a sample, prepared for screening.
 
+    Its column heights and their eroded and dilated maps are 0 outside the
+    cells the part enters, grown by one cell (about half the pad face on a
+    job of mixed parts): they are kept on that window of the grid only, so a
+    sample's maps take about a third of three whole grids.
+
     Attributes
     ----------
-    heights_mm : (cells,) float32
-        Column heights of ``I_n`` (:func:`column_heights`).
-    heights_low_mm, heights_high_mm : (cells,) float32
-        The same eroded and dilated by one cell.
+    grid_shape : (int, int)
+        ``(count_v, count_w)`` of the grid.
+    window : (int, int, int, int)
+        ``(first row, row stop, first column, column stop)`` of the window (rows along v, columns along w); all 0
+        when the part enters no cell.
+    window_heights_mm : (rows, columns) float32
+        Column heights of ``I_n`` (:func:`column_heights`) in the window.
+    window_low_mm, window_high_mm : (rows, columns) float32
+        The same eroded and dilated by one cell (3 x 3 minimum and maximum over the whole grid), in the window.
     good : bool
         The filter's label.
     depth_mm : float
@@ -188,9 +198,11 @@ class ScreenGeometry:
         geometries; 1 under the paper's measure.
     """
 
-    heights_mm: np.ndarray
-    heights_low_mm: np.ndarray
-    heights_high_mm: np.ndarray
+    grid_shape: tuple[int, int]
+    window: tuple[int, int, int, int]
+    window_heights_mm: np.ndarray
+    window_low_mm: np.ndarray
+    window_high_mm: np.ndarray
     good: bool
     depth_mm: float
     point_u_mm: np.ndarray
@@ -198,6 +210,19 @@ class ScreenGeometry:
     point_bin: np.ndarray
     area_per_point_mm2: float
     capture: float = 1.0
+
+    @property
+    def cells(self) -> tuple[slice, slice]:
+        """The window as slices of the ``(count_v, count_w)`` grid."""
+        first_row, row_stop, first_column, column_stop = self.window
+        return slice(first_row, row_stop), slice(first_column, column_stop)
+
+    @property
+    def heights_mm(self) -> np.ndarray:
+        """Column heights of ``I_n`` over the whole grid, ``(cells,)`` float32 (a new array)."""
+        heights = np.zeros(self.grid_shape, dtype=np.float32)
+        heights[self.cells] = self.window_heights_mm
+        return heights.ravel()
 
 
 @dataclass
@@ -275,10 +300,25 @@ def prepare_geometry(
     lattice : NormalLattice
     """
     square = np.asarray(heights_mm, dtype=np.float32).reshape(grid.count_v, grid.count_w)
+    rows, columns = np.flatnonzero(square.any(axis=1)), np.flatnonzero(square.any(axis=0))
+    # the dilation reaches one cell beyond the footprint; heights are never negative, so all maps are 0 outside
+    window = (
+        (
+            max(int(rows[0]) - 1, 0),
+            min(int(rows[-1]) + 2, grid.count_v),
+            max(int(columns[0]) - 1, 0),
+            min(int(columns[-1]) + 2, grid.count_w),
+        )
+        if len(rows)
+        else (0, 0, 0, 0)
+    )
+    cells = (slice(window[0], window[1]), slice(window[2], window[3]))
     return ScreenGeometry(
-        heights_mm=square.ravel(),
-        heights_low_mm=minimum_filter(square, size=3, mode="nearest").ravel(),
-        heights_high_mm=maximum_filter(square, size=3, mode="nearest").ravel(),
+        grid_shape=(grid.count_v, grid.count_w),
+        window=window,
+        window_heights_mm=square[cells].copy(),
+        window_low_mm=minimum_filter(square, size=3, mode="nearest")[cells].copy(),
+        window_high_mm=maximum_filter(square, size=3, mode="nearest")[cells].copy(),
         good=bool(good),
         depth_mm=float(depth_mm),
         point_u_mm=np.asarray(points[:, 0], dtype=np.float32),
@@ -333,16 +373,20 @@ class ScreenedCandidate:
 class Carving:
     """The carved geometries of part of a candidate, as column heights (before the block's floor).
 
+    The pad's floor (its face where nothing is carved, :func:`pad_case`) is
+    never below 0 and every use of these heights takes the larger of them and
+    the floor, so a cell no geometry carves holds 0, as one carved to 0 does.
+
     Attributes
     ----------
     top_mm : (cells,) float32
-        Largest eroded height of the carved geometries; ``-inf`` where none.
+        Largest eroded height of the carved geometries; 0 where none.
     owner : (cells,) int32
-        Which geometry gives ``top_mm`` (its position in the candidate,
-        ``2 * scenario + side``); -1 where none.
+        Which geometry gives ``top_mm`` where it is above 0 (its position in
+        the candidate, ``2 * scenario + side``); -1 where none.
     second_mm : (cells,) float32
-        Largest eroded height of the others: a geometry's own carving does
-        not bury its own samples.
+        Largest eroded height of the others (0 where none): a geometry's own
+        carving does not bury its own samples.
     top_high_mm : (cells,) float32
         Largest dilated height.
     pairs : frozenset of int
@@ -361,7 +405,8 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
 
     A coordinate move changes one scenario, so the search carves the other
     scenarios once and each move adds two geometries: the screening of a
-    move costs a few height maps instead of all of them.
+    move costs a few height maps instead of all of them, and each on its
+    window only (outside it a geometry's maps are 0 and change nothing).
 
     Parameters
     ----------
@@ -373,32 +418,31 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
         Carving to extend; an empty pad when None.
     """
     pairs = list(pairs)
+    shape = chosen[0][0].grid_shape
     if base is None:
-        cells = len(chosen[0][0].heights_mm)
-        top = np.full(cells, -np.inf, dtype=np.float32)
-        owner = np.full(cells, -1, dtype=np.int32)
-        second = np.full(cells, -np.inf, dtype=np.float32)
-        top_high = np.full(cells, -np.inf, dtype=np.float32)
+        top = np.zeros(shape, dtype=np.float32)
+        owner = np.full(shape, -1, dtype=np.int32)
+        second = np.zeros(shape, dtype=np.float32)
+        top_high = np.zeros(shape, dtype=np.float32)
         done = frozenset()
     else:
         top, owner, second, top_high = (
-            base.top_mm.copy(),
-            base.owner.copy(),
-            base.second_mm.copy(),
-            base.top_high_mm.copy(),
+            a.reshape(shape).copy() for a in (base.top_mm, base.owner, base.second_mm, base.top_high_mm)
         )
         done = base.pairs
     for pair in pairs:
         for side, g in enumerate(chosen[pair]):
             if not g.good:
                 continue
-            higher = g.heights_low_mm > top
+            cells = g.cells
+            window_top, low = top[cells], g.window_low_mm
+            higher = low > window_top
             # ties keep the earlier owner: equal heights bury the same samples either way
-            np.copyto(second, np.where(higher, top, np.maximum(second, g.heights_low_mm)))
-            np.copyto(owner, np.where(higher, 2 * pair + side, owner))
-            np.maximum(top, g.heights_low_mm, out=top)
-            np.maximum(top_high, g.heights_high_mm, out=top_high)
-    return Carving(top, owner, second, top_high, done | frozenset(pairs))
+            second[cells] = np.where(higher, window_top, np.maximum(second[cells], low))
+            owner[cells] = np.where(higher, 2 * pair + side, owner[cells])
+            np.maximum(window_top, low, out=window_top)
+            np.maximum(top_high[cells], g.window_high_mm, out=top_high[cells])
+    return Carving(top.ravel(), owner.ravel(), second.ravel(), top_high.ravel(), done | frozenset(pairs))
 
 
 def pad_case(geometries: list[ScreenGeometry], config: DesignConfig) -> tuple[str, float]:

@@ -24,7 +24,7 @@ from ..report.models import DesignReport, FingerSetsReport, JobReport
 from ..report.sets import exact_retained, sets_report, zero_quality_report
 from .identity import identical_groups
 from .partition import search_judged_exactly
-from .screening import SetScreener, SoloQuality, screening_pools, solo_picks, solo_quality
+from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality
 
 
 @dataclass
@@ -132,6 +132,7 @@ def _design_sets_of_one_size(
     # no more workers than tasks: forking costs more than one small task
     with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
         solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
+    keep_held(prepared, {(m, k): entries for m, solo in enumerate(solos) for k, entries in solo.held.items()})
     report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
     timings["solo_quality"] = time.perf_counter() - clock
     ungraspable = list(prepared.ungraspable)

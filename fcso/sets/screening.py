@@ -40,12 +40,18 @@ class SoloQuality:
         ``E*``: the best exact quality (as printed) among the ``search.exact_top_k`` best screened samples.
     sample : int
         The sample giving ``E*``.
+    held : dict
+        Per sample index, the holding shares its finalists' screenings
+        measured (:attr:`fcso.evaluate.SampleGeometry.held`), for the
+        process that forks the next workers: a part's contacts in a pair are
+        often its contacts alone, and holding is six linear programmes.
     """
 
     screened: np.ndarray
     screened_best: float
     exact: float
     sample: int
+    held: dict[int, dict[tuple, float]] = dataclasses.field(default_factory=dict, repr=False)
 
 
 def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig) -> SoloQuality:
@@ -71,8 +77,37 @@ def solo_quality(prepared: Prepared, scenario_number: int, config: DesignConfig)
     exact = [evaluate_exact(alone, (int(k),), config).quality for k in finalists]
     best = int(np.argmax(exact))
     # the screened E* with holding, as a set's screening measures its finalists: the best sample may hold nothing
-    held = [screen_on_pad(alone.scenarios, (int(k),), config, prepared.lattice, True).quality for k in finalists]
-    return SoloQuality(screened, float(max(held, default=0.0)), float(exact[best]), int(finalists[best]))
+    # a sample's capture on its own pad is the one it was prepared with
+    held = [
+        screen_on_pad(
+            alone.scenarios,
+            (int(k),),
+            config,
+            prepared.lattice,
+            True,
+            [alone.scenarios[0].samples[k].screen[0].capture],
+        ).quality
+        for k in finalists
+    ]
+    samples = alone.scenarios[0].samples
+    return SoloQuality(
+        screened,
+        float(max(held, default=0.0)),
+        float(exact[best]),
+        int(finalists[best]),
+        {int(k): dict(samples[k].held) for k in finalists if samples[k].held},
+    )
+
+
+def keep_held(prepared: Prepared, held: dict[tuple[int, int], dict[tuple, float]]) -> None:
+    """Record holding shares measured in worker processes on ``prepared``'s samples (``(scenario, sample)`` keys).
+
+    Workers forked later, and a Dask cluster's context sent later, start with them: the same contacts are not
+    measured again. A share depends only on its key (the contacts and settings), so a design is the same with or
+    without them.
+    """
+    for (number, index), entries in held.items():
+        prepared.scenarios[number].samples[index].held.update(entries)
 
 
 def screening_pools(solos: Sequence[SoloQuality], size: int) -> list[np.ndarray]:
@@ -139,10 +174,10 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
-    def on_pad(choice: tuple[int, ...], holding: bool = False):
+    def on_pad(choice: tuple[int, ...], holding: bool = False, captures: list[float] | None = None):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
         scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding)
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
@@ -151,7 +186,11 @@ def screen_set(
     # best of those with holding too, as the set's design re-evaluates its exact_top_k
     top = {c: on_pad(c) for c in ranked[: config.search.pad_top_k]}
     ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in top.items()}, counts)
-    held = {c: on_pad(c, holding=True) for c in ranked[: config.search.exact_top_k]}
+    # the pad_top_k were screened on their pads: their captures stand, only holding is new
+    held = {
+        c: on_pad(c, True, [s.capture for s in top[c].scenarios] if c in top else None)
+        for c in ranked[: config.search.exact_top_k]
+    }
     best = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in held.items()}, counts)[0]
     areas = np.array([s.measure for s in held[best].scenarios], dtype=np.float64)
     choice = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, best))
@@ -245,7 +284,10 @@ class SetScreener:
         # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
-        areas = [a for batch in self.pool.map(_quick_task, batches) for a in batch]
+        areas = []
+        for batch_areas, held in self.pool.map(_quick_task, batches):
+            areas.extend(batch_areas)
+            keep_held(self.prepared, held)
         for members, area in zip(fresh, areas):
             self.quick_cache[members] = self._ratios(members, area)
         return [self._per_part(members, self.quick_cache[members]) for members in sets]
@@ -333,9 +375,14 @@ def _probe_task(context, task: tuple[tuple[int, ...], tuple[int, ...]]) -> np.nd
     return np.array([s.measure for s in evaluation.scenarios], dtype=np.float64)
 
 
-def _quick_task(context, batch: list[tuple[int, ...]]) -> list[np.ndarray]:
+def _quick_task(
+    context, batch: list[tuple[int, ...]]
+) -> tuple[list[np.ndarray], dict[tuple[int, int], dict[tuple, float]]]:
+    """Quick screenings of a batch of sets, and the holding shares their samples know afterwards (:func:`keep_held`)."""
     prepared, pools, picks, config = context
-    return [quick_screen(prepared, numbers, picks, config) for numbers in batch]
+    areas = [quick_screen(prepared, numbers, picks, config) for numbers in batch]
+    touched = {(m, picks[m]) for numbers in batch for m in numbers}
+    return areas, {key: dict(prepared.scenarios[key[0]].samples[key[1]].held) for key in sorted(touched)}
 
 
 def solo_picks(solos: Sequence[SoloQuality]) -> list[int]:
