@@ -122,7 +122,7 @@ def test_counts_qualities_and_best_are_consistent(two_part_design):
     assert report.best == best.index
     assert {c.pad_case for c in report.candidates} == {"good", "bad", "mixed"}
     for scenario in report.scenarios:
-        assert set(scenario.rejected) == {"contact", "fit", "collision_finger", "collision_descent"}
+        assert set(scenario.rejected) == {"contact", "fit", "collision_pads", "collision_finger", "collision_descent"}
         assert scenario.tried_samples == scenario.valid_samples + sum(scenario.rejected.values())
     assert set(report.timings_s) >= {"poses", "sampling", "pad_geometries", "screening", "exact", "finger"}
     assert report.settings.sampler.length_mm == 10.0
