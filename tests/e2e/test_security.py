@@ -40,6 +40,17 @@ from tests.fcsod_helpers import (
 
 CUBE = DATA / "20mm-xyz-cube.stl"
 TOPICS = {"status", "quality", "grasps", "design", "plan", "placement"}
+
+
+def _query_replies(subscriber, job_id: str) -> tuple[set[str], set[str]]:
+    """The topics of ``job_id`` whose query replies ``subscriber`` refused (failed verification), and those it
+    accepted."""
+    replies = [v for v in subscriber.json_lines() if v.get("source") == "query"]
+    refused = {v["key"].rsplit("/", 1)[-1] for v in replies if "rejected" in v and f"/{job_id}/" in v["key"]}
+    answered = {v["topic"] for v in replies if "rejected" not in v and v.get("job_id") == job_id}
+    return refused, answered
+
+
 FORGED = '{"job_id": "forged", "grasps": [{"closing_width_mm": 0.0}]}'
 ROS2_DOMAIN = 7
 ROS2 = f'[ros2]\nenabled = true\ndomain_id = {ROS2_DOMAIN}\nnamespace = "/cell1"\n'
@@ -445,7 +456,8 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
                 "UPDATE messages SET payload = ? WHERE job_id = ? AND topic = 'grasps'", (FORGED.encode(), job_id)
             )
         late = start_subscriber(cell["config"], extra=[*client_args(pki, "ctl1")])
-        late.wait_for(lambda v: isinstance(v, dict) and v.get("source") == "query" and v.get("topic") == "status")
+        # every topic's query reply, accepted or refused, in whatever order they arrive
+        late.wait_for(lambda v: set().union(*_query_replies(late, job_id)) >= TOPICS)
         late.stop()
     finally:
         _stop(cell)
@@ -459,7 +471,5 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
     assert accepted and all(v["body"] == real["grasps"]["body"] for v in accepted), (
         "a forged grasps message was accepted"
     )
-    replies = late.json_lines()
-    refused = {v["key"].rsplit("/", 1)[-1] for v in replies if v.get("source") == "query" and "rejected" in v}
-    answered = {v["topic"] for v in replies if v.get("source") == "query" and v.get("job_id") == job_id}
+    refused, answered = _query_replies(late, job_id)
     assert refused == {"design", "grasps"} and answered == TOPICS - refused, (refused, answered)
