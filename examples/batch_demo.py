@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import fcso
-from fcsod.config import parse_manifest
+from fcsod.config import JobManifest, parse_manifest
 
 #: The job folder: ``job.toml`` and the part files it names.
 BATCH_DEMO = Path(__file__).resolve().parent / "jobs" / "batch-demo"
@@ -13,13 +13,14 @@ BATCH_DEMO = Path(__file__).resolve().parent / "jobs" / "batch-demo"
 
 def batch_demo_settings() -> fcso.DesignConfig:
     """fcso's defaults with the manifest's sections applied, as the daemon would design the job."""
-    manifest_path = BATCH_DEMO / "job.toml"
-    manifest = parse_manifest(manifest_path.read_text(encoding="utf-8"), manifest_path, fcso.DesignConfig())
-    return manifest.design_config(fcso.DesignConfig())
+    return _manifest().design_config(fcso.DesignConfig())
 
 
 def batch_demo_part_files() -> list[Path]:
     """The job's part files, in manifest order (each once: quantities are the pick plan's concern)."""
-    manifest_path = BATCH_DEMO / "job.toml"
-    manifest = parse_manifest(manifest_path.read_text(encoding="utf-8"), manifest_path, fcso.DesignConfig())
-    return [BATCH_DEMO / entry.file for entry in manifest.parts]
+    return [BATCH_DEMO / entry.file for entry in _manifest().parts]
+
+
+def _manifest() -> JobManifest:
+    path = BATCH_DEMO / "job.toml"
+    return parse_manifest(path.read_text(encoding="utf-8"), path, fcso.DesignConfig())

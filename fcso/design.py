@@ -53,6 +53,7 @@ from .report.models import (
     PrintFitReport,
     SearchReport,
     UngraspableReport,
+    chosen_candidate,
 )
 from .sampler import SamplerResult, face_yaws, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
@@ -361,7 +362,7 @@ def design(
         return design_prepared(prepare(parts, sized, progress=progress, repair=repair), sized, progress)
 
     def score(result: DesignResult) -> SizeScore:
-        chosen = next(c for c in result.report.candidates if c.index == result.report.best)
+        chosen = chosen_candidate(result.report)
         flat = result.report.finger.flat_pads
         return SizeScore((not flat, chosen.quality, chosen.mean_effective_area), chosen.quality, flat)
 

@@ -20,7 +20,7 @@ from ..parallel import WorkerPool
 from ..parts import Part
 from ..progress import Progress
 from ..report.design import part_report
-from ..report.models import DesignReport, FingerSetsReport, JobReport
+from ..report.models import DesignReport, FingerSetsReport, JobReport, chosen_candidate
 from ..report.sets import exact_retained, sets_report, zero_quality_report
 from .identity import identical_groups
 from .partition import search_judged_exactly
@@ -91,7 +91,7 @@ def design_sets(
 
     def score(result: SetsResult) -> SizeScore:
         # retained shares are of each size's own solo qualities: sizes compete on what their fingers keep
-        qualities = [next(c for c in d.report.candidates if c.index == d.report.best).quality for d in result.designs]
+        qualities = [chosen_candidate(d.report).quality for d in result.designs]
         flat = any(d.report.finger.flat_pads for d in result.designs)
         return SizeScore(
             (result.report.min_retained_reached, -len(result.designs), min(qualities)), min(qualities), flat
