@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -175,6 +178,22 @@ def test_a_pad_longer_than_the_face_wraps_both_chamfers_and_is_chosen_from_the_s
     assert sizes[20.0].quality < 0.7
     # the finger as written carries the longer pad: 34 mm along the pad's length
     assert result.fingerpad.extents[1] == pytest.approx(34.0, abs=1e-3)
+
+
+def test_the_holding_solver_writes_nothing_to_the_terminal():
+    # HiGHS writes its banner from C++ once per process, so a fresh interpreter is the only clean witness;
+    # highspy 1.16 printed it before the output flag could be set, into every `fcso design --quiet`
+    script = (
+        "import numpy as np\n"
+        "from fcso.holding import holding_forces_n\n"
+        "points = np.array([[10.0, 0, 0], [10.0, 1, 0], [-10.0, 0, 0], [-10.0, 1, 0]])\n"
+        "normals = np.array([[-1.0, 0, 0]] * 2 + [[1.0, 0, 0]] * 2)\n"
+        "forces = holding_forces_n(points, normals, np.array([0, 0, 1, 1]), np.array([1.0, 0, 0]), np.zeros(3), "
+        "0.05, 0.4, 60.0, 30.0)\n"
+        "assert forces.max() > 0\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert run.stdout == "" and run.stderr == ""
 
 
 def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():
