@@ -38,6 +38,15 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
+    lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    if len(faces):
+        # triangles wholly beyond one plane are dropped first, as that plane's pass would drop them: a small box
+        # on a large part then cuts only the few triangles near it, instead of each pass sorting them all
+        corners = vertices[faces]
+        beyond = np.any(corners.max(axis=1) - lower < -PLANE_TOLERANCE_MM, axis=1) | np.any(
+            upper - corners.min(axis=1) < -PLANE_TOLERANCE_MM, axis=1
+        )
+        faces = faces[~beyond]
     for axis in range(3):
         for bound, sign in ((lower[axis], 1.0), (upper[axis], -1.0)):
             if len(faces) == 0:
