@@ -224,11 +224,12 @@ def main() -> None:
         if old_tree is not None:
             commands.append((paper_command(sys.executable, old_tree, scratch / "old-out"), old_tree))
         new, *old = timed_commands(commands, args.runs)
-        print(f"paper experiment, whole fcso design command: {summary(new)}  (target <= 3 s)")
+        print(f"paper experiment, whole fcso design command: {summary(new)}")
         if old:
+            # issue 21: the paper command "stays within 3 s" of its time before the capture measure came
             print(
-                f"  same command on {args.baseline}, in turns with it: {summary(old[0])}; ratio "
-                f"{statistics.median(old[0]) / statistics.median(new):.2f}x"
+                f"  same command on {args.baseline}, in turns with it: {summary(old[0])}; new - old "
+                f"{statistics.median(new) - statistics.median(old[0]):+.2f} s (target <= +3 s)"
             )
     if args.paper_only:
         return

@@ -34,6 +34,8 @@ from pathlib import Path
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
+import fcso
+
 REPO = Path(__file__).resolve().parents[1]
 BATCH = REPO / "examples" / "jobs" / "batch-demo"
 BASE = REPO / "demo-out" / "daemon"
@@ -85,8 +87,8 @@ def _show(line: str) -> None:
             print(f"  {message['key']}: {'passed' if body['passed'] else 'did not pass'}; success {rates}")
     elif topic == "quality":
         print(
-            f"  {message['key']}: Q = {body['quality_mm2']:.2f} mm², {body['candidates_evaluated']} candidates, pad "
-            f"{body['pad_case']}"
+            f"  {message['key']}: {fcso.quality_words(body['quality'], body['quality_measure'])}, "
+            f"{body['candidates_evaluated']} candidates, pad {body['pad_case']}"
         )
     elif topic == "grasps":
         for grasp in body["grasps"]:
@@ -115,7 +117,8 @@ def _show(line: str) -> None:
         for entry in body["sets"]:
             print(
                 f"    mount set {entry['set']}: {entry['finger_key']} (sha256 {entry['finger_sha256'][:16]}…, "
-                f"{entry['finger_copies']} copies in build.3mf, Q = {entry['quality_mm2']:.1f} mm²)"
+                f"{entry['finger_copies']} copies in build.3mf, "
+                f"{fcso.quality_words(entry['quality'], entry['quality_measure'])})"
             )
             for part in entry["parts"]:
                 for grasp in part["grasps"]:

@@ -24,6 +24,7 @@ from .errors import (  # noqa: E402
     NoGraspError,
     RepairToleranceError,
 )
+from .measure import quality_words  # noqa: E402
 from .output.files import output_files, write_outputs, write_set_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
 from .poses import stable_poses  # noqa: E402
@@ -56,6 +57,7 @@ __all__ = [
     "read_3mf_items",
     "output_files",
     "write_outputs",
+    "quality_words",
     "rles",
     "stable_poses",
 ]

@@ -527,7 +527,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
                 "screening",
                 min(screened_count, expected),
                 expected,
-                f"best {quality_words(best_screened, config)} of bound {screened_bound:.3g} (screened)",
+                f"best {quality_words(best_screened, config.quality.measure)} of bound {screened_bound:.3g} (screened)",
             )
             return scored
 
@@ -563,7 +563,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
         "exact",
         len(finalists),
         len(finalists),
-        f"best {quality_words(max(e.quality for e in exact.values()), config)} (exact)",
+        f"best {quality_words(max(e.quality for e in exact.values()), config.quality.measure)} (exact)",
     )
     best_choice = max(finalists, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]))
     upper_bound = max(

@@ -54,18 +54,26 @@ def scenario_measure(capture: float, holding_share: float, effective_area_mm2: f
     return capture_measure(capture, holding_share, effective_area_mm2, pad_area)
 
 
-def quality_words(quality: float, config: DesignConfig) -> str:
-    """A design's quality in words: ``Q = 179.4 mm²`` or ``measure 0.951`` (no unit)."""
-    if config.quality.measure == "paper":
+def quality_words(quality: float, measure: str) -> str:
+    """A design's quality in words: ``Q = 179.4 mm²`` or ``measure 0.951`` (no unit).
+
+    Parameters
+    ----------
+    quality : float
+        The design's quality: E in mm² under the paper's measure, no unit under the capture measure.
+    measure : {"capture", "paper"}
+        ``[quality] measure`` of the design.
+    """
+    if measure == "paper":
         return f"Q = {quality:.1f} mm²"
     return f"measure {quality:.3f}"
 
 
-def quality_title(config: DesignConfig) -> str:
-    """A table heading for a design's quality: ``Q (mm²)``, or ``measure`` (no unit)."""
-    return "Q (mm²)" if config.quality.measure == "paper" else "measure"
+def quality_title(measure: str) -> str:
+    """A table heading for a design's quality under ``measure``: ``Q (mm²)``, or ``measure`` (no unit)."""
+    return "Q (mm²)" if measure == "paper" else "measure"
 
 
-def quality_decimals(config: DesignConfig) -> int:
-    """Decimals that show a quality: 1 for Q in mm², 3 for the capture measure."""
-    return 1 if config.quality.measure == "paper" else 3
+def quality_decimals(measure: str) -> int:
+    """Decimals that show a quality under ``measure``: 1 for Q in mm², 3 for the capture measure."""
+    return 1 if measure == "paper" else 3

@@ -9,6 +9,7 @@ package turns its results into files. Submodules:
 - :mod:`~fcso.output.design_page`: ``report.html`` of one design, with the data its pictures are drawn from
 - :mod:`~fcso.output.sets_page`: the finger-sets sections, the job page and the terminal's pick plan
 - :mod:`~fcso.output.render`: drawing meshes off screen (matplotlib's Agg canvas): views, layers, panels, PNG
+- :mod:`~fcso.output.decimate`: fewer triangles for the pictures and the 3D view (no matplotlib)
 - :mod:`~fcso.output.pictures`: the pictures of the design pages
 - :mod:`~fcso.output.viewer`: the pages' interactive 3D view (three.js and GLB meshes, inlined)
 - :mod:`~fcso.output.verification_page`: the verification section (fcso.sim) and its files

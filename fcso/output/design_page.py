@@ -356,7 +356,7 @@ def _print_fit_section(report: DesignReport) -> list[str]:
     titles = _scenario_titles(report)
     header = (
         '<tr><th class="text">chosen candidate</th><th>pocket volume (mm³)</th>'
-        + f"<th>{text(quality_title(report.settings))}</th>"
+        + f"<th>{text(quality_title(report.settings.quality.measure))}</th>"
         + "".join(f"<th>A {text(t)} (mm²)</th><th>seat offsets {text(t)} (mm)</th>" for t in titles)
         + "</tr>"
     )
@@ -371,7 +371,7 @@ def _print_fit_section(report: DesignReport) -> list[str]:
         )
         rows.append(
             f'<tr><td class="text">{label}</td><td>{effect.pocket_volume_mm3:.1f}</td>'
-            f"<td>{effect.quality:.{quality_decimals(report.settings)}f}</td>{cells}</tr>"
+            f"<td>{effect.quality:.{quality_decimals(report.settings.quality.measure)}f}</td>{cells}</tr>"
         )
     return [
         "<h2>Printed fit</h2>",
@@ -385,6 +385,7 @@ def _print_fit_section(report: DesignReport) -> list[str]:
 
 
 def _summary(report: DesignReport, chosen) -> str:
+    measure = report.settings.quality.measure
     rows = [
         ("parts", ", ".join(f"{p.name} ({p.file}, x{p.scale_to_mm:g} to mm, {p.faces} faces)" for p in report.parts)),
         ("scenarios", len(report.scenarios)),
@@ -394,12 +395,12 @@ def _summary(report: DesignReport, chosen) -> str:
             f"screened, "
             f"the best {report.search.exact} re-evaluated exactly on {report.search.jobs} worker(s)"
             f"{'' if report.search.proven_optimal else ' (not proven optimal)'}; "
-            f"upper bound {quality_words(report.search.quality_upper_bound or 0, report.settings)}, "
+            f"upper bound {quality_words(report.search.quality_upper_bound or 0, measure)}, "
             f"the chosen is {report.search.gap or 0:.0%} of it",
         ),
         (
             "chosen candidate",
-            f"{chosen.index} (samples {chosen.samples}), {quality_words(chosen.quality, report.settings)}, "
+            f"{chosen.index} (samples {chosen.samples}), {quality_words(chosen.quality, measure)}, "
             f"{chosen.pad_case} pad"
             + ("; delivered with flat pads: no carving captures a part better" if report.finger.flat_pads else ""),
         ),
@@ -489,7 +490,8 @@ def quality_table_html(report: DesignReport, rows: list, table_id: str) -> str:
     top = (
         '<tr><th rowspan="2">i</th>'
         + "".join(f'<th colspan="{count}">{text(GROUP_TITLES[g])}</th>' for g, _, _ in SCENARIO_GROUPS)
-        + f'<th rowspan="2">{text(quality_title(report.settings))}</th><th rowspan="2" class="text">pad</th></tr>'
+        + f'<th rowspan="2">{text(quality_title(report.settings.quality.measure))}</th>'
+        + '<th rowspan="2" class="text">pad</th></tr>'
     )
     second = "<tr>" + "".join(f"<th>{text(c.scenario)}</th>" for c in columns if c.scenario is not None) + "</tr>"
     lines = [f'<table id="{table_id}" class="quality">', top, second]

@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 
 from ..contact import PadPlacement
 from ..geometry import clip_to_box, transform_points
+from .decimate import decimate
 from .render import (
     CAP_COLOUR,
     CONTACT_COLOUR,
@@ -25,7 +26,6 @@ from .render import (
     Panel,
     View,
     caption,
-    decimate,
     draw_layers,
     fit_axes,
     mesh_arrays,

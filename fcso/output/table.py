@@ -54,7 +54,12 @@ def quality_columns(report: DesignReport) -> list[QualityColumn]:
         for m, label in enumerate(labels)
     ]
     columns.append(
-        QualityColumn(quality_title(report.settings), None, quality_decimals(report.settings), lambda c: c.quality)
+        QualityColumn(
+            quality_title(report.settings.quality.measure),
+            None,
+            quality_decimals(report.settings.quality.measure),
+            lambda c: c.quality,
+        )
     )
     return columns
 
@@ -89,7 +94,7 @@ def quality_table(report: DesignReport, limit: int | None = 20) -> str:
         f"{len(rows)} of {len(report.candidates)} listed candidates shown ({report.search.kind}: "
         f"{report.search.screened} screened "
         f"of C = {report.search.candidates_total}, the best {report.search.exact} re-evaluated exactly); * = chosen, "
-        f"{quality_words(chosen_candidate(report).quality, report.settings)}, {_gap(report)}"
+        f"{quality_words(chosen_candidate(report).quality, report.settings.quality.measure)}, {_gap(report)}"
     )
     return "\n".join(lines)
 
@@ -98,5 +103,5 @@ def _gap(report: DesignReport) -> str:
     """The chosen Q against the search's upper bound, in words."""
     if report.search.quality_upper_bound is None:
         return "no upper bound"
-    bound = quality_words(report.search.quality_upper_bound, report.settings)
+    bound = quality_words(report.search.quality_upper_bound, report.settings.quality.measure)
     return f"upper bound {bound} (the chosen is {report.search.gap:.0%} of it)"

@@ -18,9 +18,10 @@ from ..report.models import DesignReport
 from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport
 from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
+from .decimate import decimate
 from .layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from .read import read_design_folder
-from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, decimate, draw_layers, png_bytes
+from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, draw_layers, png_bytes
 
 #: Markers around the section, so verifying again replaces it.
 BEGIN, END = "<!-- fcso verify -->", "<!-- /fcso verify -->"

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from .decimate import decimate
 from .html import text
 
 #: The vendored viewer files, inlined into the page in this order.
@@ -32,8 +33,6 @@ def glb_base64(mesh: trimesh.Trimesh, max_faces: int) -> str:
     """``mesh`` (mm) decimated to at most ``max_faces`` triangles, as base64 GLB without normals (the viewer
     computes them).
     """
-    from .render import decimate  # render loads matplotlib: only where a page is written
-
     vertices, faces = decimate(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_faces)
     glb = trimesh.Trimesh(vertices, faces, process=False).export(file_type="glb", include_normals=False)
     return base64.b64encode(glb).decode("ascii")

@@ -64,7 +64,11 @@ class QualityMessage(_Message):
     """``<prefix>/<cell>/jobs/<job_id>/quality``: quality summary of the chosen design."""
 
     job_id: str
-    quality_mm2: float = Field(description="Q = min over scenarios of E, mm²")
+    quality: float = Field(
+        description="Least over the scenarios of the quality_measure: E in mm² under 'paper' (Q), no unit under "
+        "'capture' (METHOD §7b)"
+    )
+    quality_measure: Literal["capture", "paper"] = Field(description="[quality] measure of the design")
     mean_effective_area_mm2: float
     pad_case: str = Field(description="good, bad or mixed")
     candidates_evaluated: int
@@ -127,7 +131,13 @@ class PlanSet(_Message):
     finger_copies: int = Field(
         description="Copies of this finger in build.3mf (finger_copies + spare_fingers requested; 0 when reused)"
     )
-    quality_mm2: float = Field(description="Q of the set's finger (min E over its scenarios), mm²")
+    quality: float = Field(
+        description="Quality of the set's finger, least over its scenarios, in its quality_measure: E in mm² under "
+        "'paper', no unit under 'capture'"
+    )
+    quality_measure: Literal["capture", "paper"] = Field(
+        description="[quality] measure the finger was designed with (a reused finger's own)"
+    )
     worst_retained: float = Field(description="Least E / E* over the set's scenarios")
     parts: list[PickPart] = Field(description="Parts to pick with this finger, with quantities and grasps")
     finger_id: int | None = Field(

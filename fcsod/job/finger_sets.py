@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 
+import fcso
 from fcso.output.layout import set_finger_path
 from fcso.report.models import FingerSetsReport
 from fcso.sets import SetsResult
@@ -99,7 +100,8 @@ def plan_message(
                 finger_file=set_finger_path(step.set, sets.several),
                 finger_sha256=hashlib.sha256(files[set_finger_path(step.set, sets.several)]).hexdigest(),
                 finger_copies=count,
-                quality_mm2=entry.quality,
+                quality=entry.quality,
+                quality_measure=sets.designs[0].report.settings.quality.measure,
                 worst_retained=entry.worst_retained,
                 parts=step.parts,
             )
@@ -129,7 +131,7 @@ def plan_lines(plan: dict) -> list[str]:
             + (f"library finger {reused} delivered by {entry['reused_from_job']}, " if reused is not None else "")
             + f"{entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, "
             f"sha256 {entry['finger_sha256']}, "
-            f"Q = {entry['quality_mm2']:.1f} mm²)"
+            f"{fcso.quality_words(entry['quality'], entry['quality_measure'])})"
         )
         for part in entry["parts"]:
             lines.append(

@@ -253,7 +253,8 @@ def step_reused_outputs(run: JobRun) -> None:
                 finger_file=finger_file,
                 finger_sha256=entry.sha256,
                 finger_copies=0,
-                quality_mm2=entry.quality_mm2,
+                quality=entry.quality,
+                quality_measure=entry.quality_measure,
                 worst_retained=set_worst[entry.finger_id],
                 parts=[
                     PickPart(part=p.name, copies=[p.name], quantity=len(p.instances), grasps=served[p.name].grasps)
@@ -334,7 +335,8 @@ def step_add_to_library(run: JobRun) -> None:
                     config.bus.prefix, config.bus.cell, run.task.job_id, f"design/{number}" if several else "design"
                 ),
                 finger_stl=run.files[finger_file],
-                quality_mm2=quality,
+                quality=quality,
+                quality_measure=run.settings.quality.measure,
                 worst_retained=worst,
                 parts=[DeliveredPart(name, meshes[name], grasps) for name, grasps in picks if name in meshes],
                 pad_stl=run.sets.designs[number - 1].fingerpad.export(file_type="stl"),

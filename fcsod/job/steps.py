@@ -161,7 +161,8 @@ def step_design(run: JobRun) -> None:
         for line in (
             run.sets.report.search.description,
             *(
-                f"set {s.set}: {', '.join(s.parts)} (Q = {s.quality:.1f} mm², worst retained {s.worst_retained:.3f})"
+                f"set {s.set}: {', '.join(s.parts)} ({fcso.quality_words(s.quality, run.settings.quality.measure)}, "
+                f"worst retained {s.worst_retained:.3f})"
                 for s in run.sets.report.sets
             ),
         ):
@@ -341,7 +342,8 @@ def step_outputs(run: JobRun) -> None:
     best = next(c for c in report.candidates if c.index == report.best)
     quality = QualityMessage(
         job_id=run.task.job_id,
-        quality_mm2=best.quality,
+        quality=best.quality,
+        quality_measure=run.settings.quality.measure,
         mean_effective_area_mm2=best.mean_effective_area,
         pad_case=best.pad_case,
         candidates_evaluated=report.search.evaluated,

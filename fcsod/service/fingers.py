@@ -42,7 +42,8 @@ CREATE TABLE IF NOT EXISTS fingers (
     design_key     TEXT NOT NULL,
     sha256         TEXT NOT NULL,
     finger_stl     BLOB NOT NULL,
-    quality_mm2    REAL NOT NULL,
+    quality        REAL NOT NULL,
+    quality_measure TEXT NOT NULL DEFAULT 'capture',
     worst_retained REAL NOT NULL,
     created_at     TEXT NOT NULL,
     retired_at     TEXT,
@@ -104,7 +105,8 @@ class DeliveredFinger:
     finger_file: str
     design_key: str
     finger_stl: bytes
-    quality_mm2: float
+    quality: float
+    quality_measure: str
     worst_retained: float
     parts: list[DeliveredPart]
     pad_stl: bytes | None = None
@@ -122,7 +124,8 @@ class FingerEntry:
     finger_file: str
     design_key: str
     sha256: str
-    quality_mm2: float
+    quality: float
+    quality_measure: str
     worst_retained: float
     created_at: str
     retired_at: str | None
@@ -185,10 +188,17 @@ class FingerLibrary:
         self.path = Path(path)
         self._db = connect_database(self.path)
         self._db.executescript(_SCHEMA)
-        # a library written before pads were kept: its fingers serve the same parts only
         columns = {row[1] for row in self._db.execute("PRAGMA table_info(fingers)")}
         with self._db:
-            for column, kind in (("pad_stl", "BLOB"), ("pad_settings", "TEXT")):
+            # a library written before qualities named their measure: its qualities are the default measure's
+            if "quality_mm2" in columns:
+                self._db.execute("ALTER TABLE fingers RENAME COLUMN quality_mm2 TO quality")
+            # ... and before pads were kept: its fingers serve the same parts only
+            for column, kind in (
+                ("quality_measure", "TEXT NOT NULL DEFAULT 'capture'"),
+                ("pad_stl", "BLOB"),
+                ("pad_settings", "TEXT"),
+            ):
                 if column not in columns:
                     self._db.execute(f"ALTER TABLE fingers ADD COLUMN {column} {kind}")
 
@@ -200,8 +210,8 @@ class FingerLibrary:
         with self._db:
             self._db.execute(
                 "INSERT OR IGNORE INTO fingers (cell, job_id, finger_set, finger_file, design_key, sha256, finger_stl, "
-                "quality_mm2, worst_retained, created_at, pad_stl, pad_settings) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "quality, quality_measure, worst_retained, created_at, pad_stl, pad_settings) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     cell,
                     finger.job_id,
@@ -210,7 +220,8 @@ class FingerLibrary:
                     finger.design_key,
                     hashlib.sha256(finger.finger_stl).hexdigest(),
                     finger.finger_stl,
-                    finger.quality_mm2,
+                    finger.quality,
+                    finger.quality_measure,
                     finger.worst_retained,
                     utc_now(),
                     finger.pad_stl,
@@ -242,7 +253,8 @@ class FingerLibrary:
     def entries(self, cell: str | None = None) -> list[FingerEntry]:
         """Every finger (of ``cell``, or of all cells), oldest first."""
         rows = self._db.execute(
-            "SELECT finger_id, cell, job_id, finger_set, finger_file, design_key, sha256, quality_mm2, worst_retained, "
+            "SELECT finger_id, cell, job_id, finger_set, finger_file, design_key, sha256, quality, quality_measure, "
+            "worst_retained, "
             "created_at, retired_at, (SELECT COUNT(*) FROM served s WHERE s.finger_id = f.finger_id) FROM fingers f "
             + ("WHERE cell = ? " if cell is not None else "")
             + "ORDER BY finger_id",

@@ -85,7 +85,8 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
     assert queued["inputs"] == 2
 
     quality = next(v for v in lines if v["topic"] == "quality")["body"]
-    assert quality["quality_mm2"] > 0 and quality["finger_watertight"] is True
+    assert 0 < quality["quality"] <= 1.05 and quality["quality_measure"] == "capture"
+    assert quality["finger_watertight"] is True
     grasps = next(v for v in lines if v["topic"] == "grasps")["body"]["grasps"]
     assert grasps and grasps[0]["part"] == "cube" and len(grasps[0]["quaternion_wxyz"]) == 4
     design = next(v for v in lines if v["topic"] == "design")

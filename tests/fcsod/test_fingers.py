@@ -52,7 +52,8 @@ def _library_with_job_a(folder, grasp: GraspReport, **pad) -> FingerLibrary:
             finger_file="finger.stl",
             design_key="fcso/cell-a/jobs/job-a/design",
             finger_stl=CUBE.read_bytes(),
-            quality_mm2=40.0,
+            quality=0.9,
+            quality_measure="capture",
             worst_retained=0.9,
             parts=[DeliveredPart("cube", load_part(CUBE).mesh, [grasp])],
             **pad,
@@ -181,6 +182,9 @@ def test_a_library_written_before_pads_were_kept_gains_the_columns_and_serves_sa
     library = FingerLibrary(path)
     try:
         assert [e.finger_id for e in library.entries()] == [1]
+        # its quality_mm2 column was the design's measure under another name: the default one's then
+        entry = library.entries()[0]
+        assert (entry.quality, entry.quality_measure) == (40.0, "capture")
         assert library.near_fingers("cell-a", "job-b", {"near": _scaled(0.99)}, 10, PAD_SETTINGS, 5.0) is None
     finally:
         library.close()
