@@ -29,7 +29,7 @@ from foxglove.messages import (
 )
 
 from fcso import DesignResult
-from fcso.output.render import decimate
+from fcso.output.decimate import decimate
 from fcso.sim.report import VerificationReport
 from fcso.sim.scene import pad_in_world
 from fcso.sim.verify import DesignUnderTest
