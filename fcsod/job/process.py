@@ -42,8 +42,14 @@ def worker_main(connection: Connection, parent_pid: int) -> None:
     signal.signal(SIGNAL_WITHDRAWN, _withdrawn)
     # the job's code (fcso's design, MuJoCo, matplotlib) loads here, before the worker says it is ready, not in the
     # daemon
-    from .running import run_job
-    from .verification import verify_again
+    try:
+        from .running import run_job
+        from .verification import verify_again
+    except Exception as exc:
+        # a broken installation (a dependency missing or changed): every worker would die the same way, so the
+        # daemon is told why instead of starting the next one
+        connection.send(("broken", f"{type(exc).__name__}: {exc}"))
+        raise
 
     connection.send(("ready", os.getpid()))
     task = connection.recv()

@@ -116,6 +116,8 @@ class Daemon:
         self.known: dict[Path, tuple] = {}
         #: done jobs whose verification a crash or a stop cut off: run again first
         self.unverified: list[str] = []
+        #: why job workers cannot start (they died importing the job's code); None while they can
+        self.workers_broken: str | None = None
         self._context = multiprocessing.get_context("spawn")
         self._lock_file = None
         self.metrics = DaemonMetrics(self.journal_path)
@@ -288,6 +290,10 @@ class Daemon:
         self._publish(self._status(row))
 
     def _dispatch(self) -> None:
+        if self.workers_broken is not None:
+            for row in self.journal.jobs("queued"):
+                self._fail_dead_job(row, self.workers_broken)
+            return
         idle = [s for s in self.slots if s.ready and s.job is None and s.process.is_alive()]
         free = self.config.jobs.concurrency - sum(1 for s in self.slots if s.job is not None)
         if not idle or free <= 0:
@@ -346,12 +352,23 @@ class Daemon:
         A worker runs one job and exits (a job cannot leave anything behind
         for the next); the spare one has done its imports by the time it is needed.
         """
-        while not self.stopping and len(self.slots) < self.config.jobs.concurrency + 1:
+        while not self.stopping and self.workers_broken is None and len(self.slots) < self.config.jobs.concurrency + 1:
             ours, theirs = self._context.Pipe(duplex=True)
             process = self._context.Process(target=worker_main, args=(theirs, os.getpid()), name="fcsod-worker")
             process.start()
             theirs.close()
             self.slots.append(WorkerSlot(process, ours))
+
+    def _workers_cannot_start(self, error: str) -> None:
+        """A worker died importing the job's code: no more are started, and queued jobs fail with why (not retried
+        forever), until fcsod is restarted with a working installation.
+        """
+        if self.workers_broken is not None:
+            return
+        self.workers_broken = (
+            f"job workers cannot start ({error}): fix the installation, restart fcsod, then retry the job"
+        )
+        log.error(self.workers_broken)
 
     def _collect(self, slot: WorkerSlot) -> None:
         """Handle what the worker sent; remove it if it exited."""
@@ -378,6 +395,8 @@ class Daemon:
             kind = event[0]
             if kind == "ready":
                 slot.ready = True
+            elif kind == "broken":
+                self._workers_cannot_start(event[1])
             elif kind == "log":
                 _, level, message, fields = event
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})

@@ -333,3 +333,33 @@ def test_job_folder_deleted_while_its_job_runs_fails_cleanly(tmp_path):
     assert failed_queued["body"]["error"].startswith(f"{waiting}: the job folder was deleted while its job ran")
     assert done["body"]["state"] == "done"
     assert not list((tmp_path / "out").glob(".tmp-*"))
+
+
+# ---------------------------------------------------------------- job workers that cannot start
+
+
+def test_workers_that_cannot_start_fail_the_queued_jobs_with_why_instead_of_starting_again(tmp_path):
+    # a broken installation as an upgrade leaves one: a dependency only the job's code loads (MuJoCo) fails to import
+    broken = tmp_path / "broken-site" / "mujoco"
+    broken.mkdir(parents=True)
+    (broken / "__init__.py").write_text('raise ImportError("this mujoco is broken on purpose")\n')
+    config = write_config(tmp_path, free_port())
+    daemon = start_daemon(config, env={"PYTHONPATH": str(broken.parent)})
+    subscriber = start_subscriber(config, extra=["--no-query"])
+    try:
+        drop_job(tmp_path / "watch" / "first", {"cube.stl": CUBE})
+        first = finished(subscriber, "first")
+        drop_job(tmp_path / "watch" / "second", {"cube.stl": CUBE})
+        second = finished(subscriber, "second")
+    finally:
+        subscriber.stop()
+        code = daemon.stop()
+    assert code == 0
+    for failed in (first, second):
+        assert failed["body"]["state"] == "failed"
+        error = failed["body"]["error"]
+        assert error.startswith("job workers cannot start (ImportError: this mujoco is broken on purpose)"), error
+        assert sorted(p.name for p in (tmp_path / "out" / failed["job_id"]).iterdir()) == ["job.mcap"]
+    # the workers started before the first said why (one job at a time, one spare) and no more
+    died = [v for v in daemon.json_lines() if v.get("message") == "worker process exited before taking a job"]
+    assert 1 <= len(died) <= 2, died
