@@ -39,14 +39,15 @@ def clip_to_box(vertices: np.ndarray, faces: np.ndarray, lower, upper) -> tuple[
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
-    if len(faces):
-        # triangles wholly beyond one plane are dropped first, as that plane's pass would drop them: a small box
-        # on a large part then cuts only the few triangles near it, instead of each pass sorting them all
-        corners = vertices[faces]
-        beyond = np.any(corners.max(axis=1) - lower < -PLANE_TOLERANCE_MM, axis=1) | np.any(
-            upper - corners.min(axis=1) < -PLANE_TOLERANCE_MM, axis=1
-        )
-        faces = faces[~beyond]
+    # triangles wholly beyond one plane are dropped first, as that plane's pass would drop them: a small box on a
+    # large part then cuts only the few triangles near it, instead of each pass sorting them all
+    beyond = np.zeros(len(faces), dtype=bool)
+    for axis in np.flatnonzero(np.isfinite(lower) | np.isfinite(upper)):
+        # corners as columns: numpy reduces along an axis of three slowly (most of this loop's time)
+        first, second, third = vertices[:, axis][faces].T
+        highest, lowest = np.maximum(np.maximum(first, second), third), np.minimum(np.minimum(first, second), third)
+        beyond |= (highest - lower[axis] < -PLANE_TOLERANCE_MM) | (upper[axis] - lowest < -PLANE_TOLERANCE_MM)
+    faces = faces[~beyond]
     for axis in range(3):
         for bound, sign in ((lower[axis], 1.0), (upper[axis], -1.0)):
             if len(faces) == 0:
@@ -71,9 +72,10 @@ def _half_space_sides(vertices: np.ndarray, faces: np.ndarray, axis: int, sign: 
     distance = vertices[:, axis][faces] * sign - level
     is_inside = distance >= -PLANE_TOLERANCE_MM
     is_on = np.abs(distance) <= PLANE_TOLERANCE_MM
-    inside_count = is_inside.sum(axis=1)
+    # corners as columns: numpy reduces along an axis of three slowly
+    inside_count = is_inside[:, 0].astype(np.int64) + is_inside[:, 1] + is_inside[:, 2]
     whole = inside_count == 3
-    on_plane = is_on.all(axis=1)
+    on_plane = is_on[:, 0] & is_on[:, 1] & is_on[:, 2]
     if on_plane.any():
         corners = vertices[faces[on_plane]]
         normal_along_axis = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, axis] * sign
