@@ -8,7 +8,15 @@ import numpy as np
 import trimesh
 
 from .config import GripperConfig, SamplerConfig
-from .geometry import box, clip_to_box, cut_at_levels, half_space_area, to_manifold, triangle_areas_normals
+from .geometry import (
+    box,
+    clip_to_box,
+    corner_extremes,
+    cut_at_levels,
+    half_space_area,
+    to_manifold,
+    triangle_areas_normals,
+)
 from .screen import ScreenGrid, column_heights
 
 #: Rejection reasons, in the order the checks run.
@@ -444,8 +452,7 @@ class _Slab:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         self.vertices, self.faces = vertices, faces
         self.triangles = vertices[faces] if len(faces) else np.zeros((0, 3, 3))
-        self.lower = self.triangles.min(axis=1) if len(faces) else np.zeros((0, 3))
-        self.upper = self.triangles.max(axis=1) if len(faces) else np.zeros((0, 3))
+        self.lower, self.upper = corner_extremes(self.triangles) if len(faces) else (np.zeros((0, 3)),) * 2
 
     def meets_box(self, lower, upper) -> bool:
         """Whether the part's solid intersects the box ``[lower, upper]`` (within the slab), exactly.
