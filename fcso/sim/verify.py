@@ -384,15 +384,17 @@ def precision_grasps(
     """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
     independent: every grasp starts from a fresh state, so the results are those of one process), judged in order.
 
-    Grasps go to the workers in waves of two per worker, the designed
-    finger's (``fcso``) first, so a verification of many trials holds only a
-    few in flight and reports progress as they end. With
-    ``config.stop_early`` the designed finger's trials stop at the failure
-    after which it can no longer reach ``pass_success_rate``: that trial is
-    the last kept, of every finger (the flat control is compared on the same
-    start errors); grasps after it are not started, and those a wave already
-    ran are dropped, so what is kept does not depend on the number of
-    workers or on the machine's speed.
+    Grasps go to the workers in waves of two per worker, trial by trial
+    (every finger's nominal grasp, then every finger's first trial, ...), so
+    a verification of many trials holds only a few in flight and reports
+    progress as they end. With ``config.stop_early`` the designed finger's
+    (``fcso``) trials stop at the failure after which it can no longer reach
+    ``pass_success_rate``: that trial is the last kept, of every finger (the
+    flat control is compared on the same start errors); later grasps are
+    not started, and those a wave already ran are dropped, so what is kept
+    does not depend on the number of workers or on the machine's speed.
+    A designed finger that fails its first trial takes one wave of two
+    workers.
 
     Parameters
     ----------
@@ -415,7 +417,7 @@ def precision_grasps(
     stopped_after : int or None
         How many trials were kept when the trials stopped early; None when every trial ran.
     """
-    items = [(kind, number, error) for kind in scenes for number, error in enumerate([None, *errors])]
+    items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in scenes]
     jobs = min(resolve_jobs(config.jobs), len(items))
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
