@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
@@ -30,7 +31,9 @@ from fcso.sim.config import VerifyConfig
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
+    design_under_test,
     finger_hull,
+    fitted_pieces,
     flat_pad,
     grasp_case,
     holding_tests,
@@ -122,6 +125,28 @@ def test_the_skipped_steady_lift_ends_where_the_stepped_lift_ends(tmp_path, monk
     for mine, theirs in zip(skipped.frames, stepped.frames):
         assert np.allclose(mine.gripper, theirs.gripper, atol=0.2)
         assert np.allclose(mine.part[:3, 3], theirs.part[:3, 3], atol=0.2)
+
+
+def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped_lift_ends(tmp_path, monkeypatch):
+    # the demo's xyz cube in its carved pads (its embossed letters) rocks at a few hundredths of a degree per second
+    # in the lift (below 0.01 degrees/s it would step through all of it)
+    result = design(batch_demo_part_files()[:1], batch_demo_settings())
+    under_test = design_under_test(result)
+    case, config = under_test.cases[0], _config(tmp_path)
+    part, pad, _ = fitted_pieces(case, under_test, config)
+    scene = build_scene(case, part.pieces, pad.pieces, under_test.finger_hull_mm, config)
+    start = start_pose(case, np.array([0.5, -0.5, 1.0]))
+    skips = []
+    skip = trials.skip_steady_lift
+    monkeypatch.setattr(trials, "skip_steady_lift", lambda *args: skips.append(args[2]) or skip(*args))
+    skipped = run_grasp(scene, case, start, config)
+    assert len(skips) == 1 and skips[0] > 10.0
+    monkeypatch.setattr(trials, "STEADY_STEPS", 10**9)
+    stepped = run_grasp(scene, case, start, config)
+    assert skipped.held and stepped.held
+    moved, turned = pose_error(skipped.part_in_gripper, stepped.part_in_gripper, case.part.center_mass)
+    # within 1 % and 3 % of the success limits (0.3 mm, 1 degree)
+    assert moved <= 0.003 and turned <= 0.03
 
 
 def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
