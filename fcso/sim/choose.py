@@ -167,7 +167,7 @@ def choice_text(
     kept = (
         "the design's flat pads are kept: only a carving that passes replaces them"
         if kept_flat
-        else "the best of those by worst-scenario success rate"
+        else "the best of those by its worst scenario's successful trials"
     )
     return f"{what}: none of the {tried} verified passed ({stop}); {kept}"
 
