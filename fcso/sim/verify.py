@@ -104,6 +104,11 @@ def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
 def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | None = None) -> VerificationReport:
     """Run the precision and holding tests on every scenario, designed pads and flat ones.
 
+    With ``config.stop_early`` a design that can no longer pass is not
+    simulated further: a scenario's trials stop at the deciding failure
+    (:func:`precision_grasps`), its holding test is skipped, and so are the
+    later scenarios (``unverified_scenarios``); the verdict is the full run's.
+
     Parameters
     ----------
     design : DesignUnderTest
