@@ -185,6 +185,11 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
             f"<td>{f.seated_penetration_mm:.3f} / {f.seated_pads_overlap_mm:.3f}</td>",
         ]
         lines.append("<tr>" + "".join(cells) + "</tr>")
+    lines += [
+        f'<tr><td class="text">{html.escape(name)}</td><td class="text" colspan="9">not verified: an earlier '
+        "scenario had failed, so the design cannot pass</td></tr>"
+        for name in verification.unverified_scenarios
+    ]
     lines.append("</table>")
     for k, s in enumerate(verification.scenarios):
         title = f"{s.part}, pose {s.pose_index}"

@@ -17,6 +17,7 @@ from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
+from fcso.output.verification_page import section_html
 from fcso.parts import Part
 from fcso.sim import trials
 from fcso.sim.collision import (
@@ -28,6 +29,7 @@ from fcso.sim.collision import (
     part_shell_pieces,
 )
 from fcso.sim.config import VerifyConfig
+from fcso.sim.report import VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
@@ -458,3 +460,17 @@ def test_a_verification_stopped_early_has_the_verdict_of_the_full_run(tmp_path):
     # the holding test ran in full only
     assert len(full.fcso.holding_n) == 6 and full.holds_as_flat is not None
     assert stopped.fcso.holding_n == {} and stopped.holds_as_flat is None
+    # the report says so
+    report = VerificationReport(
+        fcso_version="",
+        mujoco_version="",
+        settings=_config(tmp_path, **settings),
+        scenarios=[stopped],
+        passed=False,
+        unverified_scenarios=["other pose 1"],
+        warnings=[],
+        timings_s={},
+    )
+    page = section_html(report, {"trial 0": b"", "errors 0": b""})
+    assert f"<td>{first_failure - 1} of {first_failure} (stopped; 4 planned)</td>" in page
+    assert "Holding test not run" in page and '<td class="text">other pose 1</td>' in page
