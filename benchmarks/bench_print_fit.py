@@ -158,7 +158,10 @@ def main() -> None:
     clearance, lead_in = values["clearance_mm"], values["lead_in_deg"]
     combos = [(0.0, 0.0), (clearance, 0.0), (0.0, lead_in), (clearance, lead_in)]
     with tempfile.TemporaryDirectory() as scratch:
-        config = VerifyConfig(trials=args.trials, density_g_cm3=values["density_g_cm3"], cache_dir=Path(scratch))
+        # every trial: the success rates are the figures compared
+        config = VerifyConfig(
+            trials=args.trials, density_g_cm3=values["density_g_cm3"], cache_dir=Path(scratch), stop_early=False
+        )
         print(
             f"profile {args.profile}: clearance {clearance} mm, lead-in {lead_in} deg, min wall "
             f"{values['min_wall_mm']} mm, "

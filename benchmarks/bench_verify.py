@@ -3,10 +3,17 @@ time.
 
 Run from the repository root::
 
-    python -m benchmarks.bench_verify [--trials N] [--runs N] [--quick] [--fixtures demo bunny]
+    python -m benchmarks.bench_verify [--trials N] [--runs N] [--quick] [--fixtures demo bunny] [--stop-early]
+    python -m benchmarks.bench_verify --choice [--runs N]
 
 ``--quick``: the paper cube and the timing only; ``--fixtures``: which of
-the fixture jobs to verify (default both).
+the fixture jobs to verify (default both); every trial of every scenario
+runs (the success rates are the figures) unless ``--stop-early`` (the
+product's default: a design's trials stop once it can no longer pass).
+``--choice``: only the daemon's whole job for the demo batch against its
+design alone: the design, then the choice by truth among ``top_k = 3``
+candidates as the daemon makes it (cold cache of collision pieces), wall
+and CPU seconds (this process and its workers), median of ``--runs``.
 
 Prints
 
@@ -35,6 +42,7 @@ The machine is shared and noisy: compare medians, not single runs.
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import tempfile
 import time
@@ -46,6 +54,7 @@ import fcso
 from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, upright_grasp_settings
 from fcso.parts import Part
+from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
 from fcso.sim.report import VerificationReport
 from fcso.sim.verify import design_under_test, verify
@@ -102,6 +111,40 @@ def print_verification(name: str, verification: VerificationReport, errors: bool
         print(f"  warning: {warning}")
 
 
+def cpu_s() -> float:
+    """CPU seconds of this process and its finished workers."""
+    own, workers = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + workers.ru_utime + workers.ru_stime
+
+
+def choice_against_design(runs: int, scratch: Path) -> None:
+    """The demo batch: design alone, then the choice by truth among 3 candidates with the product's settings."""
+    design_s, choice_s = [], []
+    for run in range(runs):
+        wall, cpu = time.perf_counter(), cpu_s()
+        result = demo_design()
+        design_s.append((time.perf_counter() - wall, cpu_s() - cpu))
+        wall, cpu = time.perf_counter(), cpu_s()
+        _, verification, _, ranking = verify_top(result, 3, VerifyConfig(cache_dir=scratch / f"choice{run}"))
+        choice_s.append((time.perf_counter() - wall, cpu_s() - cpu))
+        print(
+            f"run {run + 1}: design {design_s[-1][0]:.1f} s, choice {choice_s[-1][0]:.1f} s wall; {verification.choice}"
+        )
+        for r in ranking:
+            print(
+                f"  rank {r.rank_by_quality} candidate {r.index}: designed {r.success_rates}, flat "
+                f"{r.flat_success_rates}, trials run {r.trials_run}, passed {r.passed}"
+            )
+    design_wall, design_cpu = (statistics.median(t[k] for t in design_s) for k in (0, 1))
+    choice_wall, choice_cpu = (statistics.median(t[k] for t in choice_s) for k in (0, 1))
+    print(
+        f"\ndemo batch, median of {runs}: design alone {design_wall:.1f} s wall ({design_cpu:.1f} s CPU); choice by "
+        f"truth {choice_wall:.1f} s wall ({choice_cpu:.1f} s CPU); whole job / design "
+        f"{(design_wall + choice_wall) / design_wall:.2f}x wall, {(design_cpu + choice_cpu) / design_cpu:.2f}x CPU "
+        "(target <= 1.5x)"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=10)
@@ -110,10 +153,15 @@ def main() -> None:
     parser.add_argument(
         "--fixtures", nargs="+", choices=["demo", "bunny"], default=["demo", "bunny"], help="fixture jobs to verify"
     )
+    parser.add_argument("--stop-early", action="store_true", help="stop a design's trials once it cannot pass")
+    parser.add_argument("--choice", action="store_true", help="only the demo job's choice by truth against its design")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as scratch:
+        if args.choice:
+            choice_against_design(args.runs, Path(scratch))
+            return
         cache = Path(scratch) / "warm"
-        config = VerifyConfig(trials=args.trials, cache_dir=cache)
+        config = VerifyConfig(trials=args.trials, cache_dir=cache, stop_early=args.stop_early)
         print(
             f"MuJoCo verification, {args.trials} trials per scenario, +-2 mm +-3 deg, 60 N, friction 0.4, lift 100 mm"
         )

@@ -175,7 +175,7 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
         cells = [f'<td class="text">{html.escape(s.part)} pose {s.pose_index}</td>']
         for r in (s.fcso, s.flat):
             cells += [
-                f"<td>{r.success_rate:.0%}</td>",
+                f"<td>{_success_text(r.trials, s.stopped_after_trials, settings.trials)}</td>",
                 f"<td>{_number(r.median_error_mm)} / {_number(r.worst_error_mm)}</td>",
                 f"<td>{_number(r.median_error_deg)} / {_number(r.worst_error_deg)}</td>",
             ]
@@ -186,6 +186,11 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
             f"<td>{f.seated_penetration_mm:.3f} / {f.seated_pads_overlap_mm:.3f}</td>",
         ]
         lines.append("<tr>" + "".join(cells) + "</tr>")
+    lines += [
+        f'<tr><td class="text">{html.escape(name)}</td><td class="text" colspan="9">not verified: an earlier '
+        "scenario had failed, so the design cannot pass</td></tr>"
+        for name in verification.unverified_scenarios
+    ]
     lines.append("</table>")
     for k, s in enumerate(verification.scenarios):
         title = f"{s.part}, pose {s.pose_index}"
@@ -195,21 +200,35 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
             + "</tr>"
             for name, r in (("designed", s.fcso), ("flat", s.flat))
         )
+        holding = (
+            [
+                _image(pictures[f"holding {k}"], f"holding of {title}"),
+                '<table><tr><th class="text">slip force, N</th>'
+                + "".join(f"<th>{d}</th>" for d in s.fcso.holding_n)
+                + "</tr>"
+                + rows
+                + "</table>",
+            ]
+            if s.fcso.holding_n
+            else ["<p>Holding test not run: the precision trials had already failed.</p>"]
+        )
         lines += [
             f"<h3>{html.escape(title)}</h3>",
             _image(pictures[f"trial {k}"], f"trial of {title}"),
             _image(pictures[f"errors {k}"], f"errors of {title}"),
-            _image(pictures[f"holding {k}"], f"holding of {title}"),
-            '<table><tr><th class="text">slip force, N</th>'
-            + "".join(f"<th>{d}</th>" for d in s.fcso.holding_n)
-            + "</tr>"
-            + rows
-            + "</table>",
+            *holding,
         ]
     if verification.warnings:
         lines.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in verification.warnings) + "</ul>")
     lines += [extra, END]
     return "\n".join(lines)
+
+
+def _success_text(trials: list, stopped_after: int | None, planned: int) -> str:
+    """Success rate, or for trials stopped early the count of those run."""
+    if stopped_after is None:
+        return f"{sum(t.success for t in trials) / len(trials):.0%}" if trials else "-"
+    return f"{sum(t.success for t in trials)} of {len(trials)} (stopped; {planned} planned)"
 
 
 def _number(value: float | None) -> str:
@@ -244,7 +263,8 @@ def verification_pictures(verification: VerificationReport, design: DesignUnderT
         pads = {"fcso": design.fingerpad, "flat": flat_pad(case.pad_size_mm, case.penetration_mm)}
         images[f"trial {k}"] = trial_picture(case.part, pads, scenario, case.pad_gap_mm, case.pad_size_mm)
         images[f"errors {k}"] = error_picture(scenario, settings.success_mm, settings.success_deg)
-        images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
+        if scenario.fcso.holding_n:
+            images[f"holding {k}"] = holding_picture(scenario, settings.hold_force_n)
     return images
 
 
@@ -291,6 +311,7 @@ def ranking_html(ranking: list[RankedCandidate], choice: str | None = None) -> s
         f"<tr{CHOSEN if r.chosen else ''}><td>{r.rank_by_quality}</td><td>{r.index}</td><td>{r.quality:.1f}</td>"
         f"<td>{' / '.join(f'{x:.0%}' for x in r.success_rates)}</td>"
         f"<td>{' / '.join(f'{x:.0%}' for x in r.flat_success_rates)}</td>"
+        f"<td>{' / '.join(str(n) for n in r.trials_run)}</td>"
         f"<td>{'yes' if r.passed else 'no'}</td><td>{'&#9733;' if r.chosen else ''}</td></tr>"
         for r in ranking
     )
@@ -299,10 +320,11 @@ def ranking_html(ranking: list[RankedCandidate], choice: str | None = None) -> s
         "<h3>Choice by verification (--verify-top)</h3>"
         "<p>The best candidates by the design's measure, verified in that order until one passed every scenario "
         "(within top K and the time budget); the first that passed is delivered, or, when none did, the best of those "
-        "tried by its worst scenario's success rate.</p>"
+        "tried by its worst scenario's successful trials. A candidate's trials stop as soon as it can no longer pass, "
+        "and scenarios after a failed one are not verified.</p>"
         + delivered
         + "<table><tr><th>rank by measure</th><th>candidate</th><th>measure</th><th>designed success per scenario</th>"
-        "<th>flat success</th><th>passed</th><th>delivered</th></tr>" + rows + "</table>"
+        "<th>flat success</th><th>trials run</th><th>passed</th><th>delivered</th></tr>" + rows + "</table>"
     )
 
 

@@ -55,9 +55,12 @@ def verify_top(
 
     At most ``top`` candidates are verified, one after the other, stopping
     at the first whose every scenario passes; no further candidate is
-    started once ``config.choice_budget_s`` went on verification. When none of
+    started once ``config.choice_budget_s`` went on verification. With
+    ``config.stop_early`` a candidate's verification stops as soon as it can
+    no longer pass (:func:`fcso.sim.verify.precision_grasps`). When none of
     those tried passes, the best of them by truth is delivered: the highest
-    worst-scenario success rate, then the measure's order; but flat pads the
+    worst-scenario success count over the planned trials
+    (:func:`worst_success_share`), then the measure's order; but flat pads the
     design chose (``report.finger.flat_pads``) are kept unless a carving passes.
 
     Parameters
@@ -97,11 +100,7 @@ def verify_top(
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
     kept_flat = result.report.finger.flat_pads and not passing
     fallback = outcomes[:1] if kept_flat else outcomes
-    chosen = (
-        passing[0]
-        if passing
-        else max(fallback, key=lambda o: (min((s.fcso.success_rate for s in o[3].scenarios), default=0.0), -o[0]))
-    )
+    chosen = passing[0] if passing else max(fallback, key=lambda o: (worst_success_share(o[3]), -o[0]))
     ranking = [
         RankedCandidate(
             rank_by_quality=rank + 1,
@@ -109,6 +108,7 @@ def verify_top(
             quality=candidate.quality,
             success_rates=[s.fcso.success_rate for s in verification.scenarios],
             flat_success_rates=[s.flat.success_rate for s in verification.scenarios],
+            trials_run=[len(s.fcso.trials) for s in verification.scenarios],
             passed=verification.passed,
             chosen=candidate.index == chosen[1].index,
         )
@@ -125,6 +125,21 @@ def verify_top(
         verification.warnings.append(f"verification delivered {why}")
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def worst_success_share(verification: VerificationReport) -> float:
+    """The designed finger's successful trials over the planned ``trials`` in its worst scenario, 0..1.
+
+    A full run's success rate; for a verification stopped early
+    (``stop_early``) a lower bound of it (a scenario left unverified counts
+    0): candidates stopped early are compared by how many trials they passed
+    before they could no longer pass. 0 without trials.
+    """
+    planned = verification.settings.trials
+    if planned == 0:
+        return 0.0
+    shares = [sum(t.success for t in s.fcso.trials) / planned for s in verification.scenarios]
+    return min(shares + [0.0] * len(verification.unverified_scenarios), default=0.0)
 
 
 def choice_text(
@@ -152,7 +167,7 @@ def choice_text(
     kept = (
         "the design's flat pads are kept: only a carving that passes replaces them"
         if kept_flat
-        else "the best of those by worst-scenario success rate"
+        else "the best of those by its worst scenario's successful trials"
     )
     return f"{what}: none of the {tried} verified passed ({stop}); {kept}"
 

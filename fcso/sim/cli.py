@@ -68,11 +68,15 @@ def summary(verification: VerificationReport) -> str:
     """A few lines per scenario: success rates, median errors and holding forces, designed against flat."""
     lines = []
     for s in verification.scenarios:
-        lines.append(f"{s.part} pose {s.pose_index}:")
+        stopped = "" if s.stopped_after_trials is None else f" (trials stopped after {s.stopped_after_trials})"
+        lines.append(f"{s.part} pose {s.pose_index}:{stopped}")
         for name, r in (("designed", s.fcso), ("flat", s.flat)):
             holding = " ".join(f"{d} {'held' if v is None else f'{v:.1f}'}" for d, v in r.holding_n.items())
             median = "-" if r.median_error_mm is None else f"{r.median_error_mm:.3f} mm {r.median_error_deg:.2f} deg"
-            lines.append(f"  {name:<9} success {r.success_rate:4.0%}  median error {median}  holding N: {holding}")
+            lines.append(
+                f"  {name:<9} success {r.success_rate:4.0%} of {len(r.trials)}  median error {median}  "
+                f"holding N: {holding or 'not tested'}"
+            )
     lines.append(f"verification {'passed' if verification.passed else 'did not pass'}")
     lines.extend(f"warning: {w}" for w in verification.warnings)
     return "\n".join(lines)

@@ -46,6 +46,14 @@ class VerifyConfig(BaseModel):
         description="A scenario passes when the designed finger's success rate reaches this (paper: 10 of 10) "
         "and it holds as well as flat pads",
     )
+    stop_early: bool = Field(
+        True,
+        description="Stop a scenario's precision trials once the designed finger can no longer reach "
+        "pass_success_rate (with 10 trials and rate 1.0: at its first failed trial), skip its holding test and the "
+        "design's further scenarios: the verdict is that of the full run, the trials that ran keep their results "
+        "(the flat control runs the same trials); false runs every trial of every scenario (success rates for "
+        "statistics)",
+    )
     hold_tolerance_n: float = Field(
         1.0,
         ge=0,

@@ -52,7 +52,8 @@ class FingerResult(_Model):
     worst_error_deg: float | None
     holding_n: dict[str, float | None] = Field(
         description="Push direction in the gripper frame (+x: along the pads, +y: closing axis, +z: approach, down) -> "
-        "force at which the part slipped, N; null: held at hold_force_n; 0: not held at all"
+        "force at which the part slipped, N; null: held at hold_force_n; 0: not held at all; empty: not tested (the "
+        "precision trials had already failed, stop_early)"
     )
     trial_start: PoseSnapshot | None = Field(None, description="First perturbed trial, at the start (for the picture)")
     trial_end: PoseSnapshot | None = Field(None, description="First perturbed trial, after the lift")
@@ -91,9 +92,14 @@ class ScenarioVerification(_Model):
     fidelity: Fidelity
     fcso: FingerResult
     flat: FingerResult
-    holds_as_flat: bool = Field(
+    holds_as_flat: bool | None = Field(
         description="Pushed in every direction, the designed finger holds at least the flat pads' force, within "
-        "hold_tolerance_n"
+        "hold_tolerance_n; null: not tested (the precision trials had already failed, stop_early)"
+    )
+    stopped_after_trials: int | None = Field(
+        None,
+        description="The precision trials stopped after this many (designed and flat alike): the designed finger "
+        "could no longer reach pass_success_rate (stop_early); null: every trial ran",
     )
     passed: bool = Field(
         description="The designed finger's success rate reaches pass_success_rate and it holds as well as flat pads"
@@ -109,8 +115,13 @@ class RankedCandidate(_Model):
     rank_by_quality: int = Field(description="1 = best by the design's measure (METHOD §7b; Q under the paper's)")
     index: int = Field(description="Candidate index (report.json candidates)")
     quality: float = Field(description="The design's measure of the candidate (Q under the paper's measure), mm²")
-    success_rates: list[float] = Field(description="Designed finger's success rate per scenario")
-    flat_success_rates: list[float] = Field(description="Flat control's success rate per scenario")
+    success_rates: list[float] = Field(description="Designed finger's success rate per verified scenario")
+    flat_success_rates: list[float] = Field(description="Flat control's success rate per verified scenario")
+    trials_run: list[int] = Field(
+        default_factory=list,
+        description="Precision trials run per verified scenario (fewer than the settings' trials: stopped once the "
+        "candidate could no longer pass; scenarios after a failed one are not verified, stop_early)",
+    )
     passed: bool
     chosen: bool
 
@@ -123,6 +134,11 @@ class VerificationReport(_Model):
     settings: VerifyConfig
     scenarios: list[ScenarioVerification]
     passed: bool = Field(description="Every scenario passed")
+    unverified_scenarios: list[str] = Field(
+        default_factory=list,
+        description="Scenarios not verified because an earlier one had failed, so the design could not pass "
+        "(stop_early)",
+    )
     warnings: list[str]
     timings_s: dict[str, float] = Field(description="Wall time per stage, s")
     ranking: list[RankedCandidate] | None = Field(

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -103,6 +104,11 @@ def finger_hull(report: DesignReport, finger: trimesh.Trimesh) -> np.ndarray:
 def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | None = None) -> VerificationReport:
     """Run the precision and holding tests on every scenario, designed pads and flat ones.
 
+    With ``config.stop_early`` a design that can no longer pass is not
+    simulated further: a scenario's trials stop at the deciding failure
+    (:func:`precision_grasps`), its holding test is skipped, and so are the
+    later scenarios (``unverified_scenarios``); the verdict is the full run's.
+
     Parameters
     ----------
     design : DesignUnderTest
@@ -124,8 +130,16 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         report_progress("verification", counter[0], total)
 
     report_progress("verification", 0, total)
-    scenarios, warnings = [], []
+    scenarios, warnings, unverified = [], [], []
     for stream, case in enumerate(design.cases):
+        if scenarios and config.stop_early and not scenarios[-1].passed:
+            # the design can no longer pass: the verdict is settled
+            unverified = [c.name for c in design.cases[stream:]]
+            warnings.append(
+                f"not verified: {', '.join(unverified)}; {design.cases[stream - 1].name} had already failed, so the "
+                "design cannot pass (stop_early)"
+            )
+            break
         clock = time.perf_counter()
         pieces, pad, refine_notes = fitted_pieces(case, design, config)
         warnings.extend(refine_notes)
@@ -133,24 +147,33 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         clock = time.perf_counter()
         scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
         timings["simulation"] += time.perf_counter() - clock
+        ran = len(scenario.fcso.trials)
         if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
-            warnings.append(
-                f"{case.name}: {scenario.fcso.success_rate:.0%} of precision trials succeeded "
-                f"(flat pads: {scenario.flat.success_rate:.0%}), below pass_success_rate {config.pass_success_rate:.0%}"
+            stop = (
+                f"; stopped after {ran} of {config.trials}: it can no longer pass"
+                if scenario.stopped_after_trials is not None
+                else ""
             )
-        if not scenario.holds_as_flat:
+            warnings.append(
+                f"{case.name}: {successes(scenario.fcso.trials)} of {ran} precision trials succeeded "
+                f"(flat pads: {successes(scenario.flat.trials)} of {len(scenario.flat.trials)}), below "
+                f"pass_success_rate {config.pass_success_rate:.0%}{stop}"
+            )
+        if scenario.holds_as_flat is False:
             weaker = weaker_than_flat(scenario.fcso.holding_n, scenario.flat.holding_n, config)
             warnings.append(
                 f"{case.name}: the designed finger holds less than flat pads pushed "
                 + ", ".join(f"{name} ({mine:.1f} N against {theirs:.1f} N)" for name, (mine, theirs) in weaker.items())
             )
         scenarios.append(scenario)
+    report_progress("verification", total, total)
     return VerificationReport(
         fcso_version=__version__,
         mujoco_version=mujoco.__version__,
         settings=config,
         scenarios=scenarios,
-        passed=all(s.passed for s in scenarios),
+        passed=all(s.passed for s in scenarios) and not unverified,
+        unverified_scenarios=unverified,
         warnings=warnings,
         timings_s={k: round(v, 3) for k, v in timings.items()},
     )
@@ -271,31 +294,20 @@ def verify_case(
         "flat": build_scene(case, pieces.pieces, None, finger_hull_mm, config),
     }
     penetration, pads_overlap = seated_overlaps_mm(scenes["fcso"])
-    runs = {kind: [] for kind in scenes}
-    for kind, run in simulated_grasps(scenes, case, errors, config, advance):
-        runs[kind].append(run)
-    holding = holding_tests(scenes, case, {kind: grasps[0] for kind, grasps in runs.items()}, config)
+    runs, trials, stopped = precision_grasps(scenes, case, errors, config, advance)
+    # a designed finger that failed its precision trials cannot pass: its holding test would change nothing
+    designed = trials["fcso"]
+    precision_failed = (successes(designed) / len(designed) if designed else 0.0) < config.pass_success_rate - 1e-9
+    holding = (
+        {kind: {} for kind in scenes}
+        if config.stop_early and precision_failed
+        else holding_tests(scenes, case, {kind: grasps[0] for kind, grasps in runs.items()}, config)
+    )
     results = {}
     for kind, (nominal, *perturbed) in runs.items():
-        design_nominal = np.linalg.inv(case.tcp)
-        offset = pose_error(nominal.part_in_gripper, design_nominal, scenes[kind].part_com_mm)
-        reference = nominal.part_in_gripper if nominal.held else design_nominal
-        trials = []
-        for error, run in zip(errors, perturbed):
-            moved, turned = pose_error(run.part_in_gripper, reference, scenes[kind].part_com_mm)
-            trials.append(
-                TrialResult(
-                    dx_mm=round(float(error[0]), 4),
-                    dy_mm=round(float(error[1]), 4),
-                    yaw_deg=round(float(error[2]), 4),
-                    held=run.held,
-                    error_mm=round(moved, 4),
-                    error_deg=round(turned, 4),
-                    success=bool(run.held and moved <= config.success_mm and turned <= config.success_deg),
-                )
-            )
+        offset = pose_error(nominal.part_in_gripper, np.linalg.inv(case.tcp), scenes[kind].part_com_mm)
         pictured = perturbed[0].frames if perturbed else None
-        results[kind] = _finger_result(kind, nominal.held, offset, trials, holding[kind], pictured)
+        results[kind] = _finger_result(kind, nominal.held, offset, trials[kind], holding[kind], pictured)
     frames = runs["fcso"][0].frames or []
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
@@ -308,7 +320,11 @@ def verify_case(
         decomposition_cached=pieces.cached,
     )
     part_name, _, pose = case.name.rpartition(" pose ")
-    holds = not weaker_than_flat(results["fcso"].holding_n, results["flat"].holding_n, config)
+    holds = (
+        not weaker_than_flat(results["fcso"].holding_n, results["flat"].holding_n, config)
+        if results["fcso"].holding_n
+        else None
+    )
     return ScenarioVerification(
         part=part_name,
         pose_index=int(pose) if pose.isdigit() else 0,
@@ -316,7 +332,8 @@ def verify_case(
         fcso=results["fcso"],
         flat=results["flat"],
         holds_as_flat=holds,
-        passed=results["fcso"].success_rate >= config.pass_success_rate - 1e-9 and holds,
+        stopped_after_trials=stopped,
+        passed=not precision_failed and bool(holds),
         frames=[_snapshot(f) for f in frames],
     )
 
@@ -341,41 +358,93 @@ def weaker_than_flat(
     return {name: pair for name, pair in held.items() if pair[0] < pair[1] - config.hold_tolerance_n}
 
 
-def simulated_grasps(
-    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
-) -> Iterator[tuple[str, TrialRun]]:
-    """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
-    independent: every grasp starts from a fresh state, so the results are those of one process), in order.
+def needed_successes(trials: int, config: VerifyConfig) -> int:
+    """Fewest successful trials out of ``trials`` that reach ``config.pass_success_rate``."""
+    return math.ceil((config.pass_success_rate - 1e-9) * trials)
 
-    Grasps go to the workers a few at a time, so a verification of many
-    trials holds only a few in flight and reports progress as they end.
+
+def successes(trials: list[TrialResult]) -> int:
+    """Successful trials."""
+    return sum(t.success for t in trials)
+
+
+def trial_result(run: TrialRun, error: np.ndarray, reference: np.ndarray, com_mm, config: VerifyConfig) -> TrialResult:
+    """One precision trial judged against the pose of the part in the gripper after the unperturbed grasp
+    (``reference``, 4x4, mm)."""
+    moved, turned = pose_error(run.part_in_gripper, reference, com_mm)
+    return TrialResult(
+        dx_mm=round(float(error[0]), 4),
+        dy_mm=round(float(error[1]), 4),
+        yaw_deg=round(float(error[2]), 4),
+        held=run.held,
+        error_mm=round(moved, 4),
+        error_deg=round(turned, 4),
+        success=bool(run.held and moved <= config.success_mm and turned <= config.success_deg),
+    )
+
+
+def precision_grasps(
+    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+) -> tuple[dict[str, list[TrialRun]], dict[str, list[TrialResult]], int | None]:
+    """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
+    independent: every grasp starts from a fresh state, so the results are those of one process), judged in order.
+
+    Grasps go to the workers in waves of two per worker, trial by trial
+    (every finger's nominal grasp, then every finger's first trial, ...), so
+    a verification of many trials holds only a few in flight and reports
+    progress as they end. With ``config.stop_early`` the designed finger's
+    (``fcso``) trials stop at the failure after which it can no longer reach
+    ``pass_success_rate``: that trial is the last kept, of every finger (the
+    flat control is compared on the same start errors); later grasps are
+    not started, and those a wave already ran are dropped, so what is kept
+    does not depend on the number of workers or on the machine's speed.
+    A designed finger that fails its first trial takes one wave of two
+    workers.
 
     Parameters
     ----------
     scenes : dict
-        Finger kind -> its scene.
+        Finger kind -> its scene (``fcso``: the designed finger, judged for the stop).
     case : GraspCase
     errors : (n, 3) float
         Start errors (x, y mm, yaw degrees) of the trials.
     config : VerifyConfig
     advance : callable
-        Called after every grasp.
+        Called after every kept grasp.
 
-    Yields
-    ------
-    kind, TrialRun
-        Per finger, in the order of ``scenes``, its nominal grasp (unperturbed, with its state after the lift for
-        the holding test; recorded for the designed finger) then its trials in the order of ``errors`` (the first
-        recorded).
+    Returns
+    -------
+    runs : dict
+        Finger kind -> its nominal grasp (unperturbed, with its state after the lift for the holding test;
+        recorded for the designed finger) then its kept trials in the order of ``errors`` (the first recorded).
+    trials : dict
+        Finger kind -> its kept trials' results.
+    stopped_after : int or None
+        How many trials were kept when the trials stopped early; None when every trial ran.
     """
-    items = [(kind, number, error) for kind in scenes for number, error in enumerate([None, *errors])]
+    items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in scenes]
     jobs = min(resolve_jobs(config.jobs), len(items))
-    batch = 2 * jobs
+    runs = {kind: [] for kind in scenes}
+    trials = {kind: [] for kind in scenes}
+    kept, allowed_failures = len(errors), len(errors) - needed_successes(len(errors), config)
     with WorkerPool((scenes, case, config), jobs) as pool:
-        for start in range(0, len(items), batch):
-            for kind, run in pool.map(_simulated_grasp, items[start : start + batch]):
+        while items:
+            wave, items = items[: 2 * jobs], items[2 * jobs :]
+            for (kind, number, error), run in zip(wave, pool.map(_simulated_grasp, wave)):
+                if number > kept:
+                    continue
+                runs[kind].append(run)
                 advance()
-                yield kind, run
+                if number == 0:
+                    continue
+                nominal = runs[kind][0]
+                reference = nominal.part_in_gripper if nominal.held else np.linalg.inv(case.tcp)
+                trials[kind].append(trial_result(run, error, reference, scenes[kind].part_com_mm, config))
+                failed = kind == "fcso" and not trials[kind][-1].success
+                if config.stop_early and failed and len(trials[kind]) - successes(trials[kind]) > allowed_failures:
+                    kept = number
+            items = [item for item in items if item[1] <= kept]
+    return runs, trials, kept if kept < len(errors) else None
 
 
 def holding_tests(
@@ -408,14 +477,14 @@ class TrialRun:
     lifted: mujoco.MjData | None = None
 
 
-def _simulated_grasp(context, item) -> tuple[str, TrialRun]:
+def _simulated_grasp(context, item) -> TrialRun:
     scenes, case, config = context
     kind, number, error = item
     if number == 0:
         run = run_grasp(scenes[kind], case, np.eye(4), config, record=kind == "fcso")
-        return kind, TrialRun(run.held, run.part_in_gripper, run.frames, run.data)
+        return TrialRun(run.held, run.part_in_gripper, run.frames, run.data)
     run = run_grasp(scenes[kind], case, start_pose(case, error), config, record=number == 1)
-    return kind, TrialRun(run.held, run.part_in_gripper, run.frames if number == 1 else None)
+    return TrialRun(run.held, run.part_in_gripper, run.frames if number == 1 else None)
 
 
 def _hold_force(context, item) -> float | None:

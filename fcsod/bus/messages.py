@@ -387,11 +387,21 @@ class ScenarioOutcome(BaseModel):
 
     part: str
     pose_index: int
-    success_rate: float = Field(description="Designed finger's precision trials within the success limits, 0..1")
+    success_rate: float = Field(
+        description="Designed finger's precision trials within the success limits, of those run, 0..1"
+    )
     flat_success_rate: float = Field(description="The same with flat pads")
+    trials_run: int = Field(
+        0,
+        description="Precision trials run per finger: fewer than [verify] trials when they stopped once the designed "
+        "finger could no longer pass",
+    )
     median_error_mm: float | None
     flat_median_error_mm: float | None
-    holding_n: dict[str, float | None] = Field(description="Slip force per push direction, N; null: held at the limit")
+    holding_n: dict[str, float | None] = Field(
+        description="Slip force per push direction, N; null: held at the limit; empty: not tested (the precision "
+        "trials had already failed)"
+    )
     flat_holding_n: dict[str, float | None]
 
 

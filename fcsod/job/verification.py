@@ -291,6 +291,7 @@ def _message(job_id: str, verification: VerificationReport, file: str, finger_se
                 pose_index=s.pose_index,
                 success_rate=s.fcso.success_rate,
                 flat_success_rate=s.flat.success_rate,
+                trials_run=len(s.fcso.trials),
                 median_error_mm=s.fcso.median_error_mm,
                 flat_median_error_mm=s.flat.median_error_mm,
                 holding_n=s.fcso.holding_n,

@@ -13,21 +13,35 @@ import numpy as np
 import pytest
 import trimesh
 
+from examples.batch_demo import batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
+from fcso.output.verification_page import section_html
 from fcso.parts import Part
 from fcso.sim import trials
-from fcso.sim.collision import MIN_PIECE_WIDTH_MM, evict, hull_width_mm, pad_prism_pieces, part_shell_pieces
+from fcso.sim.collision import (
+    MIN_PIECE_WIDTH_MM,
+    ConvexPieces,
+    evict,
+    hull_width_mm,
+    pad_prism_pieces,
+    part_shell_pieces,
+)
 from fcso.sim.config import VerifyConfig
+from fcso.sim.report import VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
+    design_under_test,
     finger_hull,
+    fitted_pieces,
+    flat_pad,
     grasp_case,
     holding_tests,
     part_pieces,
-    simulated_grasps,
+    precision_grasps,
+    verify_case,
     weaker_than_flat,
 )
 
@@ -113,6 +127,28 @@ def test_the_skipped_steady_lift_ends_where_the_stepped_lift_ends(tmp_path, monk
     for mine, theirs in zip(skipped.frames, stepped.frames):
         assert np.allclose(mine.gripper, theirs.gripper, atol=0.2)
         assert np.allclose(mine.part[:3, 3], theirs.part[:3, 3], atol=0.2)
+
+
+def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped_lift_ends(tmp_path, monkeypatch):
+    # the demo's xyz cube in its carved pads (its embossed letters) rocks at a few hundredths of a degree per second
+    # in the lift (below 0.01 degrees/s it would step through all of it)
+    result = design(batch_demo_part_files()[:1], batch_demo_settings())
+    under_test = design_under_test(result)
+    case, config = under_test.cases[0], _config(tmp_path)
+    part, pad, _ = fitted_pieces(case, under_test, config)
+    scene = build_scene(case, part.pieces, pad.pieces, under_test.finger_hull_mm, config)
+    start = start_pose(case, np.array([0.5, -0.5, 1.0]))
+    skips = []
+    skip = trials.skip_steady_lift
+    monkeypatch.setattr(trials, "skip_steady_lift", lambda *args: skips.append(args[2]) or skip(*args))
+    skipped = run_grasp(scene, case, start, config)
+    assert len(skips) == 1 and skips[0] > 10.0
+    monkeypatch.setattr(trials, "STEADY_STEPS", 10**9)
+    stepped = run_grasp(scene, case, start, config)
+    assert skipped.held and stepped.held
+    moved, turned = pose_error(skipped.part_in_gripper, stepped.part_in_gripper, case.part.center_mass)
+    # within 1 % and 3 % of the success limits (0.3 mm, 1 degree)
+    assert moved <= 0.003 and turned <= 0.03
 
 
 def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
@@ -357,8 +393,9 @@ def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tm
     runs, holding, advanced = {}, {}, []
     for jobs in (1, 2):
         config = _config(tmp_path, jobs=jobs, **settings)
-        grasps = simulated_grasps(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
-        runs[jobs] = [run for _, run in grasps]
+        grasps, _, stopped = precision_grasps(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
+        assert stopped is None
+        runs[jobs] = grasps["flat"]
         holding[jobs] = holding_tests(scenes, case, {"flat": runs[jobs][0]}, config)
     assert advanced == [1] * 4 + [2] * 4
     for one, forked in zip(runs[1], runs[2]):
@@ -371,3 +408,69 @@ def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tm
     runs[2] = runs[2][1:]
     # the start errors matter: the trials end in different poses
     assert not np.allclose(runs[2][0].part_in_gripper, runs[2][1].part_in_gripper)
+
+
+#: Start errors of the cube between flat pads: along the closing axis (table x) the pads centre it, along the pads
+#: (table y) nothing brings it back.
+_CENTRED, _OFF_ALONG_PADS = [0.4, 0.0, 0.0], [0.0, 1.5, 0.0]
+
+
+def test_precision_trials_stop_at_the_deciding_failure_whatever_the_workers(tmp_path):
+    case = _cube_case()
+    settings = {"lift_mm": 10.0}
+    # the flat pads stand in for a designed finger that centres across the pads and not along them
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), _config(tmp_path, **settings))
+    scenes = {"fcso": scene, "flat": scene}
+    errors = np.array([_CENTRED, _OFF_ALONG_PADS, [-0.4, 0.0, 0.0], [0.0, -1.5, 0.0], [0.3, 0.0, 1.0]])
+    _, full, stopped = precision_grasps(
+        scenes, case, errors, _config(tmp_path, stop_early=False, **settings), lambda: None
+    )
+    assert stopped is None
+    assert [t.success for t in full["fcso"]] == [True, False, True, False, True] == [t.success for t in full["flat"]]
+    kept = {}
+    for jobs in (1, 2):
+        config = _config(tmp_path, jobs=jobs, **settings)
+        runs, kept[jobs], stopped = precision_grasps(scenes, case, errors, config, lambda: None)
+        # all 5 must succeed: the first failure (trial 2) decides; both fingers keep trials 1 and 2 as the full run
+        assert stopped == 2 and [len(r) for r in runs.values()] == [3, 3]
+        assert kept[jobs] == {kind: trials[:2] for kind, trials in full.items()}
+    assert kept[1] == kept[2]
+    # at 0.6 (3 of 5) two failures are allowed and every trial runs; at 0.7 (4 of 5) the second, trial 4, decides
+    for rate, expected in ((0.6, None), (0.7, 4)):
+        config = _config(tmp_path, jobs=2, pass_success_rate=rate, **settings)
+        _, trials, stopped = precision_grasps(scenes, case, errors, config, lambda: None)
+        assert stopped == expected and trials["fcso"] == full["fcso"][: expected or 5]
+
+
+def test_a_verification_stopped_early_has_the_verdict_of_the_full_run(tmp_path):
+    case = _cube_case()
+    settings = {"lift_mm": 10.0, "trials": 4, "hold_ramp_n_s": 300.0}
+    part = ConvexPieces(_hull(case.part), 0.0, 0.0, False)
+    pad = pad_prism_pieces(flat_pad(case.pad_size_mm, case.penetration_mm), case.pad_size_mm[0], tmp_path / "cache")
+    results = {
+        stop: verify_case(case, part, pad, np.zeros((0, 3)), _config(tmp_path, stop_early=stop, **settings), 0)
+        for stop in (False, True)
+    }
+    full, stopped = results[False], results[True]
+    assert not full.passed and not stopped.passed
+    first_failure = next(k for k, t in enumerate(full.fcso.trials, 1) if not t.success)
+    assert first_failure < 4 and stopped.stopped_after_trials == first_failure and full.stopped_after_trials is None
+    assert stopped.fcso.trials == full.fcso.trials[:first_failure]
+    assert stopped.flat.trials == full.flat.trials[:first_failure]
+    # the holding test ran in full only
+    assert len(full.fcso.holding_n) == 6 and full.holds_as_flat is not None
+    assert stopped.fcso.holding_n == {} and stopped.holds_as_flat is None
+    # the report says so
+    report = VerificationReport(
+        fcso_version="",
+        mujoco_version="",
+        settings=_config(tmp_path, **settings),
+        scenarios=[stopped],
+        passed=False,
+        unverified_scenarios=["other pose 1"],
+        warnings=[],
+        timings_s={},
+    )
+    page = section_html(report, {"trial 0": b"", "errors 0": b""})
+    assert f"<td>{first_failure - 1} of {first_failure} (stopped; 4 planned)</td>" in page
+    assert "Holding test not run" in page and '<td class="text">other pose 1</td>' in page
