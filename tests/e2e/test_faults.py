@@ -360,6 +360,7 @@ def test_workers_that_cannot_start_fail_the_queued_jobs_with_why_instead_of_star
         error = failed["body"]["error"]
         assert error.startswith("job workers cannot start (ImportError: this mujoco is broken on purpose)"), error
         assert sorted(p.name for p in (tmp_path / "out" / failed["job_id"]).iterdir()) == ["job.mcap"]
-    # the workers started before the first said why (one job at a time, one spare) and no more
+    # no more workers than those started before the first said why (one job at a time, one spare); those may still
+    # be exiting when the daemon stops, which then does not log them
     died = [v for v in daemon.json_lines() if v.get("message") == "worker process exited before taking a job"]
-    assert 1 <= len(died) <= 2, died
+    assert len(died) <= 2, died
