@@ -266,6 +266,11 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     assert union.volume() == pytest.approx(carved.volume, rel=1e-5)
     # no piece pokes out of the pad, and no two overlap (their volumes add up to their union's)
     assert (union - to_manifold(carved)).volume() <= 1e-6 * carved.volume
+    # the fidelity read back with the pieces is the one measured when they were made, the union's against the pad
+    assert (read.excess_fraction, read.missing_fraction) == (made.excess_fraction, made.missing_fraction)
+    volume = to_manifold(carved).volume()
+    assert read.excess_fraction == pytest.approx((union - to_manifold(carved)).volume() / volume, abs=1e-9)
+    assert read.missing_fraction == pytest.approx((to_manifold(carved) - union).volume() / volume, abs=1e-9)
     total = sum(manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)).volume() for v, _ in read.pieces)
     assert total == pytest.approx(union.volume(), rel=1e-6)
     assert abs(read.volume_error) < 1e-5 and read.missing_fraction < 1e-5
