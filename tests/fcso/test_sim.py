@@ -259,6 +259,7 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     made = pad_prism_pieces(carved, 5.0, tmp_path)
     read = pad_prism_pieces(carved, 5.0, tmp_path)
     assert not made.cached and read.cached and len(read.pieces) == len(made.pieces)
+    assert all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) for a, b in zip(made.pieces, read.pieces))
     # the curved wall alone needs a prism per facet; every flat face is one
     assert len(read.pieces) < 120
     union = _union(read.pieces)
