@@ -135,7 +135,7 @@ def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped
     result = design(batch_demo_part_files()[:1], batch_demo_settings())
     under_test = design_under_test(result)
     case, config = under_test.cases[0], _config(tmp_path)
-    part, pad, _ = fitted_pieces(case, under_test, config)
+    part, pad, _, _ = fitted_pieces(case, under_test, config)
     scene = build_scene(case, part.pieces, pad.pieces, under_test.finger_hull_mm, config)
     start = start_pose(case, np.array([0.5, -0.5, 1.0]))
     skips = []
