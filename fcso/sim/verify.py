@@ -141,11 +141,11 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
             )
             break
         clock = time.perf_counter()
-        pieces, pad, refine_notes = fitted_pieces(case, design, config)
+        pieces, pad, refine_notes, seated = fitted_pieces(case, design, config)
         warnings.extend(refine_notes)
         timings["decomposition"] += time.perf_counter() - clock
         clock = time.perf_counter()
-        scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance)
+        scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance, seated)
         timings["simulation"] += time.perf_counter() - clock
         ran = len(scenario.fcso.trials)
         if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
@@ -181,7 +181,7 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
-) -> tuple[ConvexPieces, ConvexPieces, list[str]]:
+) -> tuple[ConvexPieces, ConvexPieces, list[str], Scene]:
     """The pad's convex pieces (prisms under its face) and the part's (prisms under its surface where the pads reach
     it), with warnings when, at the nominal seated grasp, they overlap or the two pads overlap each other by more
     than ``max_seated_penetration_mm``.
@@ -196,10 +196,13 @@ def fitted_pieces(
     part, pad : ConvexPieces
     notes : list of str
         The warnings.
+    scene : Scene
+        The designed finger's scene of these pieces (for :func:`verify_case`: one compilation).
     """
     pad = pad_prism_pieces(design.fingerpad, case.pad_size_mm[0], config.cache_path())
     part = part_pieces(case, config)
-    part_pad, pad_pad = seated_overlaps_mm(build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config))
+    scene = build_scene(case, part.pieces, pad.pieces, design.finger_hull_mm, config)
+    part_pad, pad_pad = seated_overlaps_mm(scene)
     notes = []
     if part_pad > config.max_seated_penetration_mm:
         notes.append(
@@ -211,7 +214,7 @@ def fitted_pieces(
             f"{case.name}: the two pads overlap each other {pad_pad:.2f} mm at the seated grasp: the fingers meet "
             f"before the part is seated"
         )
-    return part, pad, notes
+    return part, pad, notes, scene
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:
@@ -271,6 +274,7 @@ def verify_case(
     config: VerifyConfig,
     stream: int,
     advance: Callable[[], None] = lambda: None,
+    designed_scene: Scene | None = None,
 ) -> ScenarioVerification:
     """Both fingers' precision and holding tests on one grasp case.
 
@@ -287,10 +291,12 @@ def verify_case(
         Seeds this scenario's perturbations (same for both fingers).
     advance : callable
         Called after every simulated grasp.
+    designed_scene : Scene, optional
+        The designed finger's scene of these pieces when already compiled (:func:`fitted_pieces`).
     """
     errors = perturbations(config.trials, config, stream)
     scenes = {
-        "fcso": build_scene(case, pieces.pieces, pad.pieces, finger_hull_mm, config),
+        "fcso": designed_scene or build_scene(case, pieces.pieces, pad.pieces, finger_hull_mm, config),
         "flat": build_scene(case, pieces.pieces, None, finger_hull_mm, config),
     }
     penetration, pads_overlap = seated_overlaps_mm(scenes["fcso"])

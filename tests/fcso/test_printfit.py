@@ -188,6 +188,32 @@ def test_a_sliver_below_the_minimum_wall_is_removed():
     assert opened.volume() > 0.9 * (pad.volume() - 0.3 * 6.0 * depth)
 
 
+def test_an_opening_is_reused_only_for_the_same_pad_and_sizes():
+    config = small_config()
+    sampler = config.sampler
+    depth = sampler.penetration_mm
+    mesh = _peg_part([((-1.0, 1.0, 2.0), (depth, 4.0, 8.0)), ((-1.0, 4.3, 2.0), (depth, 7.0, 8.0))])
+
+    def carved(shift_mm: float) -> manifold3d.Manifold:
+        moved = mesh.copy()
+        moved.apply_translation([0.0, 0.0, shift_mm])
+        geometry = pad_geometry(to_manifold(moved), moved.vertices, moved.faces, np.eye(4), sampler, config.filter)
+        return build_fingerpad([geometry], sampler, config.filter).pad
+
+    size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
+    opened = open_thin_walls(carved(0.0), *size, 0.8)
+    # the same pad built again (another candidate carving it): the same opening, sliver gone
+    again = open_thin_walls(carved(0.0), *size, 0.8)
+    assert np.array_equal(again.to_mesh64().vert_properties, opened.to_mesh64().vert_properties)
+    assert np.array_equal(again.to_mesh64().tri_verts, opened.to_mesh64().tri_verts)
+    # a smaller minimum keeps the 0.3 mm wall: not the opening kept for 0.8 mm
+    assert open_thin_walls(carved(0.0), *size, 0.2).volume() > opened.volume() + 0.3 * 6.0 * 1.0
+    # the pegs moved 0.5 mm along w: a pad of its own, opened where it is
+    moved = open_thin_walls(carved(0.5), *size, 0.8)
+    assert (moved - opened).volume() > 0.5 and (opened - moved).volume() > 0.5
+    assert (moved ^ box((0.0, 4.0, 2.5), (depth - 0.5, 4.3, 8.5))).volume() < 0.01 * 0.3 * 6.0 * (depth - 0.5)
+
+
 def test_profiles_load_and_keys_override(tmp_path):
     # the default is the paper's printer and material (METHOD §9b): HP MJF in PA12
     assert PrintConfig().profile == "mjf-pa12"

@@ -135,7 +135,7 @@ def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped
     result = design(batch_demo_part_files()[:1], batch_demo_settings())
     under_test = design_under_test(result)
     case, config = under_test.cases[0], _config(tmp_path)
-    part, pad, _ = fitted_pieces(case, under_test, config)
+    part, pad, _, _ = fitted_pieces(case, under_test, config)
     scene = build_scene(case, part.pieces, pad.pieces, under_test.finger_hull_mm, config)
     start = start_pose(case, np.array([0.5, -0.5, 1.0]))
     skips = []
@@ -259,6 +259,7 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     made = pad_prism_pieces(carved, 5.0, tmp_path)
     read = pad_prism_pieces(carved, 5.0, tmp_path)
     assert not made.cached and read.cached and len(read.pieces) == len(made.pieces)
+    assert all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) for a, b in zip(made.pieces, read.pieces))
     # the curved wall alone needs a prism per facet; every flat face is one
     assert len(read.pieces) < 120
     union = _union(read.pieces)
@@ -266,6 +267,11 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     assert union.volume() == pytest.approx(carved.volume, rel=1e-5)
     # no piece pokes out of the pad, and no two overlap (their volumes add up to their union's)
     assert (union - to_manifold(carved)).volume() <= 1e-6 * carved.volume
+    # the fidelity read back with the pieces is the one measured when they were made, the union's against the pad
+    assert (read.excess_fraction, read.missing_fraction) == (made.excess_fraction, made.missing_fraction)
+    volume = to_manifold(carved).volume()
+    assert read.excess_fraction == pytest.approx((union - to_manifold(carved)).volume() / volume, abs=1e-9)
+    assert read.missing_fraction == pytest.approx((to_manifold(carved) - union).volume() / volume, abs=1e-9)
     total = sum(manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)).volume() for v, _ in read.pieces)
     assert total == pytest.approx(union.volume(), rel=1e-6)
     assert abs(read.volume_error) < 1e-5 and read.missing_fraction < 1e-5
