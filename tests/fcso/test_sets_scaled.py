@@ -43,7 +43,7 @@ def test_scaled_search_finds_the_fewest_sets_where_it_claims_to(screener, max_se
     scaled = search_partition(
         screener, len(PARTS), cfg.updated({"finger_sets": {"exhaustive_parts": 1, **settings}}), quiet
     )
-    assert exhaustive.method == "exhaustive" and scaled.method == "quick_screening+colouring+local_moves"
+    assert exhaustive.method == "exhaustive" and scaled.method == "carving_similarity+local_moves"
     best_sets = max(exhaustive.assignment) + 1
     reached = float(exhaustive.retained.min()) >= min_retained
     # the certified conflict clique: every pair in it was searched as a set and keeps less than min_retained
