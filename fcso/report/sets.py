@@ -210,7 +210,8 @@ def _screened_description(outcome: PartitionOutcome, parts: int, settings) -> st
         )
     return (
         f"each part was described by what its best samples carve into a pad; the pairs of the "
-        f"{outcome.probed_parts} most dissimilar parts were quick-screened (one candidate: each part's own best sample) "
+        f"{outcome.probed_parts} most dissimilar parts were quick-screened (one candidate: each part's own best "
+        f"sample) "
         f"and a clique of pairs suspected to conflict among them was searched pair by pair until every pair in it "
         f"conflicts: {len(outcome.conflict_clique)} parts, so no partition reaching min_retained has fewer than "
         f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set; a lower bound "
