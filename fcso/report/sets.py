@@ -10,6 +10,7 @@ from ..evaluate import Scenario
 from ..output.layout import set_finger_path, set_folder
 from .design import ungraspable_entry
 from .models import (
+    CandidateReport,
     FingerSetReport,
     FingerSetsReport,
     IdenticalPartsReport,
@@ -38,20 +39,20 @@ def _ratio(value: float, reference: float) -> float:
     return round(float(value) / float(reference), 6)
 
 
-def exact_retained(made, numbers: list[int], solos) -> list[float]:
-    """``r = E / E*`` of every scenario of a set's delivered design, ``E`` read as the scenario's quality (METHOD §11):
-    E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
+def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[float]:
+    """``r = E / E*`` of every scenario of a set's chosen candidate, ``E`` read as the scenario's quality (METHOD
+    §11): E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
 
     Parameters
     ----------
-    made : DesignResult
-        The set's design, its scenarios ``numbers`` (job numbering, increasing).
+    chosen : CandidateReport
+        The set's chosen candidate (``chosen_candidate`` of its design's report), its scenarios ``numbers`` (job
+        numbering, increasing).
     numbers : sequence of int
     solos : sequence of SoloQuality
         Per job scenario.
     """
     # the chosen candidate's exact evaluation, as the solo E* are evaluated (fcso.sets.screening.solo_quality)
-    chosen = chosen_candidate(made.report)
     return [q.measure / solos[m].exact for m, q in zip(numbers, chosen.per_scenario)]
 
 
@@ -64,7 +65,7 @@ def sets_report(
     exact: dict[int, tuple[int, float]] = {}
     sets, pick_plan = [], []
     for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
-        retained = exact_retained(design_result, numbers, solos)
+        retained = exact_retained(chosen_candidate(design_result.report), numbers, solos)
         for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
             exact[m] = (label, quality.measure)
         folder = set_folder(label, several)

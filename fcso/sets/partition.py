@@ -527,6 +527,7 @@ def search_judged_exactly(
     config: DesignConfig,
     progress: Progress,
     design_exactly: Callable[[frozenset[int]], str | None],
+    finish_exactly: Callable[[frozenset[int]], str | None],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
 
@@ -539,11 +540,14 @@ def search_judged_exactly(
     ``min_retained`` misses it exactly and has fewer than ``max`` sets, and
     stops when the search proposes a partition already judged, or after
     ``[finger_sets] max`` proposals. The best proposal by the exact objective
-    is then designed (``design_exactly`` on each of its sets, METHOD §1-9); if
-    its designed sets miss ``min_retained`` (or a finger cannot be made), one
-    finger for every part is designed too, and the better of the two designed
-    partitions by the exact objective is chosen, so the sets never keep less
-    in their worst scenario than one finger does.
+    is then designed (``design_exactly`` on each of its sets: search and
+    exact re-evaluation, METHOD §6-8); if its designed sets miss
+    ``min_retained`` (or a set cannot be made), one finger for every part is
+    designed too, and the better of the two designed partitions by the exact
+    objective is chosen, so the sets never keep less in their worst scenario
+    than one finger does. Only the chosen partition's fingers are made
+    (``finish_exactly``, METHOD §9): the figures that judge a partition are
+    its chosen candidates' exact ones, which making the finger does not change.
 
     Parameters
     ----------
@@ -553,9 +557,16 @@ def search_judged_exactly(
     config : DesignConfig
     progress : callable
     design_exactly : callable
-        ``design_exactly(set_of_parts)``: designs the set by METHOD §1-9 and
-        calls ``screener.judge_exactly`` with its exact retained qualities
-        (zeros when its finger cannot be made); returns why not, or None.
+        ``design_exactly(set_of_parts)``: chooses the set's candidate by
+        METHOD §6-8 and calls ``screener.judge_exactly`` with its exact
+        retained qualities (zeros when it cannot be designed); returns why
+        not, or None.
+    finish_exactly : callable
+        ``finish_exactly(set_of_parts)``: makes the finger of a set
+        ``design_exactly`` designed (METHOD §9), called only for the sets of
+        the partition delivered; when the finger cannot be made it judges the
+        set at zeros and returns why, and the next best designed partition is
+        delivered instead.
 
     Returns
     -------
@@ -614,11 +625,20 @@ def search_judged_exactly(
     single = tuple([0] * parts)
     if (best.failure is not None or best.exact_worst < threshold) and best.assignment != single:
         design(single, "one_finger")
-    # a partition with a finger that cannot be made is delivered only when every one designed has one
-    chosen = max(
-        (a for a in attempts if a.designed),
-        key=lambda a: (a.failure is None, key(a.assignment)),
-    )
+    while True:
+        # a partition with a finger that cannot be made is delivered only when every one designed has one
+        chosen = max(
+            (a for a in attempts if a.designed),
+            key=lambda a: (a.failure is None, key(a.assignment)),
+        )
+        if chosen.failure is not None:
+            break
+        failures = [f for f in map(finish_exactly, sets_of(chosen.assignment)) if f is not None]
+        if not failures:
+            break
+        judge(chosen.assignment, chosen.source, failures[0], designed=True)
+        if not any(a.assignment == single and a.designed for a in attempts):
+            design(single, "one_finger")
     outcome = dataclasses.replace(
         outcome,
         assignment=chosen.assignment,
