@@ -10,7 +10,7 @@ import pytest
 from distributed import LocalCluster, WorkerPlugin
 
 from fcso.sets import design_sets
-from tests.fcso.test_sets import NARROWING, WIDENING, config
+from tests.fcso.test_sets import NARROWING, NARROWING_WIDER, WIDENING, config
 
 
 def report_without_timings(result) -> dict:
@@ -56,6 +56,16 @@ def test_a_dask_cluster_gives_the_local_report(cluster, local_report):
     assert report_without_timings(on_cluster) == local_report
     # where the work ran changes no result, so the report's settings leave it out
     assert "compute" not in local_report["settings"]
+
+
+def test_the_scaled_partition_search_on_a_dask_cluster_gives_the_local_report(cluster):
+    # above exhaustive_parts the search for many parts runs (carving descriptors, probed pairs, moves): the same
+    parts = [NARROWING, WIDENING, NARROWING_WIDER]
+    settings = {"finger_sets": {"exhaustive_parts": 1, "max": 2}}
+    local = design_sets(parts, config(**settings))
+    on_cluster = design_sets(parts, config(compute={"scheduler": cluster.scheduler_address}, **settings))
+    assert local.report.search.method == "carving_similarity+local_moves"
+    assert report_without_timings(on_cluster) == report_without_timings(local)
 
 
 def test_a_worker_killed_mid_job_costs_a_retry_not_the_job(cluster, tmp_path):
