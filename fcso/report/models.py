@@ -356,12 +356,19 @@ class PartitionAttemptReport(ReportModel):
 class PartitionSearchReport(ReportModel):
     """How the parts were split into sets and what bounds the split."""
 
-    method: Literal["single_set", "single_part", "exhaustive", "carving_similarity+local_moves"] = Field(
+    method: Literal[
+        "single_set",
+        "single_part",
+        "exhaustive",
+        "quick_screening+colouring+local_moves",
+        "carving_neighbours+colouring+local_moves",
+    ] = Field(
         description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
-        "exhaustive: every partition screened; carving_similarity+local_moves: parts described by what they carve, "
-        "the most dissimilar ones quick-screened pairwise (one candidate each) and their conflict clique certified "
-        "by set searches, parts joined to the nearest seed (pairs quick-screened only where two seeds are nearly as "
-        "near), sets improved by moving parts, set searches only where the quick figure falls short"
+        "exhaustive: every partition screened; quick_screening+colouring+local_moves: every pair quick-screened (one "
+        "candidate each), the conflict clique certified by set searches, greedy sets improved by moving parts, set "
+        "searches only where the quick figure falls short; carving_neighbours+colouring+local_moves: the same with "
+        "only each part's nearest neighbours by what it carves, and the pairs of the most dissimilar parts, "
+        "quick-screened (a sparse conflict graph)"
     )
     description: str = Field(description="The same in words, with what it proves")
     proven: bool = Field(

@@ -210,20 +210,31 @@ def _screened_description(outcome: PartitionOutcome, parts: int, settings) -> st
             f"({outcome.set_screenings} distinct sets): the proposal is the best under screening"
         )
     return (
-        f"each part was described by what its best samples carve into a pad; the pairs of the "
-        f"{outcome.probed_parts} most dissimilar parts were quick-screened (one candidate: each part's own best "
-        f"sample) "
-        f"and a clique of pairs suspected to conflict among them was searched pair by pair until every pair in it "
+        f"{_pairs_screened(outcome, parts)}; a pair keeping min_retained = {settings.min_retained:g} there is "
+        f"compatible; a clique of pairs suspected to conflict was searched pair by pair until every pair in it "
         f"conflicts: {len(outcome.conflict_clique)} parts, so no partition reaching min_retained has fewer than "
-        f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set; a lower bound "
-        f"only: pairs of other parts were not screened, a larger clique may exist); for "
-        f"{', '.join(map(str, outcome.sets_tried))} sets, every part joined the seed (the clique's parts, then the "
-        f"most dissimilar others) whose carving is nearest, pairs quick-screened where two seeds were nearly as near, "
-        f"and the worst set's parts moved while the objective improved, each set judged by its best known figure "
-        f"(exact, searched, else quick), sets short of min_retained on the quick figure searched, then moves "
-        f"decided by searching the best three ({outcome.set_screenings} set searches); guaranteed: the lower bound "
-        f"and every figure reported; the fewest sets only when the proposal reaches min_retained with the lower "
-        f"bound's number of sets; otherwise not proven optimal"
+        f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set"
+        + ("" if outcome.method == "quick_screening+colouring+local_moves" else "; among the screened pairs only")
+        + f"); for {', '.join(map(str, outcome.sets_tried))} sets, parts were placed greedily and the worst set's "
+        f"parts moved while the objective improved, each set judged by its best known figure (exact, searched, else "
+        f"quick), sets short of min_retained on the quick figure searched, then moves decided by searching the best "
+        f"three ({outcome.set_screenings} set searches); guaranteed: the lower bound and every figure reported; the "
+        f"fewest sets only when the proposal reaches min_retained with the lower bound's number of sets; otherwise "
+        f"not proven optimal"
+    )
+
+
+def _pairs_screened(outcome: PartitionOutcome, parts: int) -> str:
+    if outcome.method == "quick_screening+colouring+local_moves":
+        return (
+            f"each of the {parts * (parts - 1) // 2} pairs of parts was quick-screened (one candidate: each part's "
+            f"own best sample)"
+        )
+    return (
+        f"{outcome.screened_pairs} of the {parts * (parts - 1) // 2} pairs of parts were quick-screened (one "
+        f"candidate: each part's own best sample): each part with its nearest neighbours by what its best samples "
+        f"carve into a pad, and every pair of the {outcome.probed_parts} most dissimilar parts; a pair not screened "
+        f"counts as the median screened pair when parts are placed"
     )
 
 

@@ -113,7 +113,8 @@ class PartitionOutcome:
         ``r`` of every graspable scenario in its set: exact where the set was
         designed exactly (:meth:`SetScreener.judge_exactly`), screened otherwise.
     method : str
-        ``"single_part"``, ``"exhaustive"`` or ``"carving_similarity+local_moves"``.
+        ``"single_part"``, ``"exhaustive"``, ``"quick_screening+colouring+local_moves"`` (every pair screened) or
+        ``"carving_neighbours+colouring+local_moves"`` (nearest pairs by carving).
     proven : bool
         Every partition into at most ``max`` sets was screened: the choice is
         the best under screening.
@@ -136,7 +137,9 @@ class PartitionOutcome:
         screened, or the proposal has as many sets as the certified conflict
         clique has parts (if a part never keeps more in a larger set).
     probed_parts : int
-        Parts whose pairs were quick-screened for the conflict clique (the scaled search's most dissimilar ones).
+        Parts every pair of which was quick-screened (all parts, or the scaled search's most dissimilar ones).
+    screened_pairs : int
+        Pairs of parts quick-screened (the scaled search).
     """
 
     assignment: tuple[int, ...]
@@ -151,6 +154,7 @@ class PartitionOutcome:
     set_screenings: int
     fewest_sets_proven: bool = False
     probed_parts: int = 0
+    screened_pairs: int = 0
 
 
 def search_partition(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
@@ -228,9 +232,8 @@ _SEARCHED_MOVES = 3
 _CLIQUE_ROUNDS = 12
 #: Parts probed pairwise for the conflict clique, per set allowed: the most dissimilar carvings (a constant).
 PROBES_PER_SET = 2
-#: A part whose second nearest seed is within this factor of its nearest is in doubt: its pairs with both are
-#: quick-screened and the better pair decides.
-_DOUBT_RATIO = 1.25
+#: Pairs quick-screened between two progress reports.
+_PAIRS_PER_PROGRESS = 2000
 
 
 def carving_descriptors(screener: SetScreener) -> np.ndarray:
@@ -273,64 +276,81 @@ def farthest_point_order(descriptors: np.ndarray, count: int) -> list[int]:
     return order
 
 
+def nearest_neighbour_pairs(descriptors: np.ndarray, neighbours: int) -> set[tuple[int, int]]:
+    """Every part with its ``neighbours`` nearest by descriptor (ties: the smaller index), as ordered pairs."""
+    squared = (descriptors**2).sum(axis=1)
+    distances = squared[:, None] + squared[None, :] - 2.0 * descriptors @ descriptors.T
+    np.fill_diagonal(distances, np.inf)
+    nearest = np.argsort(distances, axis=1, kind="stable")[:, : min(neighbours, len(descriptors) - 1)]
+    return {(min(i, int(j)), max(i, int(j))) for i in range(len(descriptors)) for j in nearest[i]}
+
+
 def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
-    """The partition search for many parts: no step costs a screening per pair of parts.
+    """The partition search for many parts: a sparse conflict graph from quick screenings, set searches only where
+    they leave doubt.
 
-    1. Each part is described by what it carves (:func:`carving_descriptors`).
-       The :data:`PROBES_PER_SET` x ``max`` most dissimilar parts
-       (:func:`farthest_point_order`) have their pairs quick-screened
-       (:func:`quick_screen`); pairs that keep less than ``min_retained``
-       there are suspected to conflict.
-    2. A clique of suspected conflicts among them, grown greedily, has each
-       of its pairs searched as a set (:func:`screen_set`); pairs the search
-       clears leave the clique and it is grown again. The clique that remains
-       conflicts pairwise under screening: no partition reaching
-       ``min_retained`` has fewer sets (if a part never keeps more of its
-       quality in a larger set). It is a lower bound, not the largest clique
-       of all parts: pairs outside the probed parts are not screened.
-    3. From that many sets up to ``max``: seeds are the clique's parts, then
-       the most dissimilar others; every part joins the seed whose carving is
-       nearest, and where the two nearest are close (:data:`_DOUBT_RATIO`) its
-       pairs with both are quick-screened and decide. Parts of the worst
-       scenario's set then move while a move improves the objective (at most
-       :data:`_MOVES_PER_COUNT` moves, each set judged by the best figure
-       known: exact, searched, else quick). Sets the quick figure leaves
-       below ``min_retained`` are searched, and the moves go on with the
-       :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding.
-       The first number of sets that reaches ``min_retained`` is taken, else
-       the best seen.
+    1. Pairs of parts get a quick screening (:func:`quick_screen`: one
+       candidate, each part's own best sample; one screening, not a set
+       search): every pair while there are at most ``[finger_sets]
+       pairs_per_part`` per part; beyond, each part is described by what it carves
+       (:func:`carving_descriptors`) and only its ``pairs_per_part``
+       nearest neighbours by carving are screened with it, plus every pair
+       of the :data:`PROBES_PER_SET` x ``max`` most dissimilar parts
+       (:func:`farthest_point_order`), where conflicts are likeliest. A
+       screened pair that keeps ``min_retained`` is compatible (that
+       candidate exists); the others are only suspected to conflict; an
+       unscreened pair counts as the median screened pair when parts are
+       placed.
+    2. A clique of suspected conflicts, grown greedily (most suspected parts
+       first), has each of its pairs searched as a set (:func:`screen_set`);
+       pairs the search clears leave the clique and it is grown again. The
+       clique that remains conflicts pairwise under screening: no partition
+       reaching ``min_retained`` has fewer sets (if a part never keeps more
+       of its quality in a larger set). With a sparse graph it is a lower
+       bound among the screened pairs only.
+    3. From that many sets up to ``max``: parts go greedily, most suspected
+       first, to the set they suit best, then parts of the worst scenario's
+       set move while a move improves the objective (at most
+       :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
+       each set: exact, searched, else quick). Sets the quick figure leaves
+       below ``min_retained`` are then searched, and the moves go on with the
+       :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
+       (a large set's quick figure is pessimistic and flat). The first number of
+       sets that reaches ``min_retained`` is taken, else the best seen.
 
-    Pair screenings: a constant number for the clique, at most one or two per
-    part for the seeds; set screenings: a bounded number per number of sets,
-    each costing its set's size. Distances between descriptors are cheap
-    arithmetic (parts x seeds).
+    Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
+    quick screenings (a set's size each) or a bounded number of set searches.
     """
     settings = config.finger_sets
     max_sets, threshold = settings.max, settings.min_retained
-    descriptors = carving_descriptors(screener)
-    probes = sorted(farthest_point_order(descriptors, PROBES_PER_SET * max_sets))
-    compatibility: dict[tuple[int, int], float] = {}
-
-    def quick_pairs(pairs: list[tuple[int, int]]) -> None:
-        fresh = [pair for pair in pairs if pair not in compatibility]
-        for (i, j), values in zip(fresh, screener.quick([frozenset(p) for p in fresh])):
-            compatibility[(i, j)] = min(float(values[i].min()), float(values[j].min()))
-
-    probe_pairs = list(itertools.combinations(probes, 2))
-    progress("pair conflicts", 0, len(probe_pairs), f"quick screening the {len(probes)} most dissimilar parts")
-    quick_pairs(probe_pairs)
-    progress("pair conflicts", len(probe_pairs), len(probe_pairs), "quick screening")
+    every_pair = parts - 1 <= 2 * settings.pairs_per_part
+    if every_pair:
+        pairs, probes = list(itertools.combinations(range(parts), 2)), list(range(parts))
+    else:
+        descriptors = carving_descriptors(screener)
+        probes = sorted(farthest_point_order(descriptors, PROBES_PER_SET * max_sets))
+        pairs = sorted(
+            nearest_neighbour_pairs(descriptors, settings.pairs_per_part) | set(itertools.combinations(probes, 2))
+        )
+    compatibility = np.full((parts, parts), np.nan)
+    # in chunks, so a large job's progress line and log move while the pairs are screened
+    for start in range(0, len(pairs), _PAIRS_PER_PROGRESS):
+        progress("pair conflicts", start, len(pairs), "quick screening")
+        chunk = pairs[start : start + _PAIRS_PER_PROGRESS]
+        for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
+            compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+    progress("pair conflicts", len(pairs), len(pairs), "quick screening")
 
     pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
-    suspected = np.zeros((parts, parts), dtype=bool)
-    for (i, j), value in compatibility.items():
-        suspected[i, j] = suspected[j, i] = value < threshold
+    suspected = np.nan_to_num(compatibility, nan=1.0) < threshold
+    np.fill_diagonal(suspected, False)
     clique: list[int] = []
     for _ in range(_CLIQUE_ROUNDS):
         clique = sorted(_greedy_clique(suspected))
         unsure = [pair for pair in itertools.combinations(clique, 2) if pair not in pair_retained]
         for pair, values in zip(unsure, screener.retained([frozenset(p) for p in unsure])):
             pair_retained[pair] = (float(values[pair[0]].min()), float(values[pair[1]].min()))
+            compatibility[pair] = compatibility[pair[::-1]] = np.fmax(compatibility[pair], min(pair_retained[pair]))
         cleared = [pair for pair in itertools.combinations(clique, 2) if min(pair_retained[pair]) >= threshold]
         if not cleared:
             break
@@ -339,6 +359,8 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     else:
         clique = []  # not certified within the rounds allowed: no bound claimed
     lower = max(1, len(clique))
+    screened = compatibility[~np.isnan(compatibility)]
+    placing = np.nan_to_num(compatibility, nan=float(np.median(screened)) if len(screened) else 1.0)
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_estimate(assignment), threshold)
@@ -357,7 +379,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
             worst = float(screener.partition_estimate(assignment).min())
             progress("partition", count - first, step, f"{count} sets: move {number}, worst retained {worst:.2f}")
 
-        current = _nearest_seed_assignment(descriptors, clique, count, quick_pairs, compatibility)
+        current = _greedy_assignment(placing, count, threshold)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
         # screen in doubt: a set the quick figure leaves short gets its own search
         doubt = [
@@ -374,7 +396,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     return PartitionOutcome(
         assignment=best,
         retained=screener.partition_retained(best),
-        method="carving_similarity+local_moves",
+        method="quick_screening+colouring+local_moves" if every_pair else "carving_neighbours+colouring+local_moves",
         proven=False,
         pair_retained=pair_retained,
         lower_bound_sets=lower,
@@ -384,6 +406,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         set_screenings=len(screener.cache),
         fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
         probed_parts=len(probes),
+        screened_pairs=len(pairs),
     )
 
 
@@ -401,41 +424,26 @@ def _greedy_clique(adjacent: np.ndarray) -> list[int]:
     return clique
 
 
-def _nearest_seed_assignment(
-    descriptors: np.ndarray,
-    clique: list[int],
-    count: int,
-    quick_pairs: Callable[[list[tuple[int, int]]], None],
-    compatibility: dict[tuple[int, int], float],
-) -> tuple[int, ...]:
-    """``count`` sets around seeds: the conflict clique's parts (they cannot share), then the most dissimilar others.
-
-    Every part joins the seed whose carving is nearest; a part in doubt (its second nearest seed within
-    :data:`_DOUBT_RATIO` of the nearest) has its pairs with the two quick-screened (``quick_pairs`` fills
-    ``compatibility``, keyed by ordered pairs) and joins the one it keeps more with (the nearer on a tie).
+def _greedy_assignment(compatibility: np.ndarray, max_sets: int, threshold: float) -> tuple[int, ...]:
+    """Most conflicted parts first, each to the set whose worst pair with it is best (a new set while any is left and
+    none is good enough).
     """
-    seeds = list(clique[:count])
-    for part in farthest_point_order(descriptors, count + len(seeds)):
-        if len(seeds) >= count:
-            break
-        if part not in seeds:
-            seeds.append(part)
-    distances = np.linalg.norm(descriptors[:, None, :] - descriptors[seeds][None, :, :], axis=2)
-    ranked = np.argsort(distances, axis=1, kind="stable")
-    labels = ranked[:, 0].copy()
-    labels[seeds] = np.arange(len(seeds))
-    doubt = [
-        p
-        for p in range(len(descriptors))
-        if p not in seeds and len(seeds) > 1 and distances[p, ranked[p, 1]] <= _DOUBT_RATIO * distances[p, ranked[p, 0]]
-    ]
-    pairs = [tuple(sorted((p, seeds[int(k)]))) for p in doubt for k in ranked[p, :2]]
-    quick_pairs(pairs)
-    for p in doubt:
-        near, second = (int(k) for k in ranked[p, :2])
-        values = [compatibility[tuple(sorted((p, seeds[k])))] for k in (near, second)]
-        labels[p] = second if values[1] > values[0] else near
-    return canonical_assignment([int(a) for a in labels])
+    parts = len(compatibility)
+    conflicts = (compatibility < threshold).sum(axis=1)
+    order = sorted(range(parts), key=lambda p: (-conflicts[p], p))
+    members: list[list[int]] = []
+    assignment = [0] * parts
+    for part in order:
+        scores = [min(compatibility[part, q] for q in group) for group in members]
+        good = [s for s in scores if s >= threshold]
+        if members and (good or len(members) >= max_sets):
+            label = int(np.argmax(scores))
+        else:
+            label = len(members)
+            members.append([])
+        members[label].append(part)
+        assignment[part] = label
+    return canonical_assignment(assignment)
 
 
 def _improve(

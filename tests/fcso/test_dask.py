@@ -10,7 +10,7 @@ import pytest
 from distributed import LocalCluster, WorkerPlugin
 
 from fcso.sets import design_sets
-from tests.fcso.test_sets import NARROWING, NARROWING_WIDER, WIDENING, config
+from tests.fcso.test_sets import NARROWING, NARROWING_BIG_PLATE, NARROWING_WIDER, WIDENING, config
 
 
 def report_without_timings(result) -> dict:
@@ -59,12 +59,12 @@ def test_a_dask_cluster_gives_the_local_report(cluster, local_report):
 
 
 def test_the_scaled_partition_search_on_a_dask_cluster_gives_the_local_report(cluster):
-    # above exhaustive_parts the search for many parts runs (carving descriptors, probed pairs, moves): the same
-    parts = [NARROWING, WIDENING, NARROWING_WIDER]
-    settings = {"finger_sets": {"exhaustive_parts": 1, "max": 2}}
+    # above exhaustive_parts the search for many parts runs (carving descriptors, nearest pairs, moves): the same
+    parts = [NARROWING, WIDENING, NARROWING_WIDER, NARROWING_BIG_PLATE]
+    settings = {"finger_sets": {"exhaustive_parts": 1, "pairs_per_part": 1, "max": 2}}
     local = design_sets(parts, config(**settings))
     on_cluster = design_sets(parts, config(compute={"scheduler": cluster.scheduler_address}, **settings))
-    assert local.report.search.method == "carving_similarity+local_moves"
+    assert local.report.search.method == "carving_neighbours+colouring+local_moves"
     assert report_without_timings(on_cluster) == report_without_timings(local)
 
 
