@@ -306,8 +306,11 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        pairs the search clears leave the clique and it is grown again. The
        clique that remains conflicts pairwise under screening: no partition
        reaching ``min_retained`` has fewer sets (if a part never keeps more
-       of its quality in a larger set). With a sparse graph it is a lower
-       bound among the screened pairs only.
+       of its quality in a larger set). With a sparse graph the clique is
+       first grown by the parts most dissimilar to it whose quick pairs with
+       all its parts are suspected (their pairs screened then, at most
+       ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
+       it is a lower bound among the screened pairs only.
     3. From that many sets up to ``max``: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
@@ -333,20 +336,41 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
             nearest_neighbour_pairs(descriptors, settings.pairs_per_part) | set(itertools.combinations(probes, 2))
         )
     compatibility = np.full((parts, parts), np.nan)
-    # in chunks, so a large job's progress line and log move while the pairs are screened
-    for start in range(0, len(pairs), _PAIRS_PER_PROGRESS):
-        progress("pair conflicts", start, len(pairs), "quick screening")
-        chunk = pairs[start : start + _PAIRS_PER_PROGRESS]
-        for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
-            compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
-    progress("pair conflicts", len(pairs), len(pairs), "quick screening")
+
+    def quick_pairs(chosen: list[tuple[int, int]]) -> None:
+        if not chosen:
+            return
+        # in chunks, so a large job's progress line and log move while the pairs are screened
+        for start in range(0, len(chosen), _PAIRS_PER_PROGRESS):
+            progress("pair conflicts", start, len(chosen), "quick screening")
+            chunk = chosen[start : start + _PAIRS_PER_PROGRESS]
+            for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
+                compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+                suspected[i, j] = suspected[j, i] = compatibility[i, j] < threshold
+        progress("pair conflicts", len(chosen), len(chosen), "quick screening")
+
+    suspected = np.zeros((parts, parts), dtype=bool)
+    quick_pairs(pairs)
+
+    def extended(clique: list[int]) -> list[int]:
+        """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
+        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
+        if every_pair or not clique:
+            return clique
+        apart = np.min([np.linalg.norm(descriptors - descriptors[q], axis=1) for q in clique], axis=0)
+        candidates = [int(p) for p in np.argsort(-apart, kind="stable") if int(p) not in clique]
+        for part in candidates[: PROBES_PER_SET * max_sets]:
+            if len(clique) > max_sets:
+                break
+            quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
+            if all(suspected[part, q] for q in clique):
+                clique = clique + [part]
+        return sorted(clique)
 
     pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
-    suspected = np.nan_to_num(compatibility, nan=1.0) < threshold
-    np.fill_diagonal(suspected, False)
     clique: list[int] = []
     for _ in range(_CLIQUE_ROUNDS):
-        clique = sorted(_greedy_clique(suspected))
+        clique = extended(sorted(_greedy_clique(suspected)))
         unsure = [pair for pair in itertools.combinations(clique, 2) if pair not in pair_retained]
         for pair, values in zip(unsure, screener.retained([frozenset(p) for p in unsure])):
             pair_retained[pair] = (float(values[pair[0]].min()), float(values[pair[1]].min()))
@@ -406,7 +430,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         set_screenings=len(screener.cache),
         fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
         probed_parts=len(probes),
-        screened_pairs=len(pairs),
+        screened_pairs=int((~np.isnan(compatibility[np.triu_indices(parts, 1)])).sum()),
     )
 
 
