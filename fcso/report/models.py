@@ -344,8 +344,8 @@ class PartitionAttemptReport(ReportModel):
     )
     designed: bool = Field(
         False,
-        description="Its sets were designed by METHOD §1-9: the best proposal, and one finger when that misses "
-        "min_retained",
+        description="Its sets' candidates were designed by METHOD §6-8 (full search, exact re-evaluation): the best "
+        "proposal, and one finger when that misses min_retained; only the delivered one's fingers are made (§9)",
     )
     chosen: bool = Field(description="The partition delivered (the best of the designed ones by the exact objective)")
     failure: str | None = Field(

@@ -542,7 +542,8 @@ class PartitionAttempt:
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
     designed : bool
-        Its sets were designed by METHOD §1-9 (the partition delivered, and one finger when compared).
+        Its sets' candidates were designed by METHOD §6-8 (the partition delivered, and one finger when compared);
+        only the delivered partition's fingers are made (METHOD §9).
     """
 
     assignment: tuple[int, ...]
