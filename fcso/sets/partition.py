@@ -311,15 +311,19 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        all its parts are suspected (their pairs screened then, at most
        ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
        it is a lower bound among the screened pairs only.
-    3. From that many sets up to ``max``: parts go greedily, most suspected
+    3. ``max`` sets first, then (only if they reach ``min_retained``) from
+       the lower bound's number of sets up: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
        each set: exact, searched, else quick). Sets the quick figure leaves
        below ``min_retained`` are then searched, and the moves go on with the
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
-       (a large set's quick figure is pessimistic and flat). The first number of
-       sets that reaches ``min_retained`` is taken, else the best seen.
+       (a large set's quick figure is pessimistic and flat). The fewest sets
+       that reach ``min_retained`` are taken, else the best seen: when
+       ``max`` sets miss it no other number is searched (if a part never
+       keeps more in a larger set, a split into fewer sets refines into
+       ``max`` sets that keep as much).
 
     Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
     quick screenings (a set's size each) or a bounded number of set searches.
@@ -358,8 +362,11 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         if every_pair or not clique:
             return clique
         apart = np.min([np.linalg.norm(descriptors - descriptors[q], axis=1) for q in clique], axis=0)
-        candidates = [int(p) for p in np.argsort(-apart, kind="stable") if int(p) not in clique]
-        for part in candidates[: PROBES_PER_SET * max_sets]:
+        # parts already suspected of conflicts first (they conflict with more), then the most dissimilar to the clique
+        degree = suspected.sum(axis=1)
+        order = sorted(range(parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
+        candidates = [p for p in order if p not in clique]
+        for part in candidates[: 2 * PROBES_PER_SET * max_sets]:
             if len(clique) > max_sets:
                 break
             quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
@@ -394,14 +401,17 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
 
     tried, seen = [], []
     first = min(lower, max_sets)
-    for count in range(first, max_sets + 1):
+    step = max_sets - first + 1
+    # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
+    # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
+    # searched; else the fewest sets from the lower bound up
+    for number, count in enumerate([max_sets] + list(range(first, max_sets))):
         tried.append(count)
-        progress("partition", count - first, max_sets - first + 1, f"{count} sets")
-        step = max_sets - first + 1
+        progress("partition", number, step, f"{count} sets")
 
-        def moved(number: int, assignment: tuple[int, ...], count: int = count, step: int = step) -> None:
+        def moved(move: int, assignment: tuple[int, ...], count: int = count, number: int = number) -> None:
             worst = float(screener.partition_estimate(assignment).min())
-            progress("partition", count - first, step, f"{count} sets: move {number}, worst retained {worst:.2f}")
+            progress("partition", number, step, f"{count} sets: move {move}, worst retained {worst:.2f}")
 
         current = _greedy_assignment(placing, count, threshold)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
@@ -409,13 +419,14 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         doubt = [
             s for s, values in zip(sets_of(current), screener.estimate(sets_of(current))) if _short(values, threshold)
         ]
-        progress("partition", count - first, step, f"{count} sets: {len(doubt)} set searches")
+        progress("partition", number, step, f"{count} sets: {len(doubt)} set searches")
         screener.retained(doubt)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        if searched_key(current)[0] == 1:
+        reached = searched_key(current)[0] == 1
+        if reached != (count == max_sets):
             break
-    progress("partition", max_sets - first + 1, max_sets - first + 1, f"{tried[-1]} sets")
+    progress("partition", step, step, f"{tried[-1]} sets")
     best = max(seen, key=searched_key)
     return PartitionOutcome(
         assignment=best,
