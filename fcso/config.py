@@ -378,6 +378,13 @@ class FingerSetsConfig(_Section):
         le=8,
         description="Jobs with at most this many distinct graspable parts try every partition (proof under screening)",
     )
+    pairs_per_part: int = Field(
+        8,
+        ge=1,
+        description="Beyond exhaustive_parts, pairs of parts quick-screened per part: every pair while there are at "
+        "most 2 x this + 1 parts, else each part's this many nearest neighbours by what it carves (and the pairs of "
+        "the 2 x max most dissimilar parts), so the pair screenings grow linearly with the parts",
+    )
 
 
 class ComputeConfig(_Section):

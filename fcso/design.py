@@ -46,6 +46,7 @@ from .report.design import (
     ungraspable_report,
 )
 from .report.models import (
+    CandidateReport,
     DesignReport,
     FingerReport,
     GraspReport,
@@ -57,7 +58,7 @@ from .report.models import (
 )
 from .sampler import SamplerResult, face_yaws, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
-from .search import candidate_index, quality_upper_bound, rerank, search
+from .search import SearchOutcome, candidate_index, quality_upper_bound, rerank, search
 
 #: Samples per pad-geometry task and candidates per screening task sent to a worker.
 _GEOMETRY_CHUNK = 4
@@ -487,9 +488,50 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     -------
     DesignResult
     """
+    return finish_design(prepared, choose_candidate(prepared, config, progress), config)
+
+
+@dataclass
+class ChosenCandidate:
+    """A design's search and exact re-evaluation done (METHOD §6-8), its finger not yet made (:func:`finish_design`).
+
+    Attributes
+    ----------
+    choice : tuple of int
+        The chosen candidate: one sample per scenario.
+    candidate : CandidateReport
+        Its entry as ``report.json`` lists it (exact figures per scenario).
+    """
+
+    choice: tuple[int, ...]
+    candidate: CandidateReport
+    outcome: SearchOutcome = dataclasses.field(repr=False)
+    ranked: list[tuple[int, ...]] = dataclasses.field(repr=False)
+    exact: dict[tuple[int, ...], CandidateEvaluation] = dataclasses.field(repr=False)
+    listed_screens: dict[tuple[int, ...], ScreenedCandidate] = dataclasses.field(repr=False)
+    indices: dict[tuple[int, ...], int] = dataclasses.field(repr=False)
+    upper_bound: float = 0.0
+    warnings: list[str] = dataclasses.field(default_factory=list, repr=False)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict, repr=False)
+
+
+def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progress | None = None) -> ChosenCandidate:
+    """The search and exact re-evaluation of :func:`design_prepared`: its choice, before any finger is made.
+
+    A finger set judged by its exact figures (METHOD §11 revision 3) needs only these; its printed-fit pockets and
+    fused finger (:func:`finish_design`) are made when the set is delivered.
+
+    Parameters
+    ----------
+    prepared, config, progress
+        As for :func:`design_prepared`.
+
+    Returns
+    -------
+    ChosenCandidate
+    """
     report_progress = _progress_with_note(progress)
     scenarios, lattice, jobs = prepared.scenarios, prepared.lattice, prepared.jobs
-    loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(prepared.warnings), dict(prepared.timings_s)
 
     clock = time.perf_counter()
@@ -581,7 +623,36 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
             f"without proving the best optimal; Q is {exact[best_choice].quality / upper_bound:.0%} of its upper bound"
         )
     timings["exact"] = time.perf_counter() - clock
+    candidate = candidate_reports([best_choice], {best_choice: exact[best_choice]}, {}, indices)[0]
+    return ChosenCandidate(
+        best_choice, candidate, outcome, ranked, exact, listed_screens, indices, upper_bound, warnings, timings
+    )
 
+
+def finish_design(prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig) -> DesignResult:
+    """The finger of a chosen candidate (METHOD §9) and the design's report: the rest of :func:`design_prepared`.
+
+    Parameters
+    ----------
+    prepared : Prepared
+        The batch ``chosen`` was chosen on (:func:`choose_candidate`).
+    chosen : ChosenCandidate
+    config : DesignConfig
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    GeometryError
+        The fused finger is not one printable body.
+    """
+    scenarios, jobs = prepared.scenarios, prepared.jobs
+    loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
+    warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
+    outcome, ranked, exact, indices = chosen.outcome, chosen.ranked, chosen.exact, chosen.indices
+    best_choice, upper_bound, listed_screens = chosen.choice, chosen.upper_bound, chosen.listed_screens
     clock = time.perf_counter()
     best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config, jobs=jobs)
     compared = versus_flat(scenarios, best, exact.values(), config)

@@ -344,8 +344,8 @@ class PartitionAttemptReport(ReportModel):
     )
     designed: bool = Field(
         False,
-        description="Its sets were designed by METHOD §1-9: the best proposal, and one finger when that misses "
-        "min_retained",
+        description="Its sets' candidates were designed by METHOD §6-8 (full search, exact re-evaluation): the best "
+        "proposal, and one finger when that misses min_retained; only the delivered one's fingers are made (§9)",
     )
     chosen: bool = Field(description="The partition delivered (the best of the designed ones by the exact objective)")
     failure: str | None = Field(
@@ -356,11 +356,19 @@ class PartitionAttemptReport(ReportModel):
 class PartitionSearchReport(ReportModel):
     """How the parts were split into sets and what bounds the split."""
 
-    method: Literal["single_set", "single_part", "exhaustive", "quick_screening+colouring+local_moves"] = Field(
+    method: Literal[
+        "single_set",
+        "single_part",
+        "exhaustive",
+        "quick_screening+colouring+local_moves",
+        "carving_neighbours+colouring+local_moves",
+    ] = Field(
         description="single_set: [finger_sets] max = 1; single_part: one distinct graspable part; "
-        "exhaustive: every partition screened; quick_screening+colouring+local_moves: pairs quick-screened (one "
+        "exhaustive: every partition screened; quick_screening+colouring+local_moves: every pair quick-screened (one "
         "candidate each), the conflict clique certified by set searches, greedy sets improved by moving parts, set "
-        "searches only where the quick figure falls short"
+        "searches only where the quick figure falls short; carving_neighbours+colouring+local_moves: the same with "
+        "only each part's nearest neighbours by what it carves, and the pairs of the most dissimilar parts, "
+        "quick-screened (a sparse conflict graph)"
     )
     description: str = Field(description="The same in words, with what it proves")
     proven: bool = Field(

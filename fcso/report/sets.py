@@ -10,6 +10,7 @@ from ..evaluate import Scenario
 from ..output.layout import set_finger_path, set_folder
 from .design import ungraspable_entry
 from .models import (
+    CandidateReport,
     FingerSetReport,
     FingerSetsReport,
     IdenticalPartsReport,
@@ -38,20 +39,20 @@ def _ratio(value: float, reference: float) -> float:
     return round(float(value) / float(reference), 6)
 
 
-def exact_retained(made, numbers: list[int], solos) -> list[float]:
-    """``r = E / E*`` of every scenario of a set's delivered design, ``E`` read as the scenario's quality (METHOD §11):
-    E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
+def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[float]:
+    """``r = E / E*`` of every scenario of a set's chosen candidate, ``E`` read as the scenario's quality (METHOD
+    §11): E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
 
     Parameters
     ----------
-    made : DesignResult
-        The set's design, its scenarios ``numbers`` (job numbering, increasing).
+    chosen : CandidateReport
+        The set's chosen candidate (``chosen_candidate`` of its design's report), its scenarios ``numbers`` (job
+        numbering, increasing).
     numbers : sequence of int
     solos : sequence of SoloQuality
         Per job scenario.
     """
     # the chosen candidate's exact evaluation, as the solo E* are evaluated (fcso.sets.screening.solo_quality)
-    chosen = chosen_candidate(made.report)
     return [q.measure / solos[m].exact for m, q in zip(numbers, chosen.per_scenario)]
 
 
@@ -64,7 +65,7 @@ def sets_report(
     exact: dict[int, tuple[int, float]] = {}
     sets, pick_plan = [], []
     for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
-        retained = exact_retained(design_result, numbers, solos)
+        retained = exact_retained(chosen_candidate(design_result.report), numbers, solos)
         for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
             exact[m] = (label, quality.measure)
         folder = set_folder(label, several)
@@ -209,17 +210,31 @@ def _screened_description(outcome: PartitionOutcome, parts: int, settings) -> st
             f"({outcome.set_screenings} distinct sets): the proposal is the best under screening"
         )
     return (
-        f"each of the {parts * (parts - 1) // 2} pairs of parts was quick-screened (one candidate: each part's own "
-        f"best sample); a pair keeping min_retained = {settings.min_retained:g} there is compatible; a clique of "
-        f"pairs suspected to conflict was searched pair by pair until every pair in it conflicts: "
-        f"{len(outcome.conflict_clique)} parts, so no partition reaching min_retained has fewer than "
-        f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set); for "
-        f"{', '.join(map(str, outcome.sets_tried))} sets, parts were placed greedily and the worst set's parts moved "
-        f"while the objective improved, each set judged by its best known figure (exact, searched, else quick), sets "
-        f"short of min_retained on the quick figure searched, then moves decided by searching the best three "
-        f"({outcome.set_screenings} set searches); guaranteed: the "
-        f"lower bound and every figure reported; the fewest sets only when the proposal reaches min_retained with "
-        f"the lower bound's number of sets; otherwise not proven optimal"
+        f"{_pairs_screened(outcome, parts)}; a pair keeping min_retained = {settings.min_retained:g} there is "
+        f"compatible; a clique of pairs suspected to conflict was searched pair by pair until every pair in it "
+        f"conflicts: {len(outcome.conflict_clique)} parts, so no partition reaching min_retained has fewer than "
+        f"{outcome.lower_bound_sets} sets (if a part never keeps more of its quality in a larger set"
+        + ("" if outcome.method == "quick_screening+colouring+local_moves" else "; among the screened pairs only")
+        + f"); for {', '.join(map(str, outcome.sets_tried))} sets, parts were placed greedily and the worst set's "
+        f"parts moved while the objective improved, each set judged by its best known figure (exact, searched, else "
+        f"quick), sets short of min_retained on the quick figure searched, then moves decided by searching the best "
+        f"three ({outcome.set_screenings} set searches); guaranteed: the lower bound and every figure reported; the "
+        f"fewest sets only when the proposal reaches min_retained with the lower bound's number of sets; otherwise "
+        f"not proven optimal"
+    )
+
+
+def _pairs_screened(outcome: PartitionOutcome, parts: int) -> str:
+    if outcome.method == "quick_screening+colouring+local_moves":
+        return (
+            f"each of the {parts * (parts - 1) // 2} pairs of parts was quick-screened (one candidate: each part's "
+            f"own best sample)"
+        )
+    return (
+        f"{outcome.screened_pairs} of the {parts * (parts - 1) // 2} pairs of parts were quick-screened (one "
+        f"candidate: each part's own best sample): each part with its nearest neighbours by what its best samples "
+        f"carve into a pad, and every pair of the {outcome.probed_parts} most dissimilar parts; a pair not screened "
+        f"counts as the median screened pair when parts are placed"
     )
 
 

@@ -14,7 +14,18 @@ import numpy as np
 
 from .. import __version__
 from ..config import DesignConfig
-from ..design import DesignResult, SizeScore, best_pad_size, design, design_prepared, load_batch, prepare, subset
+from ..design import (
+    ChosenCandidate,
+    DesignResult,
+    SizeScore,
+    best_pad_size,
+    choose_candidate,
+    design,
+    finish_design,
+    load_batch,
+    prepare,
+    subset,
+)
 from ..errors import GeometryError, NoGraspError
 from ..parallel import WorkerPool
 from ..parts import Part
@@ -157,27 +168,49 @@ def _design_sets_of_one_size(
     clock = time.perf_counter()
     pools = screening_pools(solos, config.finger_sets.screen_samples)
     set_scenarios = [part_scenarios[u] for u in graspable]
+    chosen_candidates: dict[frozenset[int], ChosenCandidate] = {}
     exact_designs: dict[frozenset[int], DesignResult] = {}
     failures: dict[frozenset[int], str] = {}
 
-    def design_exactly(members: frozenset[int]) -> str | None:
-        """A set's finger by METHOD §1-9, once per set; the screener then judges the set by it.
+    def numbers_of(members: frozenset[int]) -> list[int]:
+        return sorted(m for p in members for m in set_scenarios[p])
 
-        Returns why the finger could not be made (a pad so carved that the fused finger is not one printable body),
-        or None: such a set keeps nothing, so the search moves on from it.
+    def failed(members: frozenset[int], error: GeometryError) -> str:
+        # such a set keeps nothing, so the search moves on from it
+        failures[members] = str(error)
+        screener.judge_exactly(members, np.zeros(len(numbers_of(members))))
+        return failures[members]
+
+    def design_exactly(members: frozenset[int]) -> str | None:
+        """A set's candidate by METHOD §6-8, once per set; the screener then judges the set by its exact figures.
+
+        Its finger (printed-fit pockets, fusing) is made only if the set is delivered (:func:`finish_exactly`): the
+        retained qualities are the chosen candidate's exact ones either way. Returns why the set cannot be designed
+        (a pad Boolean that failed), or None.
         """
-        if members not in exact_designs and members not in failures:
-            numbers = sorted(m for p in members for m in set_scenarios[p])
-            report_progress("finger sets", len(exact_designs), len(exact_designs) + 1, f"set of {len(members)} parts")
+        if members not in chosen_candidates and members not in failures:
+            numbers = numbers_of(members)
+            report_progress(
+                "finger sets", len(chosen_candidates), len(chosen_candidates) + 1, f"set of {len(members)} parts"
+            )
             try:
-                made = design_prepared(subset(prepared, numbers), config, progress)
+                chosen = choose_candidate(subset(prepared, numbers), config, progress)
             except GeometryError as error:
-                failures[members] = str(error)
-                screener.judge_exactly(members, np.zeros(len(numbers)))
-                return failures[members]
-            exact_designs[members] = made
-            kept = dict(zip(numbers, exact_retained(made, numbers, solos)))
+                return failed(members, error)
+            chosen_candidates[members] = chosen
+            kept = dict(zip(numbers, exact_retained(chosen.candidate, numbers, solos)))
             screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
+        return failures.get(members)
+
+    def finish_exactly(members: frozenset[int]) -> str | None:
+        """The finger of a set designed by :func:`design_exactly`, once; why it could not be made (a pad so carved
+        that the fused finger is not one printable body), or None."""
+        if members not in exact_designs and members not in failures:
+            try:
+                made = finish_design(subset(prepared, numbers_of(members)), chosen_candidates[members], config)
+            except GeometryError as error:
+                return failed(members, error)
+            exact_designs[members] = made
         return failures.get(members)
 
     # no more workers than sets to screen: one part has one partition
@@ -193,6 +226,7 @@ def _design_sets_of_one_size(
             config,
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
             design_exactly,
+            finish_exactly,
         )
     # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
     timings["partition"] = time.perf_counter() - clock

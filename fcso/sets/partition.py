@@ -113,7 +113,8 @@ class PartitionOutcome:
         ``r`` of every graspable scenario in its set: exact where the set was
         designed exactly (:meth:`SetScreener.judge_exactly`), screened otherwise.
     method : str
-        ``"single_part"``, ``"exhaustive"`` or ``"quick_screening+colouring+local_moves"``.
+        ``"single_part"``, ``"exhaustive"``, ``"quick_screening+colouring+local_moves"`` (every pair screened) or
+        ``"carving_neighbours+colouring+local_moves"`` (nearest pairs by carving).
     proven : bool
         Every partition into at most ``max`` sets was screened: the choice is
         the best under screening.
@@ -135,6 +136,10 @@ class PartitionOutcome:
         and no partition reaching it has fewer sets: every partition was
         screened, or the proposal has as many sets as the certified conflict
         clique has parts (if a part never keeps more in a larger set).
+    probed_parts : int
+        Parts every pair of which was quick-screened (all parts, or the scaled search's most dissimilar ones).
+    screened_pairs : int
+        Pairs of parts quick-screened (the scaled search).
     """
 
     assignment: tuple[int, ...]
@@ -148,6 +153,8 @@ class PartitionOutcome:
     sets_tried: list[int]
     set_screenings: int
     fewest_sets_proven: bool = False
+    probed_parts: int = 0
+    screened_pairs: int = 0
 
 
 def search_partition(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
@@ -221,61 +228,160 @@ def _clique_bound(clique: list[int], pair_retained: dict, max_sets: int) -> floa
 _MOVES_PER_COUNT = 24
 #: Best moves by the quick figure whose sets are searched to decide a move, once the sets in doubt are searched.
 _SEARCHED_MOVES = 3
-#: Pairs quick-screened between two progress reports.
-_PAIRS_PER_PROGRESS = 2000
 #: Rounds of certifying the conflict clique by set searches before giving up the bound.
 _CLIQUE_ROUNDS = 12
+#: Parts probed pairwise for the conflict clique, per set allowed: the most dissimilar carvings (a constant).
+PROBES_PER_SET = 2
+#: Pairs quick-screened between two progress reports.
+_PAIRS_PER_PROGRESS = 2000
+
+
+def carving_descriptors(screener: SetScreener) -> np.ndarray:
+    """What each part carves into a pad, cheaply: the column heights of its scenarios' best samples.
+
+    Per part, the largest column height (:attr:`fcso.screen.ScreenGeometry.heights_mm`) over the good
+    geometries (METHOD §5, the ones carved into the pad) of each scenario's sample of best solo screened E, on
+    the pad-face grid; 0 where it carves nothing. Two parts whose carvings differ little leave each other's
+    contacts nearly as they are; a part that carves deep where another touches takes that contact away.
+
+    Returns
+    -------
+    (parts, cells) float64
+        Heights, mm.
+    """
+    prepared, picks = screener.prepared, screener.picks
+    rows = []
+    for numbers in screener.part_scenarios:
+        carving = None
+        for m in numbers:
+            for geometry in prepared.scenarios[m].samples[picks[m]].screen:
+                heights = geometry.heights_mm if geometry.good else np.zeros_like(geometry.heights_mm)
+                carving = heights if carving is None else np.maximum(carving, heights)
+        rows.append(carving)
+    return np.asarray(rows, dtype=np.float64)
+
+
+def farthest_point_order(descriptors: np.ndarray, count: int) -> list[int]:
+    """The ``count`` most dissimilar parts, in order: first the one farthest from the mean, then each the farthest
+    from those already taken (ties: the smaller index). O(parts x count) distances."""
+    parts = len(descriptors)
+    centre = descriptors.mean(axis=0)
+    nearest = np.linalg.norm(descriptors - centre, axis=1)
+    order: list[int] = []
+    for _ in range(min(count, parts)):
+        candidates = np.where(np.isin(np.arange(parts), order), -np.inf, nearest)
+        chosen = int(np.argmax(candidates))
+        order.append(chosen)
+        nearest = np.minimum(nearest, np.linalg.norm(descriptors - descriptors[chosen], axis=1))
+    return order
+
+
+def nearest_neighbour_pairs(descriptors: np.ndarray, neighbours: int) -> set[tuple[int, int]]:
+    """Every part with its ``neighbours`` nearest by descriptor (ties: the smaller index), as ordered pairs."""
+    squared = (descriptors**2).sum(axis=1)
+    distances = squared[:, None] + squared[None, :] - 2.0 * descriptors @ descriptors.T
+    np.fill_diagonal(distances, np.inf)
+    nearest = np.argsort(distances, axis=1, kind="stable")[:, : min(neighbours, len(descriptors) - 1)]
+    return {(min(i, int(j)), max(i, int(j))) for i in range(len(descriptors)) for j in nearest[i]}
 
 
 def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
-    """The partition search for many parts: quick screenings everywhere, set searches only where they leave doubt.
+    """The partition search for many parts: a sparse conflict graph from quick screenings, set searches only where
+    they leave doubt.
 
-    1. Every pair of parts gets a quick screening (:func:`quick_screen`: one
-       candidate, each scenario's own best sample; one screening, not a set
-       search). A pair that keeps ``min_retained`` there is compatible: that
-       candidate exists. The others are only suspected to conflict.
+    1. Pairs of parts get a quick screening (:func:`quick_screen`: one
+       candidate, each part's own best sample; one screening, not a set
+       search): every pair while there are at most ``[finger_sets]
+       pairs_per_part`` per part; beyond, each part is described by what it carves
+       (:func:`carving_descriptors`) and only its ``pairs_per_part``
+       nearest neighbours by carving are screened with it, plus every pair
+       of the :data:`PROBES_PER_SET` x ``max`` most dissimilar parts
+       (:func:`farthest_point_order`), where conflicts are likeliest. A
+       screened pair that keeps ``min_retained`` is compatible (that
+       candidate exists); the others are only suspected to conflict; an
+       unscreened pair counts as the median screened pair when parts are
+       placed.
     2. A clique of suspected conflicts, grown greedily (most suspected parts
        first), has each of its pairs searched as a set (:func:`screen_set`);
        pairs the search clears leave the clique and it is grown again. The
        clique that remains conflicts pairwise under screening: no partition
        reaching ``min_retained`` has fewer sets (if a part never keeps more
-       of its quality in a larger set).
-    3. From that many sets up to ``max``: parts go greedily, most suspected
+       of its quality in a larger set). With a sparse graph the clique is
+       first grown by the parts most dissimilar to it whose quick pairs with
+       all its parts are suspected (their pairs screened then, at most
+       ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
+       it is a lower bound among the screened pairs only.
+    3. ``max`` sets first, then (only if they reach ``min_retained``) from
+       the lower bound's number of sets up: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
        each set: exact, searched, else quick). Sets the quick figure leaves
        below ``min_retained`` are then searched, and the moves go on with the
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
-       (a large set's quick figure is pessimistic and flat). The first number of
-       sets that reaches ``min_retained`` is taken, else the best seen.
+       (a large set's quick figure is pessimistic and flat). The fewest sets
+       that reach ``min_retained`` are taken, else the best seen: when
+       ``max`` sets miss it no other number is searched (if a part never
+       keeps more in a larger set, a split into fewer sets refines into
+       ``max`` sets that keep as much).
 
-    Every step costs quick screenings (a set's size each) or a bounded number
-    of set searches, so the work grows with the number of parts times the
-    set sizes; only step 1 visits every pair, at one screening each.
+    Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
+    quick screenings (a set's size each) or a bounded number of set searches.
     """
     settings = config.finger_sets
     max_sets, threshold = settings.max, settings.min_retained
-    pairs = list(itertools.combinations(range(parts), 2))
-    compatibility = np.ones((parts, parts))
-    # in chunks, so a large job's progress line and log move while the pairs are screened
-    for start in range(0, len(pairs), _PAIRS_PER_PROGRESS):
-        progress("pair conflicts", start, len(pairs), "quick screening")
-        chunk = pairs[start : start + _PAIRS_PER_PROGRESS]
-        for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
-            compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
-    progress("pair conflicts", len(pairs), len(pairs), "quick screening")
+    every_pair = parts - 1 <= 2 * settings.pairs_per_part
+    if every_pair:
+        pairs, probes = list(itertools.combinations(range(parts), 2)), list(range(parts))
+    else:
+        descriptors = carving_descriptors(screener)
+        probes = sorted(farthest_point_order(descriptors, PROBES_PER_SET * max_sets))
+        pairs = sorted(
+            nearest_neighbour_pairs(descriptors, settings.pairs_per_part) | set(itertools.combinations(probes, 2))
+        )
+    compatibility = np.full((parts, parts), np.nan)
+
+    def quick_pairs(chosen: list[tuple[int, int]]) -> None:
+        if not chosen:
+            return
+        # in chunks, so a large job's progress line and log move while the pairs are screened
+        for start in range(0, len(chosen), _PAIRS_PER_PROGRESS):
+            progress("pair conflicts", start, len(chosen), "quick screening")
+            chunk = chosen[start : start + _PAIRS_PER_PROGRESS]
+            for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
+                compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+                suspected[i, j] = suspected[j, i] = compatibility[i, j] < threshold
+        progress("pair conflicts", len(chosen), len(chosen), "quick screening")
+
+    suspected = np.zeros((parts, parts), dtype=bool)
+    quick_pairs(pairs)
+
+    def extended(clique: list[int]) -> list[int]:
+        """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
+        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
+        if every_pair or not clique:
+            return clique
+        apart = np.min([np.linalg.norm(descriptors - descriptors[q], axis=1) for q in clique], axis=0)
+        # parts already suspected of conflicts first (they conflict with more), then the most dissimilar to the clique
+        degree = suspected.sum(axis=1)
+        order = sorted(range(parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
+        candidates = [p for p in order if p not in clique]
+        for part in candidates[: 2 * PROBES_PER_SET * max_sets]:
+            if len(clique) > max_sets:
+                break
+            quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
+            if all(suspected[part, q] for q in clique):
+                clique = clique + [part]
+        return sorted(clique)
 
     pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
-    suspected = compatibility < threshold
-    np.fill_diagonal(suspected, False)
     clique: list[int] = []
     for _ in range(_CLIQUE_ROUNDS):
-        clique = sorted(_greedy_clique(suspected))
+        clique = extended(sorted(_greedy_clique(suspected)))
         unsure = [pair for pair in itertools.combinations(clique, 2) if pair not in pair_retained]
         for pair, values in zip(unsure, screener.retained([frozenset(p) for p in unsure])):
             pair_retained[pair] = (float(values[pair[0]].min()), float(values[pair[1]].min()))
-            compatibility[pair] = compatibility[pair[::-1]] = max(compatibility[pair], min(pair_retained[pair]))
+            compatibility[pair] = compatibility[pair[::-1]] = np.fmax(compatibility[pair], min(pair_retained[pair]))
         cleared = [pair for pair in itertools.combinations(clique, 2) if min(pair_retained[pair]) >= threshold]
         if not cleared:
             break
@@ -284,6 +390,8 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     else:
         clique = []  # not certified within the rounds allowed: no bound claimed
     lower = max(1, len(clique))
+    screened = compatibility[~np.isnan(compatibility)]
+    placing = np.nan_to_num(compatibility, nan=float(np.median(screened)) if len(screened) else 1.0)
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_estimate(assignment), threshold)
@@ -293,33 +401,37 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
 
     tried, seen = [], []
     first = min(lower, max_sets)
-    for count in range(first, max_sets + 1):
+    step = max_sets - first + 1
+    # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
+    # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
+    # searched; else the fewest sets from the lower bound up
+    for number, count in enumerate([max_sets] + list(range(first, max_sets))):
         tried.append(count)
-        progress("partition", count - first, max_sets - first + 1, f"{count} sets")
-        step = max_sets - first + 1
+        progress("partition", number, step, f"{count} sets")
 
-        def moved(number: int, assignment: tuple[int, ...], count: int = count, step: int = step) -> None:
+        def moved(move: int, assignment: tuple[int, ...], count: int = count, number: int = number) -> None:
             worst = float(screener.partition_estimate(assignment).min())
-            progress("partition", count - first, step, f"{count} sets: move {number}, worst retained {worst:.2f}")
+            progress("partition", number, step, f"{count} sets: move {move}, worst retained {worst:.2f}")
 
-        current = _greedy_assignment(compatibility, count, threshold)
+        current = _greedy_assignment(placing, count, threshold)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved)
         # screen in doubt: a set the quick figure leaves short gets its own search
         doubt = [
             s for s, values in zip(sets_of(current), screener.estimate(sets_of(current))) if _short(values, threshold)
         ]
-        progress("partition", count - first, step, f"{count} sets: {len(doubt)} set searches")
+        progress("partition", number, step, f"{count} sets: {len(doubt)} set searches")
         screener.retained(doubt)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        if searched_key(current)[0] == 1:
+        reached = searched_key(current)[0] == 1
+        if reached != (count == max_sets):
             break
-    progress("partition", max_sets - first + 1, max_sets - first + 1, f"{tried[-1]} sets")
+    progress("partition", step, step, f"{tried[-1]} sets")
     best = max(seen, key=searched_key)
     return PartitionOutcome(
         assignment=best,
         retained=screener.partition_retained(best),
-        method="quick_screening+colouring+local_moves",
+        method="quick_screening+colouring+local_moves" if every_pair else "carving_neighbours+colouring+local_moves",
         proven=False,
         pair_retained=pair_retained,
         lower_bound_sets=lower,
@@ -328,6 +440,8 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         sets_tried=tried,
         set_screenings=len(screener.cache),
         fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
+        probed_parts=len(probes),
+        screened_pairs=int((~np.isnan(compatibility[np.triu_indices(parts, 1)])).sum()),
     )
 
 
@@ -439,7 +553,8 @@ class PartitionAttempt:
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
     designed : bool
-        Its sets were designed by METHOD §1-9 (the partition delivered, and one finger when compared).
+        Its sets' candidates were designed by METHOD §6-8 (the partition delivered, and one finger when compared);
+        only the delivered partition's fingers are made (METHOD §9).
     """
 
     assignment: tuple[int, ...]
@@ -456,6 +571,7 @@ def search_judged_exactly(
     config: DesignConfig,
     progress: Progress,
     design_exactly: Callable[[frozenset[int]], str | None],
+    finish_exactly: Callable[[frozenset[int]], str | None],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
 
@@ -468,11 +584,14 @@ def search_judged_exactly(
     ``min_retained`` misses it exactly and has fewer than ``max`` sets, and
     stops when the search proposes a partition already judged, or after
     ``[finger_sets] max`` proposals. The best proposal by the exact objective
-    is then designed (``design_exactly`` on each of its sets, METHOD §1-9); if
-    its designed sets miss ``min_retained`` (or a finger cannot be made), one
-    finger for every part is designed too, and the better of the two designed
-    partitions by the exact objective is chosen, so the sets never keep less
-    in their worst scenario than one finger does.
+    is then designed (``design_exactly`` on each of its sets: search and
+    exact re-evaluation, METHOD §6-8); if its designed sets miss
+    ``min_retained`` (or a set cannot be made), one finger for every part is
+    designed too, and the better of the two designed partitions by the exact
+    objective is chosen, so the sets never keep less in their worst scenario
+    than one finger does. Only the chosen partition's fingers are made
+    (``finish_exactly``, METHOD §9): the figures that judge a partition are
+    its chosen candidates' exact ones, which making the finger does not change.
 
     Parameters
     ----------
@@ -482,9 +601,16 @@ def search_judged_exactly(
     config : DesignConfig
     progress : callable
     design_exactly : callable
-        ``design_exactly(set_of_parts)``: designs the set by METHOD §1-9 and
-        calls ``screener.judge_exactly`` with its exact retained qualities
-        (zeros when its finger cannot be made); returns why not, or None.
+        ``design_exactly(set_of_parts)``: chooses the set's candidate by
+        METHOD §6-8 and calls ``screener.judge_exactly`` with its exact
+        retained qualities (zeros when it cannot be designed); returns why
+        not, or None.
+    finish_exactly : callable
+        ``finish_exactly(set_of_parts)``: makes the finger of a set
+        ``design_exactly`` designed (METHOD §9), called only for the sets of
+        the partition delivered; when the finger cannot be made it judges the
+        set at zeros and returns why, and the next best designed partition is
+        delivered instead.
 
     Returns
     -------
@@ -543,11 +669,20 @@ def search_judged_exactly(
     single = tuple([0] * parts)
     if (best.failure is not None or best.exact_worst < threshold) and best.assignment != single:
         design(single, "one_finger")
-    # a partition with a finger that cannot be made is delivered only when every one designed has one
-    chosen = max(
-        (a for a in attempts if a.designed),
-        key=lambda a: (a.failure is None, key(a.assignment)),
-    )
+    while True:
+        # a partition with a finger that cannot be made is delivered only when every one designed has one
+        chosen = max(
+            (a for a in attempts if a.designed),
+            key=lambda a: (a.failure is None, key(a.assignment)),
+        )
+        if chosen.failure is not None:
+            break
+        failures = [f for f in map(finish_exactly, sets_of(chosen.assignment)) if f is not None]
+        if not failures:
+            break
+        judge(chosen.assignment, chosen.source, failures[0], designed=True)
+        if not any(a.assignment == single and a.designed for a in attempts):
+            design(single, "one_finger")
     outcome = dataclasses.replace(
         outcome,
         assignment=chosen.assignment,
