@@ -305,7 +305,10 @@ def _audit(args: argparse.Namespace) -> int:
     for problem in result.problems:
         print(f"PROBLEM: {problem}")
     if args.verify is not None or args.inputs is not None:
-        print("verification " + ("FAILED" if result.problems else "passed"))
+        # not "verification": that word is the simulated grasp test's, whose own verdict the record tells above
+        print(
+            "record check " + ("FAILED" if result.problems else "passed: the files match the hashes the record holds")
+        )
     return EXIT_FAILED if result.problems else EXIT_OK
 
 

@@ -147,7 +147,7 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
 
     code, text = _audit(capsys, str(out / "job.mcap"), "--verify", str(out), "--inputs", str(folder))
     assert code == 0, text
-    assert "verification passed" in text and "state done" in text and "TRUNCATED" not in text
+    assert "record check passed" in text and "state done" in text and "TRUNCATED" not in text
     # a tampered output is caught
     tampered = base / "tampered"
     shutil.copytree(out, tampered)

@@ -88,7 +88,7 @@ def test_a_repeated_job_reuses_the_delivered_finger_after_kill_9_and_other_parts
     assert main(["audit", str(out_again / "job.mcap"), "--verify", str(out_again)]) == 0
     told = capsys.readouterr().out
     assert f"set 1: mount library finger 1 delivered by {first['job_id']}, ../{first['job_id']}/finger.stl" in told
-    assert "verification passed" in told
+    assert "record check passed" in told
 
     # B: other parts, a new finger designed and printed
     out_b = tmp_path / "out" / other["job_id"]
