@@ -39,8 +39,10 @@ from fcso.sim.verify import (
     flat_pad,
     grasp_case,
     holding_tests,
+    is_flat_control,
     part_pieces,
     precision_grasps,
+    verify,
     verify_case,
     weaker_than_flat,
 )
@@ -480,3 +482,23 @@ def test_a_verification_stopped_early_has_the_verdict_of_the_full_run(tmp_path):
     page = section_html(report, {"trial 0": b"", "errors 0": b""})
     assert f"<td>{first_failure - 1} of {first_failure} (stopped; 4 planned)</td>" in page
     assert "Holding test not run" in page and '<td class="text">other pose 1</td>' in page
+
+
+def test_a_design_delivered_with_flat_pads_is_simulated_as_the_flat_control(tmp_path):
+    # a plain cube: nothing beats flat, so flat pads are delivered; the designed finger's trials are the control's
+    result = design(
+        [Part(name="plain cube", path="plain cube", mesh=trimesh.creation.box(extents=(30.0, 30.0, 30.0)))],
+        DesignConfig().updated({"poses": {"count": 1}}),
+    )
+    assert result.report.finger.flat_pads
+    under_test = design_under_test(result)
+    case = under_test.cases[0]
+    assert is_flat_control(under_test.fingerpad, case.pad_size_mm, case.penetration_mm)
+    report = verify(under_test, _config(tmp_path, trials=3, stop_early=False))
+    scenario = report.scenarios[0]
+    assert [t.model_dump() for t in scenario.fcso.trials] == [t.model_dump() for t in scenario.flat.trials]
+    assert scenario.fcso.holding_n == scenario.flat.holding_n
+    # a carved pad is not the control
+    carved = trimesh.creation.box(bounds=[[case.penetration_mm, 0.0, 0.0], [case.pad_size_mm[0], 20.0, 20.0]])
+    carved = carved.difference(trimesh.creation.box(bounds=[[3.0, 5.0, 5.0], [4.5, 10.0, 10.0]]))
+    assert not is_flat_control(carved, case.pad_size_mm, case.penetration_mm)
