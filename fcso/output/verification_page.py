@@ -17,7 +17,7 @@ from ..geometry import transform_points
 from ..report.models import DesignReport
 from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport
 from ..sim.scene import pad_in_world
-from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
+from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
 from .decimate import decimate
 from .layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from .read import read_design_folder
@@ -227,8 +227,8 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
 def _success_text(trials: list, stopped_after: int | None, planned: int) -> str:
     """Success rate, or for trials stopped early the count of those run."""
     if stopped_after is None:
-        return f"{sum(t.success for t in trials) / len(trials):.0%}" if trials else "-"
-    return f"{sum(t.success for t in trials)} of {len(trials)} (stopped; {planned} planned)"
+        return f"{successes(trials) / len(trials):.0%}" if trials else "-"
+    return f"{successes(trials)} of {len(trials)} (stopped; {planned} planned)"
 
 
 def _number(value: float | None) -> str:

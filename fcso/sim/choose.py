@@ -12,7 +12,7 @@ from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
-from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify
+from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, successes, verify
 
 
 def candidate_design(
@@ -138,7 +138,7 @@ def worst_success_share(verification: VerificationReport) -> float:
     planned = verification.settings.trials
     if planned == 0:
         return 0.0
-    shares = [sum(t.success for t in s.fcso.trials) / planned for s in verification.scenarios]
+    shares = [successes(s.fcso.trials) / planned for s in verification.scenarios]
     return min(shares + [0.0] * len(verification.unverified_scenarios), default=0.0)
 
 
