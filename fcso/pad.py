@@ -68,6 +68,22 @@ def rebuilt_from_mesh(solid: manifold3d.Manifold) -> manifold3d.Manifold:
     return _from_mesh_arrays(*_mesh_arrays(solid))
 
 
+def distinct_solids(solids: list[manifold3d.Manifold]) -> list[manifold3d.Manifold]:
+    """The distinct meshes of ``solids`` (first of each, in order), each rebuilt from its mesh.
+
+    manifold3d's Booleans triangulate by their operands' identities as well as
+    their meshes (one object given twice is not two equal objects): rebuilt,
+    the operands of a Boolean are the same whether they were made here, by a
+    forked worker or on a Dask cluster, and a carving shared by several
+    scenarios is subtracted once.
+    """
+    distinct: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    for solid in solids:
+        vertices, triangles = _mesh_arrays(solid)
+        distinct.setdefault(vertices.tobytes() + triangles.tobytes(), (vertices, triangles))
+    return [_from_mesh_arrays(vertices, triangles) for vertices, triangles in distinct.values()]
+
+
 def _mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
     mesh = solid.to_mesh64()
     return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
@@ -296,7 +312,9 @@ def build_fingerpad(geometries: list[PadGeometry], sampler: SamplerConfig, filte
         pad = box((depth, 0.0, 0.0), (thickness, length, width))
         result = Fingerpad(pad=pad, case="bad", block_depth_mm=None)
     else:
-        removed = manifold3d.Manifold.batch_boolean([g.intersection for g in good], manifold3d.OpType.Add)
+        removed = manifold3d.Manifold.batch_boolean(
+            distinct_solids([g.intersection for g in good]), manifold3d.OpType.Add
+        )
         block_depth = None
         case = "good"
         if len(good) < len(geometries):

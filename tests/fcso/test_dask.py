@@ -65,12 +65,9 @@ def test_the_scaled_partition_search_on_a_dask_cluster_gives_the_local_report(cl
     local = design_sets(parts, config(**settings))
     on_cluster = design_sets(parts, config(compute={"scheduler": cluster.scheduler_address}, **settings))
     assert local.report.search.method == "carving_neighbours+colouring+local_moves"
-    expected, got = report_without_timings(local), report_without_timings(on_cluster)
-    # these four knobs end on one finger whose thinnest wall differs on Dask (9.080566 locally, 9.077406 on the
-    # cluster), on main c1872a5's exhaustive search too: a defect of the printed-fit measurement, not of the search,
-    # left to its own fix; everything else of the report must be the same
-    expected["print_fit"].pop("thinnest_wall_mm"), got["print_fit"].pop("thinnest_wall_mm")
-    assert got == expected
+    # these four knobs share carvings: their pad's thinnest wall differed on Dask (9.077406 against 9.080566) while
+    # manifold3d's union triangulated a carving given twice as one object locally and as two on the cluster
+    assert report_without_timings(on_cluster) == report_without_timings(local)
 
 
 def test_a_worker_killed_mid_job_costs_a_retry_not_the_job(cluster, tmp_path):
