@@ -14,14 +14,16 @@ import trimesh
 
 from . import __version__
 from .config import DesignConfig
-from .errors import NoGraspError
+from .errors import GeometryError, NoGraspError
 from .evaluate import (
     CandidateEvaluation,
     SampleGeometry,
     Scenario,
+    candidate_fingerpad,
     evaluate_candidate,
     fit_key,
     fitted_sample,
+    opened_pad,
     printed_lead_in_deg,
     sample_geometry,
     screen_on_pad,
@@ -30,7 +32,7 @@ from .evaluate import (
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
 from .geometry import to_manifold
 from .measure import quality_words, scenario_measure
-from .pad import PadGeometry
+from .pad import Fingerpad, PadGeometry, mesh_arrays, solid_from_mesh_arrays
 from .parallel import WorkerPool, resolve_jobs
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
@@ -278,30 +280,84 @@ def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConf
 def finish_candidate(
     scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig, flat: bool = False, jobs: int = 1
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
-    """One candidate built as :func:`design` builds its choice: carved with ``[print]``'s fit, its pad kept.
+    """One candidate built as :func:`design` builds its choice: :func:`finish_candidates` of that one."""
+    return finish_candidates([(scenarios, tuple(choice))], config, flat, jobs)[0]
 
-    ``flat`` builds flat pads on the candidate's grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
-    ``jobs`` workers carve the printed-fit pockets of its samples (``[compute] scheduler``'s when set).
 
-    Returns the fitted evaluation, its grasps and print-fit report as
-    ``report.json`` lists them, and the print-fit warnings.
+def finish_candidates(
+    candidates: Sequence[tuple[list[Scenario], tuple[int, ...]]],
+    config: DesignConfig,
+    flat: bool = False,
+    jobs: int = 1,
+) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
+    """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
+
+    ``flat`` builds flat pads on the candidates' grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
+    The printed-fit pockets of every candidate's samples, then the thin-wall
+    openings of their pads (two Minkowski sums each, a second or more) are
+    made on ``jobs`` workers (``[compute] scheduler``'s when set): a job's
+    finger sets are finished together. Each opened pad is rebuilt from its
+    mesh, so it is the same wherever it was opened.
+
+    Parameters
+    ----------
+    candidates : sequence of (list of Scenario, tuple of int)
+        Each candidate's scenarios (samples shared between candidates are carved once) and sample index per
+        scenario.
+    config : DesignConfig
+    flat : bool
+    jobs : int
+
+    Returns
+    -------
+    list of (CandidateEvaluation, list of GraspReport, PrintFitReport, list of str)
+        Per candidate: the fitted evaluation, its grasps and print-fit report
+        as ``report.json`` lists them, and the print-fit warnings.
     """
-    choice = tuple(choice)
-    lead_in, why = (config.print.lead_in_deg, None) if flat else printed_lead_in_deg(scenarios, choice, config)
-    if why is not None:
-        config = config.updated({"print": {"lead_in_deg": lead_in}})
-    key = fit_key(config)
-    missing = (
-        []
-        if flat or key is None
-        else [(m, k) for m, k in enumerate(choice) if key not in scenarios[m].samples[k].fitted]
+    fits = [
+        (config.print.lead_in_deg, None) if flat else printed_lead_in_deg(scenarios, choice, config)
+        for scenarios, choice in candidates
+    ]
+    configs = [config if why is None else config.updated({"print": {"lead_in_deg": angle}}) for angle, why in fits]
+    # every scenario of the candidates once: the workers' shared context
+    shared = list({id(s): s for scenarios, _ in candidates for s in scenarios}.values())
+    number = {id(s): n for n, s in enumerate(shared)}
+    missing = list(
+        dict.fromkeys(
+            (number[id(scenarios[m])], k, fitted_config.print.lead_in_deg)
+            for (scenarios, choice), fitted_config in zip(candidates, configs)
+            if not flat and fit_key(fitted_config) is not None
+            for m, k in enumerate(choice)
+            if fit_key(fitted_config) not in scenarios[m].samples[k].fitted
+        )
     )
-    if len(missing) > 1:
-        # two Minkowski sums per good geometry, a second or so each: a large set's finger carves on every core
-        with WorkerPool((scenarios, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
-            for (m, k), made in zip(missing, pool.map(_fit_task, missing)):
-                scenarios[m].samples[k].fitted[key] = made
-    fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat)
+    with WorkerPool((shared, config), min(jobs, max(len(missing), len(candidates))), config.compute.scheduler) as pool:
+        for (n, k, angle), made in zip(missing, pool.map(_fit_task, missing)):
+            shared[n].samples[k].fitted[fit_key(config.updated({"print": {"lead_in_deg": angle}}))] = made
+        pads = [
+            candidate_fingerpad(scenarios, choice, fitted_config, fitted=True, flat=flat)
+            for (scenarios, choice), fitted_config in zip(candidates, configs)
+        ]
+        opened = pool.map(
+            _open_task, [(mesh_arrays(pad.pad), fitted_config) for pad, fitted_config in zip(pads, configs)]
+        )
+    fingerpads = [dataclasses.replace(pad, pad=solid_from_mesh_arrays(*arrays)) for pad, arrays in zip(pads, opened)]
+    return [
+        _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
+        for (scenarios, choice), fitted_config, fingerpad, (_, why) in zip(candidates, configs, fingerpads, fits)
+    ]
+
+
+def _finished(
+    scenarios: list[Scenario],
+    choice: tuple[int, ...],
+    config: DesignConfig,
+    flat: bool,
+    fingerpad: Fingerpad,
+    why: str | None,
+) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
+    """One candidate of :func:`finish_candidates` evaluated on its opened pad (``config`` with its lead-in)."""
+    fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat, fingerpad=fingerpad)
     fit, sampler = config.print.resolved(), config.sampler
     exact = (
         evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
@@ -630,37 +686,88 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
 
 
 def finish_design(prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig) -> DesignResult:
-    """The finger of a chosen candidate (METHOD §9) and the design's report: the rest of :func:`design_prepared`.
-
-    Parameters
-    ----------
-    prepared : Prepared
-        The batch ``chosen`` was chosen on (:func:`choose_candidate`).
-    chosen : ChosenCandidate
-    config : DesignConfig
-
-    Returns
-    -------
-    DesignResult
+    """The finger of a chosen candidate (METHOD §9) and the design's report: :func:`finish_designs` of that one.
 
     Raises
     ------
     GeometryError
         The fused finger is not one printable body.
     """
+    made = finish_designs([(prepared, chosen)], config)[0]
+    if isinstance(made, GeometryError):
+        raise made
+    return made
+
+
+def finish_designs(
+    designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
+) -> list[DesignResult | GeometryError]:
+    """The fingers of chosen candidates (METHOD §9) and their designs' reports: the rest of :func:`design_prepared`.
+
+    The candidates are finished together (:func:`finish_candidates`, on the
+    batches' workers): a job's finger sets carve their printed-fit pockets
+    and open their thin walls side by side. Each design's ``finger`` timing
+    holds an equal share of that.
+
+    Parameters
+    ----------
+    designs : sequence of (Prepared, ChosenCandidate)
+        Each batch and the candidate chosen on it (:func:`choose_candidate`).
+    config : DesignConfig
+
+    Returns
+    -------
+    list of DesignResult or GeometryError
+        Per design, its result, or the error saying why its fused finger is not one printable body.
+    """
+    clock = time.perf_counter()
+    jobs = max(prepared.jobs for prepared, _ in designs)
+    candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
+    try:
+        finished = finish_candidates(candidates, config, jobs=jobs)
+        compared = [
+            versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
+            for (prepared, chosen), (best, *_) in zip(designs, finished)
+        ]
+        # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
+        # §7b)
+        flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
+        for n, made in zip(flat, finish_candidates([candidates[n] for n in flat], config, flat=True, jobs=jobs)):
+            finished[n] = made
+            compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
+    except GeometryError as error:
+        # a pad Boolean failed: each design alone says whose
+        if len(designs) == 1:
+            return [error]
+        return [made for design in designs for made in finish_designs([design], config)]
+    shared_s = (time.perf_counter() - clock) / len(designs)
+    results: list[DesignResult | GeometryError] = []
+    for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
+        try:
+            results.append(_finished_design(prepared, chosen, config, made, versus, n in flat, shared_s))
+        except GeometryError as error:
+            results.append(error)
+    return results
+
+
+def _finished_design(
+    prepared: Prepared,
+    chosen: ChosenCandidate,
+    config: DesignConfig,
+    finished: tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]],
+    compared: list,
+    flat_pads: bool,
+    finishing_s: float,
+) -> DesignResult:
+    """One design of :func:`finish_designs`: its finger fused and its report, ``finishing_s`` its share of the
+    candidates' finishing."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
     outcome, ranked, exact, indices = chosen.outcome, chosen.ranked, chosen.exact, chosen.indices
     best_choice, upper_bound, listed_screens = chosen.choice, chosen.upper_bound, chosen.listed_screens
-    clock = time.perf_counter()
-    best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config, jobs=jobs)
-    compared = versus_flat(scenarios, best, exact.values(), config)
-    # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD §7b)
-    flat_pads = all(versus is not None and not versus.beats_flat for versus in compared)
-    if flat_pads:
-        best, grasps, print_fit, fit_warnings = finish_candidate(scenarios, best_choice, config, flat=True)
-        compared = versus_flat(scenarios, best, exact.values(), config)
+    clock = time.perf_counter() - finishing_s
+    best, grasps, print_fit, fit_warnings = finished
     transform = pad_to_finger(finger, config.sampler)
     fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     # a clearance deepens the pocket by c: the carving demands that much less
@@ -823,10 +930,17 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
     return [(c.quality, c.mean_effective_area) for c in _screen_batch(context, choices)]
 
 
-def _fit_task(context, task: tuple[int, int]) -> list[PadGeometry]:
+def _fit_task(context, task: tuple[int, int, float]) -> list[PadGeometry]:
     scenarios, config = context
-    number, index = task
+    number, index, lead_in_deg = task
+    if lead_in_deg != config.print.lead_in_deg:
+        config = config.updated({"print": {"lead_in_deg": lead_in_deg}})
     return fitted_sample(scenarios[number], scenarios[number].samples[index], config)
+
+
+def _open_task(context, task: tuple[tuple[np.ndarray, np.ndarray], DesignConfig]) -> tuple[np.ndarray, np.ndarray]:
+    arrays, config = task
+    return mesh_arrays(opened_pad(solid_from_mesh_arrays(*arrays), config))
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:

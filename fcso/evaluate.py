@@ -227,6 +227,7 @@ def evaluate_candidate(
     keep_pad: bool,
     fitted: bool = False,
     flat: bool = False,
+    fingerpad: Fingerpad | None = None,
 ) -> CandidateEvaluation:
     """Carve, seat and score one candidate (METHOD §4-7).
 
@@ -235,19 +236,15 @@ def evaluate_candidate(
     (:mod:`fcso.printfit`); the search ranks candidates on exact pockets.
     ``flat`` carves nothing: flat pads (the case "bad") on the candidate's
     grasps, the pad delivered where no carving captures better (METHOD §7b).
+    ``fingerpad``: the candidate's pad when already made so
+    (:func:`candidate_fingerpad`, its thin walls opened when ``fitted``).
     """
     chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
-    geometries = [] if flat else [g for sample in chosen for g in sample.geometries]
     fit = config.print.resolved()
-    if fitted and not flat:
-        geometries = fitted_geometries(scenarios, chosen, config)
-    fingerpad = build_fingerpad(geometries, config.sampler, config.filter)
-    if fitted:
-        sampler = config.sampler
-        opened = open_thin_walls(
-            fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, fit["min_wall_mm"]
-        )
-        fingerpad = Fingerpad(opened, fingerpad.case, fingerpad.block_depth_mm)
+    if fingerpad is None:
+        fingerpad = candidate_fingerpad(scenarios, choice, config, fitted, flat)
+        if fitted:
+            fingerpad = dataclasses.replace(fingerpad, pad=opened_pad(fingerpad.pad, config))
     pad_mesh = fingerpad.pad.to_mesh()
     vertices = np.asarray(pad_mesh.vert_properties[:, :3], dtype=np.float64)
     faces = np.asarray(pad_mesh.tri_verts, dtype=np.int64)
@@ -289,6 +286,31 @@ def evaluate_candidate(
         block_depth_mm=fingerpad.block_depth_mm,
         fingerpad=fingerpad if keep_pad else None,
     )
+
+
+def candidate_fingerpad(
+    scenarios: list[Scenario], choice: tuple[int, ...], config: DesignConfig, fitted: bool = False, flat: bool = False
+) -> Fingerpad:
+    """A candidate's pad (METHOD §4-5) as :func:`evaluate_candidate` carves it, before any thin-wall opening.
+
+    ``fitted`` carves the printed-fit pockets (made and kept with the samples when missing); ``flat`` carves
+    nothing.
+    """
+    chosen = [scenario.samples[k] for scenario, k in zip(scenarios, choice)]
+    if flat:
+        geometries = []
+    elif fitted:
+        geometries = fitted_geometries(scenarios, chosen, config)
+    else:
+        geometries = [g for sample in chosen for g in sample.geometries]
+    return build_fingerpad(geometries, config.sampler, config.filter)
+
+
+def opened_pad(pad: manifold3d.Manifold, config: DesignConfig) -> manifold3d.Manifold:
+    """``pad`` without the walls thinner than ``[print]``'s minimum (:func:`fcso.printfit.open_thin_walls`)."""
+    sampler = config.sampler
+    minimum = config.print.resolved()["min_wall_mm"]
+    return open_thin_walls(pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm, minimum)
 
 
 def screen_on_pad(

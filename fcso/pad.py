@@ -51,11 +51,11 @@ class PadGeometry:
     def __getstate__(self) -> dict:
         # manifold3d solids do not pickle: worker processes send the mesh
         state = dict(self.__dict__)
-        state["intersection"] = _mesh_arrays(self.intersection)
+        state["intersection"] = mesh_arrays(self.intersection)
         return state
 
     def __setstate__(self, state: dict) -> None:
-        state["intersection"] = _from_mesh_arrays(*state["intersection"])
+        state["intersection"] = solid_from_mesh_arrays(*state["intersection"])
         self.__dict__.update(state)
 
 
@@ -65,7 +65,7 @@ def rebuilt_from_mesh(solid: manifold3d.Manifold) -> manifold3d.Manifold:
     manifold3d's later Booleans triangulate a solid's history differently from
     its mesh, and a design must not depend on where its geometries were made.
     """
-    return _from_mesh_arrays(*_mesh_arrays(solid))
+    return solid_from_mesh_arrays(*mesh_arrays(solid))
 
 
 def distinct_solids(solids: list[manifold3d.Manifold]) -> list[manifold3d.Manifold]:
@@ -79,17 +79,19 @@ def distinct_solids(solids: list[manifold3d.Manifold]) -> list[manifold3d.Manifo
     """
     distinct: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
     for solid in solids:
-        vertices, triangles = _mesh_arrays(solid)
+        vertices, triangles = mesh_arrays(solid)
         distinct.setdefault(vertices.tobytes() + triangles.tobytes(), (vertices, triangles))
-    return [_from_mesh_arrays(vertices, triangles) for vertices, triangles in distinct.values()]
+    return [solid_from_mesh_arrays(vertices, triangles) for vertices, triangles in distinct.values()]
 
 
-def _mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
+def mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    """``solid``'s vertices (mm, float64) and triangles: what a worker sends of a solid (manifold3d's do not pickle)."""
     mesh = solid.to_mesh64()
     return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
 
 
-def _from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manifold3d.Manifold:
+def solid_from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manifold3d.Manifold:
+    """The solid of :func:`mesh_arrays`."""
     return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
 
 

@@ -21,7 +21,7 @@ from ..design import (
     best_pad_size,
     choose_candidate,
     design,
-    finish_design,
+    finish_designs,
     load_batch,
     prepare,
     subset,
@@ -202,16 +202,19 @@ def _design_sets_of_one_size(
             screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
         return failures.get(members)
 
-    def finish_exactly(members: frozenset[int]) -> str | None:
-        """The finger of a set designed by :func:`design_exactly`, once; why it could not be made (a pad so carved
-        that the fused finger is not one printable body), or None."""
-        if members not in exact_designs and members not in failures:
-            try:
-                made = finish_design(subset(prepared, numbers_of(members)), chosen_candidates[members], config)
-            except GeometryError as error:
-                return failed(members, error)
-            exact_designs[members] = made
-        return failures.get(members)
+    def finish_exactly(sets: list[frozenset[int]]) -> list[str | None]:
+        """The fingers of sets designed by :func:`design_exactly`, each made once, together
+        (:func:`fcso.design.finish_designs`); per set why its finger could not be made (a pad so carved that the
+        fused finger is not one printable body), or None."""
+        todo = [members for members in sets if members not in exact_designs and members not in failures]
+        if todo:
+            made = finish_designs([(subset(prepared, numbers_of(m)), chosen_candidates[m]) for m in todo], config)
+            for members, result in zip(todo, made):
+                if isinstance(result, GeometryError):
+                    failed(members, result)
+                else:
+                    exact_designs[members] = result
+        return [failures.get(members) for members in sets]
 
     # no more workers than sets to screen: one part has one partition
     with WorkerPool(

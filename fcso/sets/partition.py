@@ -571,7 +571,7 @@ def search_judged_exactly(
     config: DesignConfig,
     progress: Progress,
     design_exactly: Callable[[frozenset[int]], str | None],
-    finish_exactly: Callable[[frozenset[int]], str | None],
+    finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
 
@@ -606,11 +606,11 @@ def search_judged_exactly(
         retained qualities (zeros when it cannot be designed); returns why
         not, or None.
     finish_exactly : callable
-        ``finish_exactly(set_of_parts)``: makes the finger of a set
-        ``design_exactly`` designed (METHOD §9), called only for the sets of
-        the partition delivered; when the finger cannot be made it judges the
-        set at zeros and returns why, and the next best designed partition is
-        delivered instead.
+        ``finish_exactly(sets_of_parts)``: makes the fingers of sets
+        ``design_exactly`` designed (METHOD §9), together, called only for the
+        sets of the partition delivered; per set, when its finger cannot be
+        made it judges the set at zeros and says why (else None), and the next
+        best designed partition is delivered instead.
 
     Returns
     -------
@@ -677,7 +677,7 @@ def search_judged_exactly(
         )
         if chosen.failure is not None:
             break
-        failures = [f for f in map(finish_exactly, sets_of(chosen.assignment)) if f is not None]
+        failures = [f for f in finish_exactly(sets_of(chosen.assignment)) if f is not None]
         if not failures:
             break
         judge(chosen.assignment, chosen.source, failures[0], designed=True)
