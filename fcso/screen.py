@@ -162,6 +162,11 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
     return heights.astype(np.float32)
 
 
+#: The eroded and dilated maps of a bad geometry (never carved, so never read).
+_NO_MAP = np.zeros((0, 0), dtype=np.float32)
+_NO_MAP.flags.writeable = False
+
+
 @dataclass
 class ScreenGeometry:
     """One pad geometry ``I_n`` of a sample, prepared for screening.
@@ -181,7 +186,8 @@ class ScreenGeometry:
     window_heights_mm : (rows, columns) float32
         Column heights of ``I_n`` (:func:`column_heights`) in the window.
     window_low_mm, window_high_mm : (rows, columns) float32
-        The same eroded and dilated by one cell (3 x 3 minimum and maximum over the whole grid), in the window.
+        The same eroded and dilated by one cell (3 x 3 minimum and maximum over the whole grid), in the window;
+        empty for a bad geometry, which is never carved.
     good : bool
         The filter's label.
     depth_mm : float
@@ -317,8 +323,9 @@ def prepare_geometry(
         grid_shape=(grid.count_v, grid.count_w),
         window=window,
         window_heights_mm=square[cells].copy(),
-        window_low_mm=minimum_filter(square, size=3, mode="nearest")[cells].copy(),
-        window_high_mm=maximum_filter(square, size=3, mode="nearest")[cells].copy(),
+        # only good geometries are carved: a bad one's maps would be two thirds of its memory, never read
+        window_low_mm=minimum_filter(square, size=3, mode="nearest")[cells].copy() if good else _NO_MAP,
+        window_high_mm=maximum_filter(square, size=3, mode="nearest")[cells].copy() if good else _NO_MAP,
         good=bool(good),
         depth_mm=float(depth_mm),
         point_u_mm=np.asarray(points[:, 0], dtype=np.float32),
