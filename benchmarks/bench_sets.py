@@ -225,10 +225,15 @@ def cpu_seconds() -> float:
 
 
 def stage_log(stage: str, done: int, total: int, note: str = "", _last=[None]) -> None:  # noqa: B006
-    """Stage changes on standard error with the time: where a long run spends it."""
+    """Stage changes on standard error with the time and this process's peak memory so far: where a long run spends
+    them."""
     if stage != _last[0]:
         _last[0] = stage
-        print(f"  [{time.strftime('%H:%M:%S')}] {stage} {done}/{total} {note}", file=sys.stderr, flush=True)
+        print(
+            f"  [{time.strftime('%H:%M:%S')}, peak {peak_memory_mb()[0]:.0f} MB] {stage} {done}/{total} {note}",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def run_curve(sizes: list[int], runs: int) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,9 +31,9 @@ from .evaluate import (
     versus_flat,
 )
 from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
-from .geometry import to_manifold
+from .geometry import mesh_arrays, solid_from_mesh_arrays, to_manifold
 from .measure import quality_words, scenario_measure
-from .pad import Fingerpad, PadGeometry, mesh_arrays, solid_from_mesh_arrays
+from .pad import Fingerpad, PadGeometry
 from .parallel import WorkerPool, resolve_jobs
 from .parts import Part, load_parts
 from .poses import select_poses, stable_poses
@@ -278,10 +279,15 @@ def evaluate_exact(prepared: Prepared, choice: Sequence[int], config: DesignConf
 
 
 def finish_candidate(
-    scenarios: list[Scenario], choice: Sequence[int], config: DesignConfig, flat: bool = False, jobs: int = 1
+    scenarios: list[Scenario],
+    choice: Sequence[int],
+    config: DesignConfig,
+    flat: bool = False,
+    jobs: int = 1,
+    openings: dict[str, tuple] | None = None,
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
     """One candidate built as :func:`design` builds its choice: :func:`finish_candidates` of that one."""
-    return finish_candidates([(scenarios, tuple(choice))], config, flat, jobs)[0]
+    return finish_candidates([(scenarios, tuple(choice))], config, flat, jobs, openings)[0]
 
 
 def finish_candidates(
@@ -289,6 +295,8 @@ def finish_candidates(
     config: DesignConfig,
     flat: bool = False,
     jobs: int = 1,
+    openings: dict[str, tuple] | None = None,
+    progress: Progress | None = None,
 ) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
 
@@ -307,6 +315,10 @@ def finish_candidates(
     config : DesignConfig
     flat : bool
     jobs : int
+    openings : dict, optional
+        Printed pads made before (:func:`pad_key`: mesh arrays, case, block depth); new ones are added. The choice
+        by truth keeps one for the candidates of a design, which often carve the same pad.
+    progress : callable, optional
 
     Returns
     -------
@@ -331,21 +343,51 @@ def finish_candidates(
             if fit_key(fitted_config) not in scenarios[m].samples[k].fitted
         )
     )
-    with WorkerPool((shared, config), min(jobs, max(len(missing), len(candidates))), config.compute.scheduler) as pool:
+    report_progress = _progress_with_note(progress)
+    report_progress("fingers", 0, len(candidates), f"{len(missing)} printed-fit pockets")
+    with WorkerPool((shared, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
         for (n, k, angle), made in zip(missing, pool.map(_fit_task, missing)):
             shared[n].samples[k].fitted[fit_key(config.updated({"print": {"lead_in_deg": angle}}))] = made
-        pads = [
-            candidate_fingerpad(scenarios, choice, fitted_config, fitted=True, flat=flat)
-            for (scenarios, choice), fitted_config in zip(candidates, configs)
-        ]
-        opened = pool.map(
-            _open_task, [(mesh_arrays(pad.pad), fitted_config) for pad, fitted_config in zip(pads, configs)]
-        )
-    fingerpads = [dataclasses.replace(pad, pad=solid_from_mesh_arrays(*arrays)) for pad, arrays in zip(pads, opened)]
+    cache = {} if openings is None else openings
+    keys = [
+        pad_key([s.samples[k] for s, k in zip(scenarios, choice)], fitted_config, flat)
+        for (scenarios, choice), fitted_config in zip(candidates, configs)
+    ]
+    # a pad carved by several candidates is made once
+    tasks = {
+        key: ([number[id(s)] for s in scenarios], choice, fitted_config.print.lead_in_deg)
+        for key, (scenarios, choice), fitted_config in zip(keys, candidates, configs)
+    }
+    todo = [key for key in tasks if key not in cache]
+    report_progress("fingers", 0, len(candidates), f"carving and opening {len(todo)} pads")
+    # forked after the pockets were carved, the workers hold them: each builds and opens its candidates' pads (the
+    # union of a large set's pockets is minutes of Booleans)
+    with WorkerPool((shared, config, flat), min(jobs, len(todo)), config.compute.scheduler) as pool:
+        cache.update(zip(todo, pool.map(_pad_task, [tasks[key] for key in todo])))
+    fingerpads = [Fingerpad(solid_from_mesh_arrays(*cache[key][0]), *cache[key][1:]) for key in keys]
+    report_progress("fingers", len(candidates), len(candidates), "")
     return [
         _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
         for (scenarios, choice), fitted_config, fingerpad, (_, why) in zip(candidates, configs, fingerpads, fits)
     ]
+
+
+def pad_key(samples: Sequence[SampleGeometry], config: DesignConfig, flat: bool) -> str:
+    """What a candidate's printed pad depends on: its samples' printed-fit pockets (their exact meshes), the pad box,
+    ``[filter]`` and ``[print]``'s minimum wall; or only the box for flat pads."""
+    sampler, key = config.sampler, fit_key(config)
+    sizes = [sampler.thickness_mm, sampler.length_mm, sampler.width_mm, sampler.penetration_mm]
+    sizes += [config.filter.block_factor, config.print.resolved()["min_wall_mm"]]
+    digest = hashlib.sha256(np.array(sizes + [float(flat)], dtype="<f8").tobytes())
+    geometries = (
+        [] if flat else [g for sample in samples for g in (sample.geometries if key is None else sample.fitted[key])]
+    )
+    for geometry in geometries:
+        vertices, triangles = mesh_arrays(geometry.intersection)
+        digest.update(np.array([geometry.good, geometry.depth_mm], dtype="<f8").tobytes())
+        digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
+        digest.update(np.ascontiguousarray(triangles, dtype="<i8").tobytes())
+    return digest.hexdigest()
 
 
 def _finished(
@@ -544,7 +586,7 @@ def design_prepared(prepared: Prepared, config: DesignConfig, progress: Progress
     -------
     DesignResult
     """
-    return finish_design(prepared, choose_candidate(prepared, config, progress), config)
+    return finish_design(prepared, choose_candidate(prepared, config, progress), config, progress)
 
 
 @dataclass
@@ -685,7 +727,9 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     )
 
 
-def finish_design(prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig) -> DesignResult:
+def finish_design(
+    prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig, progress: Progress | None = None
+) -> DesignResult:
     """The finger of a chosen candidate (METHOD §9) and the design's report: :func:`finish_designs` of that one.
 
     Raises
@@ -693,14 +737,14 @@ def finish_design(prepared: Prepared, chosen: ChosenCandidate, config: DesignCon
     GeometryError
         The fused finger is not one printable body.
     """
-    made = finish_designs([(prepared, chosen)], config)[0]
+    made = finish_designs([(prepared, chosen)], config, progress)[0]
     if isinstance(made, GeometryError):
         raise made
     return made
 
 
 def finish_designs(
-    designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
+    designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig, progress: Progress | None = None
 ) -> list[DesignResult | GeometryError]:
     """The fingers of chosen candidates (METHOD §9) and their designs' reports: the rest of :func:`design_prepared`.
 
@@ -714,6 +758,7 @@ def finish_designs(
     designs : sequence of (Prepared, ChosenCandidate)
         Each batch and the candidate chosen on it (:func:`choose_candidate`).
     config : DesignConfig
+    progress : callable, optional
 
     Returns
     -------
@@ -724,7 +769,7 @@ def finish_designs(
     jobs = max(prepared.jobs for prepared, _ in designs)
     candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
     try:
-        finished = finish_candidates(candidates, config, jobs=jobs)
+        finished = finish_candidates(candidates, config, jobs=jobs, progress=progress)
         compared = [
             versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
             for (prepared, chosen), (best, *_) in zip(designs, finished)
@@ -732,14 +777,15 @@ def finish_designs(
         # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
         # §7b)
         flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
-        for n, made in zip(flat, finish_candidates([candidates[n] for n in flat], config, flat=True, jobs=jobs)):
+        flat_pads = finish_candidates([candidates[n] for n in flat], config, flat=True, jobs=jobs, progress=progress)
+        for n, made in zip(flat, flat_pads):
             finished[n] = made
             compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
     except GeometryError as error:
         # a pad Boolean failed: each design alone says whose
         if len(designs) == 1:
             return [error]
-        return [made for design in designs for made in finish_designs([design], config)]
+        return [made for design in designs for made in finish_designs([design], config, progress)]
     shared_s = (time.perf_counter() - clock) / len(designs)
     results: list[DesignResult | GeometryError] = []
     for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
@@ -938,9 +984,14 @@ def _fit_task(context, task: tuple[int, int, float]) -> list[PadGeometry]:
     return fitted_sample(scenarios[number], scenarios[number].samples[index], config)
 
 
-def _open_task(context, task: tuple[tuple[np.ndarray, np.ndarray], DesignConfig]) -> tuple[np.ndarray, np.ndarray]:
-    arrays, config = task
-    return mesh_arrays(opened_pad(solid_from_mesh_arrays(*arrays), config))
+def _pad_task(context, task: tuple[list[int], tuple[int, ...], float]) -> tuple:
+    """A candidate's printed pad, built and opened: its mesh arrays, case and block depth."""
+    scenarios, config, flat = context
+    numbers, choice, lead_in_deg = task
+    if lead_in_deg != config.print.lead_in_deg:
+        config = config.updated({"print": {"lead_in_deg": lead_in_deg}})
+    pad = candidate_fingerpad([scenarios[n] for n in numbers], choice, config, fitted=True, flat=flat)
+    return mesh_arrays(opened_pad(pad.pad, config)), pad.case, pad.block_depth_mm
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:

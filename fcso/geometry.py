@@ -294,6 +294,17 @@ def ray_hits(
     return np.asarray(rays, dtype=np.int64), np.asarray(distances, dtype=np.float64)
 
 
+def mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    """``solid``'s vertices (mm, float64) and triangles: what a worker sends of a solid (manifold3d's do not pickle)."""
+    mesh = solid.to_mesh64()
+    return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
+
+
+def solid_from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manifold3d.Manifold:
+    """The solid of :func:`mesh_arrays`."""
+    return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
+
+
 def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
     """Convert a watertight trimesh to a :class:`manifold3d.Manifold`.
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from .config import FilterConfig, SamplerConfig
 from .errors import GeometryError
-from .geometry import affine_3x4, box, clip_to_box, triangle_areas_normals
+from .geometry import affine_3x4, box, clip_to_box, mesh_arrays, solid_from_mesh_arrays, triangle_areas_normals
 
 # (u, v, w) -> (v, w, u): lets manifold3d's slice(z) cut across the pad thickness
 _U_TO_Z = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
@@ -82,17 +82,6 @@ def distinct_solids(solids: list[manifold3d.Manifold]) -> list[manifold3d.Manifo
         vertices, triangles = mesh_arrays(solid)
         distinct.setdefault(vertices.tobytes() + triangles.tobytes(), (vertices, triangles))
     return [solid_from_mesh_arrays(vertices, triangles) for vertices, triangles in distinct.values()]
-
-
-def mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
-    """``solid``'s vertices (mm, float64) and triangles: what a worker sends of a solid (manifold3d's do not pickle)."""
-    mesh = solid.to_mesh64()
-    return np.array(mesh.vert_properties), np.array(mesh.tri_verts)
-
-
-def solid_from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manifold3d.Manifold:
-    """The solid of :func:`mesh_arrays`."""
-    return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
 
 
 def pad_box(sampler: SamplerConfig) -> manifold3d.Manifold:

@@ -40,16 +40,13 @@ solid is written (:func:`fcso.finger.as_written`).
 
 from __future__ import annotations
 
-import hashlib
-import threading
-from collections import OrderedDict
 from functools import lru_cache
 
 import manifold3d
 import numpy as np
 import trimesh
 
-from .geometry import affine_3x4, box, ray_hits, to_trimesh
+from .geometry import affine_3x4, box, mesh_arrays, ray_hits, solid_from_mesh_arrays, to_trimesh
 
 #: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
 BALL_SEGMENTS = 12
@@ -58,11 +55,6 @@ CONE_SEGMENTS = 32
 #: Features smaller than this are merged when a thin-wall opening is simplified, mm (a
 #: thousandth of the finest printer's resolution, a hundred float32 steps at 100 mm).
 SIMPLIFY_TOLERANCE_MM = 1e-4
-#: Thin-wall openings kept in memory (:func:`open_thin_walls`): the choice by truth builds several candidates of
-#: one design, which often carve the same pad (the demo batch's ranks 2 and 3), and the opening is a second or two.
-OPENINGS_KEPT = 16
-_openings: OrderedDict[str, manifold3d.Manifold] = OrderedDict()
-_openings_lock = threading.Lock()
 
 
 @lru_cache(maxsize=8)
@@ -250,8 +242,8 @@ def open_thin_walls(
     opening never adds material (beyond that tolerance), so a clearance stays a clearance. Convex
     edges of the pad are rounded to radius ``min_wall_mm / 2``; a pad whose
     thinnest wall (:func:`thinnest_wall_mm`) already meets the minimum is
-    returned unchanged. Openings are kept in memory by the pad's exact mesh
-    (the last :data:`OPENINGS_KEPT`): the same pad is opened once.
+    returned unchanged. The opening is a function of the pad's mesh: the
+    same mesh opens the same, however the pad was built.
 
     Parameters
     ----------
@@ -269,32 +261,11 @@ def open_thin_walls(
     """
     if min_wall_mm <= 0:
         return pad
-    # the opening is a function of the pad's exact mesh and the sizes: a pad opened before is not opened again
-    mesh = pad.to_mesh64()
-    digest = hashlib.sha256(
-        np.ascontiguousarray(mesh.vert_properties, dtype="<f8").tobytes()
-        + np.ascontiguousarray(mesh.tri_verts, dtype="<i8").tobytes()
-        + np.array([thickness_mm, length_mm, width_mm, min_wall_mm], dtype="<f8").tobytes()
-    ).hexdigest()
-    with _openings_lock:
-        if digest in _openings:
-            _openings.move_to_end(digest)
-            return _openings[digest]
-    opened = _opened(pad, thickness_mm, length_mm, width_mm, min_wall_mm)
-    with _openings_lock:
-        _openings[digest] = opened
-        while len(_openings) > OPENINGS_KEPT:
-            _openings.popitem(last=False)
-    return opened
-
-
-def _opened(
-    pad: manifold3d.Manifold, thickness_mm: float, length_mm: float, width_mm: float, min_wall_mm: float
-) -> manifold3d.Manifold:
-    """:func:`open_thin_walls` computed (``min_wall_mm > 0``)."""
     # no wall under the minimum: the opening would only round convex edges, so skip it
     if thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
         return pad
+    # manifold3d's Booleans triangulate by their operands' history as well as their meshes
+    pad = solid_from_mesh_arrays(*mesh_arrays(pad))
     kernel = manifold3d.Manifold.hull_points(ball_points(min_wall_mm / 2.0))
     # the pad's facets carry the carvings' slivers too, and the erosion sums the kernel over every one of them
     # (13 s for a 960-triangle pad of the 12-part job, 7 s simplified: 476 triangles)

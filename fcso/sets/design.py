@@ -208,7 +208,9 @@ def _design_sets_of_one_size(
         fused finger is not one printable body), or None."""
         todo = [members for members in sets if members not in exact_designs and members not in failures]
         if todo:
-            made = finish_designs([(subset(prepared, numbers_of(m)), chosen_candidates[m]) for m in todo], config)
+            made = finish_designs(
+                [(subset(prepared, numbers_of(m)), chosen_candidates[m]) for m in todo], config, progress
+            )
             for members, result in zip(todo, made):
                 if isinstance(result, GeometryError):
                     failed(members, result)

@@ -188,7 +188,7 @@ def test_a_sliver_below_the_minimum_wall_is_removed():
     assert opened.volume() > 0.9 * (pad.volume() - 0.3 * 6.0 * depth)
 
 
-def test_an_opening_is_reused_only_for_the_same_pad_and_sizes():
+def test_the_same_pad_opens_the_same_and_another_pad_or_size_differently():
     config = small_config()
     sampler = config.sampler
     depth = sampler.penetration_mm
