@@ -284,10 +284,10 @@ def finish_candidate(
     config: DesignConfig,
     flat: bool = False,
     jobs: int = 1,
-    openings: dict[str, tuple] | None = None,
+    pads: dict[str, tuple] | None = None,
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
     """One candidate built as :func:`design` builds its choice: :func:`finish_candidates` of that one."""
-    return finish_candidates([(scenarios, tuple(choice))], config, flat, jobs, openings)[0]
+    return finish_candidates([(scenarios, tuple(choice))], config, flat, jobs, pads)[0]
 
 
 def finish_candidates(
@@ -295,17 +295,18 @@ def finish_candidates(
     config: DesignConfig,
     flat: bool = False,
     jobs: int = 1,
-    openings: dict[str, tuple] | None = None,
+    pads: dict[str, tuple] | None = None,
     progress: Progress | None = None,
 ) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
 
     ``flat`` builds flat pads on the candidates' grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
-    The printed-fit pockets of every candidate's samples, then the thin-wall
-    openings of their pads (two Minkowski sums each, a second or more) are
-    made on ``jobs`` workers (``[compute] scheduler``'s when set): a job's
-    finger sets are finished together. Each opened pad is rebuilt from its
-    mesh, so it is the same wherever it was opened.
+    The printed-fit pockets of every candidate's samples (two Minkowski sums
+    each), then each candidate's pad (their union, its thin walls opened)
+    are made on ``jobs`` workers (``[compute] scheduler``'s when set): a
+    job's finger sets are finished side by side. Each pad is rebuilt from
+    its mesh, so it is the same wherever it was made; its evaluations are
+    made here.
 
     Parameters
     ----------
@@ -315,7 +316,7 @@ def finish_candidates(
     config : DesignConfig
     flat : bool
     jobs : int
-    openings : dict, optional
+    pads : dict, optional
         Printed pads made before (:func:`pad_key`: mesh arrays, case, block depth); new ones are added. The choice
         by truth keeps one for the candidates of a design, which often carve the same pad.
     progress : callable, optional
@@ -348,7 +349,7 @@ def finish_candidates(
     with WorkerPool((shared, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
         for (n, k, angle), made in zip(missing, pool.map(_fit_task, missing)):
             shared[n].samples[k].fitted[fit_key(config.updated({"print": {"lead_in_deg": angle}}))] = made
-    cache = {} if openings is None else openings
+    cache = {} if pads is None else pads
     keys = [
         pad_key([s.samples[k] for s, k in zip(scenarios, choice)], fitted_config, flat)
         for (scenarios, choice), fitted_config in zip(candidates, configs)

@@ -16,13 +16,13 @@ from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case,
 
 
 def candidate_design(
-    result: DesignResult, candidate: CandidateReport, openings: dict | None = None
+    result: DesignResult, candidate: CandidateReport, pads: dict | None = None
 ) -> tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
     """The simulation's inputs for any evaluated candidate of a design, built as the design builds its choice.
 
     The pad is carved with the design's ``[print]`` clearance and lead-in
     (:func:`fcso.design.finish_candidate`), so the verified pad is the one
-    that would be printed. ``openings``: the thin-wall openings of the
+    that would be printed. ``pads``: the printed pads of the
     design's candidates made so far (:func:`fcso.design.finish_candidates`).
 
     Returns
@@ -37,7 +37,7 @@ def candidate_design(
         The print fit's warnings.
     """
     evaluation, grasps, print_fit, warnings = finish_candidate(
-        result.scenarios, candidate.samples, result.report.settings, openings=openings
+        result.scenarios, candidate.samples, result.report.settings, pads=pads
     )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
     report = result.report.model_copy(update={"grasps": grasps})
@@ -86,14 +86,14 @@ def verify_top(
     started, budget_s = time.monotonic(), config.choice_budget_s
     ranked = ranked_candidates(result.report, top)
     outcomes = []
-    # candidates often carve the same pad (the demo batch's ranks 2 and 3): each is opened once
-    openings: dict = {}
+    # candidates often carve the same pad (the demo batch's ranks 2 and 3): each is made once
+    pads: dict = {}
     for rank, candidate in enumerate(ranked):
         # the design's own choice is already built as printed
         built = (
             (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
             if candidate.index == result.report.best
-            else candidate_design(result, candidate, openings)
+            else candidate_design(result, candidate, pads)
         )
         verification = verify(built[0], config, progress)
         outcomes.append((rank, candidate, built, verification))
