@@ -153,6 +153,36 @@ def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped
     assert moved <= 0.003 and turned <= 0.03
 
 
+def test_settles_and_holds_that_end_at_rest_end_where_the_whole_ones_end(ridged, tmp_path, monkeypatch):
+    # the ridged block displaced in its carved pads: the settles after closing and after the lift end once it rests in
+    # the gripper, and so does each holding push held at its largest force
+    case, pieces, pad, hull, _ = ridged
+    config = _config(tmp_path)
+    scene = build_scene(case, pieces, pad, hull, config)
+    start = start_pose(case, np.array([0.5, -0.5, 1.0]))
+    steps = []
+    step = trials.prescribed_step
+    monkeypatch.setattr(trials, "prescribed_step", lambda *args: steps.append(1) or step(*args))
+    early = run_grasp(scene, case, start, config)
+    early_steps = len(steps)
+    early_holds = hold_forces(scene, case, early, config)
+    early_hold_steps = len(steps) - early_steps
+    monkeypatch.setattr(trials, "REST_STEPS", 10**9)
+    steps.clear()
+    whole = run_grasp(scene, case, start, config)
+    whole_steps = len(steps)
+    whole_holds = hold_forces(scene, case, whole, config)
+    whole_hold_steps = len(steps) - whole_steps
+    # the settles' 100 + 200 steps, of which at least 50 each are simulated
+    assert whole_steps - early_steps >= 100
+    # pushed, it rests in the gripper less often (4127 steps against 4200 here)
+    assert any(force is None for force in whole_holds.values()) and early_hold_steps < whole_hold_steps
+    moved, turned = pose_error(early.part_in_gripper, whole.part_in_gripper, case.part.center_mass)
+    # within 1 % and 3 % of the success limits (0.3 mm, 1 degree)
+    assert moved <= 0.003 and turned <= 0.03
+    assert early_holds == whole_holds
+
+
 def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
     """The seated overlap of part and pads is the part's alone; the pads' overlap with each other is its own figure."""
     case, config, nothing = _cube_case(), _config(tmp_path), np.zeros((0, 3))
