@@ -155,7 +155,7 @@ def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped
 
 def test_settles_and_holds_that_end_at_rest_end_where_the_whole_ones_end(ridged, tmp_path, monkeypatch):
     # the ridged block displaced in its carved pads: the settles after closing and after the lift end once it rests in
-    # the gripper, and so does each holding push held at its largest force
+    # the gripper, and each holding push held at its largest force once its drift could not make it slip
     case, pieces, pad, hull, _ = ridged
     config = _config(tmp_path)
     scene = build_scene(case, pieces, pad, hull, config)
@@ -175,8 +175,9 @@ def test_settles_and_holds_that_end_at_rest_end_where_the_whole_ones_end(ridged,
     whole_hold_steps = len(steps) - whole_steps
     # the settles' 100 + 200 steps, of which at least 50 each are simulated
     assert whole_steps - early_steps >= 100
-    # pushed, it rests in the gripper less often (4127 steps against 4200 here)
-    assert any(force is None for force in whole_holds.values()) and early_hold_steps < whole_hold_steps
+    # held at the largest push in every direction, each hold ends after 50 of its 200 steps there
+    held = [name for name, force in whole_holds.items() if force is None]
+    assert held and early_hold_steps <= whole_hold_steps - 100 * len(held)
     moved, turned = pose_error(early.part_in_gripper, whole.part_in_gripper, case.part.center_mass)
     # within 1 % and 3 % of the success limits (0.3 mm, 1 degree)
     assert moved <= 0.003 and turned <= 0.03
