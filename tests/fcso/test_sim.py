@@ -46,6 +46,7 @@ from fcso.sim.verify import (
     verify_case,
     weaker_than_flat,
 )
+from tests.conftest import data_path
 
 #: TCP of a grasp closing along the table's x axis (TCP y), approaching from above.
 CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -308,6 +309,18 @@ def test_pad_prisms_are_the_pad_exactly_and_read_back_from_disk(tmp_path):
     total = sum(manifold3d.Manifold.hull_points(np.asarray(v, dtype=float)).volume() for v, _ in read.pieces)
     assert total == pytest.approx(union.volume(), rel=1e-6)
     assert abs(read.volume_error) < 1e-5 and read.missing_fraction < 1e-5
+
+
+def test_no_pad_prism_stands_in_front_of_a_designed_pad():
+    """The pad fcso designs for the spur gear lying flat (with its print clearance and lead-in): the pocket swept
+    towards -u and subtracted from the pad's box (before issue 22's h26a) left slivers of the box in front of the pad,
+    four prisms reaching 1 mm out of it (its seated pieces overlapped the gear's by 0.69 mm).
+    """
+    pad = trimesh.load(data_path("spur_gear_pad.stl"))
+    pieces = pad_prism_pieces(pad, 5.0, None)
+    assert min(float(vertices[:, 0].min()) for vertices, _ in pieces.pieces) >= -1e-6
+    # the 0.005 mm simplification's few micrometres
+    assert pieces.excess_fraction < 2e-5 and pieces.missing_fraction < 1e-6
 
 
 def test_no_pad_prism_is_flat_under_a_sliver_of_the_face():
