@@ -278,7 +278,8 @@ def pad_prism_pieces(pad: trimesh.Trimesh, thickness_mm: float, cache_dir: Path 
     decomposition is searched (under a second for the bunny's pad). Pad
     material the part overhangs (a stretch of the part between it and the
     front, along ``u``) is left out, as the design's column heights leave
-    it out: the carved pocket is first swept towards ``-u``. The volume
+    it out: the pocket's faces that face ``-u`` are first swept towards
+    ``-u`` and taken away from the pad. The volume
     error says how much that is (the bunny's pad: 4.8 %). The mesh
     is first simplified within :data:`SIMPLIFY_TOLERANCE_MM` (a pad carved
     with a print clearance has ~35k triangles of offset surface).

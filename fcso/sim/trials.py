@@ -251,6 +251,10 @@ def hold_force(
 ) -> float | None:
     """One direction of the holding test (:func:`hold_forces`) from the state ``lifted`` (left unchanged).
 
+    The push ramps up to ``hold_force_n`` and is held there for
+    :data:`HOLD_AT_MAX_S`, or until the part's drift could no longer make it
+    slip in that time (:data:`HOLD_PROJECTED_SHARE`).
+
     Returns
     -------
     float or None

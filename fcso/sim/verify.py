@@ -401,8 +401,8 @@ def precision_grasps(
 
     Grasps go to the workers in waves of two per worker, trial by trial
     (every finger's nominal grasp, then every finger's first trial, ...; in
-    a wave the designed finger's first), so a verification of many trials holds only a few in flight and reports
-    progress as they end. With ``config.stop_early`` the designed finger's
+    a wave the designed finger's first), so a verification of many trials
+    holds only a few in flight and reports progress as they end. With ``config.stop_early`` the designed finger's
     (``fcso``) trials stop at the failure after which it can no longer reach
     ``pass_success_rate``: that trial is the last kept, of every finger (the
     flat control is compared on the same start errors); later grasps are
