@@ -32,9 +32,9 @@ Prints
   rate, median error and holding forces, designed against flat, and the
   design's verification time with a cold and a warm cache of collision
   pieces;
-- the wall time of a one-part verification (the paper cube, ``--trials``
-  trials and the holding test) with a cold cache (median of ``--runs``)
-  and a warm one (median of ``--runs``).
+- the wall and CPU time of a one-part verification (the paper cube,
+  ``--trials`` trials and the holding test) with a cold cache (median of
+  ``--runs``) and a warm one (median of ``--runs``).
 
 The machine is shared and noisy: compare medians, not single runs.
 """
@@ -117,16 +117,32 @@ def cpu_s() -> float:
     return own.ru_utime + own.ru_stime + workers.ru_utime + workers.ru_stime
 
 
+def timed(function, *args):
+    """``function(*args)``, its wall seconds and its CPU seconds (this process and its workers)."""
+    wall, cpu = time.perf_counter(), cpu_s()
+    result = function(*args)
+    return result, time.perf_counter() - wall, cpu_s() - cpu
+
+
+def _spread(times: list[tuple[float, float]]) -> str:
+    """Median, least and most of (wall s, CPU s) pairs."""
+    walls, cpus = [t[0] for t in times], [t[1] for t in times]
+    return (
+        f"median {statistics.median(walls):.1f} s wall (min {min(walls):.1f}, max {max(walls):.1f}), "
+        f"{statistics.median(cpus):.1f} s CPU"
+    )
+
+
 def choice_against_design(runs: int, scratch: Path) -> None:
     """The demo batch: design alone, then the choice by truth among 3 candidates with the product's settings."""
     design_s, choice_s = [], []
     for run in range(runs):
-        wall, cpu = time.perf_counter(), cpu_s()
-        result = demo_design()
-        design_s.append((time.perf_counter() - wall, cpu_s() - cpu))
-        wall, cpu = time.perf_counter(), cpu_s()
-        _, verification, _, ranking = verify_top(result, 3, VerifyConfig(cache_dir=scratch / f"choice{run}"))
-        choice_s.append((time.perf_counter() - wall, cpu_s() - cpu))
+        result, *design_times = timed(demo_design)
+        design_s.append(design_times)
+        (_, verification, _, ranking), *choice_times = timed(
+            verify_top, result, 3, VerifyConfig(cache_dir=scratch / f"choice{run}")
+        )
+        choice_s.append(choice_times)
         print(
             f"run {run + 1}: design {design_s[-1][0]:.1f} s, choice {choice_s[-1][0]:.1f} s wall; {verification.choice}"
         )
@@ -188,30 +204,22 @@ def main() -> None:
             for name, make in (fixtures[f] for f in args.fixtures):
                 design = design_under_test(make())
                 fixture_cache = config.model_copy(update={"cache_dir": Path(scratch) / name})
-                started = time.perf_counter()
-                verify(design, fixture_cache)
-                cold_s = time.perf_counter() - started
-                started = time.perf_counter()
-                verification = verify(design, fixture_cache)
-                warm_s = time.perf_counter() - started
+                _, cold_s, cold_cpu = timed(verify, design, fixture_cache)
+                verification, warm_s, warm_cpu = timed(verify, design, fixture_cache)
                 print_verification(
-                    f"{name}: verification cold cache {cold_s:.1f} s, warm cache {warm_s:.1f} s", verification
+                    f"{name}: verification cold cache {cold_s:.1f} s wall ({cold_cpu:.1f} s CPU), warm cache "
+                    f"{warm_s:.1f} s wall ({warm_cpu:.1f} s CPU)",
+                    verification,
                 )
 
-        cold, warm = [], []
-        for run in range(args.runs):
-            started = time.perf_counter()
-            verify(cube, config.model_copy(update={"cache_dir": Path(scratch) / f"cold{run}"}))
-            cold.append(time.perf_counter() - started)
-        for _ in range(args.runs):
-            started = time.perf_counter()
-            verify(cube, config)
-            warm.append(time.perf_counter() - started)
+        cold = [
+            timed(verify, cube, config.model_copy(update={"cache_dir": Path(scratch) / f"cold{run}"}))[1:]
+            for run in range(args.runs)
+        ]
+        warm = [timed(verify, cube, config)[1:] for _ in range(args.runs)]
         print(
             f"\none-part verification (paper cube, {args.trials} trials x 2 fingers + holding): "
-            f"cold cache median {statistics.median(cold):.1f} s (min {min(cold):.1f}, max {max(cold):.1f}), "
-            f"warm cache median {statistics.median(warm):.1f} s (min {min(warm):.1f}, max {max(warm):.1f}); "
-            "target cold <= 10 s"
+            f"cold cache {_spread(cold)}, warm cache {_spread(warm)}; target cold <= 10 s"
         )
 
 

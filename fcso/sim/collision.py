@@ -57,7 +57,7 @@ from scipy.spatial import ConvexHull
 from ..geometry import box, ray_hits, to_manifold
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
-CACHE_VERSION = "shell-5"
+CACHE_VERSION = "shell-6"
 #: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
 #: few kB to a few hundred kB).
 CACHE_MAX_BYTES = 500_000_000
@@ -278,7 +278,8 @@ def pad_prism_pieces(pad: trimesh.Trimesh, thickness_mm: float, cache_dir: Path 
     decomposition is searched (under a second for the bunny's pad). Pad
     material the part overhangs (a stretch of the part between it and the
     front, along ``u``) is left out, as the design's column heights leave
-    it out: the carved pocket is first swept towards ``-u``. The volume
+    it out: the pocket's faces that face ``-u`` are first swept towards
+    ``-u`` and taken away from the pad. The volume
     error says how much that is (the bunny's pad: 4.8 %). The mesh
     is first simplified within :data:`SIMPLIFY_TOLERANCE_MM` (a pad carved
     with a print clearance has ~35k triangles of offset surface).
@@ -305,15 +306,21 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     lower, upper = np.asarray(solid.bounding_box()[:3]), np.asarray(solid.bounding_box()[3:])
     front, back = min(0.0, float(lower[0])) - 1.0, max(float(thickness_mm), float(upper[0]))
     region = box((front, lower[1], lower[2]), (back, upper[1], upper[2]))
-    # the carved pocket swept towards -u (the union of each of its triangles' sweeps): what the columns leave out
+    # what the columns leave out: the pad's material with carved pocket in front of it along +u (an overhang). A ray
+    # from such a point along +u enters the pocket through one of the pocket's triangles that face -u, so it is the
+    # union of those triangles' sweeps towards -u (a fraction of the pocket's triangles: the sweeps were the costliest
+    # part of this function)
     pocket = (region - solid).to_mesh64()
     triangles = np.asarray(pocket.vert_properties[:, :3], dtype=np.float64)[np.asarray(pocket.tri_verts)]
+    facing = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])[:, 0]
+    # the region's own front face faces -u too, with nothing of the pad in front of it
+    triangles = triangles[(facing < 0.0) & (triangles[:, :, 0].max(axis=1) > front)]
     sweeps = []
     for triangle in triangles:
         swept = manifold3d.Manifold.hull_points(np.vstack([triangle, triangle - [back - front, 0.0, 0.0]]))
         if swept.volume() > 1e-12:
             sweeps.append(swept)
-    columns = region - manifold3d.Manifold.batch_boolean(sweeps, manifold3d.OpType.Add) if sweeps else region
+    columns = solid - manifold3d.Manifold.batch_boolean(sweeps, manifold3d.OpType.Add) if sweeps else solid
     face = columns.simplify(SIMPLIFY_TOLERANCE_MM).to_mesh64()
     vertices = np.asarray(face.vert_properties[:, :3], dtype=np.float64)
     corners = np.asarray(face.tri_verts, dtype=np.int64)

@@ -400,9 +400,9 @@ def precision_grasps(
     independent: every grasp starts from a fresh state, so the results are those of one process), judged in order.
 
     Grasps go to the workers in waves of two per worker, trial by trial
-    (every finger's nominal grasp, then every finger's first trial, ...), so
-    a verification of many trials holds only a few in flight and reports
-    progress as they end. With ``config.stop_early`` the designed finger's
+    (every finger's nominal grasp, then every finger's first trial, ...; in
+    a wave the designed finger's first), so a verification of many trials
+    holds only a few in flight and reports progress as they end. With ``config.stop_early`` the designed finger's
     (``fcso``) trials stop at the failure after which it can no longer reach
     ``pass_success_rate``: that trial is the last kept, of every finger (the
     flat control is compared on the same start errors); later grasps are
@@ -439,7 +439,9 @@ def precision_grasps(
     kept, allowed_failures = len(errors), len(errors) - needed_successes(len(errors), config)
     with WorkerPool((scenes, case, config), jobs) as pool:
         while items:
-            wave, items = items[: 2 * jobs], items[2 * jobs :]
+            # the designed finger's grasps first: its contacts make them the longest, and a worker left with a short
+            # one at the end of a wave idles less (judged in the same order per finger)
+            wave, items = sorted(items[: 2 * jobs], key=lambda item: item[0] != "fcso"), items[2 * jobs :]
             for (kind, number, error), run in zip(wave, pool.map(_simulated_grasp, wave)):
                 if number > kept:
                     continue
