@@ -11,7 +11,7 @@ import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
 from .errors import ConfigError, GeometryError
-from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points
+from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points, volume_about
 from .parts import read_mesh, unit_factor, validate_mesh
 from .printfit import SIMPLIFY_TOLERANCE_MM
 from .sampler import FingerPlate
@@ -270,7 +270,7 @@ def _without_flaps(written: trimesh.Trimesh) -> trimesh.Trimesh:
     pieces = written.split(only_watertight=False)
     if len(pieces) < 2:
         return written
-    solids = [p for p in pieces if abs(float(p.volume)) >= FLAP_VOLUME_MM3]
+    solids = [p for p in pieces if abs(volume_about(p, p.vertices.mean(axis=0))) >= FLAP_VOLUME_MM3]
     if len(solids) != 1 or not solids[0].is_watertight:
         return written
     data = solids[0].export(file_type="stl")

@@ -294,6 +294,16 @@ def ray_hits(
     return np.asarray(rays, dtype=np.int64), np.asarray(distances, dtype=np.float64)
 
 
+def volume_about(mesh: trimesh.Trimesh, origin: np.ndarray) -> float:
+    """The divergence integral of ``mesh``'s triangles about ``origin`` (its signed volume if closed), units³.
+
+    Unlike ``trimesh.Trimesh.volume`` it computes no centre of mass, so a piece of zero volume (a flap) raises no
+    division warning.
+    """
+    corners = np.asarray(mesh.triangles, dtype=np.float64) - origin
+    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
+
+
 def mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
     """``solid``'s vertices (mm, float64) and triangles: what a worker sends of a solid (manifold3d's do not pickle)."""
     mesh = solid.to_mesh64()

@@ -22,6 +22,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from .geometry import volume_about
+
 #: A shell with fewer triangles than a tetrahedron cannot close a volume.
 MIN_SHELL_FACES = 4
 
@@ -187,7 +189,7 @@ def _repair(
         else:
             summary.open_shells += 1
             boundary = shell.edges_sorted[trimesh.grouping.group_rows(shell.edges_sorted, require_count=1)]
-            summary.volume_before += abs(_volume_about(shell, shell.vertices[np.unique(boundary)].mean(axis=0)))
+            summary.volume_before += abs(volume_about(shell, shell.vertices[np.unique(boundary)].mean(axis=0)))
             loops = len(trimesh.graph.connected_components(boundary))
             opened = len(shell.faces)
             shell = close_holes(shell)
@@ -210,12 +212,6 @@ def _repair(
         summary.max_deviation = float(np.sqrt(squared.max()))
     summary.lines = summary.lines + _describe(summary)
     return closed, summary
-
-
-def _volume_about(shell: trimesh.Trimesh, origin: np.ndarray) -> float:
-    """The divergence integral of ``shell``'s triangles about ``origin`` (its volume if closed), file units³."""
-    corners = np.asarray(shell.triangles, dtype=np.float64) - origin
-    return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
 
 
 def _weld(mesh: trimesh.Trimesh, tolerance: float) -> None:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
+import trimesh
 
 from fcso import load_part
-from fcso.geometry import box, clip_to_box, half_space_area, ray_hits, to_trimesh, triangle_areas_normals
+from fcso.geometry import box, clip_to_box, half_space_area, ray_hits, to_trimesh, triangle_areas_normals, volume_about
 from fcso.sampler import Bands
 from tests.conftest import data_path
 
@@ -93,3 +96,18 @@ def test_rays_report_every_crossing_once_in_order():
     # the second ray runs along the diagonal shared by two triangles of each face it crosses
     assert rays.tolist() == [0, 0, 1, 1, 2, 2]
     assert distances == pytest.approx([20.0, 50.0, 20.0, 50.0, 15.0, 30.0], abs=1e-5)
+
+
+def test_volume_about_a_closed_box_and_a_flap():
+    cube = to_trimesh(box((1.0, 2.0, 3.0), (3.0, 4.0, 5.0)))
+    # a closed surface encloses the same volume about any origin
+    assert volume_about(cube, np.zeros(3)) == pytest.approx(8.0)
+    assert volume_about(cube, np.array([10.0, -4.0, 7.0])) == pytest.approx(8.0)
+    # a two-triangle flap of zero thickness (what float32 rounding leaves beside a written finger) encloses nothing;
+    # trimesh's own volume divides by it for the centre of mass and warns
+    flap = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 1]], process=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        assert volume_about(flap, flap.vertices.mean(axis=0)) == 0.0
+        with pytest.raises(RuntimeWarning):
+            float(flap.volume)
