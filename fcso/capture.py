@@ -201,7 +201,9 @@ def capture_landscape(
         gap += np.min(columns, axis=2)
         levers.append(abs(depth_mm - u_c))
     centre = (steps, turns)
-    separation = -(gap - gap[centre])
+    # a centre no pad touches has an infinite gap: every separation is then inf - inf, read as never seated
+    with np.errstate(invalid="ignore"):
+        separation = -(gap - gap[centre])
     separation[~np.isfinite(separation)] = np.inf
     lever_mm = max(float(np.mean(levers)), cell_mm)
     successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * lever_mm, config.friction)
