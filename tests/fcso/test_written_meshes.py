@@ -20,6 +20,7 @@ import trimesh
 
 import fcso
 from examples.batch_demo import batch_demo_part_files, batch_demo_settings
+from fcso.finger import without_zero_area_faces
 from fcso.output.files import output_files
 from tests.conftest import REPO, data_path, small_config
 
@@ -139,3 +140,24 @@ def test_the_demo_parts_on_one_finger_write_one_body_without_the_float32_flap(tm
     for file_name in ("finger.stl", "fingerpad.stl"):
         (tmp_path / file_name).write_bytes(files[file_name])
         _assert_one_body(_read_back(tmp_path / file_name), f"demo parts on one finger: {file_name}")
+
+
+def test_a_zero_area_face_of_a_closed_surface_is_flipped_away():
+    # a vertex that rounding to float32 put on the edge between two others: the face they make has no area, the
+    # surface stays closed (one face of a 200-part job's 41-part set's pad, so the set's finger was refused)
+    box = trimesh.creation.box(extents=(20.0, 10.0, 5.0))
+    faces = [list(face) for face in box.faces]
+    first = faces[0]
+    a, c, x = first
+    vertices = np.vstack([box.vertices, (box.vertices[a] + box.vertices[c]) / 2.0])
+    b = len(vertices) - 1
+    faces[0:1] = [[a, b, x], [b, c, x], [b, a, c]]
+    needled = trimesh.Trimesh(vertices, faces, process=False)
+    assert needled.is_watertight and (needled.area_faces < MIN_FACE_AREA_MM2).sum() == 1
+    mended = without_zero_area_faces(needled)
+    assert mended.is_watertight and mended.is_winding_consistent
+    assert (mended.area_faces < MIN_FACE_AREA_MM2).sum() == 0
+    assert mended.volume == pytest.approx(20.0 * 10.0 * 5.0)
+    assert len(mended.faces) == len(needled.faces)
+    # a mesh without such a face is returned as it is
+    assert without_zero_area_faces(box) is box
