@@ -31,9 +31,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import resource
 import statistics
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -218,6 +220,58 @@ def peak_memory_mb() -> tuple[float, float]:
     )
 
 
+def _descendants(pid: int) -> list[int]:
+    """``pid`` and every process below it (Linux ``/proc/<pid>/task/<tid>/children``)."""
+    found, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        found.append(current)
+        for task in Path(f"/proc/{current}/task").glob("*"):
+            try:
+                todo.extend(int(c) for c in (task / "children").read_text().split())
+            except OSError:  # the process ended while it was read
+                continue
+    return found
+
+
+def proportional_set_mb(pid: int) -> float:
+    """The memory of ``pid`` and its worker processes together, MB: the sum of their proportional set sizes (PSS:
+    each shared page counted once, split among the processes sharing it; forked workers share most of the job)."""
+    total_kib = 0
+    for process in _descendants(pid):
+        try:
+            for line in Path(f"/proc/{process}/smaps_rollup").read_text().splitlines():
+                if line.startswith("Pss:"):
+                    total_kib += int(line.split()[1])
+                    break
+        except OSError:
+            continue
+    return total_kib / 1024.0
+
+
+class PeakProportionalSet:
+    """Samples :func:`proportional_set_mb` of this process every ``interval_s`` in a thread while in a ``with``
+    block; ``peak_mb`` is the largest sample (a sampled peak: a spike shorter than the interval can be missed)."""
+
+    def __init__(self, interval_s: float = 0.5):
+        self.interval_s, self.peak_mb = interval_s, 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            self.peak_mb = max(self.peak_mb, proportional_set_mb(os.getpid()))
+            self._stop.wait(self.interval_s)
+
+    def __enter__(self) -> PeakProportionalSet:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 def cpu_seconds() -> float:
     """CPU time of this process and its finished workers, s: on a shared machine, wall time / cores understates it."""
     own, workers = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -243,16 +297,18 @@ def run_curve(sizes: list[int], runs: int) -> None:
     first: tuple[int, float] | None = None
     print(
         "parts | whole design s (median of runs) | CPU s | s per part | growth vs n log n | partition s | sets | "
-        "worst retained | method | peak MB (main, largest worker)"
+        "worst retained (median) | method | peak MB (main, largest worker) | peak MB of all processes together (PSS)"
     )
     for parts in sizes:
         loaded = job(parts)
-        seconds, cpu = [], []
+        seconds, cpu, together_mb = [], [], []
         for _ in range(runs):
             started, started_cpu = time.perf_counter(), cpu_seconds()
-            result = design_sets(loaded, config, progress=stage_log)
+            with PeakProportionalSet() as memory:
+                result = design_sets(loaded, config, progress=stage_log)
             seconds.append(time.perf_counter() - started)
             cpu.append(cpu_seconds() - started_cpu)
+            together_mb.append(memory.peak_mb)
         median = statistics.median(seconds)
         report = result.report
         timings = result.job().timings_s
@@ -267,8 +323,9 @@ def run_curve(sizes: list[int], runs: int) -> None:
         print(
             f"{parts} | {median:.1f}{verdict} | {statistics.median(cpu):.1f} | {per_part:.2f} | {growth:.2f} | "
             f"{timings.get('partition', 0.0):.1f} | "
-            f"{len(report.sets)} | {report.worst_retained:.3f} | {report.search.method} | "
-            f"{main_mb:.0f}, {worker_mb:.0f}",
+            f"{len(report.sets)} | {report.worst_retained:.3f} (median {report.median_retained:.3f}) | "
+            f"{report.search.method} | "
+            f"{main_mb:.0f}, {worker_mb:.0f} | {max(together_mb):.0f}",
             flush=True,
         )
         print(

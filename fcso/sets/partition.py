@@ -319,7 +319,8 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        each set: exact, searched, else quick). Sets the quick figure leaves
        below ``min_retained`` are then searched, and the moves go on with the
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
-       (a large set's quick figure is pessimistic and flat). The fewest sets
+       (a large set's quick figure is pessimistic and flat), taken only when
+       they reach ``min_retained`` or raise the worst r. The fewest sets
        that reach ``min_retained`` are taken, else the best seen: when
        ``max`` sets miss it no other number is searched (if a part never
        keeps more in a larger set, a split into fewer sets refines into
@@ -495,7 +496,9 @@ def _improve(
 
     Moves are ranked by ``key``; with ``searched_key``, the best :data:`_SEARCHED_MOVES` of them and the current
     partition are compared by it instead (their sets searched): the quick figure of a large set is pessimistic and
-    flat, so it ranks moves but does not decide them.
+    flat, so it ranks moves but does not decide them. A searched move is taken only when it reaches
+    ``min_retained`` or raises the worst r: each costs set searches of its two sets (seconds of CPU for sets of
+    tens of parts), and the mean r, a tie-break of the objective, is left to the quick moves.
     """
     decide = searched_key or key
     current = assignment
@@ -520,7 +523,9 @@ def _improve(
         if searched_key:
             screener.retained(list({s for m in ranked for s in sets_of(m)}))
         best = max(ranked, key=decide)
-        if decide(best) <= decide(current):
+        # the objective's first terms: whether min_retained is reached, then the number of sets or the worst r
+        gained = decide(best)[:2] > decide(current)[:2] if searched_key else decide(best) > decide(current)
+        if not gained:
             return current
         current = best
     return current
