@@ -333,7 +333,9 @@ def run_curve(sizes: list[int], runs: int) -> None:
             f"lower bound {report.search.lower_bound_sets}, "
             f"{report.search.set_screenings} set searches; attempts "
             + "; ".join(
-                f"{a.sets} sets screened {a.screened_worst_retained:.3f} exact {a.exact_worst_retained:.3f}"
+                f"{a.sets} sets screened "
+                + ("-" if a.screened_worst_retained is None else f"{a.screened_worst_retained:.3f}")
+                + f" exact {a.exact_worst_retained:.3f}"
                 + (" chosen" if a.chosen else "")
                 for a in report.search.attempts
             ),

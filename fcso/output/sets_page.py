@@ -147,7 +147,7 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
         section.append(f"<p><b>Why min_retained is not reached:</b> {text(search.explanation)}.</p>")
     if search.attempts:
         tried = "".join(
-            f"<tr><td>{a.sets}</td><td>{a.screened_worst_retained:.3f}</td><td>{a.exact_worst_retained:.3f}</td>"
+            f"<tr><td>{a.sets}</td><td>{_number(a.screened_worst_retained)}</td><td>{a.exact_worst_retained:.3f}</td>"
             f'<td class="text">{text(_attempt_source(a))}</td><td class="text">{"chosen" if a.chosen else ""}'
             f'</td><td class="text">{text(" | ".join(", ".join(p) for p in a.parts))}</td></tr>'
             for a in search.attempts
@@ -233,7 +233,7 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
     for attempt in sets.search.attempts:
         lines.append(
             f"{attempt.sets} set(s) ({attempt.source.replace('_', ' ')}): worst retained screened "
-            f"{attempt.screened_worst_retained:.3f}, exact {attempt.exact_worst_retained:.3f}"
+            f"{_number(attempt.screened_worst_retained)}, exact {attempt.exact_worst_retained:.3f}"
             + (" (designed)" if attempt.designed else "")
             + (" (chosen)" if attempt.chosen else "")
             + (f"; not made: {attempt.failure}" if attempt.failure else "")

@@ -333,7 +333,10 @@ class PartitionAttemptReport(ReportModel):
 
     sets: int = Field(description="Number of finger sets")
     parts: list[list[str]] = Field(description="Distinct parts of each set, sets numbered by their first part")
-    screened_worst_retained: float = Field(description="Least screened E / E* over its graspable scenarios")
+    screened_worst_retained: float | None = Field(
+        description="Least screened E / E* over its graspable scenarios; null for one finger designed to compare "
+        "(not screened as a set: its design judges it)"
+    )
     exact_worst_retained: float = Field(
         description="Least exact E / E*: of its sets' designs when designed, else of the exact evaluation of each "
         "set's screened best candidate"

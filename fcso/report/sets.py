@@ -177,7 +177,7 @@ def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names:
     return PartitionAttemptReport(
         sets=labels,
         parts=[[names[p] for p, a in enumerate(attempt.assignment) if a == label] for label in range(labels)],
-        screened_worst_retained=round(attempt.screened_worst, 6),
+        screened_worst_retained=None if attempt.screened_worst is None else round(attempt.screened_worst, 6),
         exact_worst_retained=round(attempt.exact_worst, 6),
         source=attempt.source,
         designed=attempt.designed,

@@ -547,8 +547,9 @@ class PartitionAttempt:
     ----------
     assignment : tuple of int
         Set of every part (canonical).
-    screened_worst : float
-        Least screened ``r`` over its graspable scenarios.
+    screened_worst : float or None
+        Least screened ``r`` over its graspable scenarios; None for one finger designed to compare (a set search of
+        every part, seconds to minutes at farm scale, would only be reported: its design judges it).
     exact_worst : float
         Least exact ``r``: of its sets' designs when ``designed``, else of the exact evaluation of each set's
         screened best candidate (:meth:`SetScreener.probe`).
@@ -563,7 +564,7 @@ class PartitionAttempt:
     """
 
     assignment: tuple[int, ...]
-    screened_worst: float
+    screened_worst: float | None
     exact_worst: float
     source: str
     failure: str | None = None
@@ -631,11 +632,11 @@ def search_judged_exactly(
         return partition_key(assignment, screener.partition_retained(assignment), threshold)
 
     def judge(assignment: tuple[int, ...], source: str, failure: str | None = None, designed: bool = False) -> None:
-        screened = screener.partition_retained(assignment, exact=False)
-        exact = screener.partition_retained(assignment)
         # a partition designed after its probe replaces the probe's row and keeps its source
         source = next((a.source for a in attempts if a.assignment == assignment), source)
-        judged = PartitionAttempt(assignment, float(screened.min()), float(exact.min()), source, failure, designed)
+        screened = float(screener.partition_retained(assignment, exact=False).min()) if source == "search" else None
+        exact = screener.partition_retained(assignment)
+        judged = PartitionAttempt(assignment, screened, float(exact.min()), source, failure, designed)
         attempts[:] = [a for a in attempts if a.assignment != assignment] + [judged]
 
     def design(assignment: tuple[int, ...], source: str) -> PartitionAttempt:

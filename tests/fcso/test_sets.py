@@ -159,6 +159,24 @@ def test_a_set_that_screening_accepts_and_its_exact_design_rejects_is_split():
     assert "1 set(s) (search): worst retained screened" in text and "(chosen)" in text
 
 
+def test_one_finger_designed_to_compare_is_judged_by_its_design_alone():
+    threshold = 0.99
+    result = design_sets(
+        [NARROWING, WIDENING, NARROWING_WIDER], config(finger_sets={"min_retained": threshold, "max": 2})
+    )
+    sets = result.report
+    compared = [a for a in sets.search.attempts if a.source == "one_finger"]
+    # the premise: two sets miss min_retained, so one finger for all three is designed to compare
+    assert not sets.min_retained_reached and len(compared) == 1
+    one_finger = compared[0]
+    assert one_finger.designed and one_finger.sets == 1
+    # it is not screened as a set as well (a set search of every part, minutes at farm scale, only to be reported)
+    assert one_finger.screened_worst_retained is None
+    assert all(a.screened_worst_retained is not None for a in sets.search.attempts if a.source == "search")
+    assert sets.worst_retained >= one_finger.exact_worst_retained
+    assert "1 set(s) (one finger): worst retained screened -, exact" in pick_plan_text(sets)
+
+
 def test_compatible_parts_share_one_set():
     result = design_sets([NARROWING, NARROWING_BIG_PLATE], config())
     sets = result.report
