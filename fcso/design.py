@@ -607,7 +607,9 @@ class ChosenCandidate:
     outcome: SearchOutcome = dataclasses.field(repr=False)
     ranked: list[tuple[int, ...]] = dataclasses.field(repr=False)
     exact: dict[tuple[int, ...], CandidateEvaluation] = dataclasses.field(repr=False)
-    listed_screens: dict[tuple[int, ...], ScreenedCandidate] = dataclasses.field(repr=False)
+    #: per-scenario screened values of the report's listed candidates kept from the search (:func:`listed_screens`
+    #: screens the others)
+    kept_screens: dict[tuple[int, ...], ScreenedCandidate] = dataclasses.field(repr=False)
     indices: dict[tuple[int, ...], int] = dataclasses.field(repr=False)
     upper_bound: float = 0.0
     warnings: list[str] = dataclasses.field(default_factory=list, repr=False)
@@ -687,12 +689,10 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
             kept_screens.update(on_pad)
             ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in on_pad.items()}, counts)
         finalists = ranked[: config.search.exact_top_k]
-        # the report lists each screened candidate's per-scenario values: screen those not kept again, on every core
+        # the report lists each screened candidate's per-scenario values: those not kept are screened again only
+        # when the finger is made (:func:`listed_screens`): a finger set judged and not delivered never needs them
         listed = ranked[config.search.exact_top_k : config.search.report_candidates]
-        missing = [c for c in listed if c not in kept_screens]
-        chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
-        kept_screens.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
-        listed_screens = {c: kept_screens[c] for c in listed}
+        kept = {c: kept_screens[c] for c in listed if c in kept_screens}
     report_progress("screening", expected, expected)
     timings["screening"] = time.perf_counter() - clock
 
@@ -724,8 +724,33 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     timings["exact"] = time.perf_counter() - clock
     candidate = candidate_reports([best_choice], {best_choice: exact[best_choice]}, {}, indices)[0]
     return ChosenCandidate(
-        best_choice, candidate, outcome, ranked, exact, listed_screens, indices, upper_bound, warnings, timings
+        best_choice, candidate, outcome, ranked, exact, kept, indices, upper_bound, warnings, timings
     )
+
+
+def listed_screens(
+    prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig
+) -> dict[tuple[int, ...], ScreenedCandidate]:
+    """Per-scenario screened values of the candidates ``report.json`` lists after the exact finalists.
+
+    Those the search kept (:attr:`ChosenCandidate.kept_screens`) are taken as they are; the others are screened again
+    on ``prepared``'s workers (screening is a function of the candidate: the same values).
+
+    Returns
+    -------
+    dict
+        Candidate (one sample per scenario) -> its screening.
+    """
+    listed = chosen.ranked[config.search.exact_top_k : config.search.report_candidates]
+    missing = [c for c in listed if c not in chosen.kept_screens]
+    known = dict(chosen.kept_screens)
+    if missing:
+        scenarios = prepared.scenarios
+        context = ([[g.screen for g in s.samples] for s in scenarios], scenarios, config, prepared.lattice)
+        chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
+        with WorkerPool(context, min(prepared.jobs, len(chunks)), config.compute.scheduler) as pool:
+            known.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
+    return {c: known[c] for c in listed}
 
 
 def finish_design(
@@ -812,7 +837,10 @@ def _finished_design(
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
     outcome, ranked, exact, indices = chosen.outcome, chosen.ranked, chosen.exact, chosen.indices
-    best_choice, upper_bound, listed_screens = chosen.choice, chosen.upper_bound, chosen.listed_screens
+    best_choice, upper_bound = chosen.choice, chosen.upper_bound
+    clock = time.perf_counter()
+    listed = listed_screens(prepared, chosen, config)
+    timings["screening"] = timings.get("screening", 0.0) + time.perf_counter() - clock
     clock = time.perf_counter() - finishing_s
     best, grasps, print_fit, fit_warnings = finished
     transform = pad_to_finger(finger, config.sampler)
@@ -837,7 +865,7 @@ def _finished_design(
         fcso_version=__version__,
         parts=[part_report(p) for p in loaded],
         scenarios=[scenario_report(s, v) for s, v in zip(scenarios, compared)],
-        candidates=candidate_reports(ranked[: config.search.report_candidates], exact, listed_screens, indices),
+        candidates=candidate_reports(ranked[: config.search.report_candidates], exact, listed, indices),
         best=indices[best_choice],
         search=SearchReport(
             kind=outcome.kind,
