@@ -257,11 +257,18 @@ def _design_sets_of_one_size(
         members.append((chosen, numbers))
     report_progress("finger sets", labels, labels, "")
     timings["finger_sets"] = time.perf_counter() - clock
-    screened = dict(
-        zip(
-            [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
-            screener.partition_retained(outcome.assignment, exact=False),
+    # one finger designed to compare was never screened as a set (fcso.sets.partition.PartitionAttempt): its
+    # scenarios have no screened figure
+    delivered = next(a for a in attempts if a.assignment == outcome.assignment)
+    screened = (
+        dict(
+            zip(
+                [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
+                screener.partition_retained(outcome.assignment, exact=False),
+            )
         )
+        if delivered.screened_worst is not None
+        else {}
     )
     finger_sets = sets_report(
         prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
