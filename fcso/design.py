@@ -331,7 +331,7 @@ def finish_candidates(
         (config.print.lead_in_deg, None) if flat else printed_lead_in_deg(scenarios, choice, config)
         for scenarios, choice in candidates
     ]
-    configs = [config if why is None else config.updated({"print": {"lead_in_deg": angle}}) for angle, why in fits]
+    configs = [config if why is None else _with_lead_in(config, angle) for angle, why in fits]
     # every scenario of the candidates once: the workers' shared context
     shared = list({id(s): s for scenarios, _ in candidates for s in scenarios}.values())
     number = {id(s): n for n, s in enumerate(shared)}
@@ -348,7 +348,7 @@ def finish_candidates(
     report_progress("fingers", 0, len(candidates), f"{len(missing)} printed-fit pockets")
     with WorkerPool((shared, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
         for (n, k, angle), made in zip(missing, pool.map(_fit_task, missing)):
-            shared[n].samples[k].fitted[fit_key(config.updated({"print": {"lead_in_deg": angle}}))] = made
+            shared[n].samples[k].fitted[fit_key(_with_lead_in(config, angle))] = made
     cache = {} if pads is None else pads
     keys = [
         pad_key([s.samples[k] for s, k in zip(scenarios, choice)], fitted_config, flat)
@@ -632,7 +632,7 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     ChosenCandidate
     """
     report_progress = _progress_with_note(progress)
-    scenarios, lattice, jobs = prepared.scenarios, prepared.lattice, prepared.jobs
+    scenarios, jobs = prepared.scenarios, prepared.jobs
     warnings, timings = list(prepared.warnings), dict(prepared.timings_s)
 
     clock = time.perf_counter()
@@ -641,12 +641,7 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     budget = config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations
     expected = min(total, budget)
     screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
-    screen_data = (
-        [[g.screen for g in s.samples] for s in scenarios],
-        scenarios,
-        config,
-        lattice,
-    )
+    screen_data = _screen_context(prepared, config)
     screened_count, best_screened = 0, 0.0
     screened_bound = quality_upper_bound(screened_bounds)
     # when every candidate the search screens is listed in the report, keep
@@ -745,10 +740,10 @@ def listed_screens(
     missing = [c for c in listed if c not in chosen.kept_screens]
     known = dict(chosen.kept_screens)
     if missing:
-        scenarios = prepared.scenarios
-        context = ([[g.screen for g in s.samples] for s in scenarios], scenarios, config, prepared.lattice)
         chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
-        with WorkerPool(context, min(prepared.jobs, len(chunks)), config.compute.scheduler) as pool:
+        with WorkerPool(
+            _screen_context(prepared, config), min(prepared.jobs, len(chunks)), config.compute.scheduler
+        ) as pool:
             known.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
     return {c: known[c] for c in listed}
 
@@ -983,6 +978,20 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
     ]
 
 
+def _screen_context(prepared: Prepared, config: DesignConfig) -> tuple:
+    """What the screening workers share (:func:`_screen_batch`, :func:`_pad_batch`): every sample's screening
+    geometries, the scenarios, the settings and the normal lattice."""
+    scenarios = prepared.scenarios
+    return [[g.screen for g in s.samples] for s in scenarios], scenarios, config, prepared.lattice
+
+
+def _with_lead_in(config: DesignConfig, lead_in_deg: float) -> DesignConfig:
+    """``config`` with the pockets drafted by ``lead_in_deg`` (a candidate printed with a wider lead-in)."""
+    return (
+        config if lead_in_deg == config.print.lead_in_deg else config.updated({"print": {"lead_in_deg": lead_in_deg}})
+    )
+
+
 def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
     screens, _, config, lattice = context
     # a batch of coordinate moves shares every scenario but one: carve those once
@@ -1008,8 +1017,7 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 def _fit_task(context, task: tuple[int, int, float]) -> list[PadGeometry]:
     scenarios, config = context
     number, index, lead_in_deg = task
-    if lead_in_deg != config.print.lead_in_deg:
-        config = config.updated({"print": {"lead_in_deg": lead_in_deg}})
+    config = _with_lead_in(config, lead_in_deg)
     return fitted_sample(scenarios[number], scenarios[number].samples[index], config)
 
 
@@ -1017,8 +1025,7 @@ def _pad_task(context, task: tuple[list[int], tuple[int, ...], float]) -> tuple:
     """A candidate's printed pad, built and opened: its mesh arrays, case and block depth."""
     scenarios, config, flat = context
     numbers, choice, lead_in_deg = task
-    if lead_in_deg != config.print.lead_in_deg:
-        config = config.updated({"print": {"lead_in_deg": lead_in_deg}})
+    config = _with_lead_in(config, lead_in_deg)
     pad = candidate_fingerpad([scenarios[n] for n in numbers], choice, config, fitted=True, flat=flat)
     return mesh_arrays(opened_pad(pad.pad, config)), pad.case, pad.block_depth_mm
 

@@ -17,10 +17,10 @@ import trimesh
 from .capture import CaptureLandscape, capture_landscape, pad_landscapes
 from .config import DesignConfig
 from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
-from .geometry import to_manifold
+from .geometry import rebuilt_from_mesh, to_manifold
 from .holding import holding_forces_n
 from .measure import scenario_measure
-from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, rebuilt_from_mesh, surface_in_pad
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
 from .parts import Part
 from .printfit import carve, closing_travel_mm, open_thin_walls
 from .report.models import DesignReport, chosen_candidate
@@ -514,8 +514,8 @@ def fit_key(config: DesignConfig) -> tuple | None:
 def fitted_sample(scenario: Scenario, sample: SampleGeometry, config: DesignConfig) -> list[PadGeometry]:
     """A sample's geometries with each good one's ``I_n`` replaced by its printed-fit carving (``fit_key`` not None).
 
-    Each carving is rebuilt from its mesh (:func:`fcso.pad.rebuilt_from_mesh`): the same solid whether it was carved
-    here or by a worker.
+    Each carving is rebuilt from its mesh (:func:`fcso.geometry.rebuilt_from_mesh`): the same solid whether it was
+    carved here or by a worker.
     """
     sampler, fit = config.sampler, config.print.resolved()
     size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)

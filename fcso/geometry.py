@@ -315,6 +315,15 @@ def solid_from_mesh_arrays(vertices: np.ndarray, triangles: np.ndarray) -> manif
     return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=vertices, tri_verts=triangles))
 
 
+def rebuilt_from_mesh(solid: manifold3d.Manifold) -> manifold3d.Manifold:
+    """``solid`` rebuilt from its own mesh, as a worker's result arrives.
+
+    manifold3d's later Booleans triangulate a solid's history differently from
+    its mesh, and a design must not depend on where its geometries were made.
+    """
+    return solid_from_mesh_arrays(*mesh_arrays(solid))
+
+
 def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
     """Convert a watertight trimesh to a :class:`manifold3d.Manifold`.
 

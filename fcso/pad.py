@@ -9,7 +9,15 @@ import numpy as np
 
 from .config import FilterConfig, SamplerConfig
 from .errors import GeometryError
-from .geometry import affine_3x4, box, clip_to_box, mesh_arrays, solid_from_mesh_arrays, triangle_areas_normals
+from .geometry import (
+    affine_3x4,
+    box,
+    clip_to_box,
+    mesh_arrays,
+    rebuilt_from_mesh,
+    solid_from_mesh_arrays,
+    triangle_areas_normals,
+)
 
 # (u, v, w) -> (v, w, u): lets manifold3d's slice(z) cut across the pad thickness
 _U_TO_Z = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
@@ -57,15 +65,6 @@ class PadGeometry:
     def __setstate__(self, state: dict) -> None:
         state["intersection"] = solid_from_mesh_arrays(*state["intersection"])
         self.__dict__.update(state)
-
-
-def rebuilt_from_mesh(solid: manifold3d.Manifold) -> manifold3d.Manifold:
-    """``solid`` rebuilt from its own mesh, as a worker's result arrives (:meth:`PadGeometry.__setstate__`).
-
-    manifold3d's later Booleans triangulate a solid's history differently from
-    its mesh, and a design must not depend on where its geometries were made.
-    """
-    return solid_from_mesh_arrays(*mesh_arrays(solid))
 
 
 def distinct_solids(solids: list[manifold3d.Manifold]) -> list[manifold3d.Manifold]:

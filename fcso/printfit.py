@@ -46,7 +46,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .geometry import affine_3x4, box, mesh_arrays, ray_hits, solid_from_mesh_arrays, to_trimesh
+from .geometry import affine_3x4, box, ray_hits, rebuilt_from_mesh, to_trimesh
 
 #: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
 BALL_SEGMENTS = 12
@@ -265,7 +265,7 @@ def open_thin_walls(
     if thinnest_wall_mm(pad, thickness_mm, length_mm, width_mm) >= min_wall_mm:
         return pad
     # manifold3d's Booleans triangulate by their operands' history as well as their meshes
-    pad = solid_from_mesh_arrays(*mesh_arrays(pad))
+    pad = rebuilt_from_mesh(pad)
     kernel = manifold3d.Manifold.hull_points(ball_points(min_wall_mm / 2.0))
     # the pad's facets carry the carvings' slivers too, and the erosion sums the kernel over every one of them
     # (13 s for a 960-triangle pad of the 12-part job, 7 s simplified: 476 triangles)
