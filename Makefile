@@ -29,8 +29,9 @@ browser:
 
 # pytest exits 5 when it collected no tests: that is a failure here. The test files run on every core
 # (at most 4 workers); a file's tests stay on one worker, which builds its module fixtures once.
+# The ten slowest tests are listed at the end: where a slow CI machine spends its time.
 test: setup lint browser
-	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile; rc=$$?; \
+	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile --durations=10; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc
 
