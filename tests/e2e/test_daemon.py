@@ -166,7 +166,7 @@ def test_same_job_dropped_twice_runs_once(cell, cube_job):
         lambda v: (
             isinstance(v, dict) and v.get("message") == "job already known: not run again" and v.get("job_id") == job_id
         ),
-        30,
+        HANG_GUARD_S,
     )
     started = [v for v in daemon.json_lines() if v.get("message") == "job started" and v.get("job_id") == job_id]
     assert len(started) == 1
@@ -252,7 +252,16 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
     record = cell["base"] / "out" / job_id / "job.mcap"
     port = free_port()
     replay = Process(
-        ["replay", str(record), "--config", str(cell["config"]), "--listen", f"tcp/127.0.0.1:{port}", "--wait", "30"]
+        [
+            "replay",
+            str(record),
+            "--config",
+            str(cell["config"]),
+            "--listen",
+            f"tcp/127.0.0.1:{port}",
+            "--wait",
+            str(HANG_GUARD_S),
+        ]
     )
     listener = Process(
         [
@@ -265,12 +274,12 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
             "--exit-after",
             "1",
             "--timeout",
-            "40",
+            str(HANG_GUARD_S),
         ]
     )
     try:
         done = listener.wait_for(
-            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", 45
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", HANG_GUARD_S
         )
         assert done["job_id"] == job_id
         assert replay.popen.wait(timeout=HANG_GUARD_S) == 0

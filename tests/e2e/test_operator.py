@@ -130,7 +130,7 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
                     lambda v, topic=topic: (
                         isinstance(v, dict) and v.get("message") == "Foxglove client subscribed" and v["topic"] == topic
                     ),
-                    60,
+                    HANG_GUARD_S,
                 )
             before = scrape(metrics_port)
             # a design of many minutes (SLOW_SECTIONS in its job.toml): surely still running when cancelled
@@ -141,7 +141,7 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
             drop_job(tmp_path / "watch" / "cube", {"cube.stl": CUBE})
             queued = daemon.wait_for(
                 lambda v: isinstance(v, dict) and v.get("message") == "job queued" and v["folder"].endswith("/cube"),
-                60,
+                HANG_GUARD_S,
             )
             running_id, queued_id = started["job_id"], queued["job_id"]
 

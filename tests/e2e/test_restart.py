@@ -89,11 +89,12 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
     systemd.received.clear()
     config = write_config(tmp_path, port)
     second = start_daemon(config, env=environment)
-    subscriber = start_subscriber(config, extra=["--no-query"])
+    # the restarted daemon may finish the job before any subscriber connects: this one also asks for what was
+    # published before it came (the journal's answer), so it does not depend on which is quicker
+    subscriber = start_subscriber(config)
     try:
         done = subscriber.wait_for(
-            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"),
-            120,
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed")
         )
         assert done["job_id"] == job_id and done["body"]["state"] == "done", done
         assert done["body"]["attempt"] == 2
@@ -109,8 +110,10 @@ def test_sigkill_during_a_job_then_restart_runs_it_exactly_once(tmp_path):
         assert db.execute("SELECT state, attempt FROM jobs").fetchall() == [("done", 2)]
     assert sum(1 for v in second.json_lines() if v.get("message") == "job started") == 1
     assert any(v.get("message") == "re-queued job left running by the previous run" for v in second.json_lines())
+    # published once: at most one done status came live, and any answer from the journal is that one
     statuses = [v for v in subscriber.json_lines() if v.get("topic") == "status" and v["body"]["state"] == "done"]
-    assert len(statuses) == 1
+    assert sum(v["source"] == "live" for v in statuses) <= 1
+    assert all(v["body"] == done["body"] for v in statuses)
     record = read_record(tmp_path / "out" / job_id / "job.mcap")
     assert [s["state"] for s in record.of(TOPIC_STATE)] == ["queued", "running", "done"]
 
@@ -126,7 +129,7 @@ def test_job_over_its_time_limit_fails_with_a_finished_record(tmp_path):
         )
         failed = subscriber.wait_for(
             lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("done", "failed"),
-            90,
+            HANG_GUARD_S,
         )
     finally:
         subscriber.stop()

@@ -443,7 +443,7 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
             lambda v: (
                 isinstance(v, dict) and len([w for w in cell["subscriber"].json_lines() if "rejected" in w]) >= 12
             ),
-            30,
+            HANG_GUARD_S,
         )
         assert rejected
 
