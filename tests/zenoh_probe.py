@@ -33,6 +33,11 @@ def main() -> int:
     parser.add_argument("--payload", default='{"job_id": "x", "grasps": []}', help="the forged payload")
     parser.add_argument("--attachment", help="attachment to send with it (JSON text); default none")
     parser.add_argument("--count", type=int, default=20)
+    parser.add_argument(
+        "--await-subscriber",
+        action="store_true",
+        help="put only once a subscriber matches the key: a put before the routes are known is dropped",
+    )
     parser.add_argument("--queryable", metavar="KEY", help="answer queries on KEY with the forged payload")
     parser.add_argument("--token", metavar="KEY", help="declare a liveliness token on KEY")
     parser.add_argument(
@@ -90,6 +95,9 @@ def main() -> int:
         publisher = session.declare_publisher(
             args.put, reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK
         )
+        # a condition, not a clock: the test's own guard ends a probe that never sees one
+        while args.await_subscriber and not publisher.matching_status.matching:
+            time.sleep(0.01)
         for _ in range(args.count):
             publisher.put(args.payload.encode(), attachment=attachment)
             time.sleep(0.05)

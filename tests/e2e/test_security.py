@@ -435,8 +435,17 @@ def test_without_access_control_forged_messages_fail_signature_verification(tmp_
         }
         for what, extra in attempts.items():
             payload = real_grasps if what == "signature of another key expression" else FORGED
+            # every forgery must reach the subscriber for the count below: each probe waits until it matches
             lines = probe(
-                pki / "clients" / "ctl2" / "zenoh.json5", "--put", key, "--payload", payload, "--count", "3", *extra
+                pki / "clients" / "ctl2" / "zenoh.json5",
+                "--put",
+                key,
+                "--payload",
+                payload,
+                "--count",
+                "3",
+                "--await-subscriber",
+                *extra,
             )
             assert [e["event"] for e in lines][:2] == ["open", "put"], (what, lines)
         rejected = cell["subscriber"].wait_for(
