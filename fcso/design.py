@@ -724,28 +724,38 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
 
 
 def listed_screens(
-    prepared: Prepared, chosen: ChosenCandidate, config: DesignConfig
-) -> dict[tuple[int, ...], ScreenedCandidate]:
-    """Per-scenario screened values of the candidates ``report.json`` lists after the exact finalists.
+    designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
+) -> list[dict[tuple[int, ...], ScreenedCandidate]]:
+    """Per-scenario screened values of the candidates each design's ``report.json`` lists after its exact finalists.
 
     Those the search kept (:attr:`ChosenCandidate.kept_screens`) are taken as they are; the others are screened again
-    on ``prepared``'s workers (screening is a function of the candidate: the same values).
+    (screening is a function of the candidate: the same values), every design's on one pool of workers.
+
+    Parameters
+    ----------
+    designs : sequence of (Prepared, ChosenCandidate)
+    config : DesignConfig
 
     Returns
     -------
-    dict
-        Candidate (one sample per scenario) -> its screening.
+    list of dict
+        Per design, candidate (one sample per scenario) -> its screening.
     """
-    listed = chosen.ranked[config.search.exact_top_k : config.search.report_candidates]
-    missing = [c for c in listed if c not in chosen.kept_screens]
-    known = dict(chosen.kept_screens)
-    if missing:
-        chunks = [missing[i : i + _SCREEN_CHUNK] for i in range(0, len(missing), _SCREEN_CHUNK)]
-        with WorkerPool(
-            _screen_context(prepared, config), min(prepared.jobs, len(chunks)), config.compute.scheduler
-        ) as pool:
-            known.update(zip(missing, (c for chunk in pool.map(_screen_batch, chunks) for c in chunk)))
-    return {c: known[c] for c in listed}
+    listed = [chosen.ranked[config.search.exact_top_k : config.search.report_candidates] for _, chosen in designs]
+    known = [dict(chosen.kept_screens) for _, chosen in designs]
+    tasks = [
+        (number, missing[i : i + _SCREEN_CHUNK])
+        for number, candidates in enumerate(listed)
+        for missing in [[c for c in candidates if c not in known[number]]]
+        for i in range(0, len(missing), _SCREEN_CHUNK)
+    ]
+    if tasks:
+        contexts = [_screen_context(prepared, config) for prepared, _ in designs]
+        jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
+        with WorkerPool(contexts, jobs, config.compute.scheduler) as pool:
+            for (number, chunk), screened in zip(tasks, pool.map(_listed_batch, tasks)):
+                known[number].update(zip(chunk, screened))
+    return [{c: screens[c] for c in candidates} for candidates, screens in zip(listed, known)]
 
 
 def finish_design(
@@ -808,10 +818,15 @@ def finish_designs(
             return [error]
         return [made for design in designs for made in finish_designs([design], config, progress)]
     shared_s = (time.perf_counter() - clock) / len(designs)
+    clock = time.perf_counter()
+    listed = listed_screens(designs, config)
+    listing_s = (time.perf_counter() - clock) / len(designs)
     results: list[DesignResult | GeometryError] = []
     for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
         try:
-            results.append(_finished_design(prepared, chosen, config, made, versus, n in flat, shared_s))
+            results.append(
+                _finished_design(prepared, chosen, config, made, versus, n in flat, shared_s, listed[n], listing_s)
+            )
         except GeometryError as error:
             results.append(error)
     return results
@@ -825,17 +840,18 @@ def _finished_design(
     compared: list,
     flat_pads: bool,
     finishing_s: float,
+    listed: dict[tuple[int, ...], ScreenedCandidate],
+    listing_s: float,
 ) -> DesignResult:
     """One design of :func:`finish_designs`: its finger fused and its report, ``finishing_s`` its share of the
-    candidates' finishing."""
+    candidates' finishing, ``listed`` its listed candidates' screenings (:func:`listed_screens`), ``listing_s`` its
+    share of screening them."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
     outcome, ranked, exact, indices = chosen.outcome, chosen.ranked, chosen.exact, chosen.indices
     best_choice, upper_bound = chosen.choice, chosen.upper_bound
-    clock = time.perf_counter()
-    listed = listed_screens(prepared, chosen, config)
-    timings["screening"] = timings.get("screening", 0.0) + time.perf_counter() - clock
+    timings["screening"] = timings.get("screening", 0.0) + listing_s
     clock = time.perf_counter() - finishing_s
     best, grasps, print_fit, fit_warnings = finished
     transform = pad_to_finger(finger, config.sampler)
@@ -1003,6 +1019,12 @@ def _screen_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandi
         else None
     )
     return [screen([screens[m][k] for m, k in enumerate(choice)], config, lattice, carved) for choice in choices]
+
+
+def _listed_batch(contexts, task: tuple[int, list[tuple[int, ...]]]) -> list[ScreenedCandidate]:
+    """:func:`_screen_batch` of one design of :func:`listed_screens`: ``task`` is (design number, candidates)."""
+    number, choices = task
+    return _screen_batch(contexts[number], choices)
 
 
 def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
