@@ -743,12 +743,10 @@ def listed_screens(
     """
     listed = [chosen.ranked[config.search.exact_top_k : config.search.report_candidates] for _, chosen in designs]
     known = [dict(chosen.kept_screens) for _, chosen in designs]
-    tasks = [
-        (number, missing[i : i + _SCREEN_CHUNK])
-        for number, candidates in enumerate(listed)
-        for missing in [[c for c in candidates if c not in known[number]]]
-        for i in range(0, len(missing), _SCREEN_CHUNK)
-    ]
+    tasks = []
+    for number, candidates in enumerate(listed):
+        missing = [c for c in candidates if c not in known[number]]
+        tasks += [(number, missing[i : i + _SCREEN_CHUNK]) for i in range(0, len(missing), _SCREEN_CHUNK)]
     if tasks:
         contexts = [_screen_context(prepared, config) for prepared, _ in designs]
         jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))

@@ -165,8 +165,7 @@ def test_same_job_dropped_twice_runs_once(cell, cube_job):
     daemon.wait_for(
         lambda v: (
             isinstance(v, dict) and v.get("message") == "job already known: not run again" and v.get("job_id") == job_id
-        ),
-        HANG_GUARD_S,
+        )
     )
     started = [v for v in daemon.json_lines() if v.get("message") == "job started" and v.get("job_id") == job_id]
     assert len(started) == 1
@@ -279,7 +278,7 @@ def test_replay_publishes_the_recorded_messages(cell, cube_job):
     )
     try:
         done = listener.wait_for(
-            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done", HANG_GUARD_S
+            lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "done"
         )
         assert done["job_id"] == job_id
         assert replay.popen.wait(timeout=HANG_GUARD_S) == 0
