@@ -75,9 +75,9 @@ SIGNAL_TIME_LIMIT = signal.SIGUSR1
 SIGNAL_WITHDRAWN = signal.SIGUSR2
 
 
-def time_limit_error(limit_seconds: float) -> str:
-    """The error of a job stopped by its time limit."""
-    return f"time limit exceeded: the job ran longer than jobs.time_limit_seconds ({limit_seconds:g} s)"
+def time_limit_error(limit_seconds: float, stage: str = "job", setting: str = "jobs.time_limit_seconds") -> str:
+    """The error of a job (or its verification, ``stage``) stopped when ``setting``, ``limit_seconds``, ran out."""
+    return f"time limit exceeded: the {stage} ran longer than {setting} ({limit_seconds:g} s)"
 
 
 @dataclass

@@ -44,7 +44,7 @@ from ..record.recorder import (
 )
 from ..record.scene import scene_updates
 from .inputs import read_manifest
-from .task import TimeLimitExceeded, VerificationTask, unfinished_verification_message
+from .task import TimeLimitExceeded, VerificationTask, time_limit_error, unfinished_verification_message
 
 
 def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> VerifySettings:
@@ -190,10 +190,7 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             for warning in verification.warnings:
                 log("warning", f"{name}: {warning}")
     except TimeLimitExceeded:
-        error = (
-            f"time limit exceeded: the verification ran longer than verify.time_limit_seconds "
-            f"({settings.time_limit_seconds:g} s)"
-        )
+        error = time_limit_error(settings.time_limit_seconds, "verification", "verify.time_limit_seconds")
         _unfinished(config, job_id, [number for _, number, _ in designs], "failed", error, emit, designs)
         return
     except Exception as exc:  # the design is delivered; its verification failed

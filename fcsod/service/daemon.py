@@ -93,8 +93,15 @@ class WorkerSlot:
     finished: bool = False
     #: the job is done and its worker verifies its design until this (monotonic s); None: no verification runs
     verify_deadline: float | None = None
+    #: that verification's time limit, s
+    verify_limit_s: float = 0.0
     open: bool = True
     events: list = field(default_factory=list)
+
+
+def _start_verification_clock(slot: WorkerSlot, limit_s: float) -> None:
+    """The slot's worker verifies from now, for at most ``limit_s``."""
+    slot.verify_deadline, slot.verify_limit_s = time.monotonic() + limit_s, limit_s
 
 
 class Daemon:
@@ -321,7 +328,7 @@ class Daemon:
         """Hand a done job's cut-off verification to a worker (it runs again from the job's output folder)."""
         verification = self.journal.restart_verification(job_id, utc_now())
         slot.job, slot.started, slot.finished = self.journal.get(job_id), time.monotonic(), True
-        slot.verify_deadline = time.monotonic() + self.config.verify.time_limit_seconds
+        _start_verification_clock(slot, self.config.verify.time_limit_seconds)
         slot.connection.send(VerificationTask(job_id, slot.job.folder, self.config))
         log.info(
             "verification started again",
@@ -412,7 +419,7 @@ class Daemon:
             elif kind == "finished":
                 self._finished(slot, *event[1:])
             elif kind == "verifying":
-                slot.verify_deadline = time.monotonic() + event[1]
+                _start_verification_clock(slot, event[1])
             elif kind == "verified":
                 self._verified(slot, *event[1:])
 
@@ -427,7 +434,7 @@ class Daemon:
         self.metrics.jobs_finished.labels(state).inc()
         slot.finished = True
         if verify_limit_s is not None:
-            slot.verify_deadline = time.monotonic() + verify_limit_s
+            _start_verification_clock(slot, verify_limit_s)
         extra = {"job_id": row.job_id, "state": state, "seconds": round(time.monotonic() - slot.started, 3)}
         if error:
             log.error(f"job failed: {error}", extra=extra)
@@ -522,7 +529,7 @@ class Daemon:
                         continue
                     log.warning("verification over its time limit: stopping it", extra={"job_id": slot.job.job_id})
                     # the worker publishes the failure; this is the error if it has to be killed
-                    slot.stop_error = "time limit exceeded: the verification ran longer than verify.time_limit_seconds"
+                    slot.stop_error = time_limit_error(slot.verify_limit_s, "verification", "verify.time_limit_seconds")
                     stop_signal = SIGNAL_TIME_LIMIT
                 elif now - slot.started > jobs.time_limit_seconds:
                     log.warning("job over its time limit: stopping it", extra={"job_id": slot.job.job_id})
