@@ -45,6 +45,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from scipy.ndimage import maximum_filter, minimum_filter
 from scipy.spatial import ConvexHull, QhullError, cKDTree
@@ -407,6 +408,33 @@ class Carving:
     pairs: frozenset
 
 
+def _compiled(function):
+    """``function`` compiled by numba, its machine code cached on disk (next to this module, or in
+    ``NUMBA_CACHE_DIR``): compiling the screening kernels takes ~2 s, loading them ~0.3 s, per process. Where no
+    folder is writable (a read-only install without a writable home) each process compiles them."""
+    try:
+        return numba.njit(cache=True, nogil=True)(function)
+    except RuntimeError:
+        return numba.njit(nogil=True)(function)
+
+
+@_compiled
+def _carve_window(top, owner, second, top_high, row, column, low, high, index):
+    """Carve one geometry's maps into a :class:`Carving`'s (``(count_v, count_w)`` arrays, changed in place) on its
+    window, whose first cell is ``(row, column)``; ``index`` is its position in the candidate."""
+    for r in range(low.shape[0]):
+        for c in range(low.shape[1]):
+            v, w = row + r, column + c
+            # ties keep the earlier owner: equal heights bury the same samples either way
+            if low[r, c] > top[v, w]:
+                second[v, w] = top[v, w]
+                owner[v, w] = index
+                top[v, w] = low[r, c]
+            else:
+                second[v, w] = max(second[v, w], low[r, c])
+            top_high[v, w] = max(top_high[v, w], high[r, c])
+
+
 def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, base: Carving | None = None) -> Carving:
     """Carve the good geometries of some scenarios of a candidate into ``base`` (a new Carving).
 
@@ -441,15 +469,89 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
         for side, g in enumerate(chosen[pair]):
             if not g.good:
                 continue
-            cells = g.cells
-            window_top, low = top[cells], g.window_low_mm
-            higher = low > window_top
-            # ties keep the earlier owner: equal heights bury the same samples either way
-            second[cells] = np.where(higher, window_top, np.maximum(second[cells], low))
-            owner[cells] = np.where(higher, 2 * pair + side, owner[cells])
-            np.maximum(window_top, low, out=window_top)
-            np.maximum(top_high[cells], g.window_high_mm, out=top_high[cells])
+            _carve_window(
+                top,
+                owner,
+                second,
+                top_high,
+                g.window[0],
+                g.window[2],
+                g.window_low_mm,
+                g.window_high_mm,
+                2 * pair + side,
+            )
     return Carving(top.ravel(), owner.ravel(), second.ravel(), top_high.ravel(), done | frozenset(pairs))
+
+
+@_compiled
+def _contacts(top, owner, second, top_high, floor, eps, lengths, good, cells, point_u, point_bins, pairs):
+    """Which contact samples of a candidate's geometries touch the pad, in one pass over every point.
+
+    A good geometry's sample touches where it reaches the pad the others
+    carve (its own carving buries none of its samples); a bad one is
+    seated where its highest sample meets the pad's high map and touches
+    between the low and high maps. Heights in float32, as the maps are
+    (``eps`` rounded to float32 where it meets them), so the figures are
+    those of the same comparisons on arrays.
+
+    Parameters
+    ----------
+    top, second, top_high : (cells,) float32
+        The :class:`Carving`'s maps; ``owner`` its (cells,) int32 owners.
+    floor : float32
+        The pad's face where nothing is carved (:func:`pad_case`).
+    eps : float
+        Contact tolerance, mm.
+    lengths : (geometries,) int64
+        Samples per geometry, in the candidate's order (``2 * scenario + side``).
+    good : (geometries,) bool
+    cells, point_u, point_bins : (samples,) int32, float32, int32
+        Every geometry's samples in turn: cell, height ``u`` (mm) and normal bin.
+    pairs : int
+        Scenarios.
+
+    Returns
+    -------
+    contact : (samples,) bool
+    counts : (geometries,) int64
+        Samples in contact.
+    offsets : (geometries,) float
+        A bad geometry's seat offset, mm (0 for a good one).
+    occupied : (pairs, NORMAL_BINS) bool
+        The normal bins of each scenario's contacts.
+    """
+    contact = np.zeros(point_u.shape[0], dtype=np.bool_)
+    counts = np.zeros(lengths.shape[0], dtype=np.int64)
+    offsets = np.zeros(lengths.shape[0], dtype=np.float64)
+    occupied = np.zeros((pairs, NORMAL_BINS), dtype=np.bool_)
+    tolerance = np.float32(eps)
+    start = 0
+    for geometry in range(lengths.shape[0]):
+        end = start + lengths[geometry]
+        if good[geometry]:
+            for i in range(start, end):
+                cell = cells[i]
+                others = max(second[cell], floor) if owner[cell] == geometry else max(top[cell], floor)
+                contact[i] = point_u[i] >= others - tolerance
+        elif end > start:
+            highest = point_u[start] - max(top_high[cells[start]], floor)
+            for i in range(start + 1, end):
+                highest = max(highest, point_u[i] - max(top_high[cells[i]], floor))
+            offset = max(np.float64(highest) - eps, 0.0)
+            offsets[geometry] = offset
+            seat = np.float32(offset)
+            for i in range(start, end):
+                cell = cells[i]
+                seated = point_u[i] - seat
+                contact[i] = (seated >= max(top[cell], floor) - tolerance) and (
+                    seated <= max(top_high[cell], floor) + tolerance
+                )
+        for i in range(start, end):
+            if contact[i]:
+                counts[geometry] += 1
+                occupied[geometry // 2, point_bins[i]] = True
+        start = end
+    return contact, counts, offsets, occupied
 
 
 def pad_case(geometries: list[ScreenGeometry], config: DesignConfig) -> tuple[str, float]:
@@ -507,32 +609,28 @@ def screen(
     case, floor = pad_case(geometries, config)
     done = carved.pairs if carved is not None else frozenset()
     carving = carve_heights(chosen, [p for p in range(len(chosen)) if p not in done], carved)
-    floor = np.float32(floor)
+    lengths = np.array([len(g.point_u_mm) for g in geometries], dtype=np.int64)
+    contact, counts, offsets, occupied = _contacts(
+        carving.top_mm,
+        carving.owner,
+        carving.second_mm,
+        carving.top_high_mm,
+        np.float32(floor),
+        float(eps),
+        lengths,
+        np.array([g.good for g in geometries], dtype=np.bool_),
+        np.concatenate([g.point_cell for g in geometries]),
+        np.concatenate([g.point_u_mm for g in geometries]),
+        np.concatenate([g.point_bin for g in geometries]),
+        len(chosen),
+    )
+    ends = np.cumsum(lengths)
     results = []
     for pair_number in range(len(chosen)):
-        areas, bins, offsets, contacts = 0.0, [], [], []
+        areas = 0.0
         for index in (2 * pair_number, 2 * pair_number + 1):
-            g = geometries[index]
-            cell = g.point_cell
-            # the pad's heights under this geometry's points only: a few hundred cells, not the grid
-            top_low = np.maximum(carving.top_mm[cell], floor)
-            if g.good:
-                others = np.where(carving.owner[cell] == index, np.maximum(carving.second_mm[cell], floor), top_low)
-                contact = g.point_u_mm >= others - eps
-                offset = 0.0
-            else:
-                top_high = np.maximum(carving.top_high_mm[cell], floor)
-                above = g.point_u_mm - top_high
-                offset = max(float(above.max()) - eps, 0.0) if len(above) else 0.0
-                seated = g.point_u_mm - offset
-                contact = (seated >= top_low - eps) & (seated <= top_high + eps)
-            areas += float(contact.sum()) * g.area_per_point_mm2
-            bins.append(g.point_bin[contact])
-            offsets.append(offset)
-            contacts.append(contact)
-        # the sorted distinct bins: a count over the lattice is cheaper than sorting the points
-        occupied = np.flatnonzero(np.bincount(np.concatenate(bins), minlength=NORMAL_BINS)).astype(np.int32)
-        radius = lattice.rles(occupied)
+            areas += float(counts[index]) * geometries[index].area_per_point_mm2
+        radius = lattice.rles(np.flatnonzero(occupied[pair_number]).astype(np.int32))
         effective = areas / radius if areas > 0 else 0.0
         if config.quality.measure != "capture":
             capture = 1.0
@@ -540,8 +638,16 @@ def screen(
             capture = geometries[2 * pair_number].capture
         else:
             capture = float(captures[pair_number])
-        share = 1.0 if holding is None or config.quality.measure != "capture" else holding(pair_number, tuple(contacts))
+        share = (
+            1.0
+            if holding is None or config.quality.measure != "capture"
+            else holding(
+                pair_number,
+                tuple(contact[ends[i] - lengths[i] : ends[i]] for i in (2 * pair_number, 2 * pair_number + 1)),
+            )
+        )
         measure = scenario_measure(capture, share, effective, config)
-        results.append(ScreenedScenario(radius, areas, effective, (offsets[0], offsets[1]), capture, measure))
+        offset_pair = (float(offsets[2 * pair_number]), float(offsets[2 * pair_number + 1]))
+        results.append(ScreenedScenario(radius, areas, effective, offset_pair, capture, measure))
     measures = [r.measure for r in results]
     return ScreenedCandidate(float(min(measures)), float(np.mean(measures)), results, case)
