@@ -39,6 +39,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter
 
 from .config import DesignConfig, QualityConfig
+from .jit import compiled
 from .screen import ScreenGeometry, ScreenGrid, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
@@ -189,16 +190,10 @@ def capture_landscape(
         # cells and interpolated between them, so the landscape has no steps of a cell's rounding
         shift = (sign * offsets[:, None] + yaws[None, :] * (depth_mm - u_c)) / cell_mm
         whole = np.floor(shift).astype(np.int64)
-        fraction = (shift - whole)[:, :, None]
-        lowest, highest = int(whole.min()), int(whole.max()) + 1
-        source_rows = np.clip(np.arange(count_v)[None, :] - np.arange(lowest, highest + 1)[:, None], 0, count_v - 1)
-        per_shift = np.min(pad_mm[None, :, entered] - part[source_rows], axis=2)
-        with np.errstate(invalid="ignore"):
-            shifted = (1.0 - fraction) * per_shift[whole - lowest] + fraction * per_shift[whole + 1 - lowest]
-        shifted = np.where(np.isnan(shifted), np.inf, shifted)
-        # tilt: the displaced surface rises by -θ (v - v_c)
-        columns = shifted + yaws[None, :, None] * (v_mm - v_c)[None, None, :]
-        gap += np.min(columns, axis=2)
+        fraction = shift - whole
+        _add_side_gaps(
+            np.ascontiguousarray(pad_mm[:, entered]), np.ascontiguousarray(part), whole, fraction, v_mm, v_c, yaws, gap
+        )
         levers.append(abs(depth_mm - u_c))
     centre = (steps, turns)
     # a centre no pad touches has an infinite gap: every separation is then inf - inf, read as never seated
@@ -235,29 +230,79 @@ def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: f
     prism at captures of 0.19 and 0.62 where the simulation seats 10/10).
     Among the moves taken the steepest (drop per length) wins.
     """
+    successor = _steepest_moves(separation, step_mm, turn_mm, friction)
+    successor = successor.ravel()
+    # pointer jumping: separation falls along every move, so the chains end
+    for _ in range(int(np.ceil(np.log2(separation.size))) + 1):
+        successor = successor[successor]
+    return successor
+
+
+@compiled
+def _add_side_gaps(pad, part, whole, fraction, v_mm, v_c, yaws, gap):
+    """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
+
+    Parameters
+    ----------
+    pad, part : (count_v, columns) float
+        The pad's face heights and the part's column heights (``-inf`` where
+        it is not in the box) on the rows of ``w`` the part enters, mm.
+    whole, fraction : (offsets, yaws) int64, float
+        Each start's shift along ``v`` in cells: its whole cells and the rest.
+    v_mm : (count_v,) float
+        Cell centres along ``v``, mm.
+    v_c : float
+        The part's centre of mass along ``v``, mm.
+    yaws : (yaws,) float
+        Start yaws, radians.
+    """
+    count_v, columns = pad.shape
+    lowest = whole.min()
+    # the clearance of every whole shift per row of v: its least over the rows of w
+    per_shift = np.empty((whole.max() + 2 - lowest, count_v))
+    for shift in range(per_shift.shape[0]):
+        for v in range(count_v):
+            source = min(max(v - (lowest + shift), 0), count_v - 1)
+            least = np.inf
+            for column in range(columns):
+                least = min(least, pad[v, column] - part[source, column])
+            per_shift[shift, v] = least
+    for offset in range(whole.shape[0]):
+        for yaw in range(whole.shape[1]):
+            row, share = whole[offset, yaw] - lowest, fraction[offset, yaw]
+            least = np.inf
+            for v in range(count_v):
+                # interpolated between whole cells, so the landscape has no steps of a cell's rounding; inf - inf
+                # (no pad or no part on either side) is no contact
+                shifted = (1.0 - share) * per_shift[row, v] + share * per_shift[row + 1, v]
+                if np.isnan(shifted):
+                    shifted = np.inf
+                # tilt: the displaced surface rises by -θ (v - v_c)
+                least = min(least, shifted + yaws[yaw] * (v_mm[v] - v_c))
+            gap[offset, yaw] += least
+
+
+@compiled
+def _steepest_moves(separation, step_mm, turn_mm, friction):
+    """Each node's steepest move of :func:`_descent` (its own flat index where none is taken)."""
     rows, columns = separation.shape
-    padded = np.pad(separation, 1, constant_values=np.inf)
-    index = np.pad(np.arange(separation.size).reshape(rows, columns), 1, constant_values=-1)
     best_slope = np.zeros(separation.shape)
     successor = np.arange(separation.size).reshape(rows, columns)
     for dr in (-1, 0, 1):
         for dc in (-1, 0, 1):
             if dr == 0 and dc == 0:
                 continue
-            neighbour = padded[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + columns]
             length = np.hypot(dr * step_mm, dc * turn_mm)
-            with np.errstate(invalid="ignore"):
-                drop = separation - neighbour
-                slope = drop / length
-            held = drop <= 2.0 * friction * abs(dr) * step_mm + 1e-9
-            slope = np.where(np.isfinite(slope) & ~held, slope, -np.inf)
-            better = slope > best_slope
-            best_slope = np.where(better, slope, best_slope)
-            successor = np.where(better, index[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + columns], successor)
-    successor = successor.ravel()
-    # pointer jumping: separation falls along every move, so the chains end
-    for _ in range(int(np.ceil(np.log2(separation.size))) + 1):
-        successor = successor[successor]
+            held_below = 2.0 * friction * abs(dr) * step_mm + 1e-9
+            for r in range(rows):
+                for c in range(columns):
+                    inside = 0 <= r + dr < rows and 0 <= c + dc < columns
+                    neighbour = separation[r + dr, c + dc] if inside else np.inf
+                    drop = separation[r, c] - neighbour
+                    slope = drop / length
+                    if np.isfinite(slope) and not drop <= held_below and slope > best_slope[r, c]:
+                        best_slope[r, c] = slope
+                        successor[r, c] = (r + dr) * columns + c + dc
     return successor
 
 

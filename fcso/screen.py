@@ -45,12 +45,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 from scipy.ndimage import maximum_filter, minimum_filter
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .config import DesignConfig
+from .jit import compiled
 from .measure import scenario_measure
 from .rles import fibonacci_sphere, rles
 
@@ -408,17 +408,7 @@ class Carving:
     pairs: frozenset
 
 
-def _compiled(function):
-    """``function`` compiled by numba, its machine code cached on disk (next to this module, or in
-    ``NUMBA_CACHE_DIR``): compiling the screening kernels takes ~2 s, loading them ~0.3 s, per process. Where no
-    folder is writable (a read-only install without a writable home) each process compiles them."""
-    try:
-        return numba.njit(cache=True, nogil=True)(function)
-    except RuntimeError:
-        return numba.njit(nogil=True)(function)
-
-
-@_compiled
+@compiled
 def _carve_window(top, owner, second, top_high, row, column, low, high, index):
     """Carve one geometry's maps into a :class:`Carving`'s (``(count_v, count_w)`` arrays, changed in place) on its
     window, whose first cell is ``(row, column)``; ``index`` is its position in the candidate."""
@@ -483,7 +473,7 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
     return Carving(top.ravel(), owner.ravel(), second.ravel(), top_high.ravel(), done | frozenset(pairs))
 
 
-@_compiled
+@compiled
 def _contacts(top, owner, second, top_high, floor, eps, lengths, good, cells, point_u, point_bins, pairs):
     """Which contact samples of a candidate's geometries touch the pad, in one pass over every point.
 
