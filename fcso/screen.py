@@ -259,11 +259,11 @@ class NormalLattice:
         return nearest[inverse.ravel()]
 
     def rles(self, occupied: np.ndarray) -> float:
-        """RLES of the lattice directions ``occupied`` (sorted unique bin indices), cached."""
+        """RLES of the lattice directions ``occupied`` (a ``(NORMAL_BINS,)`` bool mask), cached by the mask."""
         key = occupied.tobytes()
         value = self._cache.get(key)
         if value is None:
-            value = _hull_rles(self.directions[occupied]) if len(occupied) else 2.0
+            value = _hull_rles(self.directions[occupied]) if occupied.any() else 2.0
             self._cache[key] = value
         return value
 
@@ -343,8 +343,9 @@ def screened_bound(geometries: tuple[ScreenGeometry, ScreenGeometry], lattice: N
     smaller, so no candidate screens this sample higher.
     """
     area = sum(len(g.point_u_mm) * g.area_per_point_mm2 for g in geometries)
-    occupied = np.unique(np.concatenate([g.point_bin for g in geometries]))
-    return float(area / lattice.rles(occupied)) if len(occupied) else 0.0
+    occupied = np.zeros(NORMAL_BINS, dtype=bool)
+    occupied[np.concatenate([g.point_bin for g in geometries])] = True
+    return float(area / lattice.rles(occupied)) if occupied.any() else 0.0
 
 
 @dataclass
@@ -620,7 +621,7 @@ def screen(
         areas = 0.0
         for index in (2 * pair_number, 2 * pair_number + 1):
             areas += float(counts[index]) * geometries[index].area_per_point_mm2
-        radius = lattice.rles(np.flatnonzero(occupied[pair_number]).astype(np.int32))
+        radius = lattice.rles(occupied[pair_number])
         effective = areas / radius if areas > 0 else 0.0
         if config.quality.measure != "capture":
             capture = 1.0
