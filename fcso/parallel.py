@@ -21,6 +21,7 @@ workers and on either executor.
 from __future__ import annotations
 
 import ctypes
+import gc
 import multiprocessing
 import os
 import signal
@@ -161,6 +162,9 @@ class WorkerPool:
             self._context_future = self._client.scatter([self.context], broadcast=True, hash=False)[0]
         elif self.jobs > 1:
             _WORKER_CONTEXT = self.context
+            # everything the workers inherit is left out of their garbage collections, which would otherwise write
+            # to every inherited object and so copy its memory page into the worker
+            gc.freeze()
             try:
                 self._pool = ProcessPoolExecutor(
                     self.jobs,
@@ -171,6 +175,7 @@ class WorkerPool:
                 # fork every worker now, while the context is the one to share
                 list(self._pool.map(_started, [None] * self.jobs))
             finally:
+                gc.unfreeze()
                 _WORKER_CONTEXT = None
         return self
 
