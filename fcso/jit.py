@@ -10,8 +10,8 @@ def compiled(function):
     """``function`` compiled by numba in nopython mode, its machine code cached on disk.
 
     The cache lives next to the function's module or in ``NUMBA_CACHE_DIR``:
-    compiling a kernel takes about a second, loading it a tenth, in every
-    process. Where no folder is writable (a read-only install without a
+    compiling the design's four kernels takes 2-3 s, loading them from the
+    cache ~0.4 s, in every process. Where no folder is writable (a read-only install without a
     writable home) each process compiles its kernels instead.
     """
     try:
