@@ -6,6 +6,7 @@ import manifold3d
 import numpy as np
 import trimesh
 from igl.embree import EmbreeIntersector
+from scipy.spatial import ConvexHull
 
 from .errors import GeometryError
 
@@ -302,6 +303,92 @@ def volume_about(mesh: trimesh.Trimesh, origin: np.ndarray) -> float:
     """
     corners = np.asarray(mesh.triangles, dtype=np.float64) - origin
     return float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0)
+
+
+def convex_patches(
+    vertices: np.ndarray,
+    corners: np.ndarray,
+    normals: np.ndarray,
+    tolerance_mm: float,
+    min_cos: float = 1.0 - 1e-9,
+    max_sag_mm: np.ndarray | None = None,
+    seen_along: np.ndarray | None = None,
+) -> list[list[int]]:
+    """Triangles of a surface grouped into edge-connected clusters that form a convex patch.
+
+    Greedy: a cluster grows from its first triangle by neighbours whose
+    normal is within ``arccos(min_cos)`` of the first one's while (a) every
+    corner of the cluster lies under the plane of every triangle of it (the
+    patch is convex, within ``tolerance_mm``), and (b) the hull of
+    its corners seen along the first normal (or ``seen_along``) has the area of its triangles
+    (no notch or hole in its outline). Then the patch is the top of the hull
+    of its corners and of their copies moved along the first normal, and the
+    prism under it is convex. By default only coplanar triangles are grouped:
+    a flat face or a planar wall of a pocket is one piece instead of one per
+    triangle.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    corners : (m, 3) int
+        The triangles' vertex indices.
+    normals : (m, 3) float
+        Unit normals of the triangles.
+    tolerance_mm : float
+        How far a corner of a patch may stand above the plane of one of its triangles, mm.
+    min_cos : float
+        Cosine of the largest angle between the normals of a cluster's triangles and its first one's.
+    max_sag_mm : (m,) float, optional
+        Largest depth of a cluster's corners along its first normal (the patch's bulge): a cluster's hull reaches
+        that far under its patch. None: no limit.
+    seen_along : (3,) float, optional
+        Unit direction of the outline's test instead of each cluster's first normal (a pad's prisms run along its
+        ``u`` axis).
+    """
+    area = np.linalg.norm(np.cross(*(vertices[corners[:, k]] - vertices[corners[:, 0]] for k in (1, 2))), axis=1) / 2
+    offsets = np.einsum("ij,ij->i", normals, vertices[corners[:, 0]])
+    neighbours: dict[tuple[int, int], list[int]] = {}
+    for index, (a, b, c) in enumerate(corners):
+        for edge in ((a, b), (b, c), (c, a)):
+            neighbours.setdefault((min(edge), max(edge)), []).append(index)
+    adjacent = [set() for _ in corners]
+    for sharing in neighbours.values():
+        for index in sharing:
+            adjacent[index].update(t for t in sharing if t != index)
+    taken = np.zeros(len(corners), dtype=bool)
+    clusters = []
+    for seed in range(len(corners)):
+        if taken[seed]:
+            continue
+        taken[seed] = True
+        normal = normals[seed]
+        seen = normal if seen_along is None else np.asarray(seen_along, dtype=np.float64)
+        cluster, shadow = [seed], float(area[seed] * abs(normal @ seen))
+        frontier = [t for t in adjacent[seed] if normals[t] @ normal >= min_cos]
+        if frontier:
+            # two directions across the one seen along: the hull's area in them is the area seen along it
+            across = np.cross(seen, np.eye(3)[np.argmin(np.abs(seen))])
+            in_plane = np.column_stack([across, np.cross(seen, across)])
+            in_plane /= np.linalg.norm(in_plane, axis=0)
+        while frontier:
+            candidate = frontier.pop()
+            if taken[candidate]:
+                continue
+            members = cluster + [candidate]
+            points = vertices[np.unique(corners[members])]
+            grown = shadow + float(area[candidate] * abs(normals[candidate] @ seen))
+            heights = points @ normal
+            if (
+                (normals[members] @ points.T - offsets[members, None]).max() <= tolerance_mm
+                and (max_sag_mm is None or np.ptp(heights) <= max_sag_mm[members].min())
+                and ConvexHull(points @ in_plane).volume <= grown * (1.0 + 1e-9) + 1e-9
+            ):
+                taken[candidate] = True
+                cluster.append(candidate)
+                shadow = grown
+                frontier.extend(t for t in adjacent[candidate] if not taken[t] and normals[t] @ normal >= min_cos)
+        clusters.append(cluster)
+    return clusters
 
 
 def mesh_arrays(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:

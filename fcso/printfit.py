@@ -17,10 +17,15 @@ seats: walls that face the pad get back into contact after the advance;
 walls parallel to the closing axis keep their gap ``c`` and drop out of
 contact, as they do in a real clearance fit.
 
-All Minkowski sums and differences are with convex kernels and done by
-manifold3d's own ``minkowski_sum`` / ``minkowski_difference`` (exact). Round
-kernels are polyhedra that contain the round shape, so grown pockets are
-never smaller than asked.
+All Minkowski sums and differences are with convex kernels and exact
+(:func:`minkowski_convex`, :func:`minkowski_difference_convex`): the solid
+and the kernel swept over each convex planar patch of its surface, one
+Boolean of all of them. manifold3d's own ``minkowski_sum`` sweeps every
+triangle instead: a flat face of a CAD part, or a pad's, is many triangles
+and as many overlapping sweeps, and the Boolean of them was the pockets'
+and openings' cost (the 12-part job's sums 2.3x faster, its openings 1.6x).
+Round kernels are polyhedra that contain the round shape, so grown pockets
+are never smaller than asked.
 
 Why not our own union of hulls (``X ∪ ⋃_t hull(t ⊕ K)``, one per triangle
 ``t``): adjacent hulls share faces (``e ⊕ K`` for each shared edge, whole
@@ -46,7 +51,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .geometry import affine_3x4, box, ray_hits, rebuilt_from_mesh, to_trimesh
+from .geometry import affine_3x4, box, convex_patches, mesh_arrays, ray_hits, rebuilt_from_mesh, to_trimesh
 
 #: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
 BALL_SEGMENTS = 12
@@ -55,6 +60,9 @@ CONE_SEGMENTS = 32
 #: Features smaller than this are merged when a thin-wall opening is simplified, mm (a
 #: thousandth of the finest printer's resolution, a hundred float32 steps at 100 mm).
 SIMPLIFY_TOLERANCE_MM = 1e-4
+#: How far from one plane the triangles of one swept patch of a Minkowski sum may lie, mm (a hundredth of
+#: :data:`SIMPLIFY_TOLERANCE_MM`): a patch's hull contains its triangles, so a sum grows by at most this.
+PATCH_TOLERANCE_MM = 1e-6
 
 
 @lru_cache(maxsize=8)
@@ -99,7 +107,45 @@ def cone_points(height_mm: float, angle_deg: float, segments: int = CONE_SEGMENT
 
 
 def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
-    """Minkowski sum of a solid with the convex hull of ``kernel`` points (manifold3d's, exact).
+    """Minkowski sum of a solid with the convex hull of ``kernel`` points (exact).
+
+    ``A ⊕ K = A ∪ ⋃_p hull(p ⊕ K)`` over the convex planar patches ``p`` of
+    ``A``'s surface (:func:`fcso.geometry.convex_patches`); a convex ``A``
+    is the hull of every vertex sum. A patch whose outward normal ``n`` has
+    ``max_k n·k = 0`` (the kernel reaches no further than its origin that
+    way: the lead-in cone's apex, for faces that face the pad's back) is
+    left out: where ``A ⊕ K`` leaves ``A``, it is ``a + λK`` for a point
+    ``a`` of ``A``'s surface where a plane with normal ``n`` supports ``A``
+    and ``max_k n·k > 0``, so ``n`` is the normal of a patch kept through
+    ``a`` (requires the kernel to hold the origin, as the ball and the cone
+    do).
+
+    Parameters
+    ----------
+    solid : manifold3d.Manifold
+    kernel : (k, 3) float
+        Points whose convex hull is the kernel and holds the origin (mm).
+
+    Returns
+    -------
+    manifold3d.Manifold
+    """
+    if solid.is_empty():
+        return solid
+    kernel = np.asarray(kernel, dtype=np.float64)
+    vertices, corners = mesh_arrays(solid)
+    if solid.hull().volume() - solid.volume() <= 1e-12 * max(solid.volume(), 1.0):
+        return manifold3d.Manifold.hull_points((vertices[:, None, :3] + kernel[None]).reshape(-1, 3))
+    return manifold3d.Manifold.batch_boolean(
+        [solid, *_swept_patches(vertices, corners, kernel, reaching_only=True)], manifold3d.OpType.Add
+    )
+
+
+def minkowski_difference_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold3d.Manifold:
+    """Minkowski difference (erosion) of a solid by the convex hull of ``kernel`` points (exact).
+
+    ``A ⊖ K = {x : x + K ⊆ A} = A - ⋃_p hull(p ⊕ -K)`` over the convex
+    planar patches ``p`` of ``A``'s surface.
 
     Parameters
     ----------
@@ -113,7 +159,31 @@ def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold
     """
     if solid.is_empty():
         return solid
-    return solid.minkowski_sum(manifold3d.Manifold.hull_points(np.asarray(kernel, dtype=np.float64)))
+    vertices, corners = mesh_arrays(solid)
+    swept = _swept_patches(vertices, corners, -np.asarray(kernel, dtype=np.float64), reaching_only=False)
+    return manifold3d.Manifold.batch_boolean([solid, *swept], manifold3d.OpType.Subtract)
+
+
+def _swept_patches(
+    vertices: np.ndarray, corners: np.ndarray, kernel: np.ndarray, reaching_only: bool
+) -> list[manifold3d.Manifold]:
+    """``hull(p ⊕ K)`` for every convex planar patch ``p`` of a surface; with ``reaching_only``, only the patches
+    whose normal ``n`` has ``max_k n·k > 0`` (see :func:`minkowski_convex`)."""
+    vertices, corners = vertices[:, :3], corners.astype(np.int64)
+    normals = np.cross(
+        vertices[corners[:, 1]] - vertices[corners[:, 0]], vertices[corners[:, 2]] - vertices[corners[:, 0]]
+    )
+    lengths = np.linalg.norm(normals, axis=1)
+    # a zero-area triangle's sweep lies in its neighbours'
+    kept = lengths > 0.0
+    corners, normals = corners[kept], normals[kept] / lengths[kept, None]
+    swept = []
+    for patch in convex_patches(vertices, corners, normals, PATCH_TOLERANCE_MM):
+        if reaching_only and (normals[patch[0]] @ kernel.T).max() <= 0.0:
+            continue
+        points = vertices[np.unique(corners[patch])]
+        swept.append(manifold3d.Manifold.hull_points((points[:, None, :] + kernel[None]).reshape(-1, 3)))
+    return swept
 
 
 def grow(part: manifold3d.Manifold, clearance_mm: float) -> manifold3d.Manifold:
@@ -266,17 +336,17 @@ def open_thin_walls(
         return pad
     # manifold3d's Booleans triangulate by their operands' history as well as their meshes
     pad = rebuilt_from_mesh(pad)
-    kernel = manifold3d.Manifold.hull_points(ball_points(min_wall_mm / 2.0))
+    kernel = ball_points(min_wall_mm / 2.0)
     # the pad's facets carry the carvings' slivers too, and the erosion sums the kernel over every one of them
     # (13 s for a 960-triangle pad of the 12-part job, 7 s simplified: 476 triangles)
     backed = _backed(pad, thickness_mm, length_mm, width_mm, 2.0 * min_wall_mm).as_original()
     backed = backed.simplify(SIMPLIFY_TOLERANCE_MM)
     # the erosion's facets carry slivers far below any printer's resolution, and the
     # dilation sums the kernel over every one of them: merge them first
-    eroded = backed.minkowski_difference(kernel).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
+    eroded = minkowski_difference_convex(backed, kernel).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
     # so does the dilation's (sliver faces where the kernel's copies meet)
     opened = (
-        (eroded.minkowski_sum(kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm)))
+        (minkowski_convex(eroded, kernel) ^ box((0.0, 0.0, 0.0), (thickness_mm, length_mm, width_mm)))
         .as_original()
         .simplify(SIMPLIFY_TOLERANCE_MM)
     )

@@ -52,9 +52,8 @@ from pathlib import Path
 import manifold3d
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull
 
-from ..geometry import box, ray_hits, to_manifold
+from ..geometry import box, convex_patches, ray_hits, to_manifold
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "shell-6"
@@ -64,8 +63,8 @@ CACHE_MAX_BYTES = 500_000_000
 #: Largest deviation of the simplified surfaces the prisms are built on, mm (a pad carved with a print clearance has
 #: ~35k triangles of offset surface).
 SIMPLIFY_TOLERANCE_MM = 0.005
-#: How far a corner of a convex patch of the part's surface may stand above the plane of one of its triangles, mm
-#: (see :func:`_convex_clusters`).
+#: How far a corner of a convex patch of the part's or pad's surface may stand above the plane of one of its triangles,
+#: mm (see :func:`fcso.geometry.convex_patches`).
 CONVEX_TOLERANCE_MM = 0.001
 #: Largest angle between the normals of the facets of one of the part's prisms, degrees (see :func:`part_shell_pieces`).
 PATCH_BEND_DEG = 30.0
@@ -138,7 +137,7 @@ def part_shell_pieces(
     thinner: half its thickness under the facet, so no prism pokes out of a
     thin wall); neighbouring facets share a prism while they form a convex
     patch (normals within :data:`PATCH_BEND_DEG`, a bulge no deeper than
-    the prism; :func:`_convex_clusters`). The prisms' outer faces are the surface itself:
+    the prism; :func:`fcso.geometry.convex_patches`). The prisms' outer faces are the surface itself:
     they stand out of the part by nothing, so nothing bridges a concavity,
     and no decomposition is searched. The material under the shell is left
     out (a pad that pushes its contact deeper than half the shell's
@@ -200,7 +199,9 @@ def _surface_prisms(part: manifold3d.Manifold, reach_boxes: np.ndarray, shell_mm
     corners, normals = corners[keep], normals[keep] / lengths[keep, None]
     depth = np.minimum(shell_mm, _thickness_under_mm(vertices, all_corners, vertices[corners], normals) / 2.0)
     pieces = []
-    for cluster in _convex_clusters(vertices, corners, normals, np.cos(np.radians(PATCH_BEND_DEG)), depth):
+    for cluster in convex_patches(
+        vertices, corners, normals, CONVEX_TOLERANCE_MM, np.cos(np.radians(PATCH_BEND_DEG)), depth
+    ):
         top = vertices[np.unique(corners[cluster])]
         prism = manifold3d.Manifold.hull_points(np.vstack([top, top - normals[cluster[0]] * depth[cluster].min()]))
         mesh = prism.to_mesh64()
@@ -330,10 +331,11 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
     # material is entered along +u through the triangles facing -u (twice their shadow's area, mm^2); walls have none
     corners, normals = corners[-normals[:, 0] > 2e-6], normals[-normals[:, 0] > 2e-6]
     pieces = []
-    for cluster in _convex_clusters(
+    for cluster in convex_patches(
         vertices,
         corners,
         normals / np.linalg.norm(normals, axis=1, keepdims=True),
+        CONVEX_TOLERANCE_MM,
         seen_along=np.array([1.0, 0.0, 0.0]),
     ):
         top = vertices[np.unique(corners[cluster])]
@@ -359,89 +361,6 @@ def hull_width_mm(vertices: np.ndarray, faces: np.ndarray) -> float:
     if len(normals) == 0:
         return 0.0
     return float(np.ptp(vertices @ normals.T, axis=0).min())
-
-
-def _convex_clusters(
-    vertices: np.ndarray,
-    corners: np.ndarray,
-    normals: np.ndarray,
-    min_cos: float = 1.0 - 1e-9,
-    max_sag_mm: np.ndarray | None = None,
-    seen_along: np.ndarray | None = None,
-) -> list[list[int]]:
-    """Triangles of a surface grouped into edge-connected clusters that form a convex patch.
-
-    Greedy: a cluster grows from its first triangle by neighbours whose
-    normal is within ``arccos(min_cos)`` of the first one's while (a) every
-    corner of the cluster lies under the plane of every triangle of it (the
-    patch is convex, within :data:`CONVEX_TOLERANCE_MM`), and (b) the hull of
-    its corners seen along the first normal (or ``seen_along``) has the area of its triangles
-    (no notch or hole in its outline). Then the patch is the top of the hull
-    of its corners and of their copies moved along the first normal, and the
-    prism under it is convex. By default only coplanar triangles are grouped:
-    a flat face or a planar wall of a pocket is one piece instead of one per
-    triangle.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float
-    corners : (m, 3) int
-        The triangles' vertex indices.
-    normals : (m, 3) float
-        Unit normals of the triangles.
-    min_cos : float
-        Cosine of the largest angle between the normals of a cluster's triangles and its first one's.
-    max_sag_mm : (m,) float, optional
-        Largest depth of a cluster's corners along its first normal (the patch's bulge): a cluster's hull reaches
-        that far under its patch. None: no limit.
-    seen_along : (3,) float, optional
-        Unit direction of the outline's test instead of each cluster's first normal (a pad's prisms run along its
-        ``u`` axis).
-    """
-    area = np.linalg.norm(np.cross(*(vertices[corners[:, k]] - vertices[corners[:, 0]] for k in (1, 2))), axis=1) / 2
-    offsets = np.einsum("ij,ij->i", normals, vertices[corners[:, 0]])
-    neighbours: dict[tuple[int, int], list[int]] = {}
-    for index, (a, b, c) in enumerate(corners):
-        for edge in ((a, b), (b, c), (c, a)):
-            neighbours.setdefault((min(edge), max(edge)), []).append(index)
-    adjacent = [set() for _ in corners]
-    for sharing in neighbours.values():
-        for index in sharing:
-            adjacent[index].update(t for t in sharing if t != index)
-    taken = np.zeros(len(corners), dtype=bool)
-    clusters = []
-    for seed in range(len(corners)):
-        if taken[seed]:
-            continue
-        taken[seed] = True
-        normal = normals[seed]
-        seen = normal if seen_along is None else np.asarray(seen_along, dtype=np.float64)
-        cluster, shadow = [seed], float(area[seed] * abs(normal @ seen))
-        frontier = [t for t in adjacent[seed] if normals[t] @ normal >= min_cos]
-        if frontier:
-            # two directions across the one seen along: the hull's area in them is the area seen along it
-            across = np.cross(seen, np.eye(3)[np.argmin(np.abs(seen))])
-            in_plane = np.column_stack([across, np.cross(seen, across)])
-            in_plane /= np.linalg.norm(in_plane, axis=0)
-        while frontier:
-            candidate = frontier.pop()
-            if taken[candidate]:
-                continue
-            members = cluster + [candidate]
-            points = vertices[np.unique(corners[members])]
-            grown = shadow + float(area[candidate] * abs(normals[candidate] @ seen))
-            heights = points @ normal
-            if (
-                (normals[members] @ points.T - offsets[members, None]).max() <= CONVEX_TOLERANCE_MM
-                and (max_sag_mm is None or np.ptp(heights) <= max_sag_mm[members].min())
-                and ConvexHull(points @ in_plane).volume <= grown * (1.0 + 1e-9) + 1e-9
-            ):
-                taken[candidate] = True
-                cluster.append(candidate)
-                shadow = grown
-                frontier.extend(t for t in adjacent[candidate] if not taken[t] and normals[t] @ normal >= min_cos)
-        clusters.append(cluster)
-    return clusters
 
 
 def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: Path | None) -> ConvexPieces:

@@ -15,11 +15,20 @@ from fcso.config import DesignConfig, PrintConfig, load_config
 from fcso.contact import sample_surface
 from fcso.errors import ConfigError
 from fcso.finger import finger_plate, fuse, parametric_finger
-from fcso.geometry import box, to_manifold
+from fcso.geometry import affine_3x4, box, to_manifold
 from fcso.output.design_page import rebuild_report
 from fcso.pad import build_fingerpad, pad_box, pad_geometry, surface_in_pad
 from fcso.poses import stable_poses
-from fcso.printfit import CONE_SEGMENTS, carve, open_thin_walls, thinnest_wall_mm
+from fcso.printfit import (
+    CONE_SEGMENTS,
+    ball_points,
+    carve,
+    cone_points,
+    minkowski_convex,
+    minkowski_difference_convex,
+    open_thin_walls,
+    thinnest_wall_mm,
+)
 from fcso.report.models import DesignReport
 from fcso.sampler import SIDES, sample_grasps
 from fcsod.config import parse_manifest
@@ -277,3 +286,42 @@ def test_every_profile_gives_one_watertight_finger(profile, tmp_path):
         page = (tmp_path / "report.html").read_text(encoding="utf-8")
         assert "<h2>Printed fit</h2>" in page and "mjf-pa12" in page and "as printed" in page
         assert f"{fit.fitted.pocket_volume_mm3:.1f}" in page and f"{fit.exact.pocket_volume_mm3:.1f}" in page
+
+
+def _l_shape() -> manifold3d.Manifold:
+    """Two boxes, 10 x 4 x 3 and 4 x 10 x 3 mm, sharing a 4 x 4 corner: an L whose flat faces are several triangles."""
+    return box((0.0, 0.0, 0.0), (10.0, 4.0, 3.0)) + box((0.0, 0.0, 0.0), (4.0, 10.0, 3.0))
+
+
+def test_minkowski_sum_of_an_l_with_a_cube_is_the_union_of_the_grown_boxes():
+    # L ⊕ [-1, 1]^3 is the two boxes grown by 1 mm on every side, whose union's volume is worked out by hand:
+    # 12 x 6 x 5 + 6 x 12 x 5 - 6 x 6 x 5 (their common corner)
+    cube = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+    grown = minkowski_convex(_l_shape(), cube)
+    assert grown.volume() == pytest.approx(12 * 6 * 5 + 6 * 12 * 5 - 6 * 6 * 5, rel=1e-9)
+    assert np.allclose(grown.bounding_box(), (-1.0, -1.0, -1.0, 11.0, 11.0, 4.0))
+    assert len(grown.decompose()) == 1
+
+
+def test_minkowski_difference_of_an_l_by_a_cube_is_the_union_of_the_shrunk_boxes():
+    # the boxes shrunk by 1 mm: 8 x 2 x 1 + 2 x 8 x 1 - 2 x 2 x 1
+    cube = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+    eroded = minkowski_difference_convex(_l_shape(), cube)
+    assert eroded.volume() == pytest.approx(8 * 2 * 1 + 2 * 8 * 1 - 2 * 2 * 1, rel=1e-9)
+    assert np.allclose(eroded.bounding_box(), (1.0, 1.0, 1.0, 9.0, 9.0, 2.0))
+
+
+@pytest.mark.parametrize("name", sorted(FIXTURE_PARTS))
+def test_minkowski_sums_of_real_parts_are_manifold3d_sums(name):
+    # the lead-in cone reaches no further than its apex across the faces that face the pad's back, which are left
+    # out of the sum: it must still be manifold3d's own sum of every triangle, as the clearance ball's is
+    config = small_config()
+    mesh, manifold, frame = _good_geometries(name, config, limit=1)[0]
+    local = (
+        manifold.transform(affine_3x4(frame)) ^ box((-1.0, -1.0, -1.0), tuple(x + 1.0 for x in SIZE))
+    ).as_original()
+    for kernel in (ball_points(0.2), cone_points(SIZE[0], 30.0)):
+        ours = minkowski_convex(local, kernel)
+        theirs = local.minkowski_sum(manifold3d.Manifold.hull_points(kernel))
+        assert ours.volume() == pytest.approx(theirs.volume(), rel=1e-7)
+        assert (ours - theirs).volume() + (theirs - ours).volume() < 1e-6 * theirs.volume()
