@@ -346,25 +346,58 @@ def finish_candidates(
     )
     report_progress = _progress_with_note(progress)
     report_progress("fingers", 0, len(candidates), f"{len(missing)} printed-fit pockets")
-    with WorkerPool((shared, config), min(jobs, len(missing)), config.compute.scheduler) as pool:
-        for (n, k, angle), made in zip(missing, pool.map(_fit_task, missing)):
-            shared[n].samples[k].fitted[fit_key(_with_lead_in(config, angle))] = made
     cache = {} if pads is None else pads
-    keys = [
-        pad_key([s.samples[k] for s, k in zip(scenarios, choice)], fitted_config, flat)
-        for (scenarios, choice), fitted_config in zip(candidates, configs)
-    ]
-    # a pad carved by several candidates is made once
-    tasks = {
-        key: ([number[id(s)] for s in scenarios], choice, fitted_config.print.lead_in_deg)
-        for key, (scenarios, choice), fitted_config in zip(keys, candidates, configs)
-    }
-    todo = [key for key in tasks if key not in cache]
-    report_progress("fingers", 0, len(candidates), f"carving and opening {len(todo)} pads")
-    # forked after the pockets were carved, the workers hold them: each builds and opens its candidates' pads (the
-    # union of a large set's pockets is minutes of Booleans)
-    with WorkerPool((shared, config, flat), min(jobs, len(todo)), config.compute.scheduler) as pool:
-        cache.update(zip(todo, pool.map(_pad_task, [tasks[key] for key in todo])))
+    # each candidate's pad is built and opened as soon as its own pockets are carved, while other pockets are still
+    # being carved: one long carving or one large pad no longer leaves the other workers waiting (the union of a large
+    # set's pockets is minutes of Booleans)
+    waiting: list[set[int]] = []  # per candidate, the missing pockets it waits for
+    for (scenarios, choice), fitted_config in zip(candidates, configs):
+        used = {(number[id(s)], k) for s, k in zip(scenarios, choice)}
+        angle = fitted_config.print.lead_in_deg
+        waiting.append({m for m, (n, k, a) in enumerate(missing) if (n, k) in used and a == angle})
+    keys: list[str | None] = [None] * len(candidates)
+    started: set[str] = set()
+
+    def pad_tasks(ready: list[int]) -> list[tuple]:
+        tasks = []
+        for c in ready:
+            (scenarios, choice), fitted_config = candidates[c], configs[c]
+            samples = [s.samples[k] for s, k in zip(scenarios, choice)]
+            keys[c] = pad_key(samples, fitted_config, flat)
+            # a pad carved by several candidates is made once
+            if keys[c] in cache or keys[c] in started:
+                continue
+            started.add(keys[c])
+            fit = fit_key(fitted_config)
+            pockets = (
+                {}
+                if flat or fit is None
+                else {(number[id(s)], k): s.samples[k].fitted[fit] for s, k in zip(scenarios, choice)}
+            )
+            item = ([number[id(s)] for s in scenarios], choice, fitted_config.print.lead_in_deg, pockets)
+            tasks.append((_pad_task, item, ("pad", keys[c])))
+        return tasks
+
+    def on_done(tag: tuple, result) -> list[tuple]:
+        kind, what = tag
+        if kind == "pad":
+            cache[what] = result
+            return []
+        n, k, angle = missing[what]
+        shared[n].samples[k].fitted[fit_key(_with_lead_in(config, angle))] = result
+        ready = []
+        for c, needs in enumerate(waiting):
+            if what in needs:
+                needs.discard(what)
+                if not needs:
+                    ready.append(c)
+        return pad_tasks(ready)
+
+    tasks = [(_fit_task, item, ("pocket", m)) for m, item in enumerate(missing)]
+    tasks += pad_tasks([c for c, needs in enumerate(waiting) if not needs])
+    workers = min(jobs, len(missing) + len(candidates))
+    with WorkerPool((shared, config, flat), workers, config.compute.scheduler) as pool:
+        pool.run(tasks, on_done)
     fingerpads = [Fingerpad(solid_from_mesh_arrays(*cache[key][0]), *cache[key][1:]) for key in keys]
     report_progress("fingers", len(candidates), len(candidates), "")
     return [
@@ -652,7 +685,11 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
 
         def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
             nonlocal screened_count, best_screened
-            chunks = [choices[i : i + _SCREEN_CHUNK] for i in range(0, len(choices), _SCREEN_CHUNK)]
+            # a batch under a chunk per worker is split among them: the coordinate ascent's batches are a few dozen
+            # candidates, and one chunk ran in this process while the workers waited (the 12-part job: 200 such
+            # batches, 1.2 s)
+            size = min(_SCREEN_CHUNK, -(-len(choices) // jobs))
+            chunks = [choices[i : i + size] for i in range(0, len(choices), size)]
             if keep_screens:
                 screened = [c for chunk in pool.map(_screen_batch, chunks) for c in chunk]
                 kept_screens.update(zip(choices, screened))
@@ -1035,17 +1072,20 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 
 
 def _fit_task(context, task: tuple[int, int, float]) -> list[PadGeometry]:
-    scenarios, config = context
+    scenarios, config, _ = context
     number, index, lead_in_deg = task
     config = _with_lead_in(config, lead_in_deg)
     return fitted_sample(scenarios[number], scenarios[number].samples[index], config)
 
 
-def _pad_task(context, task: tuple[list[int], tuple[int, ...], float]) -> tuple:
-    """A candidate's printed pad, built and opened: its mesh arrays, case and block depth."""
+def _pad_task(context, task: tuple[list[int], tuple[int, ...], float, dict]) -> tuple:
+    """A candidate's printed pad, built and opened from its samples' printed-fit pockets (scenario number, sample
+    index -> carved geometries, carved after this worker was forked): its mesh arrays, case and block depth."""
     scenarios, config, flat = context
-    numbers, choice, lead_in_deg = task
+    numbers, choice, lead_in_deg, pockets = task
     config = _with_lead_in(config, lead_in_deg)
+    for (number, index), carved in pockets.items():
+        scenarios[number].samples[index].fitted[fit_key(config)] = carved
     pad = candidate_fingerpad([scenarios[n] for n in numbers], choice, config, fitted=True, flat=flat)
     return mesh_arrays(opened_pad(pad.pad, config)), pad.case, pad.block_depth_mm
 

@@ -26,7 +26,7 @@ import multiprocessing
 import os
 import signal
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
 from .errors import ComputeError
@@ -197,6 +197,52 @@ class WorkerPool:
         if self._pool is None or len(items) <= 1:
             return [function(self.context, item) for item in items]
         return list(self._pool.map(_call, [(function, item) for item in items], chunksize=max(1, chunksize)))
+
+    def run(
+        self,
+        tasks: Sequence[tuple[Callable[[Any, Any], Any], Any, Any]],
+        on_done: Callable[[Any, Any], Sequence[tuple[Callable[[Any, Any], Any], Any, Any]]],
+    ) -> None:
+        """Run ``(function, item, tag)`` tasks as workers free up; each result goes to ``on_done(tag, result)``.
+
+        ``on_done`` is called in this process as each task finishes, in the
+        order they finish, and returns further tasks to run (those that
+        waited for it): a stage's task starts as soon as what it needs is
+        made, not after the whole previous stage. What it records must not
+        depend on that order.
+        """
+        if self._client is not None:
+            self._dask_run(list(tasks), on_done)
+            return
+        if self._pool is None:
+            queue = list(tasks)
+            while queue:
+                function, item, tag = queue.pop(0)
+                queue.extend(on_done(tag, function(self.context, item)))
+            return
+        running = {self._pool.submit(_call, (function, item)): tag for function, item, tag in tasks}
+        while running:
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                tag = running.pop(future)
+                for function, item, next_tag in on_done(tag, future.result()):
+                    running[self._pool.submit(_call, (function, item))] = next_tag
+
+    def _dask_run(self, tasks: list, on_done) -> None:
+        """:meth:`run` on the Dask cluster."""
+        from distributed import as_completed
+
+        def submit(function, item):
+            return self._client.submit(_call_batch, function, self._context_future, [item], pure=False)
+
+        running = {submit(function, item): tag for function, item, tag in tasks}
+        finished = as_completed(list(running), loop=self._client.loop)
+        for future in finished:
+            tag = running.pop(future)
+            for function, item, next_tag in on_done(tag, future.result()[0]):
+                follower = submit(function, item)
+                running[follower] = next_tag
+                finished.add(follower)
 
     def _dask_map(self, function: Callable[[Any, Any], Any], items: list) -> list:
         """The map on the Dask cluster: items in contiguous batches, results gathered in order."""

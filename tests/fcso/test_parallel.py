@@ -1,0 +1,49 @@
+"""fcso.parallel.WorkerPool.run: tasks that start others as they finish, on forked workers and in this process."""
+
+from __future__ import annotations
+
+import pytest
+
+from fcso.parallel import WorkerPool
+
+
+def _scaled(context, item: int) -> int:
+    return context * item
+
+
+def _summed(context, items: list[int]) -> int:
+    return context + sum(items)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_run_starts_each_follower_with_what_it_waited_for(jobs):
+    # pairs (1, 2), (3, 4), (5, 6) are scaled by the context (10); each pair's sum (plus the context) is a follower
+    # started once both of its items are done: 10 + 10 + 20, 10 + 30 + 40, 10 + 50 + 60
+    pairs = {0: (1, 2), 1: (3, 4), 2: (5, 6)}
+    scaled: dict[int, int] = {}
+    sums: dict[int, int] = {}
+
+    def on_done(tag, result):
+        kind, what = tag
+        if kind == "sum":
+            sums[what] = result
+            return []
+        scaled[what] = result
+        pair = next(p for p, items in pairs.items() if what in items)
+        if all(item in scaled for item in pairs[pair]):
+            return [(_summed, [scaled[item] for item in pairs[pair]], ("sum", pair))]
+        return []
+
+    with WorkerPool(10, jobs) as pool:
+        pool.run([(_scaled, item, ("scaled", item)) for items in pairs.values() for item in items], on_done)
+    assert scaled == {1: 10, 2: 20, 3: 30, 4: 40, 5: 50, 6: 60}
+    assert sums == {0: 40, 1: 80, 2: 120}
+
+
+def test_run_raises_what_a_task_raised():
+    with WorkerPool(0, 2) as pool, pytest.raises(ZeroDivisionError):
+        pool.run([(_summed, [1], "fine"), (_scaled, 1, "fine too")], lambda tag, result: [(_divided, result, "bad")])
+
+
+def _divided(context, item: int) -> float:
+    return item / context
