@@ -378,10 +378,20 @@ def finish_candidates(
             tasks.append((_pad_task, item, ("pad", keys[c])))
         return tasks
 
+    finished: dict[int, tuple] = {}
+
+    def finish_made() -> None:
+        # each candidate is evaluated on its pad here as soon as the pad is made, while the workers open the others
+        for c, ((scenarios, choice), fitted_config, (_, why)) in enumerate(zip(candidates, configs, fits)):
+            if c not in finished and keys[c] in cache:
+                fingerpad = Fingerpad(solid_from_mesh_arrays(*cache[keys[c]][0]), *cache[keys[c]][1:])
+                finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
+
     def on_done(tag: tuple, result) -> list[tuple]:
         kind, what = tag
         if kind == "pad":
             cache[what] = result
+            finish_made()
             return []
         n, k, angle = missing[what]
         shared[n].samples[k].fitted[fit_key(_with_lead_in(config, angle))] = result
@@ -397,13 +407,11 @@ def finish_candidates(
     tasks += pad_tasks([c for c, needs in enumerate(waiting) if not needs])
     workers = min(jobs, len(missing) + len(candidates))
     with WorkerPool((shared, config, flat), workers, config.compute.scheduler) as pool:
+        finish_made()
         pool.run(tasks, on_done)
-    fingerpads = [Fingerpad(solid_from_mesh_arrays(*cache[key][0]), *cache[key][1:]) for key in keys]
+    finish_made()
     report_progress("fingers", len(candidates), len(candidates), "")
-    return [
-        _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
-        for (scenarios, choice), fitted_config, fingerpad, (_, why) in zip(candidates, configs, fingerpads, fits)
-    ]
+    return [finished[c] for c in range(len(candidates))]
 
 
 def pad_key(samples: Sequence[SampleGeometry], config: DesignConfig, flat: bool) -> str:
