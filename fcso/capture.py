@@ -238,7 +238,10 @@ def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: f
     return successor
 
 
-@compiled
+@compiled(
+    "(float64[:, ::1], float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[::1], float64, "
+    "float64[::1], float64[:, ::1])"
+)
 def _add_side_gaps(pad, part, whole, fraction, v_mm, v_c, yaws, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
 
@@ -282,7 +285,7 @@ def _add_side_gaps(pad, part, whole, fraction, v_mm, v_c, yaws, gap):
             gap[offset, yaw] += least
 
 
-@compiled
+@compiled("(float64[:, ::1], float64, float64, float64)")
 def _steepest_moves(separation, step_mm, turn_mm, friction):
     """Each node's steepest move of :func:`_descent` (its own flat index where none is taken)."""
     rows, columns = separation.shape

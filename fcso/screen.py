@@ -409,7 +409,10 @@ class Carving:
     pairs: frozenset
 
 
-@compiled
+@compiled(
+    "(float32[:, ::1], int32[:, ::1], float32[:, ::1], float32[:, ::1], int64, int64, "
+    "float32[:, ::1], float32[:, ::1], int64)"
+)
 def _carve_window(top, owner, second, top_high, row, column, low, high, index):
     """Carve one geometry's maps into a :class:`Carving`'s (``(count_v, count_w)`` arrays, changed in place) on its
     window, whose first cell is ``(row, column)``; ``index`` is its position in the candidate."""
@@ -474,7 +477,10 @@ def carve_heights(chosen: list[tuple[ScreenGeometry, ScreenGeometry]], pairs, ba
     return Carving(top.ravel(), owner.ravel(), second.ravel(), top_high.ravel(), done | frozenset(pairs))
 
 
-@compiled
+@compiled(
+    "(float32[::1], int32[::1], float32[::1], float32[::1], float32, float64, int64[::1], "
+    "boolean[::1], int32[::1], float32[::1], int32[::1], int64)"
+)
 def _contacts(top, owner, second, top_high, floor, eps, lengths, good, cells, point_u, point_bins, pairs):
     """Which contact samples of a candidate's geometries touch the pad, in one pass over every point.
 
