@@ -27,18 +27,22 @@ and openings' cost (the 12-part job's sums 2.3x faster, its openings 1.6x).
 Round kernels are polyhedra that contain the round shape, so grown pockets
 are never smaller than asked.
 
-Why not our own union of hulls (``X ∪ ⋃_t hull(t ⊕ K)``, one per triangle
-``t``): adjacent hulls share faces (``e ⊕ K`` for each shared edge, whole
-planes for coplanar triangles) that each hull triangulates on its own, so in
-double precision they coincide only to 1e-16..1e-7 mm. manifold3d's exact
-Booleans keep every such near-coincidence as a sliver narrower than float32
-resolution; written as a float32 STL, the slivers collapse into zero-area
-triangles and the surface falls apart into pieces (a knurled knob's
-``finger.stl``: 5 627 zero-area triangles, 1 688 pieces). manifold3d's own
-sums do not leave them. The opening of :func:`open_thin_walls` still dilates
-an erosion whose facets carry slivers, and multiplies them (a 450-triangle
-pad opened into 53 000 triangles, 251 of zero area as written): its erosion
-and its result are simplified to :data:`SIMPLIFY_TOLERANCE_MM`. What
+The sweeps are hulls of the solid's own double-precision vertices plus the
+kernel's, as manifold3d's are. An earlier union of hulls here (before
+b31b3ef) built them from the solid's float32 mesh (``to_mesh``): their
+faces then met the solid's and each other's only to float32 rounding
+(1e-16..1e-7 mm), manifold3d's exact Booleans kept every such
+near-coincidence as a sliver narrower than float32 resolution, and written
+as a float32 STL the slivers collapsed into zero-area triangles and the
+surface fell apart into pieces (a knurled knob's ``finger.stl``: 5 627
+zero-area triangles, 1 688 pieces). That knob and every fixture part, with
+every printer profile, are written and read back as one watertight body
+by the tests of ``tests/fcso/test_written_meshes.py``.
+
+The opening of :func:`open_thin_walls` dilates an erosion whose facets
+carry slivers, and multiplies them (a 450-triangle pad opened into 53 000
+triangles, 251 of zero area as written): its erosion and its result are
+simplified to :data:`SIMPLIFY_TOLERANCE_MM`. What
 float32 rounding itself makes degenerate is collapsed when a delivered
 solid is written (:func:`fcso.finger.as_written`).
 """
@@ -134,7 +138,8 @@ def minkowski_convex(solid: manifold3d.Manifold, kernel: np.ndarray) -> manifold
         return solid
     kernel = np.asarray(kernel, dtype=np.float64)
     vertices, corners = mesh_arrays(solid)
-    if solid.hull().volume() - solid.volume() <= 1e-12 * max(solid.volume(), 1.0):
+    volume = solid.volume()
+    if solid.hull().volume() - volume <= 1e-12 * max(volume, 1.0):
         return manifold3d.Manifold.hull_points((vertices[:, None, :3] + kernel[None]).reshape(-1, 3))
     return manifold3d.Manifold.batch_boolean(
         [solid, *_swept_patches(vertices, corners, kernel, reaching_only=True)], manifold3d.OpType.Add
