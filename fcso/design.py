@@ -302,11 +302,11 @@ def finish_candidates(
 
     ``flat`` builds flat pads on the candidates' grasps instead (:func:`fcso.evaluate.evaluate_candidate`).
     The printed-fit pockets of every candidate's samples (two Minkowski sums
-    each), then each candidate's pad (their union, its thin walls opened)
-    are made on ``jobs`` workers (``[compute] scheduler``'s when set): a
-    job's finger sets are finished side by side. Each pad is rebuilt from
-    its mesh, so it is the same wherever it was made; its evaluations are
-    made here.
+    each) are made on ``jobs`` workers (``[compute] scheduler``'s when set),
+    and each candidate's pad (their union, its thin walls opened) as soon as
+    its own pockets are: a job's finger sets are finished side by side. Each
+    pad is rebuilt from its mesh, so it is the same wherever it was made;
+    its evaluations are made here as each pad arrives.
 
     Parameters
     ----------
