@@ -55,7 +55,16 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .geometry import affine_3x4, box, convex_patches, mesh_arrays, ray_hits, rebuilt_from_mesh, to_trimesh
+from .geometry import (
+    affine_3x4,
+    box,
+    convex_patches,
+    mesh_arrays,
+    ray_hits,
+    rebuilt_from_mesh,
+    to_trimesh,
+    triangle_areas_normals,
+)
 
 #: Facets of the ball kernel: its vertices lie at most 8.5 % beyond the ball it contains.
 BALL_SEGMENTS = 12
@@ -175,13 +184,9 @@ def _swept_patches(
     """``hull(p ⊕ K)`` for every convex planar patch ``p`` of a surface; with ``reaching_only``, only the patches
     whose normal ``n`` has ``max_k n·k > 0`` (see :func:`minkowski_convex`)."""
     vertices, corners = vertices[:, :3], corners.astype(np.int64)
-    normals = np.cross(
-        vertices[corners[:, 1]] - vertices[corners[:, 0]], vertices[corners[:, 2]] - vertices[corners[:, 0]]
-    )
-    lengths = np.linalg.norm(normals, axis=1)
+    areas, normals = triangle_areas_normals(vertices, corners)
     # a zero-area triangle's sweep lies in its neighbours'
-    kept = lengths > 0.0
-    corners, normals = corners[kept], normals[kept] / lengths[kept, None]
+    corners, normals = corners[areas > 0.0], normals[areas > 0.0]
     swept = []
     for patch in convex_patches(vertices, corners, normals, PATCH_TOLERANCE_MM):
         if reaching_only and (normals[patch[0]] @ kernel.T).max() <= 0.0:
