@@ -768,6 +768,70 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     )
 
 
+def choose_candidates(
+    prepared: Prepared,
+    subsets: Sequence[Sequence[int]],
+    config: DesignConfig,
+    then: Callable[[Sequence[int], ChosenCandidate | GeometryError], Sequence[Sequence[int]]] | None = None,
+    progress: Progress | None = None,
+) -> list[ChosenCandidate | GeometryError]:
+    """:func:`choose_candidate` of several :func:`subset` s of one batch, side by side.
+
+    Each design runs whole on one worker, as ``jobs = 1`` would run it: a
+    design's coordinate ascent screens a few dozen candidates a batch, too
+    few to share out without leaving the workers waiting on each other,
+    while several designs keep every worker busy. A design's choice does
+    not depend on its number of workers. With one design and no ``then``,
+    or on a cluster (``[compute] scheduler``), the designs run one after
+    another, each over every worker.
+
+    Parameters
+    ----------
+    prepared : Prepared
+    subsets : sequence of sequence of int
+        Scenario numbers of each design (positions in ``prepared.scenarios``, increasing).
+    config : DesignConfig
+    then : callable, optional
+        ``then(numbers, chosen)``, called in this process as each design
+        finishes (in the order they finish): further subsets to design
+        beside the others; its answer must not depend on that order.
+    progress : callable, optional
+        Hears of each design's stages when they run one after another.
+
+    Returns
+    -------
+    list of ChosenCandidate or GeometryError
+        Per design, ``subsets`` first, then those ``then`` asked for in the
+        order asked: the choice, or the error of a pad Boolean that failed.
+    """
+    follow = then or (lambda numbers, chosen: [])
+    designs = [list(numbers) for numbers in subsets]
+    chosen: dict[int, ChosenCandidate | GeometryError] = {}
+    side_by_side = prepared.jobs > 1 and not config.compute.scheduler and (len(designs) > 1 or then is not None)
+    waiting = [(_choose_task, numbers, n) for n, numbers in enumerate(designs)]
+
+    def on_done(number: int, result: ChosenCandidate | GeometryError) -> list[tuple]:
+        chosen[number] = result
+        tasks = []
+        for numbers in follow(designs[number], result):
+            designs.append(list(numbers))
+            tasks.append((_choose_task, designs[-1], len(designs) - 1))
+        if side_by_side and len(designs) - len(chosen) == len(tasks) == 1:
+            # a design asked for when every other is done runs on every worker, after
+            waiting.extend(tasks)
+            return []
+        return tasks
+
+    while waiting:
+        tasks, waiting[:] = list(waiting), []
+        # side by side, the workers are not told of progress: they cannot reach whoever listens
+        workers = min(prepared.jobs, len(tasks) + (then is not None)) if side_by_side else 1
+        with WorkerPool((prepared, config, side_by_side, None if side_by_side else progress), workers) as pool:
+            pool.run(tasks, on_done)
+        side_by_side = False
+    return [chosen[n] for n in range(len(designs))]
+
+
 def listed_screens(
     designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
 ) -> list[dict[tuple[int, ...], ScreenedCandidate]]:
@@ -1101,3 +1165,13 @@ def _pad_task(context, task: tuple[list[int], tuple[int, ...], float, dict]) -> 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
     scenarios, config = context
     return evaluate_candidate(scenarios, choice, config, keep_pad=False)
+
+
+def _choose_task(context, numbers: list[int]) -> ChosenCandidate | GeometryError:
+    """:func:`choose_candidate` of one subset of :func:`choose_candidates`, in this one process when side by side."""
+    prepared, config, side_by_side, progress = context
+    one = subset(prepared, numbers)
+    try:
+        return choose_candidate(dataclasses.replace(one, jobs=1) if side_by_side else one, config, progress)
+    except GeometryError as error:
+        return error
