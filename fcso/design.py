@@ -297,6 +297,7 @@ def finish_candidates(
     jobs: int = 1,
     pads: dict[str, tuple] | None = None,
     progress: Progress | None = None,
+    exact: Sequence[CandidateEvaluation | None] | None = None,
 ) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
 
@@ -320,6 +321,10 @@ def finish_candidates(
         Printed pads made before (:func:`pad_key`: mesh arrays, case, block depth); new ones are added. The choice
         by truth keeps one for the candidates of a design, which often carve the same pad.
     progress : callable, optional
+    exact : sequence of CandidateEvaluation or None, optional
+        Per candidate, its exact evaluation with ``config`` (``keep_pad=False``) when made before, as
+        :func:`choose_candidate` makes its finalists': the print-fit report takes its figures and makes only its pad,
+        instead of evaluating the candidate again.
 
     Returns
     -------
@@ -344,6 +349,8 @@ def finish_candidates(
             if fit_key(fitted_config) not in scenarios[m].samples[k].fitted
         )
     )
+    # an exact evaluation made before holds for a candidate printed with config's own lead-in
+    known = [None if exact is None or flat or why is not None else exact[c] for c, (_, why) in enumerate(fits)]
     report_progress = _progress_with_note(progress)
     report_progress("fingers", 0, len(candidates), f"{len(missing)} printed-fit pockets")
     cache = {} if pads is None else pads
@@ -385,7 +392,7 @@ def finish_candidates(
         for c, ((scenarios, choice), fitted_config, (_, why)) in enumerate(zip(candidates, configs, fits)):
             if c not in finished and keys[c] in cache:
                 fingerpad = Fingerpad(solid_from_mesh_arrays(*cache[keys[c]][0]), *cache[keys[c]][1:])
-                finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
+                finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why, known[c])
 
     def on_done(tag: tuple, result) -> list[tuple]:
         kind, what = tag
@@ -439,15 +446,19 @@ def _finished(
     flat: bool,
     fingerpad: Fingerpad,
     why: str | None,
+    known: CandidateEvaluation | None = None,
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
-    """One candidate of :func:`finish_candidates` evaluated on its opened pad (``config`` with its lead-in)."""
+    """One candidate of :func:`finish_candidates` evaluated on its opened pad (``config`` with its lead-in);
+    ``known`` its exact evaluation made before, if any."""
     fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat, fingerpad=fingerpad)
     fit, sampler = config.print.resolved(), config.sampler
-    exact = (
-        evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
-        if any(v > 0 for k, v in fit.items() if k != "density_g_cm3")
-        else fitted
-    )
+    if not any(v > 0 for k, v in fit.items() if k != "density_g_cm3"):
+        exact = fitted
+    elif known is not None:
+        # the same evaluation: its figures, and the exact pad the report measures
+        exact = dataclasses.replace(known, fingerpad=candidate_fingerpad(scenarios, choice, config))
+    else:
+        exact = evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
     thinnest = thinnest_wall_mm(fitted.fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
     warnings: list[str] = [] if why is None else [why]
     # the opening's ball is a polyhedron and the wall is measured by rays: 0.05 mm of slack
@@ -907,7 +918,8 @@ def finish_designs(
     jobs = max(prepared.jobs for prepared, _ in designs)
     candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
     try:
-        finished = finish_candidates(candidates, config, jobs=jobs, progress=progress)
+        exact = [chosen.exact[chosen.choice] for _, chosen in designs]
+        finished = finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact)
         compared = [
             versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
             for (prepared, chosen), (best, *_) in zip(designs, finished)
