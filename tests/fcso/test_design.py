@@ -9,7 +9,7 @@ import trimesh
 import fcso
 from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
 from fcso.config import DesignConfig
-from fcso.design import choose_candidate, choose_candidates, finish_candidate, prepare, subset
+from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
@@ -260,3 +260,16 @@ def test_designs_side_by_side_choose_as_one_at_a_time():
         assert made.candidate == alone.candidate
         assert made.ranked == alone.ranked
         assert {c: e.quality for c, e in made.exact.items()} == {c: e.quality for c, e in alone.exact.items()}
+
+
+def test_a_finish_given_the_exact_evaluation_reports_as_one_that_evaluates_again():
+    """finish_candidates takes a design's exact evaluation of its choice instead of making it again: the same
+    print-fit report (exact figures and pad measured)."""
+    config = small_config()
+    prepared = prepare([data_path(name) for name in TWO_PARTS], config)
+    chosen = choose_candidate(prepared, config)
+    candidates = [(prepared.scenarios, chosen.choice)]
+    given = finish_candidates(candidates, config, exact=[chosen.exact[chosen.choice]])[0]
+    again = finish_candidates(candidates, config)[0]
+    assert given[2].exact.quality > 0
+    assert given[1:] == again[1:]
