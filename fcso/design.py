@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -843,23 +844,27 @@ def choose_candidates(
     return [chosen[n] for n in range(len(designs))]
 
 
+@contextlib.contextmanager
 def listed_screens(
     designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
-) -> list[dict[tuple[int, ...], ScreenedCandidate]]:
-    """Per-scenario screened values of the candidates each design's ``report.json`` lists after its exact finalists.
+) -> Iterator[Callable[[], list[dict[tuple[int, ...], ScreenedCandidate]]]]:
+    """Per-scenario screened values of the candidates each design's ``report.json`` lists after its exact finalists,
+    screened on workers while this process goes on.
 
     Those the search kept (:attr:`ChosenCandidate.kept_screens`) are taken as they are; the others are screened again
-    (screening is a function of the candidate: the same values), every design's on one pool of workers.
+    (screening is a function of the candidate: the same values), every design's on one pool of workers, from entering
+    the context on.
 
     Parameters
     ----------
     designs : sequence of (Prepared, ChosenCandidate)
     config : DesignConfig
 
-    Returns
-    -------
-    list of dict
-        Per design, candidate (one sample per scenario) -> its screening.
+    Yields
+    ------
+    callable
+        Waits for the screenings and returns, per design, candidate (one sample per scenario) -> its screening; to be
+        called once, inside the context.
     """
     listed = [chosen.ranked[config.search.exact_top_k : config.search.report_candidates] for _, chosen in designs]
     known = [dict(chosen.kept_screens) for _, chosen in designs]
@@ -867,13 +872,17 @@ def listed_screens(
     for number, candidates in enumerate(listed):
         missing = [c for c in candidates if c not in known[number]]
         tasks += [(number, missing[i : i + _SCREEN_CHUNK]) for i in range(0, len(missing), _SCREEN_CHUNK)]
-    if tasks:
-        contexts = [_screen_context(prepared, config) for prepared, _ in designs]
-        jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
-        with WorkerPool(contexts, jobs, config.compute.scheduler) as pool:
-            for (number, chunk), screened in zip(tasks, pool.map(_listed_batch, tasks)):
-                known[number].update(zip(chunk, screened))
-    return [{c: screens[c] for c in candidates} for candidates, screens in zip(listed, known)]
+    contexts = [_screen_context(prepared, config) for prepared, _ in designs] if tasks else []
+    jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
+    with WorkerPool(contexts, jobs, config.compute.scheduler) as pool:
+        screened = pool.map_later(_listed_batch, tasks)
+
+        def results() -> list[dict[tuple[int, ...], ScreenedCandidate]]:
+            for (number, chunk), screens in zip(tasks, screened()):
+                known[number].update(zip(chunk, screens))
+            return [{c: screens[c] for c in candidates} for candidates, screens in zip(listed, known)]
+
+        yield results
 
 
 def finish_design(
@@ -917,29 +926,33 @@ def finish_designs(
     clock = time.perf_counter()
     jobs = max(prepared.jobs for prepared, _ in designs)
     candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
-    try:
-        exact = [chosen.exact[chosen.choice] for _, chosen in designs]
-        finished = finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact)
-        compared = [
-            versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
-            for (prepared, chosen), (best, *_) in zip(designs, finished)
-        ]
-        # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
-        # §7b)
-        flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
-        flat_pads = finish_candidates([candidates[n] for n in flat], config, flat=True, jobs=jobs, progress=progress)
-        for n, made in zip(flat, flat_pads):
-            finished[n] = made
-            compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
-    except GeometryError as error:
-        # a pad Boolean failed: each design alone says whose
-        if len(designs) == 1:
-            return [error]
-        return [made for design in designs for made in finish_designs([design], config, progress)]
-    shared_s = (time.perf_counter() - clock) / len(designs)
-    clock = time.perf_counter()
-    listed = listed_screens(designs, config)
-    listing_s = (time.perf_counter() - clock) / len(designs)
+    # the listed candidates are screened beside the finishing, on workers of their own: they wait for nothing
+    with listed_screens(designs, config) as listed_later:
+        try:
+            exact = [chosen.exact[chosen.choice] for _, chosen in designs]
+            finished = finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact)
+            compared = [
+                versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
+                for (prepared, chosen), (best, *_) in zip(designs, finished)
+            ]
+            # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
+            # §7b)
+            flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
+            flat_pads = finish_candidates(
+                [candidates[n] for n in flat], config, flat=True, jobs=jobs, progress=progress
+            )
+            for n, made in zip(flat, flat_pads):
+                finished[n] = made
+                compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
+        except GeometryError as error:
+            # a pad Boolean failed: each design alone says whose
+            if len(designs) == 1:
+                return [error]
+            return [made for design in designs for made in finish_designs([design], config, progress)]
+        shared_s = (time.perf_counter() - clock) / len(designs)
+        clock = time.perf_counter()
+        listed = listed_later()
+        listing_s = (time.perf_counter() - clock) / len(designs)
     results: list[DesignResult | GeometryError] = []
     for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
         try:
