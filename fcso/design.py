@@ -31,7 +31,16 @@ from .evaluate import (
     screen_on_pad,
     versus_flat,
 )
-from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
+from .finger import (
+    FlatFinger,
+    FusedFinger,
+    finger_plate,
+    fuse,
+    load_finger,
+    pad_to_finger,
+    parametric_finger,
+    print_ready,
+)
 from .geometry import mesh_arrays, solid_from_mesh_arrays, to_manifold
 from .measure import quality_words, scenario_measure
 from .pad import Fingerpad, PadGeometry
@@ -299,6 +308,7 @@ def finish_candidates(
     pads: dict[str, tuple] | None = None,
     progress: Progress | None = None,
     exact: Sequence[CandidateEvaluation | None] | None = None,
+    on_finished: Callable[[int, tuple], None] | None = None,
 ) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
 
@@ -326,6 +336,9 @@ def finish_candidates(
         Per candidate, its exact evaluation with ``config`` (``keep_pad=False``) when made before, as
         :func:`choose_candidate` makes its finalists': the print-fit report takes its figures and makes only its pad,
         instead of evaluating the candidate again.
+    on_finished : callable, optional
+        ``on_finished(number, finished)``, called in this process as each candidate is finished (its entry of the
+        list returned), while the workers make the others' pads.
 
     Returns
     -------
@@ -394,6 +407,8 @@ def finish_candidates(
             if c not in finished and keys[c] in cache:
                 fingerpad = Fingerpad(solid_from_mesh_arrays(*cache[keys[c]][0]), *cache[keys[c]][1:])
                 finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why, known[c])
+                if on_finished is not None:
+                    on_finished(c, finished[c])
 
     def on_done(tag: tuple, result) -> list[tuple]:
         kind, what = tag
@@ -926,24 +941,30 @@ def finish_designs(
     clock = time.perf_counter()
     jobs = max(prepared.jobs for prepared, _ in designs)
     candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
+    # per design: its finished candidate, compared with flat pads, whether flat pads are delivered, its fused finger
+    fingers: dict[int, tuple] = {}
+
+    def made_finger(n: int, made: tuple) -> None:
+        # as soon as a candidate is finished, while the workers make the other pads
+        prepared, chosen = designs[n]
+        versus = versus_flat(prepared.scenarios, made[0], chosen.exact.values(), config)
+        # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
+        # §7b)
+        flat = all(v is not None and not v.beats_flat for v in versus)
+        if flat:
+            made = finish_candidates([candidates[n]], config, flat=True, progress=progress)[0]
+            versus = versus_flat(prepared.scenarios, made[0], chosen.exact.values(), config)
+        try:
+            fused = fuse(prepared.finger, made[0].fingerpad.pad, config.sampler, config.finger.overlap_mm)
+        except GeometryError as error:
+            fused = error
+        fingers[n] = (made, versus, flat, fused)
+
     # the listed candidates are screened beside the finishing, on workers of their own: they wait for nothing
     with listed_screens(designs, config) as listed_later:
         try:
             exact = [chosen.exact[chosen.choice] for _, chosen in designs]
-            finished = finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact)
-            compared = [
-                versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
-                for (prepared, chosen), (best, *_) in zip(designs, finished)
-            ]
-            # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
-            # §7b)
-            flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
-            flat_pads = finish_candidates(
-                [candidates[n] for n in flat], config, flat=True, jobs=jobs, progress=progress
-            )
-            for n, made in zip(flat, flat_pads):
-                finished[n] = made
-                compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
+            finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact, on_finished=made_finger)
         except GeometryError as error:
             # a pad Boolean failed: each design alone says whose
             if len(designs) == 1:
@@ -954,10 +975,13 @@ def finish_designs(
         listed = listed_later()
         listing_s = (time.perf_counter() - clock) / len(designs)
     results: list[DesignResult | GeometryError] = []
-    for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
+    for n, (prepared, chosen) in enumerate(designs):
+        made, versus, flat, fused = fingers[n]
         try:
+            if isinstance(fused, GeometryError):
+                raise fused
             results.append(
-                _finished_design(prepared, chosen, config, made, versus, n in flat, shared_s, listed[n], listing_s)
+                _finished_design(prepared, chosen, config, made, versus, flat, fused, shared_s, listed[n], listing_s)
             )
         except GeometryError as error:
             results.append(error)
@@ -971,13 +995,14 @@ def _finished_design(
     finished: tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]],
     compared: list,
     flat_pads: bool,
+    fused: FusedFinger,
     finishing_s: float,
     listed: dict[tuple[int, ...], ScreenedCandidate],
     listing_s: float,
 ) -> DesignResult:
-    """One design of :func:`finish_designs`: its finger fused and its report, ``finishing_s`` its share of the
-    candidates' finishing, ``listed`` its listed candidates' screenings (:func:`listed_screens`), ``listing_s`` its
-    share of screening them."""
+    """One design of :func:`finish_designs`: its report, ``fused`` its finger, ``finishing_s`` its share of the
+    candidates' finishing (the finger fused), ``listed`` its listed candidates' screenings (:func:`listed_screens`),
+    ``listing_s`` its share of screening them."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
@@ -987,7 +1012,6 @@ def _finished_design(
     clock = time.perf_counter() - finishing_s
     best, grasps, print_fit, fit_warnings = finished
     transform = pad_to_finger(finger, config.sampler)
-    fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     # a clearance deepens the pocket by c: the carving demands that much less
     floor = config.sampler.thickness_mm - config.sampler.penetration_mm - config.print.resolved()["clearance_mm"]
     if fused.min_pad_thickness_mm < floor - 1e-3:

@@ -202,9 +202,12 @@ def _design_sets_of_one_size(
         compare = fallback is not None and fallback not in chosen_candidates and fallback not in failures
         compare = compare and fallback not in todo
 
+        designed = 0
+
         def then(numbers: list[int], chosen: ChosenCandidate | GeometryError) -> list[list[int]]:
-            nonlocal compare
-            report_progress("finger sets", 0, len(wanted), f"set of {len(numbers)} scenarios designed")
+            nonlocal compare, designed
+            designed += 1
+            report_progress("finger sets", designed, len(wanted), f"set of {len(wanted[frozenset(numbers)])} parts")
             short = isinstance(chosen, GeometryError) or (
                 min(exact_retained(chosen.candidate, numbers, solos)) < config.finger_sets.min_retained
             )
