@@ -889,7 +889,7 @@ def listed_screens(
         tasks += [(number, missing[i : i + _SCREEN_CHUNK]) for i in range(0, len(missing), _SCREEN_CHUNK)]
     contexts = [_screen_context(prepared, config) for prepared, _ in designs] if tasks else []
     jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
-    with WorkerPool(contexts, jobs, config.compute.scheduler) as pool:
+    with WorkerPool(contexts, jobs, config.compute.scheduler if tasks else None) as pool:
         screened = pool.map_later(_listed_batch, tasks)
 
         def results() -> list[dict[tuple[int, ...], ScreenedCandidate]]:
