@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -30,7 +31,16 @@ from .evaluate import (
     screen_on_pad,
     versus_flat,
 )
-from .finger import FlatFinger, finger_plate, fuse, load_finger, pad_to_finger, parametric_finger, print_ready
+from .finger import (
+    FlatFinger,
+    FusedFinger,
+    finger_plate,
+    fuse,
+    load_finger,
+    pad_to_finger,
+    parametric_finger,
+    print_ready,
+)
 from .geometry import mesh_arrays, solid_from_mesh_arrays, to_manifold
 from .measure import quality_words, scenario_measure
 from .pad import Fingerpad, PadGeometry
@@ -297,6 +307,8 @@ def finish_candidates(
     jobs: int = 1,
     pads: dict[str, tuple] | None = None,
     progress: Progress | None = None,
+    exact: Sequence[CandidateEvaluation | None] | None = None,
+    on_finished: Callable[[int, tuple], None] | None = None,
 ) -> list[tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """Candidates built as :func:`design` builds its choice: carved with ``[print]``'s fit, their pads kept.
 
@@ -320,6 +332,13 @@ def finish_candidates(
         Printed pads made before (:func:`pad_key`: mesh arrays, case, block depth); new ones are added. The choice
         by truth keeps one for the candidates of a design, which often carve the same pad.
     progress : callable, optional
+    exact : sequence of CandidateEvaluation or None, optional
+        Per candidate, its exact evaluation with ``config`` (``keep_pad=False``) when made before, as
+        :func:`choose_candidate` makes its finalists': the print-fit report takes its figures and makes only its pad,
+        instead of evaluating the candidate again.
+    on_finished : callable, optional
+        ``on_finished(number, finished)``, called in this process as each candidate is finished (its entry of the
+        list returned), while the workers make the others' pads.
 
     Returns
     -------
@@ -344,6 +363,8 @@ def finish_candidates(
             if fit_key(fitted_config) not in scenarios[m].samples[k].fitted
         )
     )
+    # an exact evaluation made before holds for a candidate printed with config's own lead-in
+    known = [None if exact is None or flat or why is not None else exact[c] for c, (_, why) in enumerate(fits)]
     report_progress = _progress_with_note(progress)
     report_progress("fingers", 0, len(candidates), f"{len(missing)} printed-fit pockets")
     cache = {} if pads is None else pads
@@ -385,7 +406,9 @@ def finish_candidates(
         for c, ((scenarios, choice), fitted_config, (_, why)) in enumerate(zip(candidates, configs, fits)):
             if c not in finished and keys[c] in cache:
                 fingerpad = Fingerpad(solid_from_mesh_arrays(*cache[keys[c]][0]), *cache[keys[c]][1:])
-                finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why)
+                finished[c] = _finished(scenarios, choice, fitted_config, flat, fingerpad, why, known[c])
+                if on_finished is not None:
+                    on_finished(c, finished[c])
 
     def on_done(tag: tuple, result) -> list[tuple]:
         kind, what = tag
@@ -439,15 +462,19 @@ def _finished(
     flat: bool,
     fingerpad: Fingerpad,
     why: str | None,
+    known: CandidateEvaluation | None = None,
 ) -> tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
-    """One candidate of :func:`finish_candidates` evaluated on its opened pad (``config`` with its lead-in)."""
+    """One candidate of :func:`finish_candidates` evaluated on its opened pad (``config`` with its lead-in);
+    ``known`` its exact evaluation made before, if any."""
     fitted = evaluate_candidate(scenarios, choice, config, keep_pad=True, fitted=True, flat=flat, fingerpad=fingerpad)
     fit, sampler = config.print.resolved(), config.sampler
-    exact = (
-        evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
-        if any(v > 0 for k, v in fit.items() if k != "density_g_cm3")
-        else fitted
-    )
+    if not any(v > 0 for k, v in fit.items() if k != "density_g_cm3"):
+        exact = fitted
+    elif known is not None:
+        # the same evaluation: its figures, and the exact pad the report measures
+        exact = dataclasses.replace(known, fingerpad=candidate_fingerpad(scenarios, choice, config))
+    else:
+        exact = evaluate_candidate(scenarios, choice, config, keep_pad=True, flat=flat)
     thinnest = thinnest_wall_mm(fitted.fingerpad.pad, sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
     warnings: list[str] = [] if why is None else [why]
     # the opening's ball is a polyhedron and the wall is measured by rays: 0.05 mm of slack
@@ -768,23 +795,91 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     )
 
 
+def choose_candidates(
+    prepared: Prepared,
+    subsets: Sequence[Sequence[int]],
+    config: DesignConfig,
+    then: Callable[[Sequence[int], ChosenCandidate | GeometryError], Sequence[Sequence[int]]] | None = None,
+    progress: Progress | None = None,
+) -> list[ChosenCandidate | GeometryError]:
+    """:func:`choose_candidate` of several :func:`subset` s of one batch, side by side.
+
+    Each design runs whole on one worker, as ``jobs = 1`` would run it: a
+    design's coordinate ascent screens a few dozen candidates a batch, too
+    few to share out without leaving the workers waiting on each other,
+    while several designs keep every worker busy. A design's choice does
+    not depend on its number of workers. With one design and no ``then``,
+    or on a cluster (``[compute] scheduler``), the designs run one after
+    another, each over every worker.
+
+    Parameters
+    ----------
+    prepared : Prepared
+    subsets : sequence of sequence of int
+        Scenario numbers of each design (positions in ``prepared.scenarios``, increasing).
+    config : DesignConfig
+    then : callable, optional
+        ``then(numbers, chosen)``, called in this process as each design
+        finishes (in the order they finish): further subsets to design
+        beside the others; its answer must not depend on that order.
+    progress : callable, optional
+        Hears of each design's stages when they run one after another.
+
+    Returns
+    -------
+    list of ChosenCandidate or GeometryError
+        Per design, ``subsets`` first, then those ``then`` asked for in the
+        order asked: the choice, or the error of a pad Boolean that failed.
+    """
+    follow = then or (lambda numbers, chosen: [])
+    designs = [list(numbers) for numbers in subsets]
+    chosen: dict[int, ChosenCandidate | GeometryError] = {}
+    side_by_side = prepared.jobs > 1 and not config.compute.scheduler and (len(designs) > 1 or then is not None)
+    waiting = [(_choose_task, numbers, n) for n, numbers in enumerate(designs)]
+
+    def on_done(number: int, result: ChosenCandidate | GeometryError) -> list[tuple]:
+        chosen[number] = result
+        tasks = []
+        for numbers in follow(designs[number], result):
+            designs.append(list(numbers))
+            tasks.append((_choose_task, designs[-1], len(designs) - 1))
+        if side_by_side and len(designs) - len(chosen) == len(tasks) == 1:
+            # a design asked for when every other is done runs on every worker, after
+            waiting.extend(tasks)
+            return []
+        return tasks
+
+    while waiting:
+        tasks, waiting[:] = list(waiting), []
+        # side by side, the workers are not told of progress: they cannot reach whoever listens
+        workers = min(prepared.jobs, len(tasks) + (then is not None)) if side_by_side else 1
+        with WorkerPool((prepared, config, side_by_side, None if side_by_side else progress), workers) as pool:
+            pool.run(tasks, on_done)
+        side_by_side = False
+    return [chosen[n] for n in range(len(designs))]
+
+
+@contextlib.contextmanager
 def listed_screens(
     designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig
-) -> list[dict[tuple[int, ...], ScreenedCandidate]]:
-    """Per-scenario screened values of the candidates each design's ``report.json`` lists after its exact finalists.
+) -> Iterator[Callable[[], list[dict[tuple[int, ...], ScreenedCandidate]]]]:
+    """Per-scenario screened values of the candidates each design's ``report.json`` lists after its exact finalists,
+    screened on workers while this process goes on.
 
     Those the search kept (:attr:`ChosenCandidate.kept_screens`) are taken as they are; the others are screened again
-    (screening is a function of the candidate: the same values), every design's on one pool of workers.
+    (screening is a function of the candidate: the same values), every design's on one pool of workers, from entering
+    the context on.
 
     Parameters
     ----------
     designs : sequence of (Prepared, ChosenCandidate)
     config : DesignConfig
 
-    Returns
-    -------
-    list of dict
-        Per design, candidate (one sample per scenario) -> its screening.
+    Yields
+    ------
+    callable
+        Waits for the screenings and returns, per design, candidate (one sample per scenario) -> its screening; to be
+        called once, inside the context.
     """
     listed = [chosen.ranked[config.search.exact_top_k : config.search.report_candidates] for _, chosen in designs]
     known = [dict(chosen.kept_screens) for _, chosen in designs]
@@ -792,13 +887,17 @@ def listed_screens(
     for number, candidates in enumerate(listed):
         missing = [c for c in candidates if c not in known[number]]
         tasks += [(number, missing[i : i + _SCREEN_CHUNK]) for i in range(0, len(missing), _SCREEN_CHUNK)]
-    if tasks:
-        contexts = [_screen_context(prepared, config) for prepared, _ in designs]
-        jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
-        with WorkerPool(contexts, jobs, config.compute.scheduler) as pool:
-            for (number, chunk), screened in zip(tasks, pool.map(_listed_batch, tasks)):
-                known[number].update(zip(chunk, screened))
-    return [{c: screens[c] for c in candidates} for candidates, screens in zip(listed, known)]
+    contexts = [_screen_context(prepared, config) for prepared, _ in designs] if tasks else []
+    jobs = min(max(prepared.jobs for prepared, _ in designs), len(tasks))
+    with WorkerPool(contexts, jobs, config.compute.scheduler if tasks else None) as pool:
+        screened = pool.map_later(_listed_batch, tasks)
+
+        def results() -> list[dict[tuple[int, ...], ScreenedCandidate]]:
+            for (number, chunk), screens in zip(tasks, screened()):
+                known[number].update(zip(chunk, screens))
+            return [{c: screens[c] for c in candidates} for candidates, screens in zip(listed, known)]
+
+        yield results
 
 
 def finish_design(
@@ -842,33 +941,47 @@ def finish_designs(
     clock = time.perf_counter()
     jobs = max(prepared.jobs for prepared, _ in designs)
     candidates = [(prepared.scenarios, chosen.choice) for prepared, chosen in designs]
-    try:
-        finished = finish_candidates(candidates, config, jobs=jobs, progress=progress)
-        compared = [
-            versus_flat(prepared.scenarios, best, chosen.exact.values(), config)
-            for (prepared, chosen), (best, *_) in zip(designs, finished)
-        ]
+    # per design: its finished candidate, compared with flat pads, whether flat pads are delivered, its fused finger
+    fingers: dict[int, tuple] = {}
+
+    def made_finger(n: int, made: tuple) -> None:
+        # as soon as a candidate is finished, while the workers make the other pads
+        prepared, chosen = designs[n]
+        versus = versus_flat(prepared.scenarios, made[0], chosen.exact.values(), config)
         # no carving tried captures any scenario better than flat pads: printing one would be over-carving (METHOD
         # §7b)
-        flat = [n for n, versus in enumerate(compared) if all(v is not None and not v.beats_flat for v in versus)]
-        flat_pads = finish_candidates([candidates[n] for n in flat], config, flat=True, jobs=jobs, progress=progress)
-        for n, made in zip(flat, flat_pads):
-            finished[n] = made
-            compared[n] = versus_flat(designs[n][0].scenarios, made[0], designs[n][1].exact.values(), config)
-    except GeometryError as error:
-        # a pad Boolean failed: each design alone says whose
-        if len(designs) == 1:
-            return [error]
-        return [made for design in designs for made in finish_designs([design], config, progress)]
-    shared_s = (time.perf_counter() - clock) / len(designs)
-    clock = time.perf_counter()
-    listed = listed_screens(designs, config)
-    listing_s = (time.perf_counter() - clock) / len(designs)
-    results: list[DesignResult | GeometryError] = []
-    for (prepared, chosen), made, versus, n in zip(designs, finished, compared, range(len(designs))):
+        flat = all(v is not None and not v.beats_flat for v in versus)
+        if flat:
+            made = finish_candidates([candidates[n]], config, flat=True, progress=progress)[0]
+            versus = versus_flat(prepared.scenarios, made[0], chosen.exact.values(), config)
         try:
+            fused = fuse(prepared.finger, made[0].fingerpad.pad, config.sampler, config.finger.overlap_mm)
+        except GeometryError as error:
+            fused = error
+        fingers[n] = (made, versus, flat, fused)
+
+    # the listed candidates are screened beside the finishing, on workers of their own: they wait for nothing
+    with listed_screens(designs, config) as listed_later:
+        try:
+            exact = [chosen.exact[chosen.choice] for _, chosen in designs]
+            finish_candidates(candidates, config, jobs=jobs, progress=progress, exact=exact, on_finished=made_finger)
+        except GeometryError as error:
+            # a pad Boolean failed: each design alone says whose
+            if len(designs) == 1:
+                return [error]
+            return [made for design in designs for made in finish_designs([design], config, progress)]
+        shared_s = (time.perf_counter() - clock) / len(designs)
+        clock = time.perf_counter()
+        listed = listed_later()
+        listing_s = (time.perf_counter() - clock) / len(designs)
+    results: list[DesignResult | GeometryError] = []
+    for n, (prepared, chosen) in enumerate(designs):
+        made, versus, flat, fused = fingers[n]
+        try:
+            if isinstance(fused, GeometryError):
+                raise fused
             results.append(
-                _finished_design(prepared, chosen, config, made, versus, n in flat, shared_s, listed[n], listing_s)
+                _finished_design(prepared, chosen, config, made, versus, flat, fused, shared_s, listed[n], listing_s)
             )
         except GeometryError as error:
             results.append(error)
@@ -882,13 +995,14 @@ def _finished_design(
     finished: tuple[CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]],
     compared: list,
     flat_pads: bool,
+    fused: FusedFinger,
     finishing_s: float,
     listed: dict[tuple[int, ...], ScreenedCandidate],
     listing_s: float,
 ) -> DesignResult:
-    """One design of :func:`finish_designs`: its finger fused and its report, ``finishing_s`` its share of the
-    candidates' finishing, ``listed`` its listed candidates' screenings (:func:`listed_screens`), ``listing_s`` its
-    share of screening them."""
+    """One design of :func:`finish_designs`: its report, ``fused`` its finger, ``finishing_s`` its share of the
+    candidates' finishing (the finger fused), ``listed`` its listed candidates' screenings (:func:`listed_screens`),
+    ``listing_s`` its share of screening them."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     loaded, finger, ungraspable = prepared.parts, prepared.finger, prepared.ungraspable
     warnings, timings = list(chosen.warnings), dict(chosen.timings_s)
@@ -898,7 +1012,6 @@ def _finished_design(
     clock = time.perf_counter() - finishing_s
     best, grasps, print_fit, fit_warnings = finished
     transform = pad_to_finger(finger, config.sampler)
-    fused = fuse(finger, best.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     # a clearance deepens the pocket by c: the carving demands that much less
     floor = config.sampler.thickness_mm - config.sampler.penetration_mm - config.print.resolved()["clearance_mm"]
     if fused.min_pad_thickness_mm < floor - 1e-3:
@@ -1101,3 +1214,13 @@ def _pad_task(context, task: tuple[list[int], tuple[int, ...], float, dict]) -> 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
     scenarios, config = context
     return evaluate_candidate(scenarios, choice, config, keep_pad=False)
+
+
+def _choose_task(context, numbers: list[int]) -> ChosenCandidate | GeometryError:
+    """:func:`choose_candidate` of one subset of :func:`choose_candidates`, in this one process when side by side."""
+    prepared, config, side_by_side, progress = context
+    one = subset(prepared, numbers)
+    try:
+        return choose_candidate(dataclasses.replace(one, jobs=1) if side_by_side else one, config, progress)
+    except GeometryError as error:
+        return error

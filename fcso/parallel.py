@@ -192,11 +192,24 @@ class WorkerPool:
 
         ``function`` must be a module-level function; items and results are pickled.
         """
+        return self.map_later(function, items, chunksize)()
+
+    def map_later(
+        self, function: Callable[[Any, Any], Any], items: Sequence[Any], chunksize: int = 1
+    ) -> Callable[[], list]:
+        """:meth:`map` started now on the workers, its results taken later: this process is free meanwhile.
+
+        Returns a function that waits for the results and returns them in
+        task order; call it once, before the pool closes. With no workers
+        (``jobs = 1``) the tasks run in this process when it is called.
+        """
+        items = list(items)
         if self._client is not None and items:
-            return self._dask_map(function, list(items))
+            return self._dask_map_later(function, items)
         if self._pool is None or len(items) <= 1:
-            return [function(self.context, item) for item in items]
-        return list(self._pool.map(_call, [(function, item) for item in items], chunksize=max(1, chunksize)))
+            return lambda: [function(self.context, item) for item in items]
+        results = self._pool.map(_call, [(function, item) for item in items], chunksize=max(1, chunksize))
+        return lambda: list(results)
 
     def run(
         self,
@@ -244,12 +257,12 @@ class WorkerPool:
                 running[follower] = next_tag
                 finished.add(follower)
 
-    def _dask_map(self, function: Callable[[Any, Any], Any], items: list) -> list:
-        """The map on the Dask cluster: items in contiguous batches, results gathered in order."""
+    def _dask_map_later(self, function: Callable[[Any, Any], Any], items: list) -> Callable[[], list]:
+        """:meth:`map_later` on the Dask cluster: items in contiguous batches, results gathered in order."""
         threads = max(1, sum(self._client.nthreads().values()))
         size = max(1, -(-len(items) // (_DASK_BATCHES_PER_THREAD * threads)))
         futures = [
             self._client.submit(_call_batch, function, self._context_future, items[i : i + size], pure=False)
             for i in range(0, len(items), size)
         ]
-        return [result for batch in self._client.gather(futures) for result in batch]
+        return lambda: [result for batch in self._client.gather(futures) for result in batch]

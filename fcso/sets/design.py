@@ -19,7 +19,7 @@ from ..design import (
     DesignResult,
     SizeScore,
     best_pad_size,
-    choose_candidate,
+    choose_candidates,
     design,
     finish_designs,
     load_batch,
@@ -181,26 +181,59 @@ def _design_sets_of_one_size(
         screener.judge_exactly(members, np.zeros(len(numbers_of(members))))
         return failures[members]
 
-    def design_exactly(members: frozenset[int]) -> str | None:
-        """A set's candidate by METHOD §6-8, once per set; the screener then judges the set by its exact figures.
+    def design_exactly(sets: list[frozenset[int]], fallback: frozenset[int] | None = None) -> list[str | None]:
+        """Sets' candidates by METHOD §6-8, each once, side by side (:func:`fcso.design.choose_candidates`); the
+        screener then judges each set by its exact figures.
 
-        Its finger (printed-fit pockets, fusing) is made only if the set is delivered (:func:`finish_exactly`): the
-        retained qualities are the chosen candidate's exact ones either way. Returns why the set cannot be designed
-        (a pad Boolean that failed), or None.
+        ``fallback`` (one finger for every part) is designed beside them as soon as one of them keeps less than
+        ``min_retained`` in a scenario or cannot be designed: the partition is then compared with it. Its finger
+        (printed-fit pockets, fusing) is made only if the set is delivered (:func:`finish_exactly`): the retained
+        qualities are the chosen candidate's exact ones either way. Returns per set why it cannot be designed (a pad
+        Boolean that failed), or None.
         """
-        if members not in chosen_candidates and members not in failures:
-            numbers = numbers_of(members)
-            report_progress(
-                "finger sets", len(chosen_candidates), len(chosen_candidates) + 1, f"set of {len(members)} parts"
+        todo = list(dict.fromkeys(m for m in sets if m not in chosen_candidates and m not in failures))
+        if not todo:
+            return [failures.get(members) for members in sets]
+        # the sets by their scenario numbers, in the order their designs start: the worst by the exact figures known
+        # (the probes of fcso.sets.screening.SetScreener.probe) first, as the likeliest to miss min_retained and so
+        # to start the fallback's design early
+        known = {m: float(screener.exact[m].min()) if m in screener.exact else np.inf for m in todo}
+        wanted = {frozenset(numbers_of(m)): m for m in sorted(todo, key=lambda m: known[m])}
+        compare = fallback is not None and fallback not in chosen_candidates and fallback not in failures
+        compare = compare and fallback not in todo
+
+        designed = 0
+
+        def then(numbers: list[int], chosen: ChosenCandidate | GeometryError) -> list[list[int]]:
+            nonlocal compare, designed
+            designed += 1
+            report_progress("finger sets", designed, len(wanted), f"set of {len(wanted[frozenset(numbers)])} parts")
+            short = isinstance(chosen, GeometryError) or (
+                min(exact_retained(chosen.candidate, numbers, solos)) < config.finger_sets.min_retained
             )
-            try:
-                chosen = choose_candidate(subset(prepared, numbers), config, progress)
-            except GeometryError as error:
-                return failed(members, error)
+            if not (compare and short):
+                return []
+            compare = False
+            wanted[frozenset(numbers_of(fallback))] = fallback
+            return [numbers_of(fallback)]
+
+        report_progress("finger sets", 0, len(wanted), f"designing {len(wanted)} set(s)")
+        starting = [numbers_of(m) for m in wanted.values()]
+        chosen_all = choose_candidates(prepared, starting, config, then if compare else None, progress)
+        # the fallback, when asked for, came last
+        made = dict(zip(wanted.values(), chosen_all))
+        report_progress("finger sets", len(made), len(made), "")
+        # judged in the order asked for (the sets, then the fallback), whichever finished first
+        for members in todo + [m for m in made if m not in todo]:
+            chosen = made[members]
+            if isinstance(chosen, GeometryError):
+                failed(members, chosen)
+                continue
             chosen_candidates[members] = chosen
+            numbers = numbers_of(members)
             kept = dict(zip(numbers, exact_retained(chosen.candidate, numbers, solos)))
             screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
-        return failures.get(members)
+        return [failures.get(members) for members in sets]
 
     def finish_exactly(sets: list[frozenset[int]]) -> list[str | None]:
         """The fingers of sets designed by :func:`design_exactly`, each made once, together

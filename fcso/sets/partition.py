@@ -585,7 +585,7 @@ def search_judged_exactly(
     parts: int,
     config: DesignConfig,
     progress: Progress,
-    design_exactly: Callable[[frozenset[int]], str | None],
+    design_exactly: Callable[[list[frozenset[int]], frozenset[int] | None], list[str | None]],
     finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
@@ -616,10 +616,13 @@ def search_judged_exactly(
     config : DesignConfig
     progress : callable
     design_exactly : callable
-        ``design_exactly(set_of_parts)``: chooses the set's candidate by
-        METHOD §6-8 and calls ``screener.judge_exactly`` with its exact
-        retained qualities (zeros when it cannot be designed); returns why
-        not, or None.
+        ``design_exactly(sets_of_parts, fallback)``: chooses each set's
+        candidate by METHOD §6-8 and calls ``screener.judge_exactly`` with
+        its exact retained qualities (zeros when it cannot be designed);
+        returns per set why not, or None. ``fallback`` (every part in one
+        set, or None) is to be designed and judged too, beside the sets,
+        when one of them misses ``min_retained`` or cannot be designed: it
+        is then compared.
     finish_exactly : callable
         ``finish_exactly(sets_of_parts)``: makes the fingers of sets
         ``design_exactly`` designed (METHOD §9), together, called only for the
@@ -648,9 +651,9 @@ def search_judged_exactly(
         judged = PartitionAttempt(assignment, screened, float(exact.min()), source, failure, designed)
         attempts[:] = [a for a in attempts if a.assignment != assignment] + [judged]
 
-    def design(assignment: tuple[int, ...], source: str) -> PartitionAttempt:
+    def design(assignment: tuple[int, ...], source: str, fallback: frozenset[int] | None = None) -> PartitionAttempt:
         progress("exact sets", 0, 1, f"designing {max(assignment) + 1} set(s)")
-        failures = [f for f in map(design_exactly, sets_of(assignment)) if f is not None]
+        failures = [f for f in design_exactly(sets_of(assignment), fallback) if f is not None]
         judge(assignment, source, failures[0] if failures else None, designed=True)
         return attempts[-1]
 
@@ -680,8 +683,9 @@ def search_judged_exactly(
         ):
             break
         outcome = search_partition(screener, parts, config, progress)
-    best = design(max(attempts, key=lambda a: key(a.assignment)).assignment, "search")
     single = tuple([0] * parts)
+    # one finger for every part is designed beside the partition's sets as soon as one of them misses min_retained
+    best = design(max(attempts, key=lambda a: key(a.assignment)).assignment, "search", frozenset(range(parts)))
     if (best.failure is not None or best.exact_worst < threshold) and best.assignment != single:
         design(single, "one_finger")
     while True:

@@ -9,7 +9,7 @@ import trimesh
 import fcso
 from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
 from fcso.config import DesignConfig
-from fcso.design import finish_candidate
+from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
@@ -237,3 +237,39 @@ def test_separate_solids_of_one_file_are_designed_as_separate_parts():
     refused = config.updated({"parts": {"split_bodies": False}})
     with pytest.raises(fcso.MeshError, match="DC-DC_case.stl: holds 2 separate solids"):
         fcso.design([data_path("DC-DC_case.stl")], refused)
+
+
+def test_designs_side_by_side_choose_as_one_at_a_time():
+    """choose_candidates runs each design whole on one worker and starts the designs ``then`` asks for: every choice is
+    the one choose_candidate makes alone, over every worker."""
+    config = small_config(search={"jobs": 2})
+    prepared = prepare([data_path(name) for name in (*TWO_PARTS, "box.STL")], config)
+    subsets = [[0], [1, 2], [2]]
+    asked = []
+
+    def then(numbers, chosen):
+        # the whole batch, once, after the first design to finish
+        asked.append(list(numbers))
+        return [list(range(len(prepared.scenarios)))] if len(asked) == 1 else []
+
+    side_by_side = choose_candidates(prepared, subsets, config, then)
+    assert len(asked) == len(subsets) + 1
+    for numbers, made in zip([*subsets, list(range(len(prepared.scenarios)))], side_by_side):
+        alone = choose_candidate(subset(prepared, numbers), config)
+        assert made.choice == alone.choice
+        assert made.candidate == alone.candidate
+        assert made.ranked == alone.ranked
+        assert {c: e.quality for c, e in made.exact.items()} == {c: e.quality for c, e in alone.exact.items()}
+
+
+def test_a_finish_given_the_exact_evaluation_reports_as_one_that_evaluates_again():
+    """finish_candidates takes a design's exact evaluation of its choice instead of making it again: the same
+    print-fit report (exact figures and pad measured)."""
+    config = small_config()
+    prepared = prepare([data_path(name) for name in TWO_PARTS], config)
+    chosen = choose_candidate(prepared, config)
+    candidates = [(prepared.scenarios, chosen.choice)]
+    given = finish_candidates(candidates, config, exact=[chosen.exact[chosen.choice]])[0]
+    again = finish_candidates(candidates, config)[0]
+    assert given[2].exact.quality > 0
+    assert given[1:] == again[1:]

@@ -1,6 +1,9 @@
-"""fcso.parallel.WorkerPool.run: tasks that start others as they finish, on forked workers and in this process."""
+"""fcso.parallel.WorkerPool.run (tasks that start others as they finish) and map_later (a map whose results are taken
+later), on forked workers and in this process."""
 
 from __future__ import annotations
+
+import os
 
 import pytest
 
@@ -47,3 +50,19 @@ def test_run_raises_what_a_task_raised():
 
 def _divided(context, item: int) -> float:
     return item / context
+
+
+def _pid(context, item: int) -> int:
+    return os.getpid()
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_map_later_returns_in_task_order_after_other_work_on_the_pool(jobs):
+    with WorkerPool(10, jobs) as pool:
+        later = pool.map_later(_scaled, [1, 2, 3, 4])
+        # the pool serves other maps while the first one's results wait
+        assert pool.map(_scaled, [5, 6]) == [50, 60]
+        where = pool.map_later(_pid, [0, 1])
+        assert later() == [10, 20, 30, 40]
+        assert (os.getpid() in where()) == (jobs == 1)
+        assert pool.map_later(_scaled, [])() == []
