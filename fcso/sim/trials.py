@@ -489,12 +489,16 @@ def skip_steady_lift(
     mujoco.mj_forward(model, data)
 
 
+#: A free joint's quaternion (w, x, y, z at 3:7 of its qpos) in scipy's order, x, y, z, w.
+_XYZW = [4, 5, 6, 3]
+
+
 def _part_pose(scene: Scene, data: mujoco.MjData) -> np.ndarray:
     """Part pose (resting frame -> world, mm) from its free joint's position (current after a step, unlike
     ``xpos``, which is of the step's start)."""
     free_joint = data.qpos[scene.part_qpos : scene.part_qpos + 7]
     pose = np.eye(4)
-    pose[:3, :3] = Rotation.from_quat(free_joint[3:7], scalar_first=True).as_matrix()
+    pose[:3, :3] = Rotation.from_quat(free_joint[_XYZW]).as_matrix()
     pose[:3, 3] = free_joint[:3] / M
     return pose
 
@@ -504,7 +508,7 @@ def _in_gripper(scene: Scene, positions: np.ndarray) -> tuple[np.ndarray, np.nda
     positions (mm) in rows of ``qpos``."""
     model = scene.model
     free_joints = positions[:, scene.part_qpos : scene.part_qpos + 7]
-    orientations = Rotation.from_quat(free_joints[:, 3:7], scalar_first=True)
+    orientations = Rotation.from_quat(free_joints[:, _XYZW])
     heights = positions[:, model.jnt_qposadr[scene.lift_joint]] / M
     coms = orientations.apply(scene.part_com_mm) + free_joints[:, :3] / M - heights[:, None] * scene.lift_axis
     fingers = positions[:, model.jnt_qposadr[list(scene.joints)]] / M
