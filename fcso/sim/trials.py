@@ -476,7 +476,7 @@ def skip_steady_lift(
     """
     model = scene.model
     seconds = skip_mm / speed_mm_s
-    pose = _part_pose(scene, data)
+    pose = _part_poses(data.qpos[None, scene.part_qpos : scene.part_qpos + 7])[0]
     com = scene.part_com_mm
     turned = Rotation.from_rotvec(creep_rad_s * seconds).as_matrix() @ pose[:3, :3]
     moved_com = pose[:3, :3] @ com + pose[:3, 3] + skip_mm * scene.lift_axis + creep_mm_s * seconds
@@ -493,26 +493,24 @@ def skip_steady_lift(
 _XYZW = [4, 5, 6, 3]
 
 
-def _part_pose(scene: Scene, data: mujoco.MjData) -> np.ndarray:
-    """Part pose (resting frame -> world, mm) from its free joint's position (current after a step, unlike
-    ``xpos``, which is of the step's start)."""
-    free_joint = data.qpos[scene.part_qpos : scene.part_qpos + 7]
-    pose = np.eye(4)
-    pose[:3, :3] = Rotation.from_quat(free_joint[_XYZW]).as_matrix()
-    pose[:3, 3] = free_joint[:3] / M
-    return pose
+def _part_poses(free_joints: np.ndarray) -> np.ndarray:
+    """Part poses (resting frame -> world, mm), (n, 4, 4), from rows of its free joint's position (``qpos``: x, y, z
+    in m, then the quaternion w, x, y, z), which is current after a step, unlike ``xpos`` (of the step's start)."""
+    poses = np.tile(np.eye(4), (len(free_joints), 1, 1))
+    poses[:, :3, :3] = Rotation.from_quat(free_joints[:, _XYZW]).as_matrix()
+    poses[:, :3, 3] = free_joints[:, :3] / M
+    return poses
 
 
 def _in_gripper(scene: Scene, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The part's centres of mass relative to the gripper (world axes, mm), its orientations and the fingers'
     positions (mm) in rows of ``qpos``."""
     model = scene.model
-    free_joints = positions[:, scene.part_qpos : scene.part_qpos + 7]
-    orientations = Rotation.from_quat(free_joints[:, _XYZW])
+    poses = _part_poses(positions[:, scene.part_qpos : scene.part_qpos + 7])
     heights = positions[:, model.jnt_qposadr[scene.lift_joint]] / M
-    coms = orientations.apply(scene.part_com_mm) + free_joints[:, :3] / M - heights[:, None] * scene.lift_axis
+    coms = poses[:, :3, :3] @ scene.part_com_mm + poses[:, :3, 3] - heights[:, None] * scene.lift_axis
     fingers = positions[:, model.jnt_qposadr[list(scene.joints)]] / M
-    return coms, orientations.as_matrix(), fingers
+    return coms, poses[:, :3, :3], fingers
 
 
 def part_world(scene: Scene, data: mujoco.MjData) -> np.ndarray:
