@@ -37,6 +37,10 @@ prisms) and 1000-5000 pieces for the bunny's pad (0.2-0.05 mm cells).
 Merging prisms across a convex crease too (a ridge as one piece, the
 bunny's pad in 261 pieces instead of 346) made MuJoCo's contacts less
 exact: the sanity tests' fingers closed 0.27 mm past their seat.
+MuJoCo's signed distance fields of meshes (``needsdf``, a ``type="sdf"``
+geom; no decomposition at all) made 2-7 contacts where the prisms make
+39-289, and the bunny slipped out of its pads in every pose; with 200
+start points 10-20x slower and still dropped (``docs/benchmarks.md``).
 """
 
 from __future__ import annotations
