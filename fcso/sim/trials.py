@@ -48,11 +48,11 @@ FRAME_RATE_HZ = 20.0
 #: carried a creep on only when the halves agreed within 0.01 mm/s and 0.02 degrees/s never passed there, and those
 #: trials stepped through the whole lift. Measured against the stepped lift on 32 grasps (the bunny's poses 1 and 3
 #: designed, pose 1 between flat pads, the demo's xyz cube and solar tracker): every final pose within 0.035 mm and
-#: 0.041 degrees of the stepped one, but for two trials that slide out of the pads, whose stepped lifts started 0.0001 mm
-#: elsewhere end 0.2-13 mm elsewhere (``docs/benchmarks.md``). Carried on in one stretch,
-#: the dying rocking of the xyz cube ended up to 0.09 degrees off and a bunny sliding out of flat pads up to 0.9
-#: degrees; fitted lines rather than two differences, since these let the contacts' chatter through. A part that rocks
-#: or slides unsteadily has a large uncertainty, and is stepped.
+#: 0.041 degrees of the stepped one, but for two trials that slide out of the pads, whose stepped lifts started
+#: 0.0001 mm elsewhere end 0.2-13 mm elsewhere (``docs/benchmarks.md``). Carried on in one stretch, the dying rocking
+#: of the xyz cube ended up to 0.09 degrees off and a bunny sliding out of flat pads up to 0.9 degrees; fitted lines
+#: rather than two differences, since these let the contacts' chatter through. A part that rocks or slides unsteadily
+#: has a large uncertainty, and is stepped.
 CREEP_WINDOW_STEPS = 50
 CREEP_CARRY_MM = 0.05
 CREEP_CARRY_DEG = 0.05
