@@ -399,17 +399,20 @@ def precision_grasps(
     """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
     independent: every grasp starts from a fresh state, so the results are those of one process), judged in order.
 
-    Grasps go to the workers in waves of two per worker, trial by trial
-    (every finger's nominal grasp, then every finger's first trial, ...; in
-    a wave the designed finger's first), so a verification of many trials
-    holds only a few in flight and reports progress as they end. With ``config.stop_early`` the designed finger's
-    (``fcso``) trials stop at the failure after which it can no longer reach
-    ``pass_success_rate``: that trial is the last kept, of every finger (the
-    flat control is compared on the same start errors); later grasps are
-    not started, and those a wave already ran are dropped, so what is kept
-    does not depend on the number of workers or on the machine's speed.
-    A designed finger that fails its first trial takes one wave of two
-    workers.
+    Grasps go to the workers trial by trial (every finger's nominal grasp,
+    then every finger's first trial, ...; the designed finger's first, its
+    contacts make them the longest), each started as soon as a worker frees
+    up, at most two per worker ahead of the first grasp not yet judged: a
+    verification of many trials holds only a few in flight, reports
+    progress as they end, and no worker waits for a wave's longest grasp. With ``config.stop_early`` the
+    designed finger's (``fcso``) trials stop at the failure after which it
+    can no longer reach ``pass_success_rate``: that trial is the last kept,
+    of every finger (the flat control is compared on the same start errors);
+    later grasps are not started, and those already running are dropped, so
+    what is kept does not depend on the number of workers or on the
+    machine's speed. A designed finger that fails its first trial takes its
+    nominal grasps and first trials, and at most the grasps already in
+    flight beside them.
 
     Parameters
     ----------
@@ -432,30 +435,50 @@ def precision_grasps(
     stopped_after : int or None
         How many trials were kept when the trials stopped early; None when every trial ran.
     """
-    items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in scenes]
+    kinds = sorted(scenes, key=lambda kind: kind != "fcso")
+    items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
     jobs = min(resolve_jobs(config.jobs), len(items))
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
-    kept, allowed_failures = len(errors), len(errors) - needed_successes(len(errors), config)
+    allowed_failures = len(errors) - needed_successes(len(errors), config)
+    # the last trial kept, the results not judged yet by item, the next item to judge and to start
+    state = {"kept": len(errors), "judged": 0, "started": 0}
+    finished: dict[int, TrialRun] = {}
+
+    def judge(index: int, run: TrialRun) -> None:
+        kind, number, error = items[index]
+        if number > state["kept"]:
+            return
+        runs[kind].append(run)
+        advance()
+        if number == 0:
+            return
+        nominal = runs[kind][0]
+        reference = nominal.part_in_gripper if nominal.held else np.linalg.inv(case.tcp)
+        trials[kind].append(trial_result(run, error, reference, scenes[kind].part_com_mm, config))
+        failed = kind == "fcso" and not trials[kind][-1].success
+        if config.stop_early and failed and len(trials[kind]) - successes(trials[kind]) > allowed_failures:
+            state["kept"] = number
+
+    def next_grasps(count: int) -> list[tuple]:
+        tasks = []
+        while len(tasks) < count and state["started"] < len(items) and items[state["started"]][1] <= state["kept"]:
+            tasks.append((_simulated_grasp, items[state["started"]], state["started"]))
+            state["started"] += 1
+        return tasks
+
+    def on_done(index: int, run: TrialRun) -> list[tuple]:
+        finished[index] = run
+        while state["judged"] in finished:
+            judge(state["judged"], finished.pop(state["judged"]))
+            state["judged"] += 1
+        return next_grasps(ahead - (state["started"] - state["judged"]))
+
+    # started and not judged yet, at most: a grasp that would be dropped is seldom started
+    ahead = 2 * jobs
     with WorkerPool((scenes, case, config), jobs) as pool:
-        while items:
-            # the designed finger's grasps first: its contacts make them the longest, and a worker left with a short
-            # one at the end of a wave idles less (judged in the same order per finger)
-            wave, items = sorted(items[: 2 * jobs], key=lambda item: item[0] != "fcso"), items[2 * jobs :]
-            for (kind, number, error), run in zip(wave, pool.map(_simulated_grasp, wave)):
-                if number > kept:
-                    continue
-                runs[kind].append(run)
-                advance()
-                if number == 0:
-                    continue
-                nominal = runs[kind][0]
-                reference = nominal.part_in_gripper if nominal.held else np.linalg.inv(case.tcp)
-                trials[kind].append(trial_result(run, error, reference, scenes[kind].part_com_mm, config))
-                failed = kind == "fcso" and not trials[kind][-1].success
-                if config.stop_early and failed and len(trials[kind]) - successes(trials[kind]) > allowed_failures:
-                    kept = number
-            items = [item for item in items if item[1] <= kept]
+        pool.run(next_grasps(ahead), on_done)
+    kept = state["kept"]
     return runs, trials, kept if kept < len(errors) else None
 
 

@@ -20,6 +20,7 @@ from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.output.verification_page import section_html
 from fcso.parts import Part
 from fcso.sim import trials
+from fcso.sim import verify as verify_module
 from fcso.sim.collision import (
     MIN_PIECE_WIDTH_MM,
     ConvexPieces,
@@ -565,6 +566,27 @@ def test_precision_trials_stop_at_the_deciding_failure_whatever_the_workers(tmp_
         config = _config(tmp_path, jobs=2, pass_success_rate=rate, **settings)
         _, trials, stopped = precision_grasps(scenes, case, errors, config, lambda: None)
         assert stopped == expected and trials["fcso"] == full["fcso"][: expected or 5]
+
+
+def test_grasps_after_the_deciding_failure_are_not_started(tmp_path, monkeypatch):
+    # in one process every grasp ends before the next starts: exactly the kept grasps are simulated, the nominal
+    # grasps and trials 1 and 2 of both fingers, and nothing after the deciding failure (trial 2)
+    case = _cube_case()
+    config = _config(tmp_path, jobs=1, lift_mm=10.0)
+    scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
+    simulated = []
+    grasp = verify_module.run_grasp
+    monkeypatch.setattr(
+        verify_module,
+        "run_grasp",
+        lambda scene, case, pose, *args, **kw: simulated.append(pose) or grasp(scene, case, pose, *args, **kw),
+    )
+    errors = np.array([_CENTRED, _OFF_ALONG_PADS, [-0.4, 0.0, 0.0], [0.0, -1.5, 0.0]])
+    _, _, stopped = precision_grasps({"fcso": scene, "flat": scene}, case, errors, config, lambda: None)
+    assert stopped == 2
+    # both fingers' nominal grasps, then both fingers' trials 1 and 2
+    expected = [np.eye(4)] * 2 + [start_pose(case, errors[0])] * 2 + [start_pose(case, errors[1])] * 2
+    assert len(simulated) == len(expected) and all(np.allclose(a, b) for a, b in zip(simulated, expected))
 
 
 def test_a_verification_stopped_early_has_the_verdict_of_the_full_run(tmp_path):
