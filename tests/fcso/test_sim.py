@@ -242,7 +242,6 @@ def test_settles_and_holds_that_end_at_rest_end_where_the_whole_ones_end(ridged,
     early_holds = hold_forces(scene, case, early, config)
     early_hold_steps = len(steps) - early_steps
     monkeypatch.setattr(trials, "REST_STEPS", 10**9)
-    monkeypatch.setattr(trials, "CREEP_WINDOW_STEPS", 10**9)
     steps.clear()
     whole = run_grasp(scene, case, start, config)
     whole_steps = len(steps)
