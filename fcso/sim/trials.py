@@ -489,7 +489,7 @@ def creep_horizon_s(creep: Creep) -> float:
 
 
 def project_creep(scene: Scene, data: mujoco.MjData, seconds: float, speed_mm_s: float, creep: Creep) -> None:
-    """Move on ``seconds`` at once: the gripper at its speed (mm/s; 0 standing), part and fingers along their creep.
+    """Move on ``seconds`` at once: the gripper up at its speed, part and fingers along their creep.
 
     While part and fingers creep in the gripper at a steady rate
     (:func:`measure_creep`) nothing acts on them but gravity and the steady

@@ -404,9 +404,10 @@ def precision_grasps(
     contacts make them the longest), each started as soon as a worker frees
     up, at most two per worker ahead of the first grasp not yet judged: a
     verification of many trials holds only a few in flight, reports
-    progress as they end, and no worker waits for a wave's longest grasp. With ``config.stop_early`` the
-    designed finger's (``fcso``) trials stop at the failure after which it
-    can no longer reach ``pass_success_rate``: that trial is the last kept,
+    progress as they end, and no worker waits for a wave's longest grasp.
+    With ``config.stop_early`` the designed finger's (``fcso``) trials stop
+    at the failure after which it can no longer reach
+    ``pass_success_rate``: that trial is the last kept,
     of every finger (the flat control is compared on the same start errors);
     later grasps are not started, and those already running are dropped, so
     what is kept does not depend on the number of workers or on the
@@ -441,13 +442,14 @@ def precision_grasps(
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
     allowed_failures = len(errors) - needed_successes(len(errors), config)
-    # the last trial kept, the results not judged yet by item, the next item to judge and to start
-    state = {"kept": len(errors), "judged": 0, "started": 0}
+    # the last trial kept, the next item to judge and the next to start; the results not judged yet by item
+    kept, judged, started = len(errors), 0, 0
     finished: dict[int, TrialRun] = {}
 
     def judge(index: int, run: TrialRun) -> None:
+        nonlocal kept
         kind, number, error = items[index]
-        if number > state["kept"]:
+        if number > kept:
             return
         runs[kind].append(run)
         advance()
@@ -458,27 +460,28 @@ def precision_grasps(
         trials[kind].append(trial_result(run, error, reference, scenes[kind].part_com_mm, config))
         failed = kind == "fcso" and not trials[kind][-1].success
         if config.stop_early and failed and len(trials[kind]) - successes(trials[kind]) > allowed_failures:
-            state["kept"] = number
+            kept = number
 
     def next_grasps(count: int) -> list[tuple]:
+        nonlocal started
         tasks = []
-        while len(tasks) < count and state["started"] < len(items) and items[state["started"]][1] <= state["kept"]:
-            tasks.append((_simulated_grasp, items[state["started"]], state["started"]))
-            state["started"] += 1
+        while len(tasks) < count and started < len(items) and items[started][1] <= kept:
+            tasks.append((_simulated_grasp, items[started], started))
+            started += 1
         return tasks
 
     def on_done(index: int, run: TrialRun) -> list[tuple]:
+        nonlocal judged
         finished[index] = run
-        while state["judged"] in finished:
-            judge(state["judged"], finished.pop(state["judged"]))
-            state["judged"] += 1
-        return next_grasps(ahead - (state["started"] - state["judged"]))
+        while judged in finished:
+            judge(judged, finished.pop(judged))
+            judged += 1
+        return next_grasps(ahead - (started - judged))
 
     # started and not judged yet, at most: a grasp that would be dropped is seldom started
     ahead = 2 * jobs
     with WorkerPool((scenes, case, config), jobs) as pool:
         pool.run(next_grasps(ahead), on_done)
-    kept = state["kept"]
     return runs, trials, kept if kept < len(errors) else None
 
 
