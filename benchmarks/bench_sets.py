@@ -4,6 +4,7 @@ Run from the repository root::
 
     python -m benchmarks.bench_sets [--runs N] [--only 12|30]
     python -m benchmarks.bench_sets --curve 30 60 200 [--runs N]
+    python -m benchmarks.bench_sets --baseline COMMIT [--runs N]
 
 ``--curve`` designs jobs of that many distinct parts with ``--finger-sets 4``
 (targets of issue 24: 60 parts <= 90 s, 200 parts <= 10 min and peak memory
@@ -26,17 +27,29 @@ D = 4). Prints, medians over N runs (the machine is shared and noisy):
   and the worst and median ``E / E*`` (``E*`` from the sets run);
 - the checks of the issue: the sets' worst retained is at least the single
   finger's, and reaches ``min_retained`` or the report says which pair blocks it.
+
+``--baseline COMMIT`` times the 12-part job (``max = 4``) on this code and
+on that commit's code (git archive), whole fresh processes taking turns, wall
+and CPU (process and workers): this code with its defaults, this code with
+the method the code of b7cf7d7 had (:data:`FIRST_METHOD`: the paper's
+measure, the exact pocket, the paper's sampler; METHOD revision 3 made
+§7b, §9b and §3b the defaults since), and the commit with its defaults. The
+second against the third is the cost of judging sets by their exact designs
+(issue 23's target: within 1.5x of the code the issue was filed on, b7cf7d7).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import multiprocessing
 import os
 import resource
 import statistics
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -49,6 +62,8 @@ import fcso
 from fcso.geometry import to_trimesh
 from fcso.report.models import chosen_candidate
 from fcso.sets import design_sets
+
+from .bench_design import baseline_tree
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / "tests" / "data"
@@ -215,6 +230,71 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
         print(f"  min_retained {report.min_retained:g} NOT reached; the report says: {report.search.explanation}")
 
 
+#: The settings that give the method of b7cf7d7, before METHOD revision 3 changed its defaults: ranked by the
+#: paper's Q (§7), the exact pocket (§9b's ``custom`` profile) and the paper's sampler (no §3b positions or face yaws).
+FIRST_METHOD = {
+    "quality": {"measure": "paper"},
+    "print": {"profile": "custom"},
+    "sampler": {"feature_positions": False, "face_yaws": False},
+}
+
+#: One design of a job in a fresh process, on whichever fcso its working folder holds: argv = the parts' folder and
+#: the configuration changes as JSON; prints the wall and CPU seconds, the number of sets and the worst retained.
+_JOB_CHILD = """
+import glob, json, resource, sys, time
+import fcso
+parts = [p for f in sorted(glob.glob(sys.argv[1] + '/*.stl')) for p in fcso.load_parts(f)]
+config = fcso.DesignConfig().updated(json.loads(sys.argv[2]))
+started = time.perf_counter()
+result = fcso.design_sets(parts, config)
+wall = time.perf_counter() - started
+cpu = sum(getattr(resource.getrusage(w), f) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+          for f in ('ru_utime', 'ru_stime'))
+print(json.dumps({'wall_s': wall, 'cpu_s': cpu, 'sets': len(result.designs), 'worst': result.report.worst_retained}))
+"""
+
+
+def run_baseline(commit: str, runs: int) -> None:
+    """The 12-part job on this code and on ``commit``'s, fresh processes in turns (see the module's docstring)."""
+    base = {"poses": {"count": 1, "select": "most_probable"}, "finger_sets": {"max": 4}}
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch) / "job"
+        folder.mkdir()
+        for part in job(12):
+            part.mesh.export(folder / f"{part.name}.stl")
+        old_tree = baseline_tree(commit, Path(scratch) / "old")
+        variants = [
+            ("this code, its defaults", REPO, base),
+            ("this code, the method of b7cf7d7 (FIRST_METHOD)", REPO, {**base, **FIRST_METHOD}),
+            (f"{commit}, its defaults", old_tree, base),
+        ]
+        measured: list[list[dict]] = [[] for _ in variants]
+        for _ in range(runs):
+            for figures, (_, tree, changes) in zip(measured, variants):
+                done = subprocess.run(
+                    [sys.executable, "-c", _JOB_CHILD, str(folder), json.dumps(changes)],
+                    cwd=tree,
+                    env={**os.environ, "PYTHONPATH": str(tree)},
+                    check=True,
+                    capture_output=True,
+                    text=True,
+                )
+                figures.append(json.loads(done.stdout.splitlines()[-1]))
+    print(f"12-part job, max = 4 sets, {runs} runs of each in turns (fresh processes), medians:")
+    walls = [statistics.median(m["wall_s"] for m in figures) for figures in measured]
+    for (name, _, _), figures, wall in zip(variants, measured, walls):
+        each = ", ".join(f"{m['wall_s']:.1f}" for m in figures)
+        print(
+            f"  {name}: {wall:.1f} s wall (runs {each}), "
+            f"{statistics.median(m['cpu_s'] for m in figures):.1f} s CPU; {figures[-1]['sets']} sets, worst retained "
+            f"{figures[-1]['worst']:.3f}"
+        )
+    print(
+        f"  the same method on both codes: {walls[1] / walls[2]:.2f}x {commit}'s wall (issue 23's target <= 1.5x: "
+        f"{'met' if walls[1] <= 1.5 * walls[2] else 'NOT met'}); this code's defaults: {walls[0] / walls[2]:.2f}x"
+    )
+
+
 def peak_memory_mb() -> tuple[float, float]:
     """Peak resident memory of this process and of its largest finished worker, MB (Linux reports KiB)."""
     return (
@@ -368,7 +448,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--runs", type=int, default=3, help="runs per figure (medians)")
     parser.add_argument("--only", type=int, choices=(12, 30), help="one job only")
     parser.add_argument("--curve", type=int, nargs="+", help="job sizes (distinct parts) of the scaling curve")
+    parser.add_argument("--baseline", metavar="COMMIT", help="the 12-part job on this code and on COMMIT's, in turns")
     args = parser.parse_args(argv)
+    if args.baseline:
+        run_baseline(args.baseline, args.runs)
+        return
     if args.curve:
         run_curve(args.curve, args.runs)
         return
