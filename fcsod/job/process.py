@@ -11,9 +11,8 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 from multiprocessing.connection import Connection
-
-from fcso.parallel import die_with_parent
 
 from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, VerificationTask, Withdrawn
 
@@ -29,7 +28,16 @@ def _withdrawn(signum, frame) -> None:
     raise Withdrawn()
 
 
-def worker_main(connection: Connection) -> None:
+def _die_with_daemon(life_line: Connection) -> None:
+    """Kill this process once the daemon is gone: the read end of a pipe only the daemon writes to ends then."""
+    try:
+        life_line.recv_bytes()
+    except (EOFError, OSError):
+        pass
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def worker_main(connection: Connection, life_line: Connection) -> None:
     """Entry point of a worker process: announce readiness, take one job (or a done job's verification), run it,
     report, exit.
 
@@ -37,9 +45,13 @@ def worker_main(connection: Connection) -> None:
     ----------
     connection : Connection
         Duplex pipe to the daemon.
+    life_line : Connection
+        Read end of a pipe whose write end only the daemon holds (it never writes): it ends when the daemon dies.
     """
-    # the parent is the fork server, which exits when the daemon does (its pipe from the daemon closes)
-    die_with_parent(os.getppid())
+    # the parent is the fork server, which outlives the daemon as long as a worker it forked does (each holds its
+    # pipe), so PR_SET_PDEATHSIG cannot tie the worker to the daemon: a kill -9 of the daemon ends the life line. The
+    # design's own workers die with this one (fcso.parallel.die_with_parent).
+    threading.Thread(target=_die_with_daemon, args=(life_line,), name="die-with-daemon", daemon=True).start()
     # Ctrl-C in a terminal reaches the whole process group: the daemon decides what happens to jobs
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -130,6 +130,8 @@ class Daemon:
         # interpreter's imports (about 3 s on a 2-core host, longer than a job that reuses a finger)
         self._context = multiprocessing.get_context("forkserver")
         self._context.set_forkserver_preload(list(WORKER_PRELOAD))
+        # only this process holds the write end (never written): the workers' read ends end when it dies
+        self._life_line, self._life_line_writer = self._context.Pipe(duplex=False)
         self._lock_file = None
         self.metrics = DaemonMetrics(self.journal_path)
         self.foxglove = None
@@ -365,7 +367,7 @@ class Daemon:
         """
         while not self.stopping and self.workers_broken is None and len(self.slots) < self.config.jobs.concurrency + 1:
             ours, theirs = self._context.Pipe(duplex=True)
-            process = self._context.Process(target=worker_main, args=(theirs,), name="fcsod-worker")
+            process = self._context.Process(target=worker_main, args=(theirs, self._life_line), name="fcsod-worker")
             try:
                 process.start()
             except (OSError, EOFError) as exc:
