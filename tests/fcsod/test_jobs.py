@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
 import shutil
+import signal
 import socket
 import time
 import zipfile
@@ -15,6 +17,7 @@ from fcso.errors import ConfigError, MeshError
 from fcsod.bus.messages import LogRecord, StateChangeRecord
 from fcsod.config import JobManifest, LimitsConfig, PartEntry
 from fcsod.job.inputs import check_parts, hash_inputs, job_id, job_inputs
+from fcsod.job.process import worker_main
 from fcsod.record.audit import audit
 from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
 from fcsod.service.journal import Journal, StoredMessage, stored_messages
@@ -213,3 +216,23 @@ def test_sd_notify_sends_datagrams(tmp_path, monkeypatch):
     monkeypatch.setenv("WATCHDOG_PID", "1")
     assert watchdog_interval() is None
     listener.close()
+
+
+def test_a_worker_ends_itself_when_the_daemons_life_line_ends_though_its_task_pipe_stays_open():
+    # as the daemon starts one: forked by the fork server, so the daemon is not its parent
+    context = multiprocessing.get_context("forkserver")
+    life_line, daemon_end = context.Pipe(duplex=False)
+    ours, theirs = context.Pipe(duplex=True)
+    worker = context.Process(target=worker_main, args=(theirs, life_line), name="fcsod-worker")
+    worker.start()
+    theirs.close()
+    try:
+        assert ours.poll(HANG_GUARD_S) and ours.recv()[0] == "ready"
+        # the worker now waits for its task on a pipe that stays open: only the life line can end it
+        daemon_end.close()
+        worker.join(HANG_GUARD_S)
+        assert worker.exitcode == -signal.SIGKILL
+    finally:
+        if worker.is_alive():
+            worker.kill()
+        ours.close()
