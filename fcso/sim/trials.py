@@ -458,12 +458,13 @@ def creep_watch(scene: Scene) -> Callable[[mujoco.MjData], Creep | None]:
     steps once it holds them all, else None.
     """
     states: deque[np.ndarray] = deque(maxlen=2 * CREEP_WINDOW_STEPS + 1)
-    step_s, watched = scene.model.opt.timestep, [0]
+    step_s, watched = scene.model.opt.timestep, 0
 
     def watch(data: mujoco.MjData) -> Creep | None:
+        nonlocal watched
         states.append(data.qpos.copy())
-        watched[0] += 1
-        if len(states) < states.maxlen or watched[0] % CREEP_TEST_STEPS:
+        watched += 1
+        if len(states) < states.maxlen or watched % CREEP_TEST_STEPS:
             return None
         return measure_creep(*_in_gripper(scene, np.array(states)), step_s)
 
