@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -45,6 +46,15 @@ def small_config(**sections) -> DesignConfig:
     for section, values in sections.items():
         base.setdefault(section, {}).update(values)
     return DesignConfig().updated(base)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def own_cache(tmp_path_factory) -> Path:
+    """The run's own cache of collision pieces and simulation outcomes (``FCSO_CACHE_DIR``, inherited by the daemons
+    the tests start), not the user's ``~/.cache/fcso``: a test never reads what another run left there."""
+    cache = tmp_path_factory.mktemp("fcso-cache")
+    os.environ["FCSO_CACHE_DIR"] = str(cache)
+    return cache
 
 
 @pytest.fixture(scope="session")

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from ..geometry import transform_points
 from ..report.models import DesignReport
-from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport
+from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport, reused_note
 from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
 from .decimate import decimate
@@ -164,7 +164,8 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
         f"with {settings.force_limit_n:g} N per finger, friction {settings.friction:g}, lift {settings.lift_mm:g} mm. "
         f"A trial succeeds within {settings.success_mm:g} mm and {settings.success_deg:g}° of the unperturbed grasp's "
         f"seat. "
-        f"The design <b>{verdict}</b> (a scenario passes at {settings.pass_success_rate:.0%} success).</p>",
+        f"The design <b>{verdict}</b> (a scenario passes at {settings.pass_success_rate:.0%} success). "
+        f"{html.escape(reused_note(verification))}</p>",
         '<table><tr><th class="text">scenario</th><th>designed: success</th><th>median / worst mm</th><th>median / '
         "worst °</th>"
         "<th>flat: success</th><th>median / worst mm</th><th>median / worst °</th>"

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .config import VerifyConfig, load_verify_config, with_print_density
-from .report import VerificationReport
+from .report import VerificationReport, reused_note
 
 
 def add_verify_command(commands) -> None:
@@ -21,6 +21,11 @@ def add_settings_options(parser) -> None:
     """Options shared by ``verify`` and ``design --verify``."""
     parser.add_argument("--trials", type=int, metavar="N", help="precision trials per scenario (verify.trials)")
     parser.add_argument("--verify-seed", type=int, metavar="N", help="seed of the trial perturbations (verify.seed)")
+    parser.add_argument(
+        "--simulate-again",
+        action="store_true",
+        help="simulate every grasp and push, even those simulated before (verify.reuse_simulations = false)",
+    )
 
 
 def add_design_options(parser) -> None:
@@ -43,6 +48,8 @@ def settings(args) -> VerifyConfig:
         overrides["trials"] = args.trials
     if getattr(args, "verify_seed", None) is not None:
         overrides["seed"] = args.verify_seed
+    if getattr(args, "simulate_again", False):
+        overrides["reuse_simulations"] = False
     return config.model_copy(update=overrides) if overrides else config
 
 
@@ -78,6 +85,8 @@ def summary(verification: VerificationReport) -> str:
                 f"holding N: {holding or 'not tested'}"
             )
     lines.append(f"verification {'passed' if verification.passed else 'did not pass'}")
+    if reused := reused_note(verification):
+        lines.append(reused)
     lines.extend(f"warning: {w}" for w in verification.warnings)
     return "\n".join(lines)
 

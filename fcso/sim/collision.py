@@ -22,7 +22,7 @@ MuJoCo collides a mesh by its convex hull, so
 - pieces are cached by content hash on disk (shared by candidates, jobs,
   restarts and concurrent workers; written under a name of its own and
   renamed, least recently used entries evicted beyond
-  :data:`CACHE_MAX_BYTES`); the fidelity is the volume of the union of
+  :data:`fcso.sim.diskcache.CACHE_MAX_BYTES`); the fidelity is the volume of the union of
   the pieces against the mesh's own, computed once and cached with them;
 - the finger body behind the pad is the convex hull of the finger's
   material behind the pad's back face.
@@ -47,8 +47,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,12 +56,10 @@ import numpy as np
 import trimesh
 
 from ..geometry import box, convex_patches, ray_hits, to_manifold
+from .diskcache import CACHE_MAX_BYTES, evict, read_entry, write_entry
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "shell-6"
-#: Largest total size of the decomposition cache, bytes: the least recently used entries go first (an entry is a
-#: few kB to a few hundred kB).
-CACHE_MAX_BYTES = 500_000_000
 #: Largest deviation of the simplified surfaces the prisms are built on, mm (a pad carved with a print clearance has
 #: ~35k triangles of offset surface).
 SIMPLIFY_TOLERANCE_MM = 0.005
@@ -383,65 +379,18 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
     pieces = decompose()
     excess, missing = union_volume_errors(mesh, pieces)
     if path is not None:
-        _write_cached(path, _write_pieces(pieces, (excess, missing)))
+        if write_entry(path, _write_pieces(pieces, (excess, missing))):
+            evict(path.parent, CACHE_MAX_BYTES)
     return ConvexPieces(pieces=pieces, excess_fraction=excess, missing_fraction=missing, cached=False)
 
 
 def _read_cached(path: Path) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[float, float]] | None:
-    """A cache entry's pieces and volume errors, or None when it is absent or unreadable (then it is made again).
-
-    Reading marks the entry as used (its modification time), so the
-    eviction of :func:`_write_cached` removes the least recently used.
-    """
+    """A cache entry's pieces and volume errors, or None when it is absent or unreadable (then it is made again)."""
+    data = read_entry(path)
     try:
-        stored = _read_pieces(path.read_bytes())
-        os.utime(path)
-        return stored
+        return None if data is None else _read_pieces(data)
     except (OSError, ValueError, KeyError, zipfile.BadZipFile):
-        # absent, or removed by another worker's eviction between the two calls
         return None
-
-
-def _write_cached(path: Path, data: bytes) -> None:
-    """Write a cache entry under a name of its own, rename it into place, then keep the cache within its size.
-
-    Several workers may write the same entry at once: each renames a whole
-    file of identical content, so a reader never sees a part of one. A
-    cache that cannot be written (full disk, read-only) costs time only.
-    """
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp", delete=False) as f:
-            f.write(data)
-        os.replace(f.name, path)
-    except OSError:
-        return
-    evict(path.parent, CACHE_MAX_BYTES)
-
-
-def evict(cache_dir: Path, max_bytes: int) -> None:
-    """Remove the least recently used entries until the cache holds at most ``max_bytes``.
-
-    Parameters
-    ----------
-    cache_dir : Path
-        The cache folder (its ``*.npz`` entries).
-    max_bytes : int
-        Largest total size of the entries, bytes.
-    """
-    entries = []
-    for entry in Path(cache_dir).glob("*.npz"):
-        try:
-            stat = entry.stat()
-        except OSError:
-            continue
-        entries.append((stat.st_mtime, stat.st_size, entry))
-    total = sum(size for _, size, _ in entries)
-    for _, size, entry in sorted(entries, key=lambda e: e[0]):
-        if total <= max_bytes:
-            break
-        entry.unlink(missing_ok=True)
-        total -= size
 
 
 def _write_pieces(pieces, volume_errors: tuple[float, float]) -> bytes:

@@ -91,7 +91,16 @@ class VerifyConfig(BaseModel):
         "design's [search] jobs); the results do not depend on it",
     )
     cache_dir: Path | None = Field(
-        None, description="Where collision pieces are cached; default $FCSO_CACHE_DIR or ~/.cache/fcso"
+        None,
+        description="Where collision pieces and the outcomes of simulations are cached; default $FCSO_CACHE_DIR or "
+        "~/.cache/fcso",
+    )
+    reuse_simulations: bool = Field(
+        True,
+        description="Read a grasp's or holding push's outcome from the cache when the same simulation ran before "
+        "(the same collision geometry, start pose, settings, trial code, MuJoCo and NumPy: MuJoCo repeats it to the "
+        "last bit), e.g. a verification restarted after a kill, or the same parts verified again; false simulates "
+        "every one again (and stores it)",
     )
 
     def cache_path(self) -> Path:

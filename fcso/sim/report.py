@@ -107,6 +107,11 @@ class ScenarioVerification(_Model):
     frames: list[PoseSnapshot] = Field(
         description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)"
     )
+    reused_simulations: int = Field(
+        0,
+        description="Grasps and holding pushes of this scenario whose outcome was read from the cache: simulated "
+        "before with the same geometry, start, settings and code (reuse_simulations)",
+    )
 
 
 class RankedCandidate(_Model):
@@ -145,3 +150,14 @@ class VerificationReport(_Model):
         None, description="--verify-top: the verified candidates in the measure's order and which was chosen"
     )
     choice: str | None = Field(None, description="--verify-top: which candidate was delivered and why")
+
+
+def reused_note(verification: VerificationReport) -> str:
+    """How many simulations were read from the cache, or "" when none were."""
+    reused = sum(s.reused_simulations for s in verification.scenarios)
+    if not reused:
+        return ""
+    return (
+        f"{reused} grasps and holding pushes were read from the cache: simulated before with the same geometry, "
+        "start, settings and code (--simulate-again runs them again)"
+    )

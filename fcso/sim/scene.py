@@ -19,6 +19,7 @@ lets the part creep down the pads.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import mujoco
@@ -120,6 +121,8 @@ class Scene:
     #: Address of the part's free joint in qpos and in qvel.
     part_qpos: int = 0
     part_dof: int = 0
+    #: Content hash of the model's source (hex sha256): the same hash, the same physics (:mod:`fcso.sim.outcomes`).
+    model_sha256: str = ""
 
 
 def _vec(values) -> str:
@@ -253,6 +256,7 @@ def build_scene(
         lift_axis=-tcp[:3, 2],
         part_qpos=int(model.jnt_qposadr[model.joint("part").id]),
         part_dof=int(model.jnt_dofadr[model.joint("part").id]),
+        model_sha256=hashlib.sha256(xml.encode()).hexdigest(),
     )
 
 

@@ -19,6 +19,8 @@ from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
+from .diskcache import evict
+from .outcomes import TrialRun, grasp_key, hold_key, reuse_or_simulate_grasp, reuse_or_simulate_hold, scene_key
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, Scene, build_scene
 from .trials import (
@@ -167,6 +169,8 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
             )
         scenarios.append(scenario)
     report_progress("verification", total, total)
+    # once per verification, not per entry: a farm's cache holds many thousands of outcomes
+    evict(config.cache_path())
     return VerificationReport(
         fcso_version=__version__,
         mujoco_version=mujoco.__version__,
@@ -308,11 +312,12 @@ def verify_case(
     # a designed finger that failed its precision trials cannot pass: its holding test would change nothing
     designed = trials["fcso"]
     precision_failed = (successes(designed) / len(designed) if designed else 0.0) < config.pass_success_rate - 1e-9
-    holding = (
-        {kind: {} for kind in scenes}
+    holding, reused = (
+        ({kind: {} for kind in scenes}, 0)
         if config.stop_early and precision_failed
         else holding_tests(scenes, case, {kind: grasps[0] for kind, grasps in runs.items()}, config)
     )
+    reused += sum(run.reused for grasps in runs.values() for run in grasps)
     results = {}
     for kind, (nominal, *perturbed) in runs.items():
         offset = pose_error(nominal.part_in_gripper, np.linalg.inv(case.tcp), scenes[kind].part_com_mm)
@@ -345,6 +350,7 @@ def verify_case(
         stopped_after_trials=stopped,
         passed=not precision_failed and bool(holds),
         frames=[_snapshot(f) for f in frames],
+        reused_simulations=reused,
     )
 
 
@@ -480,55 +486,73 @@ def precision_grasps(
 
     # started and not judged yet, at most: a grasp that would be dropped is seldom started
     ahead = 2 * jobs
-    with WorkerPool((scenes, case, config), jobs) as pool:
+    keys = {kind: scene_key(scene, case, config) for kind, scene in scenes.items()}
+    with WorkerPool((scenes, case, config, keys), jobs) as pool:
         pool.run(next_grasps(ahead), on_done)
     return runs, trials, kept if kept < len(errors) else None
 
 
 def holding_tests(
     scenes: dict[str, Scene], case: GraspCase, nominals: dict[str, TrialRun], config: VerifyConfig
-) -> dict[str, dict[str, float | None]]:
+) -> tuple[dict[str, dict[str, float | None]], int]:
     """Every finger's holding test (:func:`fcso.sim.trials.hold_forces`) from its nominal grasp, its directions on
     ``config.jobs`` forked workers.
 
     Returns
     -------
-    dict
+    forces : dict
         Finger kind -> push direction -> slip force, N (None: held; 0.0 in every direction when not held).
+    reused : int
+        Pushes whose outcome was read from the cache (:mod:`fcso.sim.outcomes`).
     """
     items = [(kind, name) for kind, run in nominals.items() if run.held for name in HOLD_DIRECTIONS]
     forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in nominals}
-    with WorkerPool((scenes, case, nominals, config), min(resolve_jobs(config.jobs), max(1, len(items)))) as pool:
-        for (kind, name), force in zip(items, pool.map(_hold_force, items)):
+    keys = {kind: scene_key(scenes[kind], case, config) for kind in nominals}
+    reused = 0
+    jobs = min(resolve_jobs(config.jobs), max(1, len(items)))
+    with WorkerPool((scenes, case, nominals, config, keys), jobs) as pool:
+        for (kind, name), (force, from_cache) in zip(items, pool.map(_hold_force, items)):
             forces[kind][name] = force
-    return forces
+            reused += from_cache
+    return forces, reused
 
 
-@dataclass
-class TrialRun:
-    """What a grasp returns from its worker: held, final pose in the gripper (4x4, mm), its frames when recorded, and
-    a nominal grasp's state after the lift."""
-
-    held: bool
-    part_in_gripper: np.ndarray
-    frames: list[Frame] | None
-    lifted: mujoco.MjData | None = None
+def _grasp_plan(
+    case: GraspCase, scene_key_hex: str, kind: str, number: int, error: np.ndarray | None
+) -> tuple[np.ndarray, bool, str]:
+    """Grasp ``number`` (0: the nominal one) of a finger ``kind``: the part's start pose (4x4, mm), whether its frames
+    are kept (the designed finger's nominal grasp and every finger's first trial: the report's pictures) and its
+    cache key (:func:`fcso.sim.outcomes.grasp_key`)."""
+    pose = np.eye(4) if number == 0 else start_pose(case, error)
+    record = number == 1 or (number == 0 and kind == "fcso")
+    return pose, record, grasp_key(scene_key_hex, pose, record)
 
 
 def _simulated_grasp(context, item) -> TrialRun:
-    scenes, case, config = context
+    scenes, case, config, keys = context
     kind, number, error = item
-    if number == 0:
-        run = run_grasp(scenes[kind], case, np.eye(4), config, record=kind == "fcso")
-        return TrialRun(run.held, run.part_in_gripper, run.frames, run.data)
-    run = run_grasp(scenes[kind], case, start_pose(case, error), config, record=number == 1)
-    return TrialRun(run.held, run.part_in_gripper, run.frames if number == 1 else None)
+    scene = scenes[kind]
+    pose, record, key = _grasp_plan(case, keys[kind], kind, number, error)
+
+    def simulate() -> TrialRun:
+        run = run_grasp(scene, case, pose, config, record=record)
+        return TrialRun(
+            run.held, run.part_in_gripper, run.frames if record else None, run.data if number == 0 else None
+        )
+
+    return reuse_or_simulate_grasp(config.cache_path(), key, config.reuse_simulations, scene.model, simulate)
 
 
-def _hold_force(context, item) -> float | None:
-    scenes, case, nominals, config = context
+def _hold_force(context, item) -> tuple[float | None, bool]:
+    scenes, case, nominals, config, keys = context
     kind, name = item
-    return hold_force(scenes[kind], case, nominals[kind].lifted, name, config)
+    _, _, nominal_key = _grasp_plan(case, keys[kind], kind, 0, None)
+    return reuse_or_simulate_hold(
+        config.cache_path(),
+        hold_key(nominal_key, name),
+        config.reuse_simulations,
+        lambda: hold_force(scenes[kind], case, nominals[kind].lifted, name, config),
+    )
 
 
 def _finger_result(

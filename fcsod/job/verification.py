@@ -60,7 +60,7 @@ def choose_by_verification(run) -> None:
     chosen, verification, design, ranking = verify_top(
         run.result,
         settings.top_k,
-        _verify_config(settings, run.result.report.settings),
+        _verify_config(settings, run.result.report.settings, run.task.config.state.dir),
         _progress(run.log),
     )
     run.sets.designs[0] = chosen
@@ -174,7 +174,7 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             name = "verification" if number is None else f"verification of finger set {number}"
             log("info", f"{name}: started")
             design, design_settings = build()
-            verification = verify(design, _verify_config(settings, design_settings), _progress(log))
+            verification = verify(design, _verify_config(settings, design_settings, config.state.dir), _progress(log))
             results.append((out, number, name, design, verification))
         messages = []
         for out, number, name, design, verification in results:
@@ -259,10 +259,21 @@ def _progress(log: Callable) -> Callable[[str, int, int], None]:
     return progress
 
 
-def _verify_config(settings: VerifySettings, design_settings) -> VerifyConfig:
-    """fcso's ``[verify]`` of a job: its trials and time budget, the part density of the design's print profile."""
+#: The daemon's cache of collision pieces and simulation outcomes, in its state folder beside the journal: a
+#: verification restarted after a kill or a restart reads what was simulated before it (:mod:`fcso.sim.outcomes`).
+VERIFICATION_CACHE_NAME = "verification-cache"
+
+
+def _verify_config(settings: VerifySettings, design_settings, state_dir: Path) -> VerifyConfig:
+    """fcso's ``[verify]`` of a job: its trials and time budget, the part density of the design's print profile, the
+    daemon's cache (``state_dir`` / :data:`VERIFICATION_CACHE_NAME`)."""
     return with_print_density(
-        VerifyConfig(trials=settings.trials, choice_budget_s=settings.time_limit_seconds), design_settings
+        VerifyConfig(
+            trials=settings.trials,
+            choice_budget_s=settings.time_limit_seconds,
+            cache_dir=state_dir / VERIFICATION_CACHE_NAME,
+        ),
+        design_settings,
     )
 
 

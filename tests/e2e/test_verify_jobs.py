@@ -1,5 +1,6 @@
 """fcsod with [verify]: the design is done and published first, its verification follows on zenoh, in the journal and in
-MCAP; a kill -9 during it runs it again after the restart, once; a time limit publishes it as failed.
+MCAP; a kill -9 during it runs it again after the restart, once, without simulating again the grasps it had
+simulated; a time limit publishes it as failed.
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ def test_kill_during_verification_then_restart_verifies_once_published_recorded_
         job_id = done["job_id"]
         started = first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started")
         first.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "verification: started")
+        # killed once both fingers' nominal grasps and first two trials are judged: each grasp's outcome is in the
+        # cache before it is judged, and the restarted daemon's two trials are these (the same seeded start errors)
+        first.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "verification" and v.get("done", 0) >= 6)
     finally:
         first.stop(signal.SIGKILL)
         subscriber.stop()
@@ -105,6 +109,10 @@ def test_kill_during_verification_then_restart_verifies_once_published_recorded_
 
     verification = json.loads((out / "verification.json").read_text())
     assert verification["scenarios"][0]["fcso"]["success_rate"] == scenario["success_rate"]
+    # the verification resumed: the grasps the killed daemon had simulated were not simulated again; they are kept in
+    # the daemon's state folder, beside its journal
+    assert verification["scenarios"][0]["reused_simulations"] >= 6
+    assert len(list((tmp_path / "state" / "verification-cache").glob("*.npz"))) >= 6
     assert len(verification["scenarios"][0]["fcso"]["trials"]) == 2
     # its section is a page of its own: report.html stays as job.mcap vouches for it
     assert (out / "verification.html").read_text().count("<!-- fcso verify -->") == 1

@@ -48,6 +48,17 @@ def test_verify_top_then_verify_then_report(tmp_path, monkeypatch):
     scenario = again.scenarios[0]
     assert len(scenario.fcso.trials) == 2 and scenario.fcso.success_rate == 1.0
     assert scenario.fidelity.part_pieces >= 1 and scenario.fidelity.decomposition_cached
+    # the design read back from its files is the one --verify-top simulated: every grasp and push is read from the
+    # cache and reported as such; on request every one is simulated again, with the same results
+    simulations = 2 * (1 + len(scenario.fcso.trials)) + len(scenario.fcso.holding_n) + len(scenario.flat.holding_n)
+    assert simulations == 18 and scenario.reused_simulations == simulations
+    assert f"{simulations} grasps and holding pushes were read from the cache" in run.stdout
+    run = fcso("verify", out, "--config", config, "--simulate-again", env=env)
+    assert run.returncode == 0, run.stderr
+    assert "read from the cache" not in run.stdout
+    repeated = VerificationReport.model_validate_json((out / "verification.json").read_text()).scenarios[0]
+    assert repeated.reused_simulations == 0
+    assert repeated.model_dump(exclude={"reused_simulations"}) == scenario.model_dump(exclude={"reused_simulations"})
     # rebuilding the page keeps the verification section, once
     assert fcso("report", out, "--quiet", env=env).returncode == 0
     assert (out / "report.html").read_text().count("<!-- fcso verify -->") == 1

@@ -24,12 +24,12 @@ from fcso.sim import verify as verify_module
 from fcso.sim.collision import (
     MIN_PIECE_WIDTH_MM,
     ConvexPieces,
-    evict,
     hull_width_mm,
     pad_prism_pieces,
     part_shell_pieces,
 )
 from fcso.sim.config import VerifyConfig
+from fcso.sim.diskcache import evict
 from fcso.sim.report import VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
@@ -54,7 +54,9 @@ CLOSING_ALONG_X = np.column_stack([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 
 
 
 def _config(tmp_path, **values) -> VerifyConfig:
-    return VerifyConfig(cache_dir=tmp_path / "cache", **values)
+    """Settings whose every grasp and push is simulated (the tests compare runs with each other), unless ``values``
+    say ``reuse_simulations=True``."""
+    return VerifyConfig(cache_dir=tmp_path / "cache", **{"reuse_simulations": False, **values})
 
 
 def _hull(mesh: trimesh.Trimesh) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -521,7 +523,8 @@ def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tm
         grasps, _, stopped = precision_grasps(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
         assert stopped is None
         runs[jobs] = grasps["flat"]
-        holding[jobs] = holding_tests(scenes, case, {"flat": runs[jobs][0]}, config)
+        holding[jobs], reused = holding_tests(scenes, case, {"flat": runs[jobs][0]}, config)
+        assert reused == 0
     assert advanced == [1] * 4 + [2] * 4
     for one, forked in zip(runs[1], runs[2]):
         assert one.held == forked.held and np.array_equal(one.part_in_gripper, forked.part_in_gripper)
@@ -620,6 +623,53 @@ def test_a_verification_stopped_early_has_the_verdict_of_the_full_run(tmp_path):
     page = section_html(report, {"trial 0": b"", "errors 0": b""})
     assert f"<td>{first_failure - 1} of {first_failure} (stopped; 4 planned)</td>" in page
     assert "Holding test not run" in page and '<td class="text">other pose 1</td>' in page
+
+
+def _outcome_entries(cache: Path, kind: str) -> list[Path]:
+    """The cache's entries of grasps (``kind="held"``) or holding pushes (``"force_n"``)."""
+    entries = []
+    for entry in sorted(cache.glob("*.npz")):
+        with np.load(entry) as stored:
+            if kind in stored.files:
+                entries.append(entry)
+    return entries
+
+
+def test_a_verification_run_again_reads_its_simulations_from_the_cache_and_reports_the_same(tmp_path):
+    case = _cube_case()
+    # friction 0.1: pushed along the pads the cube slips inside the test's 30 N, so the pushes have forces to compare
+    settings = {"lift_mm": 10.0, "trials": 3, "hold_ramp_n_s": 300.0, "friction": 0.1, "stop_early": False}
+    part = ConvexPieces(_hull(case.part), 0.0, 0.0, False)
+    pad = pad_prism_pieces(flat_pad(case.pad_size_mm, case.penetration_mm), case.pad_size_mm[0], tmp_path / "pad")
+    nothing = np.zeros((0, 3))
+
+    def run(**values):
+        return verify_case(case, part, pad, nothing, _config(tmp_path, **{**settings, **values}), 0)
+
+    first, again = run(reuse_simulations=True), run(reuse_simulations=True)
+    simulated = run()
+    assert first.reused_simulations == 0 and simulated.reused_simulations == 0
+    # 2 fingers x (the nominal grasp + 3 trials), and 6 pushes of each finger that held
+    pushes = 6 * (first.fcso.nominal_held + first.flat.nominal_held)
+    assert pushes == 12 and again.reused_simulations == 8 + pushes
+    report = {"exclude": {"reused_simulations"}}
+    assert again.model_dump(**report) == first.model_dump(**report) == simulated.model_dump(**report)
+    assert any(force is not None for force in first.flat.holding_n.values())
+    # a setting that only judges the trials reuses them all; one that changes the physics simulates them again
+    assert run(reuse_simulations=True, success_mm=0.5, pass_success_rate=0.5).reused_simulations == 8 + pushes
+    assert run(reuse_simulations=True, friction=0.2).reused_simulations == 0
+    # the pushes run again from a nominal grasp read from the cache (its state after the lift) push as before
+    cache = tmp_path / "cache"
+    for entry in _outcome_entries(cache, "force_n"):
+        entry.unlink()
+    from_cached_grasps = run(reuse_simulations=True)
+    assert from_cached_grasps.reused_simulations == 8
+    assert from_cached_grasps.model_dump(**report) == first.model_dump(**report)
+    # damaged entries are simulated again and written over
+    for entry in _outcome_entries(cache, "held"):
+        entry.write_bytes(b"not a cache entry")
+    assert run(reuse_simulations=True).reused_simulations == pushes
+    assert run(reuse_simulations=True).reused_simulations == 8 + pushes
 
 
 def test_a_design_delivered_with_flat_pads_is_simulated_as_the_flat_control(tmp_path):
