@@ -68,13 +68,29 @@ STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 @dataclass
 class TrialRun:
     """What a grasp returns from its worker: held, final pose in the gripper (4x4, mm), its frames when recorded, a
-    nominal grasp's state after the lift, and whether it was read from the cache."""
+    nominal grasp's state after the lift (:func:`saved_state`), and whether it was read from the cache."""
 
     held: bool
     part_in_gripper: np.ndarray
     frames: list[Frame] | None
-    lifted: mujoco.MjData | None = None
+    lifted: np.ndarray | None = None
     reused: bool = False
+
+
+def saved_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """The state a simulation continues from (:data:`STATE`), as a flat array."""
+    state = np.empty(mujoco.mj_stateSize(model, STATE))
+    mujoco.mj_getState(model, data, state, STATE)
+    return state
+
+
+def restored_state(model: mujoco.MjModel, state: np.ndarray) -> mujoco.MjData:
+    """A simulation set to ``state`` (:func:`saved_state`), its derived quantities computed: it continues bit for bit
+    as the one the state was taken from."""
+    data = mujoco.MjData(model)
+    mujoco.mj_setState(model, data, np.asarray(state, dtype=np.float64), STATE)
+    mujoco.mj_forward(model, data)
+    return data
 
 
 def scene_key(scene: Scene, case: GraspCase, config: VerifyConfig) -> str:
@@ -115,7 +131,7 @@ def reuse_or_simulate_grasp(
         :func:`grasp_key`.
     reuse : bool
     model : mujoco.MjModel
-        The scene's model (to rebuild the state after the lift).
+        The scene's model (a stored state after the lift must fit it).
     simulate : callable
         Runs the grasp.
     """
@@ -123,7 +139,7 @@ def reuse_or_simulate_grasp(
     if stored is not None and (run := _grasp_from(stored, model)) is not None:
         return run
     run = simulate()
-    write_entry(cache_dir / f"{key}.npz", _grasp_entry(run, model))
+    write_entry(cache_dir / f"{key}.npz", _grasp_entry(run))
     return run
 
 
@@ -169,7 +185,7 @@ def _entry(**arrays: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-def _grasp_entry(run: TrialRun, model: mujoco.MjModel) -> bytes:
+def _grasp_entry(run: TrialRun) -> bytes:
     frames = run.frames or []
     arrays = {
         "held": np.array([run.held]),
@@ -181,9 +197,7 @@ def _grasp_entry(run: TrialRun, model: mujoco.MjModel) -> bytes:
         "frame_openings_mm": np.array([f.q_mm for f in frames], dtype=float),
     }
     if run.lifted is not None:
-        state = np.empty(mujoco.mj_stateSize(model, STATE))
-        mujoco.mj_getState(model, run.lifted, state, STATE)
-        arrays["lifted_state"] = state
+        arrays["saved_state"] = run.lifted
     return _entry(**arrays)
 
 
@@ -195,13 +209,9 @@ def _grasp_from(stored: dict[str, np.ndarray], model: mujoco.MjModel) -> TrialRu
                 stored["frame_times_s"], stored["frame_parts"], stored["frame_grippers"], stored["frame_openings_mm"]
             )
         ]
-        lifted = None
-        if "lifted_state" in stored:
-            if len(stored["lifted_state"]) != mujoco.mj_stateSize(model, STATE):
-                return None
-            lifted = mujoco.MjData(model)
-            mujoco.mj_setState(model, lifted, stored["lifted_state"], STATE)
-            mujoco.mj_forward(model, lifted)
+        lifted = stored.get("saved_state")
+        if lifted is not None and len(lifted) != mujoco.mj_stateSize(model, STATE):
+            return None
         return TrialRun(
             held=bool(stored["held"][0]),
             part_in_gripper=np.asarray(stored["part_in_gripper"], dtype=float),

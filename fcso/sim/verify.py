@@ -20,7 +20,16 @@ from ..report.models import DesignReport, GraspReport
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .diskcache import evict
-from .outcomes import TrialRun, grasp_key, hold_key, reuse_or_simulate_grasp, reuse_or_simulate_hold, scene_key
+from .outcomes import (
+    TrialRun,
+    grasp_key,
+    hold_key,
+    restored_state,
+    reuse_or_simulate_grasp,
+    reuse_or_simulate_hold,
+    saved_state,
+    scene_key,
+)
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
 from .scene import GraspCase, Scene, build_scene
 from .trials import (
@@ -108,7 +117,7 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 
     With ``config.stop_early`` a design that can no longer pass is not
     simulated further: a scenario's trials stop at the deciding failure
-    (:func:`precision_grasps`), its holding test is skipped, and so are the
+    (:func:`scenario_simulations`), its holding test is skipped, and so are the
     later scenarios (``unverified_scenarios``); the verdict is the full run's.
 
     Parameters
@@ -308,16 +317,9 @@ def verify_case(
         "flat": build_scene(case, pieces.pieces, None, finger_hull_mm, config),
     }
     penetration, pads_overlap = seated_overlaps_mm(scenes["fcso"])
-    runs, trials, stopped = precision_grasps(scenes, case, errors, config, advance)
-    # a designed finger that failed its precision trials cannot pass: its holding test would change nothing
-    designed = trials["fcso"]
-    precision_failed = (successes(designed) / len(designed) if designed else 0.0) < config.pass_success_rate - 1e-9
-    holding, reused = (
-        ({kind: {} for kind in scenes}, 0)
-        if config.stop_early and precision_failed
-        else holding_tests(scenes, case, {kind: grasps[0] for kind, grasps in runs.items()}, config)
-    )
-    reused += sum(run.reused for grasps in runs.values() for run in grasps)
+    simulated = scenario_simulations(scenes, case, errors, config, advance)
+    runs, trials, stopped, holding = simulated.runs, simulated.trials, simulated.stopped_after, simulated.holding
+    precision_failed = simulated.precision_failed
     results = {}
     for kind, (nominal, *perturbed) in runs.items():
         offset = pose_error(nominal.part_in_gripper, np.linalg.inv(case.tcp), scenes[kind].part_com_mm)
@@ -350,7 +352,7 @@ def verify_case(
         stopped_after_trials=stopped,
         passed=not precision_failed and bool(holds),
         frames=[_snapshot(f) for f in frames],
-        reused_simulations=reused,
+        reused_simulations=simulated.reused,
     )
 
 
@@ -399,27 +401,62 @@ def trial_result(run: TrialRun, error: np.ndarray, reference: np.ndarray, com_mm
     )
 
 
-def precision_grasps(
-    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
-) -> tuple[dict[str, list[TrialRun]], dict[str, list[TrialResult]], int | None]:
-    """Every finger's nominal grasp and precision trials, run on ``config.jobs`` forked workers (they are
-    independent: every grasp starts from a fresh state, so the results are those of one process), judged in order.
+@dataclass
+class ScenarioSimulations:
+    """What :func:`scenario_simulations` ran and kept.
 
-    Grasps go to the workers trial by trial (every finger's nominal grasp,
-    then every finger's first trial, ...; the designed finger's first, its
-    contacts make them the longest), each started as soon as a worker frees
-    up, at most two per worker ahead of the first grasp not yet judged: a
-    verification of many trials holds only a few in flight, reports
-    progress as they end, and no worker waits for a wave's longest grasp.
-    With ``config.stop_early`` the designed finger's (``fcso``) trials stop
-    at the failure after which it can no longer reach
-    ``pass_success_rate``: that trial is the last kept,
-    of every finger (the flat control is compared on the same start errors);
-    later grasps are not started, and those already running are dropped, so
-    what is kept does not depend on the number of workers or on the
-    machine's speed. A designed finger that fails its first trial takes its
-    nominal grasps and first trials, and at most the grasps already in
-    flight beside them.
+    Attributes
+    ----------
+    runs : dict
+        Finger kind -> its nominal grasp (unperturbed, with its state after the lift; recorded for the designed
+        finger) then its kept trials in the order of the start errors (the first recorded).
+    trials : dict
+        Finger kind -> its kept trials' results.
+    stopped_after : int or None
+        How many trials were kept when the trials stopped early; None when every trial ran.
+    holding : dict
+        Finger kind -> push direction -> slip force, N (None: held; 0.0 in every direction when the nominal grasp
+        did not hold); every kind's is empty when the holding test is not run (the designed finger failed its
+        precision trials, ``stop_early``).
+    precision_failed : bool
+        The designed finger's success rate is below ``pass_success_rate`` (False without a designed finger).
+    reused : int
+        Grasps and pushes kept whose outcome was read from the cache (:mod:`fcso.sim.outcomes`).
+    """
+
+    runs: dict[str, list[TrialRun]]
+    trials: dict[str, list[TrialResult]]
+    stopped_after: int | None
+    holding: dict[str, dict[str, float | None]]
+    precision_failed: bool
+    reused: int
+
+
+def scenario_simulations(
+    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+) -> ScenarioSimulations:
+    """Every finger's nominal grasp, precision trials and holding test (:func:`fcso.sim.trials.hold_force`, six
+    pushes from the nominal grasp's state after the lift) on ``config.jobs`` forked workers, the trials judged in
+    order. Grasps and pushes are independent (each starts from a fresh state or from its nominal grasp's), so the
+    results are those of one process.
+
+    The workers are kept busy, at most one task each. Grasps go first,
+    trial by trial (every finger's nominal grasp, then every finger's first
+    trial, ...; the designed finger's first: its contacts make them the
+    longest), each started as soon as a worker frees up; a finger's pushes
+    start once its nominal grasp has held, on workers no grasp can use, so
+    they fill what would be the trials' tail. With ``config.stop_early``
+    the designed finger's (``fcso``) trials stop at the failure after which
+    it can no longer reach ``pass_success_rate``: that trial is the last
+    kept, of every finger (the flat control is compared on the same start
+    errors); later grasps are not started and those already running are
+    dropped, as are the pushes, since the finger cannot pass; and at most
+    two grasps per worker are started ahead of the first not yet judged,
+    so a finger that fails early takes few grasps beyond its deciding
+    one. What is kept does not depend on the number of workers or on the
+    machine's speed. A designed finger that fails its first trial takes
+    its nominal grasps and first trials, and at most the grasps and pushes
+    in flight beside them.
 
     Parameters
     ----------
@@ -431,35 +468,35 @@ def precision_grasps(
     config : VerifyConfig
     advance : callable
         Called after every kept grasp.
-
-    Returns
-    -------
-    runs : dict
-        Finger kind -> its nominal grasp (unperturbed, with its state after the lift for the holding test;
-        recorded for the designed finger) then its kept trials in the order of ``errors`` (the first recorded).
-    trials : dict
-        Finger kind -> its kept trials' results.
-    stopped_after : int or None
-        How many trials were kept when the trials stopped early; None when every trial ran.
     """
     kinds = sorted(scenes, key=lambda kind: kind != "fcso")
     items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
-    jobs = min(resolve_jobs(config.jobs), len(items))
+    jobs = resolve_jobs(config.jobs)
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
+    forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in scenes}
     allowed_failures = len(errors) - needed_successes(len(errors), config)
-    # the last trial kept, the next item to judge and the next to start; the results not judged yet by item
+    # the last trial kept, the next grasp to judge and the next to start; the grasps not judged yet by index;
+    # the pushes whose nominal grasp held, not started yet; tasks running
     kept, judged, started = len(errors), 0, 0
     finished: dict[int, TrialRun] = {}
+    pushes: list[tuple[str, str, np.ndarray]] = []
+    running, reused = 0, 0
+    # grasps started and not judged yet, at most (stop_early: a grasp that would be dropped is seldom started;
+    # otherwise every grasp is kept)
+    ahead = 2 * jobs if config.stop_early else len(items)
 
     def judge(index: int, run: TrialRun) -> None:
-        nonlocal kept
+        nonlocal kept, reused
         kind, number, error = items[index]
         if number > kept:
             return
         runs[kind].append(run)
+        reused += run.reused
         advance()
         if number == 0:
+            if run.held:
+                pushes.extend((kind, name, run.lifted) for name in HOLD_DIRECTIONS)
             return
         nominal = runs[kind][0]
         reference = nominal.part_in_gripper if nominal.held else np.linalg.inv(case.tcp)
@@ -467,54 +504,48 @@ def precision_grasps(
         failed = kind == "fcso" and not trials[kind][-1].success
         if config.stop_early and failed and len(trials[kind]) - successes(trials[kind]) > allowed_failures:
             kept = number
+            pushes.clear()
 
-    def next_grasps(count: int) -> list[tuple]:
-        nonlocal started
+    def next_tasks() -> list[tuple]:
+        nonlocal started, running
         tasks = []
-        while len(tasks) < count and started < len(items) and items[started][1] <= kept:
-            tasks.append((_simulated_grasp, items[started], started))
-            started += 1
+        while running + len(tasks) < jobs:
+            if started < len(items) and items[started][1] <= kept and started - judged < ahead:
+                tasks.append((_simulated_grasp, items[started], ("grasp", started)))
+                started += 1
+            elif pushes and kept == len(errors):
+                push = pushes.pop(0)
+                tasks.append((_hold_force, push, ("push", push[:2])))
+            else:
+                break
+        running += len(tasks)
         return tasks
 
-    def on_done(index: int, run: TrialRun) -> list[tuple]:
-        nonlocal judged
-        finished[index] = run
+    def on_done(tag: tuple, result) -> list[tuple]:
+        nonlocal judged, running, reused
+        running -= 1
+        stage, index = tag
+        if stage == "push":
+            force, from_cache = result
+            if kept == len(errors):
+                forces[index[0]][index[1]] = force
+                reused += from_cache
+            return next_tasks()
+        finished[index] = result
         while judged in finished:
             judge(judged, finished.pop(judged))
             judged += 1
-        return next_grasps(ahead - (started - judged))
+        return next_tasks()
 
-    # started and not judged yet, at most: a grasp that would be dropped is seldom started
-    ahead = 2 * jobs
     keys = {kind: scene_key(scene, case, config) for kind, scene in scenes.items()}
     with WorkerPool((scenes, case, config, keys), jobs) as pool:
-        pool.run(next_grasps(ahead), on_done)
-    return runs, trials, kept if kept < len(errors) else None
-
-
-def holding_tests(
-    scenes: dict[str, Scene], case: GraspCase, nominals: dict[str, TrialRun], config: VerifyConfig
-) -> tuple[dict[str, dict[str, float | None]], int]:
-    """Every finger's holding test (:func:`fcso.sim.trials.hold_forces`) from its nominal grasp, its directions on
-    ``config.jobs`` forked workers.
-
-    Returns
-    -------
-    forces : dict
-        Finger kind -> push direction -> slip force, N (None: held; 0.0 in every direction when not held).
-    reused : int
-        Pushes whose outcome was read from the cache (:mod:`fcso.sim.outcomes`).
-    """
-    items = [(kind, name) for kind, run in nominals.items() if run.held for name in HOLD_DIRECTIONS]
-    forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in nominals}
-    keys = {kind: scene_key(scenes[kind], case, config) for kind in nominals}
-    reused = 0
-    jobs = min(resolve_jobs(config.jobs), max(1, len(items)))
-    with WorkerPool((scenes, case, nominals, config, keys), jobs) as pool:
-        for (kind, name), (force, from_cache) in zip(items, pool.map(_hold_force, items)):
-            forces[kind][name] = force
-            reused += from_cache
-    return forces, reused
+        pool.run(next_tasks(), on_done)
+    designed = trials.get("fcso")
+    precision_failed = designed is not None and (
+        (successes(designed) / len(designed) if designed else 0.0) < config.pass_success_rate - 1e-9
+    )
+    holding = {kind: {} for kind in scenes} if config.stop_early and precision_failed else forces
+    return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 
 def _grasp_plan(
@@ -536,22 +567,21 @@ def _simulated_grasp(context, item) -> TrialRun:
 
     def simulate() -> TrialRun:
         run = run_grasp(scene, case, pose, config, record=record)
-        return TrialRun(
-            run.held, run.part_in_gripper, run.frames if record else None, run.data if number == 0 else None
-        )
+        lifted = saved_state(scene.model, run.data) if number == 0 else None
+        return TrialRun(run.held, run.part_in_gripper, run.frames if record else None, lifted)
 
     return reuse_or_simulate_grasp(config.cache_path(), key, config.reuse_simulations, scene.model, simulate)
 
 
 def _hold_force(context, item) -> tuple[float | None, bool]:
-    scenes, case, nominals, config, keys = context
-    kind, name = item
+    scenes, case, config, keys = context
+    kind, name, state = item
     _, _, nominal_key = _grasp_plan(case, keys[kind], kind, 0, None)
     return reuse_or_simulate_hold(
         config.cache_path(),
         hold_key(nominal_key, name),
         config.reuse_simulations,
-        lambda: hold_force(scenes[kind], case, nominals[kind].lifted, name, config),
+        lambda: hold_force(scenes[kind], case, restored_state(scenes[kind].model, state), name, config),
     )
 
 

@@ -39,10 +39,9 @@ from fcso.sim.verify import (
     fitted_pieces,
     flat_pad,
     grasp_case,
-    holding_tests,
     is_flat_control,
     part_pieces,
-    precision_grasps,
+    scenario_simulations,
     verify,
     verify_case,
     weaker_than_flat,
@@ -520,11 +519,9 @@ def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tm
     runs, holding, advanced = {}, {}, []
     for jobs in (1, 2):
         config = _config(tmp_path, jobs=jobs, **settings)
-        grasps, _, stopped = precision_grasps(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
-        assert stopped is None
-        runs[jobs] = grasps["flat"]
-        holding[jobs], reused = holding_tests(scenes, case, {"flat": runs[jobs][0]}, config)
-        assert reused == 0
+        simulated = scenario_simulations(scenes, case, errors, config, lambda jobs=jobs: advanced.append(jobs))
+        assert simulated.stopped_after is None and simulated.reused == 0
+        runs[jobs], holding[jobs] = simulated.runs["flat"], simulated.holding
     assert advanced == [1] * 4 + [2] * 4
     for one, forked in zip(runs[1], runs[2]):
         assert one.held == forked.held and np.array_equal(one.part_in_gripper, forked.part_in_gripper)
@@ -550,24 +547,28 @@ def test_precision_trials_stop_at_the_deciding_failure_whatever_the_workers(tmp_
     scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), _config(tmp_path, **settings))
     scenes = {"fcso": scene, "flat": scene}
     errors = np.array([_CENTRED, _OFF_ALONG_PADS, [-0.4, 0.0, 0.0], [0.0, -1.5, 0.0], [0.3, 0.0, 1.0]])
-    _, full, stopped = precision_grasps(
-        scenes, case, errors, _config(tmp_path, stop_early=False, **settings), lambda: None
-    )
-    assert stopped is None
+    whole = scenario_simulations(scenes, case, errors, _config(tmp_path, stop_early=False, **settings), lambda: None)
+    full = whole.trials
+    assert whole.stopped_after is None and whole.precision_failed and len(whole.holding["fcso"]) == 6
     assert [t.success for t in full["fcso"]] == [True, False, True, False, True] == [t.success for t in full["flat"]]
     kept = {}
     for jobs in (1, 2):
         config = _config(tmp_path, jobs=jobs, **settings)
-        runs, kept[jobs], stopped = precision_grasps(scenes, case, errors, config, lambda: None)
-        # all 5 must succeed: the first failure (trial 2) decides; both fingers keep trials 1 and 2 as the full run
-        assert stopped == 2 and [len(r) for r in runs.values()] == [3, 3]
+        simulated = scenario_simulations(scenes, case, errors, config, lambda: None)
+        kept[jobs] = simulated.trials
+        # all 5 must succeed: the first failure (trial 2) decides; both fingers keep trials 1 and 2 as the full run,
+        # and no holding test: the finger cannot pass
+        assert simulated.stopped_after == 2 and [len(r) for r in simulated.runs.values()] == [3, 3]
+        assert simulated.holding == {"fcso": {}, "flat": {}}
         assert kept[jobs] == {kind: trials[:2] for kind, trials in full.items()}
     assert kept[1] == kept[2]
     # at 0.6 (3 of 5) two failures are allowed and every trial runs; at 0.7 (4 of 5) the second, trial 4, decides
     for rate, expected in ((0.6, None), (0.7, 4)):
         config = _config(tmp_path, jobs=2, pass_success_rate=rate, **settings)
-        _, trials, stopped = precision_grasps(scenes, case, errors, config, lambda: None)
-        assert stopped == expected and trials["fcso"] == full["fcso"][: expected or 5]
+        simulated = scenario_simulations(scenes, case, errors, config, lambda: None)
+        assert simulated.stopped_after == expected and simulated.trials["fcso"] == full["fcso"][: expected or 5]
+        # 3 of 5 pass at 0.6: the pushes ran beside the trials, as in the full run
+        assert simulated.holding == (whole.holding if expected is None else {"fcso": {}, "flat": {}})
 
 
 def test_grasps_after_the_deciding_failure_are_not_started(tmp_path, monkeypatch):
@@ -584,8 +585,7 @@ def test_grasps_after_the_deciding_failure_are_not_started(tmp_path, monkeypatch
         lambda scene, case, pose, *args, **kw: simulated.append(pose) or grasp(scene, case, pose, *args, **kw),
     )
     errors = np.array([_CENTRED, _OFF_ALONG_PADS, [-0.4, 0.0, 0.0], [0.0, -1.5, 0.0]])
-    _, _, stopped = precision_grasps({"fcso": scene, "flat": scene}, case, errors, config, lambda: None)
-    assert stopped == 2
+    assert scenario_simulations({"fcso": scene, "flat": scene}, case, errors, config, lambda: None).stopped_after == 2
     # both fingers' nominal grasps, then both fingers' trials 1 and 2
     expected = [np.eye(4)] * 2 + [start_pose(case, errors[0])] * 2 + [start_pose(case, errors[1])] * 2
     assert len(simulated) == len(expected) and all(np.allclose(a, b) for a, b in zip(simulated, expected))
