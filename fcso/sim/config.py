@@ -98,9 +98,9 @@ class VerifyConfig(BaseModel):
     reuse_simulations: bool = Field(
         True,
         description="Read a grasp's or holding push's outcome from the cache when the same simulation ran before "
-        "(the same collision geometry, start pose, settings, trial code, MuJoCo and NumPy: MuJoCo repeats it to the "
-        "last bit), e.g. a verification restarted after a kill, or the same parts verified again; false simulates "
-        "every one again (and stores it)",
+        "(the same collision geometry, start pose, settings, trial code, library versions and processor "
+        "architecture: MuJoCo repeats it to the last bit), e.g. a verification restarted after a kill, or the same "
+        "parts verified again; false simulates every one again (and stores it)",
     )
 
     def cache_path(self) -> Path:

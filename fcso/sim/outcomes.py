@@ -16,7 +16,9 @@ it instead of simulating it again. The key holds
 - every ``[verify]`` setting that changes a simulation (not those that
   judge, count or schedule them: :data:`NOT_SIMULATED`);
 - the code that drives the gripper (the source of :mod:`fcso.sim.trials`),
-  MuJoCo's and NumPy's versions and :data:`OUTCOME_VERSION`.
+  the versions of MuJoCo, NumPy and SciPy, the processor's architecture
+  (MuJoCo's arithmetic may differ on another; a cache folder may be shared)
+  and :data:`OUTCOME_VERSION`.
 
 A push starts from its grasp's state after the lift, so its key is its
 grasp's key and its direction. Entries live in the collision pieces' cache
@@ -28,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import platform
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +38,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import scipy
 
 from . import trials
 from .config import VerifyConfig
@@ -96,7 +100,8 @@ def restored_state(model: mujoco.MjModel, state: np.ndarray) -> mujoco.MjData:
 def scene_key(scene: Scene, case: GraspCase, config: VerifyConfig) -> str:
     """Hash (hex sha256) of what every simulation of ``scene`` shares: model, case, settings and code."""
     digest = hashlib.sha256(OUTCOME_VERSION.encode())
-    for text in (mujoco.__version__, np.__version__, Path(trials.__file__).read_text(), scene.model_sha256):
+    versions = (mujoco.__version__, np.__version__, scipy.__version__, platform.machine())
+    for text in (*versions, Path(trials.__file__).read_text(), scene.model_sha256):
         digest.update(text.encode())
         digest.update(b"\0")
     for values in (case.tcp, case.part.vertices, case.pad_size_mm, [case.pad_gap_mm], case.opening_mm):
