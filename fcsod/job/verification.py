@@ -30,7 +30,7 @@ from fcso.output.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density
-from fcso.sim.report import VerificationReport
+from fcso.sim.report import VerificationReport, reused_note
 from fcso.sim.verify import DesignUnderTest, design_under_test, verify
 
 from ..bus.messages import BusMessage, ScenarioOutcome, VerificationMessage
@@ -182,10 +182,11 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             message = _bus_message(config, job_id, verification, file, number)
             _write(out, verification, design, "", message, config.mcap, VERIFICATION_HTML)
             messages.append(message)
+            reused = reused_note(verification)
             log(
                 "info" if verification.passed else "warning",
                 f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
-                f"{time.perf_counter() - started:.1f} s",
+                f"{time.perf_counter() - started:.1f} s" + (f" ({reused})" if reused else ""),
             )
             for warning in verification.warnings:
                 log("warning", f"{name}: {warning}")

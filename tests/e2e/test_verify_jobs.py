@@ -98,6 +98,9 @@ def test_kill_during_verification_then_restart_verifies_once_published_recorded_
     assert sum(v["source"] == "live" for v in verifications) <= 1
     assert all(v["body"] == message["body"] for v in verifications)
     assert sum(v.get("message") == "verification started again" for v in second.json_lines()) == 1
+    # the operator reads in the log that the resumed verification did not simulate everything again
+    done_lines = [v["message"] for v in second.json_lines() if v.get("message", "").startswith("verification: design")]
+    assert len(done_lines) == 1 and "grasps and holding pushes were read from the cache" in done_lines[0]
     with sqlite3.connect(journal) as db:
         assert db.execute("SELECT state, attempt FROM jobs").fetchall() == [("done", 1)]
         assert db.execute("SELECT state, attempt FROM verifications").fetchall() == [("done", 2)]
