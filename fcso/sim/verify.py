@@ -471,7 +471,8 @@ def scenario_simulations(
     """
     kinds = sorted(scenes, key=lambda kind: kind != "fcso")
     items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
-    jobs = resolve_jobs(config.jobs)
+    # no more workers than tasks: the grasps and every finger's pushes
+    jobs = min(resolve_jobs(config.jobs), len(items) + len(scenes) * len(HOLD_DIRECTIONS))
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
     forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in scenes}
