@@ -202,7 +202,7 @@ def _grasp_entry(run: TrialRun) -> bytes:
         "frame_openings_mm": np.array([f.q_mm for f in frames], dtype=float),
     }
     if run.lifted is not None:
-        arrays["saved_state"] = run.lifted
+        arrays["state_after_lift"] = run.lifted
     return _entry(**arrays)
 
 
@@ -214,7 +214,7 @@ def _grasp_from(stored: dict[str, np.ndarray], model: mujoco.MjModel) -> TrialRu
                 stored["frame_times_s"], stored["frame_parts"], stored["frame_grippers"], stored["frame_openings_mm"]
             )
         ]
-        lifted = stored.get("saved_state")
+        lifted = stored.get("state_after_lift")
         if lifted is not None and len(lifted) != mujoco.mj_stateSize(model, STATE):
             return None
         return TrialRun(
