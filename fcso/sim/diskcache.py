@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import os
 import tempfile
+import time
 from pathlib import Path
 
 #: Largest total size of a cache folder, bytes: the least recently used entries go first (an entry is a few kB to a
 #: few hundred kB).
 CACHE_MAX_BYTES = 500_000_000
+#: A temporary file this old was left by a writer that died before renaming it (a write takes milliseconds), s.
+ABANDONED_WRITE_S = 3600.0
 
 
 def read_entry(path: Path) -> bytes | None:
@@ -48,7 +51,8 @@ def write_entry(path: Path, data: bytes) -> bool:
 
 
 def evict(cache_dir: Path, max_bytes: int = CACHE_MAX_BYTES) -> None:
-    """Remove the least recently used entries until the cache holds at most ``max_bytes``.
+    """Remove the least recently used entries until the cache holds at most ``max_bytes``, and the temporary files of
+    writers that died (a ``kill -9``) before renaming them, older than :data:`ABANDONED_WRITE_S`.
 
     Parameters
     ----------
@@ -57,6 +61,12 @@ def evict(cache_dir: Path, max_bytes: int = CACHE_MAX_BYTES) -> None:
     max_bytes : int
         Largest total size of the entries, bytes.
     """
+    for leftover in Path(cache_dir).glob(".*.tmp"):
+        try:
+            if time.time() - leftover.stat().st_mtime > ABANDONED_WRITE_S:
+                leftover.unlink()
+        except OSError:
+            continue
     entries = []
     for entry in Path(cache_dir).glob("*.npz"):
         try:

@@ -29,7 +29,7 @@ from fcso.sim.collision import (
     part_shell_pieces,
 )
 from fcso.sim.config import VerifyConfig
-from fcso.sim.diskcache import evict
+from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
 from fcso.sim.report import VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
@@ -506,8 +506,14 @@ def test_the_pieces_cache_survives_concurrent_writers_damage_and_a_size_bound(tm
     os.utime(entries[0], (old, old))
     assert part_shell_pieces(mesh, np.eye(4), _ZONE, 0.5, cache).cached
     newer = next(e for e in cache.glob("*.npz") if e != entries[0])
+    # a writer killed before its rename left its temporary file: removed once abandoned, not while it may be written
+    abandoned, writing = cache / ".abandoned.1.tmp", cache / ".writing.2.tmp"
+    abandoned.write_bytes(b"half an entry")
+    writing.write_bytes(b"an entry being written")
+    os.utime(abandoned, (old - ABANDONED_WRITE_S, old - ABANDONED_WRITE_S))
     evict(cache, newer.stat().st_size)
     assert list(cache.glob("*.npz")) == [newer]
+    assert not abandoned.exists() and writing.exists()
 
 
 def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tmp_path):
