@@ -116,13 +116,13 @@ class Scene:
     actuators: tuple[int, int]
     part_geoms: np.ndarray
     pad_geoms: np.ndarray
+    #: Content hash of the model's source (hex sha256): the same hash, the same physics (:mod:`fcso.sim.outcomes`).
+    model_sha256: str
     #: Unit vector (world) along which the lift joint raises the gripper.
     lift_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     #: Address of the part's free joint in qpos and in qvel.
     part_qpos: int = 0
     part_dof: int = 0
-    #: Content hash of the model's source (hex sha256): the same hash, the same physics (:mod:`fcso.sim.outcomes`).
-    model_sha256: str = ""
 
 
 def _vec(values) -> str:
