@@ -46,7 +46,7 @@ from examples.sim_parts import (
     zigzag_l_part,
 )
 from fcso.parts import Part
-from fcso.sim.choose import candidate_design, verify_top
+from fcso.sim.choose import candidate_designs, verify_top
 from fcso.sim.config import VerifyConfig
 from fcso.sim.verify import verify, weaker_than_flat
 
@@ -186,7 +186,7 @@ def main() -> None:
             if c is not None
         ]
         for candidate in list({c.index: c for c in picks}.values())[: args.candidates]:
-            design, evaluation, _, _, _ = candidate_design(result, candidate)
+            design, evaluation, _, _, _ = candidate_designs(result, [candidate])[0]
             checked = verify(design, config)
             success = float(np.mean([s.fcso.success_rate for s in checked.scenarios]))
             q = min(s.effective_area for s in evaluation.scenarios)

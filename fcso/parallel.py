@@ -150,6 +150,8 @@ class WorkerPool:
         self.jobs = jobs
         self.scheduler = scheduler
         self._pool: ProcessPoolExecutor | None = None
+        self._worker_pids: list[int] = []
+        self._stopped = False
         self._client = None
         self._context_future = None
 
@@ -173,7 +175,7 @@ class WorkerPool:
                     initargs=(os.getpid(),),
                 )
                 # fork every worker now, while the context is the one to share
-                list(self._pool.map(_started, [None] * self.jobs))
+                self._worker_pids = sorted(set(self._pool.map(_started, [None] * self.jobs)))
             finally:
                 gc.unfreeze()
                 _WORKER_CONTEXT = None
@@ -203,6 +205,7 @@ class WorkerPool:
         task order; call it once, before the pool closes. With no workers
         (``jobs = 1``) the tasks run in this process when it is called.
         """
+        self._check_open()
         items = list(items)
         if self._client is not None and items:
             return self._dask_map_later(function, items)
@@ -215,6 +218,7 @@ class WorkerPool:
         self,
         tasks: Sequence[tuple[Callable[[Any, Any], Any], Any, Any]],
         on_done: Callable[[Any, Any], Sequence[tuple[Callable[[Any, Any], Any], Any, Any]]],
+        settled: Callable[[], bool] = lambda: False,
     ) -> None:
         """Run ``(function, item, tag)`` tasks as workers free up; each result goes to ``on_done(tag, result)``.
 
@@ -223,25 +227,53 @@ class WorkerPool:
         waited for it): a stage's task starts as soon as what it needs is
         made, not after the whole previous stage. What it records must not
         depend on that order.
+
+        ``settled`` is asked after each ``on_done``: once it returns True the
+        run returns at once, and the tasks still running are abandoned
+        (their results are not needed, e.g. the grasps beyond a failure
+        that decided a verification): the local workers are killed and the
+        pool takes no further tasks; a cluster's futures are cancelled.
         """
+        self._check_open()
         if self._client is not None:
-            self._dask_run(list(tasks), on_done)
+            self._dask_run(list(tasks), on_done, settled)
             return
         if self._pool is None:
             queue = list(tasks)
-            while queue:
+            while queue and not settled():
                 function, item, tag = queue.pop(0)
                 queue.extend(on_done(tag, function(self.context, item)))
             return
         running = {self._pool.submit(_call, (function, item)): tag for function, item, tag in tasks}
-        while running:
+        while running and not settled():
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
                 tag = running.pop(future)
                 for function, item, next_tag in on_done(tag, future.result()):
                     running[self._pool.submit(_call, (function, item))] = next_tag
+                if settled():
+                    break
+        if running:
+            self._stop_workers()
 
-    def _dask_run(self, tasks: list, on_done) -> None:
+    def _stop_workers(self) -> None:
+        """Kill the local workers, whatever they are running, and close the pool."""
+        for pid in self._worker_pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        # the executor sees its workers die, fails what was queued and reaps them
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = None
+        self._worker_pids = []
+        self._stopped = True
+
+    def _check_open(self) -> None:
+        if self._stopped:
+            raise RuntimeError("this pool's workers were killed when a run settled: open a new pool")
+
+    def _dask_run(self, tasks: list, on_done, settled: Callable[[], bool]) -> None:
         """:meth:`run` on the Dask cluster."""
         from distributed import as_completed
 
@@ -256,6 +288,9 @@ class WorkerPool:
                 follower = submit(function, item)
                 running[follower] = next_tag
                 finished.add(follower)
+            if settled():
+                self._client.cancel(list(running))
+                return
 
     def _dask_map_later(self, function: Callable[[Any, Any], Any], items: list) -> Callable[[], list]:
         """:meth:`map_later` on the Dask cluster: items in contiguous batches, results gathered in order."""

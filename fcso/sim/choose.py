@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import time
 
-from ..design import DesignResult, finish_candidate
+from ..design import DesignResult, finish_candidates
 from ..evaluate import CandidateEvaluation
 from ..finger import fuse
 from ..geometry import to_trimesh
+from ..parallel import resolve_jobs
 from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
@@ -15,35 +16,45 @@ from .report import RankedCandidate, VerificationReport
 from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, successes, verify
 
 
-def candidate_design(
-    result: DesignResult, candidate: CandidateReport, pads: dict | None = None
-) -> tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]:
-    """The simulation's inputs for any evaluated candidate of a design, built as the design builds its choice.
+def candidate_designs(
+    result: DesignResult, candidates: list[CandidateReport], pads: dict | None = None, jobs: int = 1
+) -> list[tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
+    """The simulation's inputs for evaluated candidates of a design, built as the design builds its choice.
 
-    The pad is carved with the design's ``[print]`` clearance and lead-in
-    (:func:`fcso.design.finish_candidate`), so the verified pad is the one
-    that would be printed. ``pads``: the printed pads of the
-    design's candidates made so far (:func:`fcso.design.finish_candidates`).
+    Each pad is carved with the design's ``[print]`` clearance and lead-in
+    (:func:`fcso.design.finish_candidates`), so the verified pad is the one
+    that would be printed; the candidates' pads are made side by side on
+    ``jobs`` workers (0: every available core).
+
+    Parameters
+    ----------
+    result : DesignResult
+    candidates : list of CandidateReport
+    pads : dict, optional
+        The printed pads of the design's candidates made so far, by :func:`fcso.design.pad_key`; new ones are added.
+    jobs : int
 
     Returns
     -------
-    design : DesignUnderTest
-    evaluation : CandidateEvaluation
-        The candidate as printed, with its pad and contacts.
-    grasps : list of GraspReport
-        Its grasps, as ``report.json`` would list them.
-    print_fit : PrintFitReport
-    warnings : list of str
-        The print fit's warnings.
+    list of (design, evaluation, grasps, print_fit, warnings)
+        Per candidate: its :class:`DesignUnderTest`; the candidate as printed, with its pad and contacts
+        (:class:`CandidateEvaluation`); its grasps as ``report.json`` would list them; its print fit and that fit's
+        warnings.
     """
-    evaluation, grasps, print_fit, warnings = finish_candidate(
-        result.scenarios, candidate.samples, result.report.settings, pads=pads
+    finished = finish_candidates(
+        [(result.scenarios, tuple(c.samples)) for c in candidates],
+        result.report.settings,
+        jobs=resolve_jobs(jobs),
+        pads=pads,
     )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
-    report = result.report.model_copy(update={"grasps": grasps})
-    cases = [grasp_case(report, g, parts[g.part]) for g in grasps]
-    design = DesignUnderTest(cases, to_trimesh(evaluation.fingerpad.pad), finger_hull(result.report, result.finger))
-    return design, evaluation, grasps, print_fit, warnings
+    built = []
+    for evaluation, grasps, print_fit, warnings in finished:
+        report = result.report.model_copy(update={"grasps": grasps})
+        cases = [grasp_case(report, g, parts[g.part]) for g in grasps]
+        design = DesignUnderTest(cases, to_trimesh(evaluation.fingerpad.pad), finger_hull(result.report, result.finger))
+        built.append((design, evaluation, grasps, print_fit, warnings))
+    return built
 
 
 def verify_top(
@@ -58,7 +69,7 @@ def verify_top(
     at the first whose every scenario passes; no further candidate is
     started once ``config.choice_budget_s`` went on verification. With
     ``config.stop_early`` a candidate's verification stops as soon as it can
-    no longer pass (:func:`fcso.sim.verify.precision_grasps`). When none of
+    no longer pass (:func:`fcso.sim.verify.scenario_simulations`). When none of
     those tried passes, the best of them by truth is delivered: the highest
     worst-scenario success count over the planned trials
     (:func:`worst_success_share`), then the measure's order; but flat pads the
@@ -86,15 +97,17 @@ def verify_top(
     started, budget_s = time.monotonic(), config.choice_budget_s
     ranked = ranked_candidates(result.report, top)
     outcomes = []
-    # candidates often carve the same pad (the demo batch's ranks 2 and 3): each is made once
-    pads: dict = {}
+    # the design's own choice is already built as printed; the others are built when the first of them is to be
+    # verified, all at once, side by side on the workers (a candidate's pad is a few Booleans on one core)
+    others: dict[int, tuple] = {}
     for rank, candidate in enumerate(ranked):
-        # the design's own choice is already built as printed
-        built = (
-            (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
-            if candidate.index == result.report.best
-            else candidate_design(result, candidate, pads)
-        )
+        if candidate.index == result.report.best:
+            built = (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
+        else:
+            if candidate.index not in others:
+                rest = [c for c in ranked[rank:] if c.index != result.report.best]
+                others = dict(zip([c.index for c in rest], candidate_designs(result, rest, jobs=config.jobs)))
+            built = others[candidate.index]
         verification = verify(built[0], config, progress)
         outcomes.append((rank, candidate, built, verification))
         if verification.passed or time.monotonic() - started >= budget_s:

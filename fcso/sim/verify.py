@@ -450,13 +450,15 @@ def scenario_simulations(
     it can no longer reach ``pass_success_rate``: that trial is the last
     kept, of every finger (the flat control is compared on the same start
     errors); later grasps are not started and those already running are
-    dropped, as are the pushes, since the finger cannot pass; and at most
+    dropped (their workers stopped once the kept grasps are judged), as
+    are the pushes, since the finger cannot pass; and at most
     two grasps per worker are started ahead of the first not yet judged,
     so a finger that fails early takes few grasps beyond its deciding
     one. What is kept does not depend on the number of workers or on the
     machine's speed. A designed finger that fails its first trial takes
-    its nominal grasps and first trials, and at most the grasps and pushes
-    in flight beside them.
+    its nominal grasps and first trials, and at most the parts of the
+    grasps and pushes in flight beside them that ran until those were
+    judged.
 
     Parameters
     ----------
@@ -538,9 +540,13 @@ def scenario_simulations(
             judged += 1
         return next_tasks()
 
+    def settled() -> bool:
+        # stopped early, and every grasp up to the deciding trial judged: what still runs would be dropped
+        return kept < len(errors) and judged >= (kept + 1) * len(kinds)
+
     keys = {kind: scene_key(scene, case, config) for kind, scene in scenes.items()}
     with WorkerPool((scenes, case, config, keys), jobs) as pool:
-        pool.run(next_tasks(), on_done)
+        pool.run(next_tasks(), on_done, settled)
     designed = trials.get("fcso")
     precision_failed = designed is not None and (
         (successes(designed) / len(designed) if designed else 0.0) < config.pass_success_rate - 1e-9

@@ -3,7 +3,9 @@ later), on forked workers and in this process."""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
+import threading
 
 import pytest
 
@@ -66,3 +68,46 @@ def test_map_later_returns_in_task_order_after_other_work_on_the_pool(jobs):
         assert later() == [10, 20, 30, 40]
         assert (os.getpid() in where()) == (jobs == 1)
         assert pool.map_later(_scaled, [])() == []
+
+
+def _blocked(context, item) -> None:
+    """Tells its pid, then never returns."""
+    context.put(os.getpid())
+    threading.Event().wait()
+
+
+def _told(context, item) -> int:
+    """The pid ``_blocked`` tells, once it runs."""
+    return context.get()
+
+
+def test_a_settled_run_stops_the_workers_of_the_tasks_it_abandons():
+    # a task that never ends runs beside one that returns its pid; the run is settled by that result: it returns, the
+    # never-ending task's worker is killed, and the pool takes no more tasks
+    told = multiprocessing.get_context("fork").SimpleQueue()
+    seen = []
+
+    def on_done(tag, result):
+        seen.append((tag, result))
+        return []
+
+    with WorkerPool(told, 2) as pool:
+        pool.run([(_blocked, None, "blocked"), (_told, None, "told")], on_done, settled=lambda: bool(seen))
+        with pytest.raises(RuntimeError, match="killed"):
+            pool.map(_pid, [0, 1])
+    [(tag, pid)] = seen
+    assert tag == "told" and pid != os.getpid()
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+
+
+def test_a_settled_run_in_this_process_starts_nothing_more():
+    done = []
+
+    def on_done(tag, result):
+        done.append(tag)
+        return [(_scaled, result, tag + 1)] if tag < 5 else []
+
+    with WorkerPool(10, 1) as pool:
+        pool.run([(_scaled, 1, 0)], on_done, settled=lambda: len(done) == 2)
+    assert done == [0, 1]
