@@ -11,9 +11,12 @@ the fixture jobs to verify (default both); every trial of every scenario
 runs (the success rates are the figures) unless ``--stop-early`` (the
 product's default: a design's trials stop once it can no longer pass).
 ``--choice``: only the daemon's whole job for the demo batch against its
-design alone: the design, then the choice by truth among ``top_k = 3``
-candidates as the daemon makes it (cold cache of collision pieces), wall
-and CPU seconds (this process and its workers), median of ``--runs``.
+design alone, twice: in this process, the design, then the choice by truth
+among ``top_k = 3`` candidates as the daemon makes it (cold cache of
+collision pieces), wall and CPU seconds (this process and its workers);
+then through a real ``fcsod``, the job with the product's ``[verify]``
+against the same job with verification off, as the daemon times it
+(:func:`daemon_job_against_design`); medians of ``--runs``.
 
 Prints
 
@@ -164,6 +167,41 @@ def choice_against_design(runs: int, scratch: Path) -> None:
     )
 
 
+#: The daemon's ``[verify]`` as ``deploy/fcsod.toml`` ships it, and verification off.
+DAEMON_VERIFY = {"verified": "enabled = true\ntrials = 10\ntop_k = 3", "design alone": "enabled = false\ntop_k = 0"}
+
+
+def daemon_job_against_design(runs: int, scratch: Path) -> None:
+    """The demo batch through a real ``fcsod``: its whole job with the product's ``[verify]`` against verification off.
+
+    Each run starts a daemon on a fresh watch and state folder (so the
+    verification's caches are cold and no finger is reused), drops the
+    batch and takes the job's time from its start to ``done`` as the daemon
+    logs it (``job done``'s seconds; the demo's one finger is verified
+    before ``done``); the two settings alternate, median of ``runs`` each.
+    """
+    from tests.fcsod_helpers import copy_tree, free_port, start_daemon, write_config
+
+    seconds: dict[str, list[float]] = {name: [] for name in DAEMON_VERIFY}
+    for run in range(runs):
+        for name, verify_body in DAEMON_VERIFY.items():
+            base = scratch / f"daemon-{run}-{name.replace(' ', '-')}"
+            config = write_config(base, free_port(), settle_seconds=0.5, design="", verify=verify_body)
+            daemon = start_daemon(config)
+            try:
+                copy_tree(REPO / "examples" / "jobs" / "batch-demo", base / "watch" / "batch-demo")
+                done = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job done", 600)
+            finally:
+                daemon.stop()
+            seconds[name].append(done["seconds"])
+            print(f"daemon run {run + 1}, {name}: job {done['seconds']:.1f} s", flush=True)
+    verified, alone = (statistics.median(seconds[name]) for name in DAEMON_VERIFY)
+    print(
+        f"\ndemo batch in fcsod, median of {runs}: job with verification (top_k 3) {verified:.1f} s, without "
+        f"{alone:.1f} s: whole job / design alone {verified / alone:.2f}x (target <= 1.5x)"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=10)
@@ -178,6 +216,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         if args.choice:
             choice_against_design(args.runs, Path(scratch))
+            daemon_job_against_design(args.runs, Path(scratch))
             return
         cache = Path(scratch) / "warm"
         config = VerifyConfig(trials=args.trials, cache_dir=cache, stop_early=args.stop_early)
