@@ -150,7 +150,7 @@ class WorkerPool:
         self.jobs = jobs
         self.scheduler = scheduler
         self._pool: ProcessPoolExecutor | None = None
-        self._worker_pids: list[int] = []
+        self._workers: list[multiprocessing.process.BaseProcess] = []
         self._stopped = False
         self._client = None
         self._context_future = None
@@ -168,6 +168,7 @@ class WorkerPool:
             # to every inherited object and so copy its memory page into the worker
             gc.freeze()
             try:
+                forked_before = {process.pid for process in multiprocessing.active_children()}
                 self._pool = ProcessPoolExecutor(
                     self.jobs,
                     mp_context=multiprocessing.get_context("fork"),
@@ -175,7 +176,9 @@ class WorkerPool:
                     initargs=(os.getpid(),),
                 )
                 # fork every worker now, while the context is the one to share
-                self._worker_pids = sorted(set(self._pool.map(_started, [None] * self.jobs)))
+                list(self._pool.map(_started, [None] * self.jobs))
+                # this pool's workers (one of them may have run every start task: their pids would miss the others)
+                self._workers = [p for p in multiprocessing.active_children() if p.pid not in forked_before]
             finally:
                 gc.unfreeze()
                 _WORKER_CONTEXT = None
@@ -258,15 +261,13 @@ class WorkerPool:
 
     def _stop_workers(self) -> None:
         """Kill the local workers, whatever they are running, and close the pool."""
-        for pid in self._worker_pids:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        # every worker: one left alive may wait for ever on the task queue's lock that a killed one held
+        for worker in self._workers:
+            worker.kill()
         # the executor sees its workers die, fails what was queued and reaps them
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
-        self._worker_pids = []
+        self._workers = []
         self._stopped = True
 
     def _check_open(self) -> None:

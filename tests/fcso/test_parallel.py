@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 
 import pytest
@@ -82,16 +83,19 @@ def _told(context, item) -> int:
 
 
 def test_a_settled_run_stops_the_workers_of_the_tasks_it_abandons():
-    # a task that never ends runs beside one that returns its pid; the run is settled by that result: it returns, the
-    # never-ending task's worker is killed, and the pool takes no more tasks
+    # a task that never ends runs beside one that returns its pid, and a third worker has no task; the run is settled
+    # by that result: it returns, every worker is killed (one left waiting on the task queue would hang the pool's
+    # shutdown), and the pool takes no more tasks
     told = multiprocessing.get_context("fork").SimpleQueue()
     seen = []
+    children_before = set(multiprocessing.active_children())
 
     def on_done(tag, result):
         seen.append((tag, result))
         return []
 
-    with WorkerPool(told, 2) as pool:
+    with WorkerPool(told, 3) as pool:
+        workers = set(multiprocessing.active_children()) - children_before
         pool.run([(_blocked, None, "blocked"), (_told, None, "told")], on_done, settled=lambda: bool(seen))
         with pytest.raises(RuntimeError, match="killed"):
             pool.map(_pid, [0, 1])
@@ -99,6 +103,8 @@ def test_a_settled_run_stops_the_workers_of_the_tasks_it_abandons():
     assert tag == "told" and pid != os.getpid()
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)
+    assert len(workers) == 3 and {worker.exitcode for worker in workers} == {-signal.SIGKILL}
+    assert set(multiprocessing.active_children()) <= children_before
 
 
 def test_a_settled_run_in_this_process_starts_nothing_more():
