@@ -83,8 +83,8 @@ def _call(task):
     return function(_WORKER_CONTEXT, item)
 
 
-def _started(_) -> int:
-    return os.getpid()
+def _started(_) -> None:
+    """A task that only makes the pool fork its workers."""
 
 
 def _call_batch(function: Callable[[Any, Any], Any], context: Any, items: list) -> list:

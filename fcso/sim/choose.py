@@ -17,7 +17,7 @@ from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case,
 
 
 def candidate_designs(
-    result: DesignResult, candidates: list[CandidateReport], pads: dict | None = None, jobs: int = 1
+    result: DesignResult, candidates: list[CandidateReport], jobs: int = 1
 ) -> list[tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """The simulation's inputs for evaluated candidates of a design, built as the design builds its choice.
 
@@ -30,8 +30,7 @@ def candidate_designs(
     ----------
     result : DesignResult
     candidates : list of CandidateReport
-    pads : dict, optional
-        The printed pads of the design's candidates made so far, by :func:`fcso.design.pad_key`; new ones are added.
+        A pad that several of them carve is made once.
     jobs : int
 
     Returns
@@ -45,7 +44,6 @@ def candidate_designs(
         [(result.scenarios, tuple(c.samples)) for c in candidates],
         result.report.settings,
         jobs=resolve_jobs(jobs),
-        pads=pads,
     )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
     built = []
