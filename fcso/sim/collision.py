@@ -21,9 +21,10 @@ MuJoCo collides a mesh by its convex hull, so
   seconds;
 - pieces are cached by content hash on disk (shared by candidates, jobs,
   restarts and concurrent workers; written under a name of its own and
-  renamed, least recently used entries evicted beyond
-  :data:`fcso.sim.diskcache.CACHE_MAX_BYTES`); the fidelity is the volume of the union of
-  the pieces against the mesh's own, computed once and cached with them;
+  renamed, :mod:`fcso.sim.diskcache`; the verification keeps the folder
+  within its size once at its end); the fidelity is the volume of the
+  union of the pieces against the mesh's own, computed once and cached
+  with them;
 - the finger body behind the pad is the convex hull of the finger's
   material behind the pad's back face.
 
@@ -56,7 +57,7 @@ import numpy as np
 import trimesh
 
 from ..geometry import box, convex_patches, ray_hits, to_manifold
-from .diskcache import CACHE_MAX_BYTES, evict, read_entry, write_entry
+from .diskcache import read_entry, write_entry
 
 #: Bumped when the decomposition's inputs or method change, so old cache entries are not reused.
 CACHE_VERSION = "shell-6"
@@ -379,8 +380,7 @@ def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: P
     pieces = decompose()
     excess, missing = union_volume_errors(mesh, pieces)
     if path is not None:
-        if write_entry(path, _write_pieces(pieces, (excess, missing))):
-            evict(path.parent, CACHE_MAX_BYTES)
+        write_entry(path, _write_pieces(pieces, (excess, missing)))
     return ConvexPieces(pieces=pieces, excess_fraction=excess, missing_fraction=missing, cached=False)
 
 
