@@ -152,12 +152,12 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
             )
             break
         clock = time.perf_counter()
-        pieces, pad, refine_notes, seated = fitted_pieces(case, design, config)
-        warnings.extend(refine_notes)
+        pieces, pad, seated = fitted_pieces(case, design, config)
         timings["decomposition"] += time.perf_counter() - clock
         clock = time.perf_counter()
         scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance, seated)
         timings["simulation"] += time.perf_counter() - clock
+        warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
         ran = len(scenario.fcso.trials)
         if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
             stop = (
@@ -194,10 +194,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
-) -> tuple[ConvexPieces, ConvexPieces, list[str], Scene]:
+) -> tuple[ConvexPieces, ConvexPieces, Scene]:
     """The pad's convex pieces (prisms under its face) and the part's (prisms under its surface where the pads reach
-    it), with warnings when, at the nominal seated grasp, they overlap or the two pads overlap each other by more
-    than ``max_seated_penetration_mm``.
+    it), and the designed finger's scene of them.
 
     Both are built from the meshes' own facets (:func:`pad_prism_pieces`,
     :func:`part_shell_pieces`), so their overlap (METHOD §12's fidelity) is
@@ -207,8 +206,6 @@ def fitted_pieces(
     Returns
     -------
     part, pad : ConvexPieces
-    notes : list of str
-        The warnings.
     scene : Scene
         The designed finger's scene of these pieces (for :func:`verify_case`: one compilation).
     """
@@ -218,20 +215,25 @@ def fitted_pieces(
     # same face meet the part in other contacts and a borderline trial could end the other way (the plain cube of
     # bench_truth: 0/10 against the control's 1/10, one finger)
     flat = is_flat_control(design.fingerpad, case.pad_size_mm, case.penetration_mm)
-    scene = build_scene(case, part.pieces, None if flat else pad.pieces, design.finger_hull_mm, config)
-    part_pad, pad_pad = seated_overlaps_mm(scene)
+    return part, pad, build_scene(case, part.pieces, None if flat else pad.pieces, design.finger_hull_mm, config)
+
+
+def seated_overlap_notes(name: str, fidelity: Fidelity, config: VerifyConfig) -> list[str]:
+    """Warnings of a scenario ``name`` whose part and pad pieces, or whose two pads, overlap at the nominal seated
+    grasp by more than ``config.max_seated_penetration_mm``; none when they do not."""
     notes = []
-    if part_pad > config.max_seated_penetration_mm:
+    if fidelity.seated_penetration_mm > config.max_seated_penetration_mm:
         notes.append(
-            f"{case.name}: part and pad pieces overlap {part_pad:.2f} mm at the seated grasp "
-            f"(part {len(part.pieces)} pieces, pad {len(pad.pieces)}); precision errors below that are not resolved"
+            f"{name}: part and pad pieces overlap {fidelity.seated_penetration_mm:.2f} mm at the seated grasp "
+            f"(part {fidelity.part_pieces} pieces, pad {fidelity.pad_pieces}); precision errors below that are not "
+            "resolved"
         )
-    if pad_pad > config.max_seated_penetration_mm:
+    if fidelity.seated_pads_overlap_mm > config.max_seated_penetration_mm:
         notes.append(
-            f"{case.name}: the two pads overlap each other {pad_pad:.2f} mm at the seated grasp: the fingers meet "
-            f"before the part is seated"
+            f"{name}: the two pads overlap each other {fidelity.seated_pads_overlap_mm:.2f} mm at the seated grasp: "
+            "the fingers meet before the part is seated"
         )
-    return part, pad, notes, scene
+    return notes
 
 
 def part_pieces(case: GraspCase, config: VerifyConfig) -> ConvexPieces:

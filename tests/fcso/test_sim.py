@@ -30,7 +30,7 @@ from fcso.sim.collision import (
 )
 from fcso.sim.config import VerifyConfig
 from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
-from fcso.sim.report import VerificationReport
+from fcso.sim.report import Fidelity, VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
@@ -42,6 +42,7 @@ from fcso.sim.verify import (
     is_flat_control,
     part_pieces,
     scenario_simulations,
+    seated_overlap_notes,
     verify,
     verify_case,
     weaker_than_flat,
@@ -212,7 +213,7 @@ def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped
     result = design(batch_demo_part_files()[:1], batch_demo_settings())
     under_test = design_under_test(result)
     case, config = under_test.cases[0], _config(tmp_path)
-    part, pad, _, _ = fitted_pieces(case, under_test, config)
+    part, pad, _ = fitted_pieces(case, under_test, config)
     scene = build_scene(case, part.pieces, pad.pieces, under_test.finger_hull_mm, config)
     start = start_pose(case, np.array([0.5, -0.5, 1.0]))
     skips = []
@@ -272,6 +273,28 @@ def test_seated_overlaps_tell_the_part_from_the_other_pad(tmp_path):
     crossing = dataclasses.replace(case, part=away, pad_gap_mm=-9.0)
     part_pad, pad_pad = seated_overlaps_mm(build_scene(crossing, _hull(away), None, nothing, config))
     assert part_pad == 0.0 and pad_pad == pytest.approx(1.0, abs=0.01)
+
+
+def test_seated_overlaps_beyond_the_limit_are_warned_of_by_scenario(tmp_path):
+    """Each overlap over max_seated_penetration_mm (0.2 mm) is a warning naming the scenario and its figure."""
+    fidelity = Fidelity(
+        part_pieces=64,
+        part_volume_error=0.0,
+        part_missing_fraction=0.5,
+        pad_pieces=296,
+        pad_volume_error=0.0,
+        seated_penetration_mm=0.15,
+        seated_pads_overlap_mm=0.0,
+        decomposition_cached=False,
+    )
+    config = _config(tmp_path)
+    assert seated_overlap_notes("cube pose 0", fidelity, config) == []
+    deep = fidelity.model_copy(update={"seated_penetration_mm": 0.25, "seated_pads_overlap_mm": 0.3})
+    part_pad, pad_pad = seated_overlap_notes("cube pose 0", deep, config)
+    assert part_pad.startswith("cube pose 0: part and pad pieces overlap 0.25 mm") and "pad 296" in part_pad
+    assert pad_pad.startswith("cube pose 0: the two pads overlap each other 0.30 mm")
+    # at the limit is within it
+    assert seated_overlap_notes("cube pose 0", deep, config.model_copy(update={"max_seated_penetration_mm": 0.3})) == []
 
 
 def test_part_seated_in_its_pad_does_not_move(ridged, tmp_path):
