@@ -104,7 +104,14 @@ def scene_key(scene: Scene, case: GraspCase, config: VerifyConfig) -> str:
     for text in (*versions, Path(trials.__file__).read_text(), scene.model_sha256):
         digest.update(text.encode())
         digest.update(b"\0")
-    for values in (case.tcp, case.part.vertices, case.pad_size_mm, [case.pad_gap_mm], case.opening_mm):
+    for values in (
+        case.tcp,
+        case.part.vertices,
+        case.pad_size_mm,
+        [case.pad_gap_mm],
+        case.opening_mm,
+        [scene.pad_inset_mm],
+    ):
         digest.update(np.ascontiguousarray(values, dtype="<f8").tobytes())
     settings = config.model_dump(mode="json", exclude=set(NOT_SIMULATED))
     digest.update(json.dumps(settings, sort_keys=True).encode())

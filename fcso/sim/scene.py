@@ -118,6 +118,9 @@ class Scene:
     pad_geoms: np.ndarray
     #: Content hash of the model's source (hex sha256): the same hash, the same physics (:mod:`fcso.sim.outcomes`).
     model_sha256: str
+    #: How far the pads' faces lie inside the part's outermost point at the seated grasp (q = 0), mm: the penetration
+    #: D for carved pads, 0 for flat ones (whose face is there).
+    pad_inset_mm: float = 0.0
     #: Unit vector (world) along which the lift joint raises the gripper.
     lift_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     #: Address of the part's free joint in qpos and in qvel.
@@ -257,6 +260,7 @@ def build_scene(
         part_qpos=int(model.jnt_qposadr[model.joint("part").id]),
         part_dof=int(model.jnt_dofadr[model.joint("part").id]),
         model_sha256=hashlib.sha256(xml.encode()).hexdigest(),
+        pad_inset_mm=0.0 if pad_pieces is None else float(depth),
     )
 
 

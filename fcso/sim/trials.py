@@ -174,7 +174,8 @@ def run_grasp(
     pad_bottom = tcp[2, 3] - case.pad_size_mm[2] / 2.0
     raise_mm = max(0.0, float(vertices[:, 2].max()) - pad_bottom) + APPROACH_CLEARANCE_MM
     q_min, q_max = case.joint_range_mm
-    q_open = min(q_max, config.open_margin_mm)
+    # both fingers' pads clear the part alike as they descend (a carved pad's face is D further in)
+    q_open = min(q_max, scene.pad_inset_mm + config.open_margin_mm)
     _set_part(model, data, part_pose)
     for joint in scene.joints:
         data.qpos[model.jnt_qposadr[joint]] = q_open * M

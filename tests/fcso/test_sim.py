@@ -297,6 +297,21 @@ def test_seated_overlaps_beyond_the_limit_are_warned_of_by_scenario(tmp_path):
     assert seated_overlap_notes("cube pose 0", deep, config.model_copy(update={"max_seated_penetration_mm": 0.3})) == []
 
 
+def test_carved_and_flat_pads_clear_the_part_alike_as_they_descend(ridged, tmp_path):
+    """A carved pad's face is the penetration D inside the part's outermost point at the seated grasp, a flat pad's at
+    it: the designed finger opens D further than the control, so both clear the part by open_margin_mm."""
+    case, pieces, pad, hull, _ = ridged
+    # within the block's 8 mm of finger travel beyond its seat
+    config = _config(tmp_path, open_margin_mm=2.0)
+    assert case.joint_range_mm[1] > case.penetration_mm + config.open_margin_mm
+    carved = run_grasp(build_scene(case, pieces, pad, hull, config), case, np.eye(4), config, record=True)
+    flat = run_grasp(build_scene(case, pieces, None, hull, config), case, np.eye(4), config, record=True)
+    # the first frame: the gripper coming down, its fingers still where they started
+    assert carved.frames[0].q_mm == pytest.approx(case.penetration_mm + config.open_margin_mm, abs=1e-3)
+    assert flat.frames[0].q_mm == pytest.approx(config.open_margin_mm, abs=1e-3)
+    assert carved.held and flat.held
+
+
 def test_part_seated_in_its_pad_does_not_move(ridged, tmp_path):
     case, pieces, pad, hull, _ = ridged
     config = _config(tmp_path)
