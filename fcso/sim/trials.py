@@ -147,6 +147,21 @@ def start_pose(case: GraspCase, error: np.ndarray) -> np.ndarray:
     return shift @ about @ turn @ np.linalg.inv(about)
 
 
+def approach_opening_mm(case: GraspCase, pad_inset_mm: float, config: VerifyConfig) -> float:
+    """Finger opening q as the gripper comes down: the pads' faces clear the part's outermost point in their
+    footprint by ``config.open_margin_mm`` (at most the gripper's full opening), mm.
+
+    Parameters
+    ----------
+    case : GraspCase
+    pad_inset_mm : float
+        How far the pads' faces lie inside that point at the seated grasp: the penetration D for carved pads, 0 for
+        flat ones (:attr:`fcso.sim.scene.Scene.pad_inset_mm`).
+    config : VerifyConfig
+    """
+    return min(case.joint_range_mm[1], pad_inset_mm + config.open_margin_mm)
+
+
 def run_grasp(
     scene: Scene, case: GraspCase, part_pose: np.ndarray, config: VerifyConfig, record: bool = False
 ) -> GraspRun:
@@ -173,9 +188,8 @@ def run_grasp(
     vertices = np.asarray(case.part.vertices) @ part_pose[:3, :3].T + part_pose[:3, 3]
     pad_bottom = tcp[2, 3] - case.pad_size_mm[2] / 2.0
     raise_mm = max(0.0, float(vertices[:, 2].max()) - pad_bottom) + APPROACH_CLEARANCE_MM
-    q_min, q_max = case.joint_range_mm
-    # both fingers' pads clear the part alike as they descend (a carved pad's face is D further in)
-    q_open = min(q_max, scene.pad_inset_mm + config.open_margin_mm)
+    q_min = case.joint_range_mm[0]
+    q_open = approach_opening_mm(case, scene.pad_inset_mm, config)
     _set_part(model, data, part_pose)
     for joint in scene.joints:
         data.qpos[model.jnt_qposadr[joint]] = q_open * M

@@ -35,6 +35,7 @@ from .scene import GraspCase, Scene, build_scene
 from .trials import (
     HOLD_DIRECTIONS,
     Frame,
+    approach_opening_mm,
     hold_force,
     perturbations,
     pose_error,
@@ -261,8 +262,8 @@ def pad_reach_boxes(case: GraspCase, config: VerifyConfig) -> np.ndarray:
     """
     thickness, length, width = case.pad_size_mm
     half_gap = case.pad_gap_mm / 2.0
-    # the designed finger's opening, the wider (a carved pad's face is D inside the part's outermost point)
-    opening = min(case.joint_range_mm[1], case.penetration_mm + config.open_margin_mm)
+    # the designed finger's opening, the wider
+    opening = approach_opening_mm(case, case.penetration_mm, config)
     reach = np.array([length / 2.0, half_gap + thickness + opening])
     to_tcp = np.linalg.inv(case.tcp)
     com = to_tcp[:3, :3] @ np.asarray(case.part.center_mass, dtype=float) + to_tcp[:3, 3]
