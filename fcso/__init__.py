@@ -6,9 +6,8 @@ resting poses, ranked by contact area over the radius of the largest empty
 sphere of contact normals.
 """
 
-__version__ = "0.1.0"
-
 from .parallel import fork_safe_manifold  # noqa: E402
+from .version import __version__
 
 # before any Boolean of this process: workers are forked (fcso.parallel)
 fork_safe_manifold()
@@ -33,6 +32,7 @@ from .rles import rles  # noqa: E402
 from .sets import SetsResult, design_sets  # noqa: E402
 
 __all__ = [
+    "__version__",
     "ComputeError",
     "ConfigError",
     "DesignConfig",

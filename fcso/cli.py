@@ -10,9 +10,9 @@ from pathlib import Path
 
 from .config import DesignConfig, format_validation_error, load_config
 from .errors import FcsoError, GeometryError
+from .layout import set_folder
 from .output.design_page import rebuild_report
 from .output.files import rebuild_job_report, write_set_outputs
-from .output.layout import set_folder
 from .output.picture_process import PictureProcess
 from .output.read import is_job_folder
 from .output.sets_page import pad_sizes_line, pick_plan_text
@@ -21,7 +21,7 @@ from .parts import load_part, load_parts
 from .poses import stable_poses
 from .schema import write_schemas
 from .sets import SetsResult, design_sets
-from .sim.cli import (
+from .verify_cli import (
     add_design_options,
     add_settings_options,
     add_verify_command,

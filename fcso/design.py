@@ -14,7 +14,6 @@ from typing import TypeVar
 import numpy as np
 import trimesh
 
-from . import __version__
 from .config import DesignConfig
 from .errors import GeometryError, NoGraspError
 from .evaluate import (
@@ -72,6 +71,7 @@ from .report.models import (
 from .sampler import SamplerResult, face_yaws, sample_grasps
 from .screen import NormalLattice, ScreenedCandidate, ScreenGrid, carve_heights, screen
 from .search import SearchOutcome, candidate_index, quality_upper_bound, rerank, search
+from .version import __version__
 
 #: Samples per pad-geometry task and candidates per screening task sent to a worker.
 _GEOMETRY_CHUNK = 4

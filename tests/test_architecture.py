@@ -19,12 +19,12 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("fcso", "fcsod")
 
 #: Presentation: writing folders, pages and pictures. The method must not import it.
-PRESENTATION = ("fcso.output", "fcso.cli", "fcso.sim.cli", "matplotlib")
+PRESENTATION = ("fcso.output", "fcso.cli", "fcso.verify_cli", "matplotlib")
 #: What the method may take from the output package: the names of the folder layout, which the reports record.
-LAYOUT = "fcso.output.layout"
+LAYOUT = "fcso.layout"
 #: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
 #: ``fcso``).
-NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.sim.cli", "fcso.output")
+NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.verify_cli", "fcso.output")
 
 
 def module_name(path: Path) -> str:

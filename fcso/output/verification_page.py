@@ -14,12 +14,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..geometry import transform_points
+from ..layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from ..report.models import DesignReport
 from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport, reused_note
 from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
 from .decimate import decimate
-from .layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from .read import read_design_folder
 from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, draw_layers, png_bytes
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..evaluate import Scenario
-from ..output.layout import set_finger_path, set_folder
+from ..layout import set_finger_path, set_folder
 from .design import ungraspable_entry
 from .models import (
     CandidateReport,

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..config import DesignConfig
 from ..design import (
     ChosenCandidate,
@@ -33,6 +32,7 @@ from ..progress import Progress
 from ..report.design import part_report
 from ..report.models import DesignReport, FingerSetsReport, JobReport, chosen_candidate
 from ..report.sets import exact_retained, sets_report, zero_quality_report
+from ..version import __version__
 from .identity import identical_groups
 from .partition import search_judged_exactly
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality

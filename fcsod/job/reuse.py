@@ -25,7 +25,7 @@ from pydantic import Field
 
 import fcso
 from fcso.config import DesignConfig
-from fcso.output.layout import REPORT_JSON, set_finger_path
+from fcso.layout import REPORT_JSON, set_finger_path
 from fcso.report.design import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 

@@ -13,8 +13,8 @@ import numpy as np
 
 import fcso
 from fcso import DesignResult, MeshError, load_parts
+from fcso.layout import FINGER_STL, FINGERPAD_STL, set_folder
 from fcso.output.files import sets_output_files
-from fcso.output.layout import FINGER_STL, FINGERPAD_STL, set_folder
 from fcso.sets import design_sets
 
 from .. import __version__

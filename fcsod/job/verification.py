@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from fcso.output.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
+from fcso.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density

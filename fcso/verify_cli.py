@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .config import VerifyConfig, load_verify_config, with_print_density
-from .report import VerificationReport, reused_note
+from .sim.config import VerifyConfig, load_verify_config, with_print_density
+from .sim.report import VerificationReport, reused_note
 
 
 def add_verify_command(commands) -> None:
@@ -55,8 +55,8 @@ def settings(args) -> VerifyConfig:
 
 def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
-    from ..output.verification_page import load_design, write_verification
-    from .verify import verify
+    from .output.verification_page import load_design, write_verification
+    from .sim.verify import verify
 
     report, design = load_design(args.directory)
     config = with_print_density(settings(args), report.settings)
@@ -93,11 +93,11 @@ def summary(verification: VerificationReport) -> str:
 
 def verify_design_outputs(result, args, progress) -> int:
     """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
-    from ..output.design_page import rebuild_report
-    from ..output.files import write_outputs
-    from ..output.verification_page import ranking_html, write_verification
-    from .choose import verify_top
-    from .verify import design_under_test, verify
+    from .output.design_page import rebuild_report
+    from .output.files import write_outputs
+    from .output.verification_page import ranking_html, write_verification
+    from .sim.choose import verify_top
+    from .sim.verify import design_under_test, verify
 
     config = with_print_density(settings(args), result.report.settings)
     try:
@@ -124,7 +124,7 @@ def verify_design_outputs(result, args, progress) -> int:
 
 def restore_section(directory: Path) -> None:
     """After ``fcso report`` rebuilt report.html: put the verification section back when verification.json exists."""
-    from ..output.verification_page import (
+    from .output.verification_page import (
         load_design,
         ranking_html,
         read_verification,
