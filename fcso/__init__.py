@@ -13,7 +13,6 @@ from .version import __version__
 fork_safe_manifold()
 
 from .config import DesignConfig, load_config  # noqa: E402
-from .design import DesignResult, design  # noqa: E402
 from .errors import (  # noqa: E402
     ComputeError,
     ConfigError,
@@ -26,6 +25,7 @@ from .errors import (  # noqa: E402
 from .measure import quality_words  # noqa: E402
 from .output.files import output_files, write_outputs, write_set_outputs  # noqa: E402
 from .parts import MeshItem, Part, load_part, load_parts, read_3mf_items  # noqa: E402
+from .pipeline import DesignResult, design  # noqa: E402
 from .poses import stable_poses  # noqa: E402
 from .reuse import KeptScenario, PadFit, fit_pads  # noqa: E402
 from .rles import rles  # noqa: E402

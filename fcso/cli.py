@@ -55,7 +55,7 @@ class ProgressLine:
         self.last_draw = 0.0
 
     def __call__(self, stage: str, done: int, total: int, note: str = "") -> None:
-        """``progress(stage, done, total, note)`` as :func:`fcso.design.design` calls it."""
+        """``progress(stage, done, total, note)`` as :func:`fcso.pipeline.design` calls it."""
         if not self.enabled:
             return
         now = time.perf_counter()

@@ -583,7 +583,7 @@ def evaluate_on_pad(
     Parameters
     ----------
     scenario : Scenario
-        With its samples (:func:`fcso.design.prepare`).
+        With its samples (:func:`fcso.pipeline.prepare`).
     pad_vertices, pad_faces : ndarray
         The printed pad, pad frame (mm), a closed mesh.
     config : DesignConfig

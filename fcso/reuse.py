@@ -18,12 +18,12 @@ import numpy as np
 import trimesh
 
 from .config import DesignConfig
-from .design import Prepared, prepare
 from .evaluate import evaluate_on_pad
 from .parallel import WorkerPool
 from .parts import Part
+from .pipeline import Prepared, prepare
+from .pipeline.report import grasp_report
 from .progress import Progress
-from .report.design import grasp_report
 from .report.models import GraspReport
 from .sets.screening import solo_quality
 

@@ -1,7 +1,7 @@
 """``report.html``: one self-contained page of pictures and tables per design.
 
 The page is built from :class:`ReportInputs`, which come either from a
-fresh :class:`~fcso.design.DesignResult` (:func:`report_inputs`) or from an
+fresh :class:`~fcso.pipeline.DesignResult` (:func:`report_inputs`) or from an
 output folder (:func:`load_report_inputs`: ``report.json``, the part files it
 names, ``finger.stl`` and ``fingerpad.stl``), so ``fcso report DIR`` redraws
 the same page without designing again.
@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ..design import DesignResult, flat_finger
 from ..finger import pad_to_finger
 from ..layout import REPORT_HTML, write_atomic
 from ..measure import quality_decimals, quality_title, quality_words
 from ..parallel import WorkerPool, resolve_jobs
+from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
 from ..sampler import REJECTION_REASONS

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..design import DesignResult
 from ..errors import MeshError
 from ..layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, set_folder, write_atomic
+from ..pipeline import DesignResult
 from ..progress import Progress
 from ..report.models import JobReport
 from ..sets import SetsResult

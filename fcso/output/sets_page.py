@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import trimesh
 
-from ..design import flat_finger
 from ..finger import pad_to_finger
+from ..pipeline import flat_finger
 from ..report.models import FingerSetsReport, JobReport, PadSizeReport
 from .html import closing_sections, html_page, image, text
 from .viewer import VIEW_FACES, glb_base64, viewer_section

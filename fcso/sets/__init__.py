@@ -8,9 +8,9 @@ alone, so that every graspable scenario keeps ``retained = E / E*`` of its
 solo quality ``E*``.
 
 Sampling and pad geometries depend on a scenario alone, so they are made
-once for the whole job (:func:`fcso.design.prepare`); the partition search
+once for the whole job (:func:`fcso.pipeline.prepare`); the partition search
 only screens candidate sets (:func:`screen_set`) and the chosen sets are
-designed exactly (:func:`fcso.design.design_prepared`). Every quality is an
+designed exactly (:func:`fcso.pipeline.design_prepared`). Every quality is an
 effective area E in mm²; retained qualities are ratios (0..1).
 """
 

@@ -11,9 +11,9 @@ import mujoco
 import numpy as np
 import trimesh
 
-from ..design import DesignResult, flat_finger
 from ..finger import pad_to_finger
 from ..parallel import WorkerPool, resolve_jobs
+from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
 from ..version import __version__

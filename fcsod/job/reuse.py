@@ -26,7 +26,7 @@ from pydantic import Field
 import fcso
 from fcso.config import DesignConfig
 from fcso.layout import REPORT_JSON, set_finger_path
-from fcso.report.design import part_report
+from fcso.pipeline.report import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 
 from .. import __version__

@@ -18,11 +18,11 @@ from examples.sim_parts import (
     upright_grasp_settings,
 )
 from fcso.capture import pad_landscapes
-from fcso.design import finish_candidate, prepare
 from fcso.evaluate import printed_lead_in_deg
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
+from fcso.pipeline import finish_candidate, prepare
 from fcso.screen import ScreenGrid
 
 

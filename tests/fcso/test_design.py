@@ -9,11 +9,11 @@ import trimesh
 import fcso
 from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
 from fcso.config import DesignConfig
-from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
 from fcso.parts import Part
+from fcso.pipeline import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
 

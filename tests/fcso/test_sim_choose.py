@@ -8,10 +8,10 @@ import pytest
 
 import fcso
 from examples.sim_parts import plain_box, two_ridge_block, upright_grasp_settings
-from fcso.design import finish_candidate
 from fcso.finger import fuse
 from fcso.geometry import to_manifold
 from fcso.parts import Part
+from fcso.pipeline import finish_candidate
 from fcso.report.models import chosen_candidate
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
