@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import manifold3d
 import numpy as np
 import trimesh
 
@@ -17,7 +20,7 @@ from .geometry import (
     to_manifold,
     triangle_areas_normals,
 )
-from .screen import ScreenGrid, column_heights
+from .grid import ScreenGrid, column_heights
 
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_pads", "collision_finger", "collision_descent")
@@ -176,10 +179,7 @@ def sample_grasps(
         count of rejections per reason in :data:`REJECTION_REASONS`.
     """
     length, width = sampler.length_mm, sampler.width_mm
-    thickness, depth = sampler.thickness_mm, sampler.penetration_mm
     stride, clearance = sampler.stride, sampler.table_clearance_mm
-    open_half = gripper.max_opening_mm / 2.0
-    plate_height = width + gripper.finger_height_mm
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     top = float(vertices[:, 2].max())
@@ -192,7 +192,6 @@ def sample_grasps(
         b = np.cross([0.0, 0.0, 1.0], a)
         # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
-        part_local = None  # the part as a solid in (a, b, z), made when a thin section needs it
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
         positions = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
         if len(positions) == 0:
@@ -205,86 +204,131 @@ def sample_grasps(
             feature_heights = along_z - width / 2.0
             feature_heights = feature_heights[(feature_heights >= clearance) & (feature_heights < top)]
         stride_positions = set(np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride).tolist())
+        stride_heights = np.arange(clearance, top, stride)
+        heights = _merge_positions(stride_heights, feature_heights)
+        # the part as a solid in (a, b, z), made when a thin section first needs it
+        part_solid = functools.cache(functools.partial(_solid, local, faces))
         for s in positions[centres[0] :: centres[1]]:
-            slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
-            if len(slab_f) == 0:
-                continue
-            # "+" plate: v = b - (s - L/2); "-" plate: v = (s + L/2) - b
-            plate_b = {
-                1: (s - length / 2.0 + plate.v_min_mm, s - length / 2.0 + plate.v_max_mm),
-                -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
-            }
-            plate_slabs = {
-                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)))
-                for side, (low, high) in plate_b.items()
-            }
-            stride_heights = np.arange(clearance, top, stride)
-            heights = _merge_positions(stride_heights, feature_heights)
-            bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
-            for h in heights:
-                prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
-                if len(prism_f) == 0:
-                    continue
-                tried += 1
-                a_min, a_max = extent
-                area_plus = half_space_area(prism_v, prism_f, prism_areas, 0, 1.0, a_max - depth)
-                area_minus = half_space_area(prism_v, prism_f, prism_areas, 0, -1.0, -(a_min + depth))
-                if min(area_plus, area_minus) < sampler.min_contact_area:
-                    rejected["contact"] += 1
-                    continue
-                span = a_max - a_min
-                fits_open = span + clearance <= gripper.max_opening_mm - 2.0 * thickness
-                fits_closed = span - 2.0 * depth + 2.0 * thickness >= gripper.min_opening_mm
-                if not (fits_open and fits_closed):
-                    rejected["fit"] += 1
-                    continue
-                # seated, each pad's inner face lies D inside the part's extent: across a section thinner than 2D
-                # the two pad boxes overlap, and where the part does not fill that overlap both pads keep material
-                # there, so the fingers meet before the part is seated (the paper's bunny by its ear: 1.4 mm)
-                if span < 2.0 * depth:
-                    if part_local is None:
-                        part_local = to_manifold(trimesh.Trimesh(local, faces, process=False))
-                    crossing = box((a_max - depth, s - length / 2.0, h), (a_min + depth, s + length / 2.0, h + width))
-                    empty_mm3 = crossing.volume() - (crossing ^ part_local).volume()
-                    if empty_mm3 > PADS_MEET_SHARE * crossing.volume():
-                        rejected["collision_pads"] += 1
-                        continue
-                closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
-                if any(
-                    plate_slabs[side].meets_box(
-                        *_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height)
-                    )
-                    for side in SIDES
-                ):
-                    rejected["collision_finger"] += 1
-                    continue
-                centre = (a_max + a_min) / 2.0
-                column = bands.above(h)
-                open_back = {1: centre + open_half, -1: centre - open_half}
-                if (
-                    column is not None
-                    and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)
-                ) or any(
-                    plate_slabs[side].meets_box(
-                        *_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF)
-                    )
-                    for side in SIDES
-                ):
-                    rejected["collision_descent"] += 1
-                    continue
-                samples.append(
-                    GraspSample(
-                        yaw_deg=float(yaw_deg),
-                        s_mm=float(s),
-                        h_mm=float(h),
-                        a_max_mm=a_max,
-                        a_min_mm=a_min,
-                        area_plus_mm2=area_plus,
-                        area_minus_mm2=area_minus,
-                        on_feature=bool(s not in stride_positions or not np.isin(h, stride_heights)),
-                    )
-                )
+            found, tried_here = _samples_at(
+                local,
+                faces,
+                float(yaw_deg),
+                s,
+                s in stride_positions,
+                heights,
+                stride_heights,
+                sampler,
+                gripper,
+                plate,
+                part_solid,
+                rejected,
+            )
+            samples += found
+            tried += tried_here
     return SamplerResult(samples=samples, rejected=rejected, tried=tried)
+
+
+def _samples_at(
+    local: np.ndarray,
+    faces: np.ndarray,
+    yaw_deg: float,
+    s: float,
+    on_stride: bool,
+    heights: np.ndarray,
+    stride_heights: np.ndarray,
+    sampler: SamplerConfig,
+    gripper: GripperConfig,
+    plate: FingerPlate,
+    part_solid: Callable[[], manifold3d.Manifold],
+    rejected: dict[str, int],
+) -> tuple[list[GraspSample], int]:
+    """The valid samples of one pad position ``s`` along the sliding axis of one yaw, at every height, and how many
+    heights had any part between the pads (:func:`sample_grasps`; ``local``: the part in (a, b, z); ``on_stride``:
+    ``s`` is a stride position, not only a feature's; rejections counted into ``rejected``)."""
+    length, width = sampler.length_mm, sampler.width_mm
+    thickness, depth = sampler.thickness_mm, sampler.penetration_mm
+    clearance = sampler.table_clearance_mm
+    open_half = gripper.max_opening_mm / 2.0
+    plate_height = width + gripper.finger_height_mm
+    samples: list[GraspSample] = []
+    tried = 0
+    slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
+    if len(slab_f) == 0:
+        return [], 0
+    # "+" plate: v = b - (s - L/2); "-" plate: v = (s + L/2) - b
+    plate_b = {
+        1: (s - length / 2.0 + plate.v_min_mm, s - length / 2.0 + plate.v_max_mm),
+        -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
+    }
+    plate_slabs = {
+        side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)))
+        for side, (low, high) in plate_b.items()
+    }
+    bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
+    for h in heights:
+        prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
+        if len(prism_f) == 0:
+            continue
+        tried += 1
+        a_min, a_max = extent
+        area_plus = half_space_area(prism_v, prism_f, prism_areas, 0, 1.0, a_max - depth)
+        area_minus = half_space_area(prism_v, prism_f, prism_areas, 0, -1.0, -(a_min + depth))
+        if min(area_plus, area_minus) < sampler.min_contact_area:
+            rejected["contact"] += 1
+            continue
+        span = a_max - a_min
+        fits_open = span + clearance <= gripper.max_opening_mm - 2.0 * thickness
+        fits_closed = span - 2.0 * depth + 2.0 * thickness >= gripper.min_opening_mm
+        if not (fits_open and fits_closed):
+            rejected["fit"] += 1
+            continue
+        # seated, each pad's inner face lies D inside the part's extent: across a section thinner than 2D
+        # the two pad boxes overlap, and where the part does not fill that overlap both pads keep material
+        # there, so the fingers meet before the part is seated (the paper's bunny by its ear: 1.4 mm)
+        if span < 2.0 * depth:
+            crossing = box((a_max - depth, s - length / 2.0, h), (a_min + depth, s + length / 2.0, h + width))
+            empty_mm3 = crossing.volume() - (crossing ^ part_solid()).volume()
+            if empty_mm3 > PADS_MEET_SHARE * crossing.volume():
+                rejected["collision_pads"] += 1
+                continue
+        closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
+        if any(
+            plate_slabs[side].meets_box(
+                *_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height)
+            )
+            for side in SIDES
+        ):
+            rejected["collision_finger"] += 1
+            continue
+        centre = (a_max + a_min) / 2.0
+        column = bands.above(h)
+        open_back = {1: centre + open_half, -1: centre - open_half}
+        if (
+            column is not None
+            and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)
+        ) or any(
+            plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
+            for side in SIDES
+        ):
+            rejected["collision_descent"] += 1
+            continue
+        samples.append(
+            GraspSample(
+                yaw_deg=yaw_deg,
+                s_mm=float(s),
+                h_mm=float(h),
+                a_max_mm=a_max,
+                a_min_mm=a_min,
+                area_plus_mm2=area_plus,
+                area_minus_mm2=area_minus,
+                on_feature=bool(not on_stride or not np.isin(h, stride_heights)),
+            )
+        )
+    return samples, tried
+
+
+def _solid(local: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
+    return to_manifold(trimesh.Trimesh(local, faces, process=False))
 
 
 def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

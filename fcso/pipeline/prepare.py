@@ -25,6 +25,7 @@ from ..finger import (
     parametric_finger,
 )
 from ..geometry import to_manifold
+from ..grid import ScreenGrid
 from ..parallel import WorkerPool, resolve_jobs
 from ..parts import Part, load_parts
 from ..poses import select_poses, stable_poses
@@ -33,7 +34,7 @@ from ..report.models import (
     UngraspableReport,
 )
 from ..sampler import SamplerResult, face_yaws, sample_grasps
-from ..screen import NormalLattice, ScreenedCandidate, ScreenGrid, screen
+from ..screen import NormalLattice, ScreenedCandidate, screen
 from .report import (
     ungraspable_report,
 )

@@ -19,11 +19,11 @@ from examples.sim_parts import (
 )
 from fcso.capture import pad_landscapes
 from fcso.evaluate import printed_lead_in_deg
+from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate, prepare
-from fcso.screen import ScreenGrid
 
 
 def _prepared(mesh, name: str, **sections):
