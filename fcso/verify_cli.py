@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .sim.config import VerifyConfig, load_verify_config, with_print_density
-from .sim.report import VerificationReport, reused_note
+if TYPE_CHECKING:
+    from .sim.config import VerifyConfig
+    from .sim.report import VerificationReport
+
+# the parser's options need nothing of the simulation: each command imports it when it runs (fcso.cli)
 
 
 def add_verify_command(commands) -> None:
@@ -42,6 +46,8 @@ def add_design_options(parser) -> None:
 
 def settings(args) -> VerifyConfig:
     """The ``[verify]`` settings of ``--config`` with the command line's overrides."""
+    from .sim.config import load_verify_config
+
     config = load_verify_config(getattr(args, "config", None))
     overrides = {}
     if getattr(args, "trials", None) is not None:
@@ -56,6 +62,7 @@ def settings(args) -> VerifyConfig:
 def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
     from .output.verification_page import load_design, write_verification
+    from .sim.config import with_print_density
     from .sim.verify import verify
 
     report, design = load_design(args.directory)
@@ -73,6 +80,8 @@ def run_verify(args, progress) -> int:
 
 def summary(verification: VerificationReport) -> str:
     """A few lines per scenario: success rates, median errors and holding forces, designed against flat."""
+    from .sim.report import reused_note
+
     lines = []
     for s in verification.scenarios:
         stopped = "" if s.stopped_after_trials is None else f" (trials stopped after {s.stopped_after_trials})"
@@ -97,6 +106,7 @@ def verify_design_outputs(result, args, progress) -> int:
     from .output.files import write_outputs
     from .output.verification_page import ranking_html, write_verification
     from .sim.choose import verify_top
+    from .sim.config import with_print_density
     from .sim.verify import design_under_test, verify
 
     config = with_print_density(settings(args), result.report.settings)
