@@ -1,5 +1,6 @@
-"""The layout the code keeps: no import cycles, the method free of presentation, no private name used across modules,
-and a daemon whose supervisor loads neither MuJoCo nor matplotlib.
+"""The layout the code keeps: no import cycles between modules nor between packages, the method free of presentation,
+no private name used across modules, commands that start without the heavy libraries, and a daemon whose supervisor
+loads neither MuJoCo nor matplotlib.
 
 The imports are read from the source files with :mod:`ast` (every import, at
 the top of a module or inside a function, except those under
@@ -9,6 +10,7 @@ the top of a module or inside a function, except those under
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +24,10 @@ PACKAGES = ("fcso", "fcsod")
 PRESENTATION = ("fcso.output", "fcso.cli", "fcso.verify_cli", "matplotlib")
 #: What the method may take from the output package: the names of the folder layout, which the reports record.
 LAYOUT = "fcso.layout"
+#: Libraries that take long to import and serve only some commands: a command's start-up loads none of them
+#: unless it uses them (numba: the compiled kernels of the pipeline; MuJoCo: the verification; matplotlib: the
+#: pictures; HiGHS: the holding forces; Dask: a cluster).
+HEAVY = ("numba", "mujoco", "matplotlib", "highspy", "dask", "distributed")
 #: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
 #: ``fcso``).
 NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.verify_cli", "fcso.output")
@@ -139,9 +145,104 @@ def within(module: str, prefixes) -> bool:
     return any(module == p or module.startswith(p + ".") for p in prefixes)
 
 
+def package_of(module: str, package: str) -> str:
+    """The part of ``package`` that ``module`` belongs to: its subpackage, or itself when it is a module of the
+    package's top level (``fcso.report.models`` -> ``fcso.report``, ``fcso.cli`` -> ``fcso.cli``)."""
+    return ".".join(module.split(".")[: package.count(".") + 2])
+
+
+def package_graph(package: str) -> dict[str, set[str]]:
+    """The import graph of ``package`` one level up: its subpackages and top-level modules, and which import which
+    (a module of one importing a module of another)."""
+    graph: dict[str, set[str]] = {}
+    for name, targets in import_graph((package,)).items():
+        if name == package:
+            continue
+        source = package_of(name, package)
+        graph.setdefault(source, set())
+        graph[source] |= {package_of(t, package) for t in targets} - {source}
+    return graph
+
+
+def modules_loaded_by(entry_point: str, argv: list[str]) -> set[str]:
+    """The modules a command loads: ``entry_point`` (``module:function``, the function taking ``argv``) run in a fresh
+    interpreter, its ``sys.modules`` read at its end (after the exit of ``--help``, too)."""
+    module, function = entry_point.split(":")
+    script = (
+        "import json, sys\n"
+        f"from {module} import {function}\n"
+        "try:\n"
+        f"    {function}({argv!r})\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "sys.stderr.write('\\nMODULES ' + json.dumps(sorted(sys.modules)) + '\\n')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=True)
+    return set(json.loads(result.stderr.rpartition("MODULES ")[2]))
+
+
 @pytest.mark.parametrize("package", PACKAGES)
 def test_no_import_cycle(package):
     assert cycles(import_graph((package,))) == []
+
+
+@pytest.mark.parametrize(
+    "package",
+    [
+        "fcso",
+        pytest.param(
+            "fcsod",
+            marks=pytest.mark.xfail(
+                strict=True, reason="bus.session -> service.journal and record.audit -> job: fcsod's half of issue 45"
+            ),
+        ),
+    ],
+)
+def test_no_package_cycle(package):
+    """Between the subpackages and top-level modules of a package: a layer imports only layers below it."""
+    assert cycles(package_graph(package)) == []
+
+
+def test_the_package_graph_finds_a_cycle_the_modules_do_not_have(tmp_path, monkeypatch):
+    """Two packages that import each other through different modules: no module cycle, a package cycle."""
+    for folder, text in {
+        "loop": "",
+        "loop/low": "",
+        "loop/low/model.py": "X = 1\n",
+        "loop/low/use.py": "from ..high.page import Y\n",
+        "loop/high": "",
+        "loop/high/page.py": "from ..low.model import X\n\nY = X\n",
+    }.items():
+        path = tmp_path / folder
+        if path.suffix:
+            path.write_text(text)
+        else:
+            path.mkdir()
+            (path / "__init__.py").write_text(text)
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert cycles(import_graph(("loop",))) == []
+    assert cycles(package_graph("loop")) == [["loop.high", "loop.low"]]
+
+
+@pytest.mark.parametrize(
+    ("entry_point", "argv"),
+    [
+        ("fcso.cli:main", ["--help"]),
+        ("fcso.cli:main", ["design", "--help"]),
+        ("fcso.cli:main", ["verify", "--help"]),
+    ],
+)
+def test_a_command_starts_without_the_heavy_libraries(entry_point, argv):
+    """The start-up budget as an import list, not a time: a command that does not design, draw or simulate loads
+    none of :data:`HEAVY`, nor the pipeline."""
+    loaded = modules_loaded_by(entry_point, argv)
+    assert sorted(m for m in loaded if within(m, HEAVY + ("fcso.pipeline", "fcso.sim"))) == []
+
+
+def test_the_import_list_sees_a_heavy_import(tmp_path):
+    """The check above can fail: ``fcso design`` loads the pipeline and numba before it finds its part missing."""
+    loaded = modules_loaded_by("fcso.cli:main", ["design", str(tmp_path / "missing.stl"), "--out", str(tmp_path)])
+    assert {"numba", "fcso.pipeline"} <= loaded
 
 
 def test_the_cycle_finder_finds_a_cycle_hidden_in_a_function(tmp_path, monkeypatch):
