@@ -25,7 +25,8 @@ from ..report.models import (
 from .report import ungraspable_entry
 
 if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
-    from ..sets.partition import PartitionAttempt, PartitionOutcome
+    from ..sets.judged import PartitionAttempt
+    from ..sets.partition import PartitionOutcome
 
 
 def zero_quality_report(scenario: Scenario) -> UngraspableReport:

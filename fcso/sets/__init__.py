@@ -16,14 +16,13 @@ effective area E in mm²; retained qualities are ratios (0..1).
 
 from .design import SetsResult, design_sets
 from .identity import SAME_GEOMETRY_TOLERANCE_MM, identical_groups, same_geometry
+from .judged import PartitionAttempt, search_judged_exactly
 from .partition import (
-    PartitionAttempt,
     PartitionOutcome,
     canonical_assignment,
     max_clique,
     partition_key,
     restricted_growth,
-    search_judged_exactly,
     search_partition,
 )
 from .screening import SetScreener, SetScreening, SoloQuality, screen_set, screening_pools, solo_quality

@@ -35,7 +35,8 @@ from ..progress import Progress
 from ..report.models import DesignReport, FingerSetsReport, JobReport, UngraspableReport, chosen_candidate
 from ..version import __version__
 from .identity import identical_groups
-from .partition import PartitionAttempt, PartitionOutcome, search_judged_exactly
+from .judged import PartitionAttempt, search_judged_exactly
+from .partition import PartitionOutcome
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality
 
 
@@ -385,7 +386,7 @@ def _screened_retained(
 ) -> dict[int, float]:
     """Scenario number -> what screening says the delivered partition retains there; empty when it was never
     screened."""
-    # one finger designed to compare was never screened as a set (fcso.sets.partition.PartitionAttempt): its
+    # one finger designed to compare was never screened as a set (fcso.sets.judged.PartitionAttempt): its
     # scenarios have no screened figure
     delivered = next(a for a in attempts if a.assignment == outcome.assignment)
     if delivered.screened_worst is None:
