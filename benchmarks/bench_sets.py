@@ -174,8 +174,28 @@ def retained_of_single(single: fcso.DesignResult, stars: dict[tuple[str, int], f
     return np.array(values)
 
 
-def run_case(parts: int, runs: int, target_s: float) -> None:
-    config = fcso.DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}})
+def served_figures(report) -> str:
+    """What issue 48 asks beside the time: worst and median retained, the worst of the served parts, the parts not
+    served, the sets used of those allowed and how many the job needs."""
+    served = [
+        s.retained
+        for s in report.scenarios
+        if s.retained is not None and s.part not in {n.part for n in report.not_served}
+    ]
+    return (
+        f"worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, worst of the served parts "
+        + (f"{min(served):.3f}" if served else "-")
+        + f" (min_retained {report.min_retained:g}); {len(report.not_served)} parts not served"
+        + (f" ({', '.join(n.part for n in report.not_served)})" if report.not_served else "")
+        + f"; sets used {len(report.sets)} of {report.sets_allowed} allowed (max {report.max_sets}), the job needs "
+        + (str(report.sets_needed) if report.sets_needed is not None else "more than allowed")
+    )
+
+
+def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4) -> None:
+    config = fcso.DesignConfig().updated(
+        {"poses": {"count": 1, "select": "most_probable"}, "finger_sets": {"max": max_sets}}
+    )
     single_config = config.updated({"finger_sets": {"max": 1}})
     loaded = job(parts)
     sets_seconds, single_seconds, sets_cpu = [], [], []
@@ -202,10 +222,7 @@ def run_case(parts: int, runs: int, target_s: float) -> None:
         f"{statistics.median(sets_cpu):.1f} s; timings of the last run: "
         f"{result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
     )
-    print(
-        f"  {len(report.sets)} sets, worst retained {report.worst_retained:.3f}, median {report.median_retained:.3f}, "
-        f"partition: {report.search.method}"
-    )
+    print(f"  {served_figures(report)}; partition: {report.search.method}")
     print(
         f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: "
         f"{', '.join(report.search.conflict_clique)}), "
@@ -373,13 +390,15 @@ def stage_log(stage: str, done: int, total: int, note: str = "", _last=[None]) -
         )
 
 
-def curve_run(parts: int) -> dict:
+def curve_run(parts: int, max_sets: int | str = 4) -> dict:
     """One design of the curve's job of ``parts`` parts, in this process (a fresh one: :func:`run_curve`).
 
     Returns its wall and CPU seconds, the peak memory of this process, of its largest worker and of all of them
     together (PSS), and the report's figures as printed.
     """
-    config = fcso.DesignConfig().updated({"poses": {"count": 1, "select": "most_probable"}})
+    config = fcso.DesignConfig().updated(
+        {"poses": {"count": 1, "select": "most_probable"}, "finger_sets": {"max": max_sets}}
+    )
     loaded = job(parts)
     started, started_cpu = time.perf_counter(), cpu_seconds()
     with PeakProportionalSet() as memory:
@@ -400,12 +419,13 @@ def curve_run(parts: int) -> dict:
         "partition_s": result.job().timings_s.get("partition", 0.0),
         "figures": f"{len(report.sets)} | {report.worst_retained:.3f} (median {report.median_retained:.3f}) | "
         f"{report.search.method}",
+        "served": served_figures(report),
         "details": f"timings {result.job().timings_s}; sets tried {report.search.sets_tried}, lower bound "
         f"{report.search.lower_bound_sets}, {report.search.set_screenings} set searches; attempts {attempts}",
     }
 
 
-def run_curve(sizes: list[int], runs: int) -> None:
+def run_curve(sizes: list[int], runs: int, max_sets: int | str = 4) -> None:
     """The scaling curve of issue 24: time, time per part, worst retained and peak memory per job size.
 
     Every run designs in a fresh process, as fcsod's workers do (one job each): a process that has designed a large
@@ -423,7 +443,7 @@ def run_curve(sizes: list[int], runs: int) -> None:
         for _ in range(runs):
             # not multiprocessing.Pool: its processes are daemons, which may not fork the design's workers
             with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as fresh:
-                measured.append(fresh.submit(curve_run, parts).result())
+                measured.append(fresh.submit(curve_run, parts, max_sets).result())
         median = statistics.median(m["seconds"] for m in measured)
         per_part = median / parts
         if first is None:
@@ -440,7 +460,8 @@ def run_curve(sizes: list[int], runs: int) -> None:
             flush=True,
         )
         each = ", ".join(f"{m['seconds']:.1f}" for m in measured)
-        print(f"    runs {each} s; {measured[-1]['details']}", flush=True)
+        print(f"    runs {each} s; {measured[-1]['served']}", flush=True)
+        print(f"    {measured[-1]['details']}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -449,16 +470,20 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", type=int, choices=(12, 30), help="one job only")
     parser.add_argument("--curve", type=int, nargs="+", help="job sizes (distinct parts) of the scaling curve")
     parser.add_argument("--baseline", metavar="COMMIT", help="the 12-part job on this code and on COMMIT's, in turns")
+    parser.add_argument(
+        "--max", default="4", help="[finger_sets] max of the sets runs and the curve: a number or auto (default 4)"
+    )
     args = parser.parse_args(argv)
+    max_sets = args.max if args.max == "auto" else int(args.max)
     if args.baseline:
         run_baseline(args.baseline, args.runs)
         return
     if args.curve:
-        run_curve(args.curve, args.runs)
+        run_curve(args.curve, args.runs, max_sets)
         return
     for parts, target in ((12, 60.0), (30, 180.0)):
         if args.only in (None, parts):
-            run_case(parts, args.runs, target)
+            run_case(parts, args.runs, target, max_sets)
 
 
 if __name__ == "__main__":

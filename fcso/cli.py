@@ -78,6 +78,19 @@ class ProgressLine:
             self.stage = None
 
 
+def _finger_sets_count(text: str) -> int | str:
+    """``--finger-sets``: a number of sets, at least 1, or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        count = int(text)
+    except ValueError:
+        count = 0
+    if count < 1:
+        raise argparse.ArgumentTypeError(f"expected a number of sets (1 or more) or 'auto', got {text!r}")
+    return count
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="fcso", description="Custom gripper fingerpads for 3D-printed parts (FCSO).")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -114,9 +127,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--finger-sets",
-        type=int,
-        metavar="N",
-        help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part",
+        type=_finger_sets_count,
+        metavar="N|auto",
+        help="most finger sets for the job (finger_sets.max, default 4); 1: one finger for every part; auto: the "
+        "fewest that serve every part",
     )
     run.add_argument(
         "--min-retained",

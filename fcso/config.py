@@ -351,11 +351,11 @@ class QualityConfig(_Section):
 class FingerSetsConfig(_Section):
     """How many finger sets a job may use and what each part must keep (METHOD §11, ``[finger_sets]``)."""
 
-    max: int = Field(
+    max: Annotated[int, Field(ge=1)] | Literal["auto"] = Field(
         4,
-        ge=1,
         description="Most finger sets (fingers the cell changes between) for one job; "
-        "1: one finger for every part, the paper's method",
+        "1: one finger for every part, the paper's method; 'auto': the fewest sets that serve every part at "
+        "min_retained (as many as the job's distinct parts at most), the report saying how many it needs",
     )
     min_retained: float = Field(
         0.5,
@@ -385,6 +385,17 @@ class FingerSetsConfig(_Section):
         "most 2 x this + 1 parts, else each part's this many nearest neighbours by what it carves (and the pairs of "
         "the 2 x max most dissimilar parts), so the pair screenings grow linearly with the parts",
     )
+    unserved_fallback: Literal["flat_fingers", "manual"] = Field(
+        "manual",
+        description="Where the pick plan sends a part that no finger set serves (its set keeps less than "
+        "min_retained of its solo quality): 'flat_fingers', the cell's plain flat fingers, or 'manual', picked by "
+        "hand; never the set's finger",
+    )
+
+    def sets_allowed(self, parts: int) -> int:
+        """The most sets a job of ``parts`` distinct graspable parts may use: ``max``, or with ``"auto"`` one per
+        part (every part alone keeps its solo quality)."""
+        return max(1, parts) if self.max == "auto" else self.max
 
 
 class ComputeConfig(_Section):

@@ -163,6 +163,15 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             )
             + "</ul>"
         )
+    if sets.not_served:
+        section.append(
+            "<h3>Parts no set serves (picked with the fallback)</h3><ul>"
+            + "".join(
+                f"<li>{text(n.part)} ({n.quantity} pieces): {text(n.fallback.replace('_', ' '))}; {text(n.reason)}</li>"
+                for n in sets.not_served
+            )
+            + "</ul>"
+        )
     section += pad_sizes_section(sets.pad_sizes)
     return section
 
@@ -236,8 +245,20 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
         for part in step.parts:
             poses = ", ".join(str(g.pose_index) for g in part.grasps)
             lines.append(f"  pick {part.quantity} x {part.part} (poses {poses})")
+    for entry in sets.not_served:
+        lines.append(
+            f"not served: {entry.quantity} x {entry.part} to {entry.fallback.replace('_', ' ')} ({entry.reason})"
+        )
     if sets.ungraspable_parts:
         lines.append("not picked (no set can grasp them): " + ", ".join(sets.ungraspable_parts))
+    lines.append(
+        f"sets used {len(sets.sets)} of {sets.sets_allowed} allowed; "
+        + (
+            f"the job needs {sets.sets_needed}"
+            if sets.sets_needed is not None
+            else f"{len(sets.not_served)} not served"
+        )
+    )
     for attempt in sets.search.attempts:
         lines.append(
             f"{attempt.sets} set(s) ({attempt.source.replace('_', ' ')}): worst retained screened "

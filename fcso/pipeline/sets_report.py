@@ -13,6 +13,7 @@ from ..report.models import (
     FingerSetReport,
     FingerSetsReport,
     IdenticalPartsReport,
+    NotServedPart,
     PairConflictReport,
     PartitionAttemptReport,
     PartitionSearchReport,
@@ -63,10 +64,32 @@ def sets_report(
     """The report of the sets, their scenarios, identical parts and the pick plan."""
     settings = config.finger_sets
     several = len(designs) > 1
+    allowed = settings.sets_allowed(len(graspable))
     exact: dict[int, tuple[int, float]] = {}
-    sets, pick_plan = [], []
+    sets, pick_plan, not_served = [], [], []
     for label, (design_result, (chosen, numbers)) in enumerate(zip(designs, members), start=1):
         retained = exact_retained(chosen_candidate(design_result.report), numbers, solos)
+        part_retained = {
+            u: min(r for m, r in zip(numbers, retained) if prepared.scenarios[m].part_index == u) for u in chosen
+        }
+        for u in chosen:
+            if part_retained[u] < settings.min_retained:
+                not_served.append(
+                    _not_served_entry(
+                        prepared.parts[u].name,
+                        loaded,
+                        groups[u],
+                        label,
+                        part_retained[u],
+                        screened,
+                        numbers,
+                        u,
+                        prepared,
+                        len(designs),
+                        allowed,
+                        settings,
+                    )
+                )
         for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
             exact[m] = (label, quality.measure)
         folder = set_folder(label, several)
@@ -94,6 +117,7 @@ def sets_report(
                         grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
                     )
                     for u in chosen
+                    if part_retained[u] >= settings.min_retained
                 ],
             )
         )
@@ -108,8 +132,11 @@ def sets_report(
         if min(a, b) < settings.min_retained
     ]
     reached = min(kept) >= settings.min_retained
+    order = {prepared.parts[u].name: k for k, u in enumerate(graspable)}
     return FingerSetsReport(
         max_sets=settings.max,
+        sets_allowed=allowed,
+        sets_needed=len(designs) if reached else None,
         min_retained=settings.min_retained,
         sets=sets,
         scenarios=scenarios,
@@ -128,6 +155,7 @@ def sets_report(
         ungraspable_parts=[p.name for p in prepared.parts if p.name not in served],
         ungraspable=ungraspable,
         pick_plan=pick_plan,
+        not_served=sorted(not_served, key=lambda entry: order[entry.part]),
         search=PartitionSearchReport(
             method=outcome.method,
             description=_search_description(outcome, len(graspable), settings),
@@ -144,6 +172,33 @@ def sets_report(
             explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
             attempts=[_attempt_report(a, outcome, names) for a in attempts],
         ),
+    )
+
+
+def _not_served_entry(
+    name, loaded, group, label, kept, screened, numbers, part, prepared, used, allowed, settings
+) -> NotServedPart:
+    """The entry of a part whose set keeps ``kept`` < min_retained of its solo quality: which set, and why no set
+    serves it."""
+    why = [f"keeps {kept:.3f} of its solo quality in set {label}, below min_retained {settings.min_retained:g}"]
+    promised = [screened[m] for m in numbers if prepared.scenarios[m].part_index == part and m in screened]
+    if promised and min(promised) >= settings.min_retained:
+        why.append(f"screening promised {min(promised):.2f}: its set's exact design keeps less")
+    if used >= allowed:
+        why.append(f"every set allowed is used ({used} of max = {settings.max})")
+    else:
+        why.append(
+            f"{used} of {allowed} sets used: the partitions designed with more sets (search.attempts) kept less in "
+            f"their worst scenario"
+        )
+    return NotServedPart(
+        part=name,
+        copies=[loaded[i].name for i in group],
+        quantity=sum(len(loaded[i].instances) for i in group),
+        best_set=label,
+        retained=round(kept, 6),
+        reason="; ".join(why),
+        fallback=settings.unserved_fallback,
     )
 
 

@@ -334,16 +334,17 @@ class PartitionAttemptReport(ReportModel):
     sets: int = Field(description="Number of finger sets")
     parts: list[list[str]] = Field(description="Distinct parts of each set, sets numbered by their first part")
     screened_worst_retained: float | None = Field(
-        description="Least screened E / E* over its graspable scenarios; null for one finger designed to compare "
-        "(not screened as a set: its design judges it)"
+        description="Least screened E / E* over its graspable scenarios; null for one finger designed to compare and "
+        "for losers moved to a set of their own (not screened as sets: their designs judge them)"
     )
     exact_worst_retained: float = Field(
         description="Least exact E / E*: of its sets' designs when designed, else of the exact evaluation of each "
         "set's screened best candidate"
     )
-    source: Literal["search", "one_finger"] = Field(
+    source: Literal["search", "one_finger", "moved_losers"] = Field(
         description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
-        "compare when min_retained was not reached"
+        "compare when min_retained was not reached; moved_losers: a designed partition that missed min_retained "
+        "with sets left, its parts below min_retained moved to a set of their own"
     )
     designed: bool = Field(
         False,
@@ -421,10 +422,34 @@ class PickStep(ReportModel):
     parts: list[PickPart]
 
 
+class NotServedPart(ReportModel):
+    """A part no finger set serves: the set that holds it best keeps less than ``min_retained`` of its solo quality.
+    The pick plan sends it to the cell's fallback, never to that set's finger."""
+
+    part: str = Field(description="Part designed (its copies are listed in copies)")
+    copies: list[str] = Field(description="Every job part with this geometry")
+    quantity: int = Field(description="Pieces to pick")
+    best_set: int = Field(description="The finger set that holds it best (the one it was designed in)")
+    retained: float = Field(description="Least E / E* over its scenarios in that set")
+    reason: str = Field(description="Why no set serves it")
+    fallback: Literal["flat_fingers", "manual"] = Field(
+        description="Where the pick plan sends it ([finger_sets] unserved_fallback): the cell's flat fingers, or by "
+        "hand"
+    )
+
+
 class FingerSetsReport(ReportModel):
     """The job's finger sets (METHOD §11) and the pick plan for the cell."""
 
-    max_sets: int = Field(description="[finger_sets] max")
+    max_sets: int | Literal["auto"] = Field(description="[finger_sets] max")
+    sets_allowed: int = Field(
+        0, description="The most sets the job could use: max, or with 'auto' one per distinct graspable part"
+    )
+    sets_needed: int | None = Field(
+        None,
+        description="Sets this job needs so that every graspable part is served (min_retained reached): the sets "
+        "delivered when they serve every part, null when they do not",
+    )
     min_retained: float = Field(description="[finger_sets] min_retained")
     sets: list[FingerSetReport]
     scenarios: list[SetScenarioReport] = Field(
@@ -438,7 +463,15 @@ class FingerSetsReport(ReportModel):
     )
     ungraspable_parts: list[str] = Field(description="Parts no set can grasp in any chosen pose: not in the pick plan")
     ungraspable: list[UngraspableReport] = Field(description="Every ungraspable scenario")
-    pick_plan: list[PickStep] = Field(description="Finger sets in the order to mount them, each with the parts to pick")
+    pick_plan: list[PickStep] = Field(
+        description="Finger sets in the order to mount them, each with the parts it serves (not_served parts are not "
+        "in it)"
+    )
+    not_served: list[NotServedPart] = Field(
+        default_factory=list,
+        description="Parts whose best set keeps less than min_retained of their solo quality, job order: picked "
+        "with the fallback named, not with a set's finger",
+    )
     search: PartitionSearchReport
     pad_sizes: list[PadSizeReport] = Field(
         default_factory=list, description="Every pad size the sets were designed with and which was delivered"

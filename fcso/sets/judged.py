@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from ..config import DesignConfig
 from ..progress import Progress
-from .partition import PartitionOutcome, partition_key, search_partition
+from .partition import PartitionOutcome, canonical_assignment, partition_key, search_partition
 from .screening import SetScreener, sets_of
 
 
@@ -28,7 +28,9 @@ class PartitionAttempt:
         screened best candidate (:meth:`SetScreener.probe`).
     source : str
         ``"search"``: proposed by the partition search; ``"one_finger"``:
-        every part in one set, designed to compare.
+        every part in one set, designed to compare; ``"moved_losers"``: a
+        designed partition that missed ``min_retained`` with its losing parts
+        moved to a set of their own (:func:`_moved_losers`).
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
     designed : bool
@@ -104,7 +106,7 @@ def search_judged_exactly(
     judging = _Judging(screener, progress, design_exactly, config.finger_sets.min_retained)
     first = search_partition(screener, parts, config, progress)
     outcome = _proposals(judging, first, parts, config)
-    chosen = _delivered(judging, parts, finish_exactly)
+    chosen = _delivered(judging, parts, config.finger_sets.sets_allowed(parts), finish_exactly)
     outcome = dataclasses.replace(
         outcome,
         assignment=chosen.assignment,
@@ -126,6 +128,14 @@ class _Judging:
 
     def key(self, assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, self.screener.partition_retained(assignment), self.threshold)
+
+    def serving_key(self, attempt: PartitionAttempt) -> tuple:
+        """Order of designed partitions for delivery: one whose fingers can all be made, then the most parts served
+        (every scenario at ``min_retained``: the others go to the cell's fallback, issue 48), then :meth:`key`."""
+        retained = self.screener.partition_retained(attempt.assignment)
+        owners = [p for p in range(len(attempt.assignment)) for _ in self.screener.part_scenarios[p]]
+        losing = {o for o, r in zip(owners, retained) if r < self.threshold}
+        return (attempt.failure is None, len(attempt.assignment) - len(losing), self.key(attempt.assignment))
 
     def judge(
         self, assignment: tuple[int, ...], source: str, failure: str | None = None, designed: bool = False
@@ -151,7 +161,7 @@ def _proposals(judging: _Judging, outcome: PartitionOutcome, parts: int, config:
     """The search's proposals, each probed and judged exactly, while one screening said reaches ``min_retained``
     misses it exactly (:func:`search_judged_exactly`); the last proposal's outcome."""
     screener, progress, threshold, attempts = judging.screener, judging.progress, judging.threshold, judging.attempts
-    proposals = config.finger_sets.max
+    proposals = config.finger_sets.sets_allowed(parts)
     for proposal in range(proposals):
         if any(a.assignment == outcome.assignment for a in attempts):
             break
@@ -180,24 +190,36 @@ def _proposals(judging: _Judging, outcome: PartitionOutcome, parts: int, config:
 
 
 def _delivered(
-    judging: _Judging, parts: int, finish_exactly: Callable[[list[frozenset[int]]], list[str | None]]
+    judging: _Judging,
+    parts: int,
+    allowed: int,
+    finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
 ) -> PartitionAttempt:
-    """The best proposal designed, one finger for every part beside it when it misses ``min_retained``, and the best
-    designed partition whose fingers can be made (:func:`search_judged_exactly`)."""
+    """The best proposal designed; while its design misses ``min_retained`` and fewer than ``allowed`` sets are
+    used, its losing parts moved to a set of their own and designed again (:func:`_moved_losers`); one finger for
+    every part beside them when they miss it; and the best designed partition whose fingers can be made
+    (:func:`search_judged_exactly`)."""
     attempts = judging.attempts
     single = tuple([0] * parts)
     # one finger for every part is designed beside the partition's sets as soon as one of them misses min_retained
     best = judging.design(
         max(attempts, key=lambda a: judging.key(a.assignment)).assignment, "search", frozenset(range(parts))
     )
+    # METHOD §11 rev. 3 by the designs themselves: a proposal whose probe kept min_retained can miss it once its
+    # sets are designed (the angle block of issue 48: screened 0.78, designed 0.012); the sets max allows are used
+    # before fewer are delivered
+    current = best
+    while current.failure is None and current.exact_worst < judging.threshold and max(current.assignment) + 1 < allowed:
+        moved = _moved_losers(current.assignment, judging.screener.partition_retained(current.assignment), judging)
+        if moved is None or any(a.assignment == moved and a.designed for a in attempts):
+            break
+        current = judging.design(moved, "moved_losers")
+    best = max((a for a in attempts if a.designed), key=judging.serving_key)
     if (best.failure is not None or best.exact_worst < judging.threshold) and best.assignment != single:
         judging.design(single, "one_finger")
     while True:
         # a partition with a finger that cannot be made is delivered only when every one designed has one
-        chosen = max(
-            (a for a in attempts if a.designed),
-            key=lambda a: (a.failure is None, judging.key(a.assignment)),
-        )
+        chosen = max((a for a in attempts if a.designed), key=judging.serving_key)
         if chosen.failure is not None:
             break
         failures = [f for f in finish_exactly(sets_of(chosen.assignment)) if f is not None]
@@ -207,3 +229,20 @@ def _delivered(
         if not any(a.assignment == single and a.designed for a in attempts):
             judging.design(single, "one_finger")
     return chosen
+
+
+def _moved_losers(assignment: tuple[int, ...], retained, judging: _Judging) -> tuple[int, ...] | None:
+    """``assignment`` with the parts that keep less than ``min_retained`` (exact ``retained``, scenarios part by part)
+    moved to one new set: the parts left behind keep their pockets without the losers' carving, and the losers get
+    a finger of their own. A set whose every part loses keeps the part that loses least. None when nothing moves."""
+    owners = [p for p in range(len(assignment)) for _ in judging.screener.part_scenarios[p]]
+    worst = {p: min(float(r) for r, o in zip(retained, owners) if o == p) for p in range(len(assignment))}
+    losers = {p for p, r in worst.items() if r < judging.threshold}
+    for label in set(assignment):
+        members = [p for p, a in enumerate(assignment) if a == label]
+        if all(p in losers for p in members):
+            losers.discard(max(members, key=lambda p: (worst[p], -p)))
+    if not losers:
+        return None
+    new_label = max(assignment) + 1
+    return canonical_assignment([new_label if p in losers else a for p, a in enumerate(assignment)])

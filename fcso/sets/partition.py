@@ -178,7 +178,7 @@ def search_partition(screener: SetScreener, parts: int, config: DesignConfig, pr
     PartitionOutcome
     """
     settings = config.finger_sets
-    max_sets, threshold = settings.max, settings.min_retained
+    max_sets, threshold = settings.sets_allowed(parts), settings.min_retained
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_retained(assignment), threshold)
@@ -237,6 +237,9 @@ _SEARCHED_MIN_GAIN = 0.01
 _CLIQUE_ROUNDS = 12
 #: Parts probed pairwise for the conflict clique, per set allowed: the most dissimilar carvings (a constant).
 PROBES_PER_SET = 2
+#: Sets the scaled search probes for with ``[finger_sets] max = "auto"``: the default ``max``'s probes (the most
+#: dissimilar parts are where conflicts are likeliest; the conflict clique grows beyond them by its own probes).
+_AUTO_PROBED_SETS = 4
 #: Pairs quick-screened between two progress reports.
 _PAIRS_PER_PROGRESS = 2000
 
@@ -303,7 +306,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         pair_retained=pair_retained,
         lower_bound_sets=lower,
         conflict_clique=sorted(clique),
-        worst_retained_bound=_clique_bound(sorted(clique), pair_retained, settings.max),
+        worst_retained_bound=_clique_bound(sorted(clique), pair_retained, settings.sets_allowed(parts)),
         sets_tried=tried,
         set_screenings=len(screener.cache),
         fewest_sets_proven=partition_key(best, screener.partition_retained(best), threshold)[0] == 1
@@ -334,6 +337,7 @@ class _ConflictGraph:
     screener: SetScreener
     parts: int
     max_sets: int
+    probed_sets: int
     threshold: float
     progress: Progress
     every_pair: bool
@@ -367,7 +371,7 @@ class _ConflictGraph:
         degree = suspected.sum(axis=1)
         order = sorted(range(self.parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
         candidates = [p for p in order if p not in clique]
-        for part in candidates[: 2 * PROBES_PER_SET * self.max_sets]:
+        for part in candidates[: 2 * PROBES_PER_SET * self.probed_sets]:
             if len(clique) > self.max_sets:
                 break
             self.quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
@@ -379,14 +383,15 @@ class _ConflictGraph:
 def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> _ConflictGraph:
     """Step 1 of :func:`_scaled_search`: the pairs to screen, screened quickly."""
     settings = config.finger_sets
-    max_sets = settings.max
+    max_sets = settings.sets_allowed(parts)
+    probed_sets = _AUTO_PROBED_SETS if settings.max == "auto" else settings.max
     every_pair = parts - 1 <= 2 * settings.pairs_per_part
     descriptors = None
     if every_pair:
         pairs, probes = list(itertools.combinations(range(parts), 2)), list(range(parts))
     else:
         descriptors = carving_descriptors(screener)
-        probes = sorted(farthest_point_order(descriptors, PROBES_PER_SET * max_sets))
+        probes = sorted(farthest_point_order(descriptors, PROBES_PER_SET * probed_sets))
         pairs = sorted(
             nearest_neighbour_pairs(descriptors, settings.pairs_per_part) | set(itertools.combinations(probes, 2))
         )
@@ -394,6 +399,7 @@ def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, pro
         screener,
         parts,
         max_sets,
+        probed_sets,
         settings.min_retained,
         progress,
         every_pair,
@@ -433,8 +439,13 @@ def _partition_by_counts(
     screener: SetScreener, placing: np.ndarray, lower: int, config: DesignConfig, progress: Progress
 ) -> tuple[tuple[int, ...], list[int]]:
     """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then from ``lower`` sets up, placed greedily
-    by ``placing`` (pairs' compatibility) and improved by moves; the best seen and the numbers of sets tried."""
-    max_sets, threshold = config.finger_sets.max, config.finger_sets.min_retained
+    by ``placing`` (pairs' compatibility) and improved by moves; the best seen and the numbers of sets tried.
+
+    With ``max = "auto"`` the first partition may use one set per part: the greedy placing opens a set only for a
+    part no set suits, so it uses as many as the conflicts need; fewer are then tried from ``lower`` up to it.
+    """
+    settings = config.finger_sets
+    max_sets, threshold = settings.sets_allowed(len(placing)), settings.min_retained
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_estimate(assignment), threshold)
@@ -444,15 +455,18 @@ def _partition_by_counts(
 
     tried, seen = [], []
     first = min(lower, max_sets)
+    counts = [max_sets]
     step = max_sets - first + 1
     # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
     # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
-    # searched; else the fewest sets from the lower bound up
-    for number, count in enumerate([max_sets] + list(range(first, max_sets))):
+    # searched; else the fewest sets from the lower bound up (with "auto", up to the sets the first partition used)
+    for number, count in enumerate(counts):
         tried.append(count)
         progress("partition", number, step, f"{count} sets")
 
-        def moved(move: int, assignment: tuple[int, ...], count: int = count, number: int = number) -> None:
+        def moved(
+            move: int, assignment: tuple[int, ...], count: int = count, number: int = number, step: int = step
+        ) -> None:
             worst = float(screener.partition_estimate(assignment).min())
             progress("partition", number, step, f"{count} sets: move {move}, worst retained {worst:.2f}")
 
@@ -469,6 +483,9 @@ def _partition_by_counts(
         reached = searched_key(current)[0] == 1
         if reached != (count == max_sets):
             break
+        if number == 0:
+            counts.extend(range(first, max(current) + 1 if settings.max == "auto" else max_sets))
+            step = len(counts)
     progress("partition", step, step, f"{tried[-1]} sets")
     return max(seen, key=searched_key), tried
 

@@ -14,7 +14,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from fcso.report.models import CandidateReport, GraspReport, PickPart, ScenarioQuality
+from fcso.report.models import CandidateReport, GraspReport, NotServedPart, PickPart, ScenarioQuality
 
 #: States of a job in the journal and on the bus.
 JobState = Literal["queued", "running", "done", "failed"]
@@ -161,6 +161,15 @@ class PlanMessage(_Message):
     )
     worst_retained: float | None = Field(description="Least E / E* over the job's graspable scenarios")
     ungraspable_parts: list[str] = Field(description="Parts no set can grasp: not in the plan")
+    not_served: list[NotServedPart] = Field(
+        default_factory=list,
+        description="Parts whose best set keeps less than min_retained of their solo quality: not picked with any "
+        "set's finger, but with the fallback each names (the cell's flat fingers, or by hand)",
+    )
+    sets_allowed: int = Field(0, description="The most sets the job could use ([finger_sets] max, or one per part)")
+    sets_needed: int | None = Field(
+        None, description="Sets the job needs to serve every part at min_retained; null when the plan does not"
+    )
     partition: str = Field(description="How the sets were found and what bounds them")
 
 

@@ -111,6 +111,9 @@ def plan_message(
         min_retained_reached=report.min_retained_reached,
         worst_retained=report.worst_retained,
         ungraspable_parts=report.ungraspable_parts,
+        not_served=report.not_served,
+        sets_allowed=report.sets_allowed,
+        sets_needed=report.sets_needed,
         partition=report.search.description,
     )
     return BusMessage.json_body(prefix, cell, "plan", plan)
@@ -138,6 +141,11 @@ def plan_lines(plan: dict) -> list[str]:
                 f"    pick {part['quantity']} x {part['part']} (poses "
                 f"{', '.join(str(g['pose_index']) for g in part['grasps'])})"
             )
+    for entry in plan.get("not_served", []):
+        lines.append(
+            f"  not served: {entry['quantity']} x {entry['part']} to {entry['fallback'].replace('_', ' ')} "
+            f"(best set {entry['best_set']} keeps {entry['retained']:.3f}: {entry['reason']})"
+        )
     if plan["ungraspable_parts"]:
         lines.append("  not picked (no set can grasp them): " + ", ".join(plan["ungraspable_parts"]))
     return lines

@@ -290,6 +290,9 @@ def step_reused_outputs(run: JobRun) -> None:
         min_retained_reached=worst >= min_retained,
         worst_retained=worst,
         ungraspable_parts=[],
+        # reused only when every part keeps min_retained on a finger the cell has: all served by these sets
+        sets_allowed=len(plan_sets),
+        sets_needed=len(plan_sets),
         partition=f"reused: {message}",
     )
     summary = placed.report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})

@@ -9,14 +9,23 @@ job's ``job.toml`` the job needs two fingers.
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 import zipfile
 from pathlib import Path
 
 from fcsod.cli import main
 from fcsod.record.recorder import TOPIC_BUS, TOPIC_DESIGN, TOPIC_GRASPS, read_record
-from tests.fcso.test_sets import NARROWING, WIDENING
-from tests.fcsod_helpers import drop_job, finished, free_port, start_daemon, start_subscriber, write_config
+from tests.fcso.test_sets import NARROWING, THREE_KNOBS, WIDENING
+from tests.fcsod_helpers import (
+    FAST_DESIGN,
+    drop_job,
+    finished,
+    free_port,
+    start_daemon,
+    start_subscriber,
+    write_config,
+)
 
 MANIFEST = """
 [[parts]]
@@ -107,3 +116,46 @@ def test_two_finger_sets_are_published_placed_recorded_and_audited(tmp_path, cap
     text = capsys.readouterr().out
     assert "pick plan: 2 finger set(s)" in text and "set 2: mount set-2/finger.stl (2 copies in build.3mf" in text
     assert "pick 2 x narrowing" in text and "verified output " + str(out / "set-2" / "finger.stl") in text
+
+
+def test_a_part_no_set_serves_is_not_served_in_the_report_the_plan_and_on_the_bus(tmp_path, capsys):
+    # three knobs that pairwise conflict at min_retained 0.7 (tests/fcso/test_sets.py), two sets allowed: one part
+    # shares a finger below min_retained; the cell's config names its fallback
+    port = free_port()
+    config = write_config(
+        tmp_path, port, design=FAST_DESIGN + '\n[design.finger_sets]\nunserved_fallback = "flat_fingers"\n'
+    )
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config, save=tmp_path / "received")
+    try:
+        files = {}
+        for part in THREE_KNOBS:
+            files[f"{part.name}.stl"] = tmp_path / f"{part.name}.stl"
+            part.mesh.export(files[f"{part.name}.stl"])
+        manifest = "".join(f'[[parts]]\nfile = "{name}"\n\n' for name in files)
+        manifest += "[finger_sets]\nmax = 2\nmin_retained = 0.7\n"
+        drop_job(tmp_path / "watch" / "three-knobs", {"job.toml": manifest, **files})
+        done = finished(subscriber, "three-knobs")
+        assert done["body"]["state"] == "done", done["body"]["error"]
+        job_id = done["job_id"]
+        lines = [v for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
+    finally:
+        subscriber.stop()
+        assert daemon.stop() == 0
+    out = tmp_path / "out" / job_id
+    report = json.loads((out / "report.json").read_text())["finger_sets"]
+    retained = {s["part"]: s["retained"] for s in report["scenarios"]}
+    losing = sorted(part for part, r in retained.items() if r < 0.7)
+    assert losing and [n["part"] for n in report["not_served"]] == losing
+    plan = next(v for v in lines if v["topic"] == "plan")["body"]
+    # on the bus: the same parts, each with its best set, its retained share, why, and the cell's fallback
+    assert plan["not_served"] == report["not_served"]
+    assert all(n["fallback"] == "flat_fingers" and n["retained"] < 0.7 and n["reason"] for n in plan["not_served"])
+    # never picked with a set's finger
+    planned = [p["part"] for s in plan["sets"] for p in s["parts"]]
+    assert not set(planned) & set(losing) and all(retained[p] >= 0.7 for p in planned)
+    assert plan["min_retained_reached"] is False and plan["sets_needed"] is None and plan["sets_allowed"] == 2
+
+    assert main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"not served: 1 x {losing[0]} to flat fingers" in text
