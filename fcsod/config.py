@@ -28,6 +28,7 @@ from fcso.config import (
     read_toml,
 )
 from fcso.errors import ConfigError, MeshError
+from fcso.sim.config import DEFAULT_TOP_K
 
 from .build.models import BuildConfig, parse_transform
 from .bus.ros2_config import Ros2Config
@@ -188,7 +189,7 @@ class VerifySettings(_Section):
     )
     trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
     top_k: int = Field(
-        3,
+        DEFAULT_TOP_K,
         ge=0,
         description="Verify up to K candidates in the order of the design's measure and deliver the first that passes "
         "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets)",

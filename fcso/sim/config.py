@@ -10,6 +10,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from ..config import DesignConfig, format_validation_error, read_toml
 from ..errors import ConfigError
 
+#: Candidates verified in the measure's order before one is delivered (the daemon's [verify] top_k and
+#: ``fcso design --verify``): the choice stops each at its first failed trial, so a few cost little more than one.
+DEFAULT_TOP_K = 3
+
 
 class VerifyConfig(BaseModel):
     """Physics, trials and thresholds of the simulated precision and holding tests."""
