@@ -156,3 +156,22 @@ def write_bad_inputs(folder: Path, source: Path) -> None:
     with zipfile.ZipFile(folder / "zip_bomb.3mf", "w", compression=zipfile.ZIP_BZIP2) as archive:
         archive.writestr("3D/3dmodel.model", b"\0" * (64 << 20))
     (folder / "sheet.stl").write_bytes(sheet_stl(source))
+
+
+def two_solids_with_degenerate_triangles(first: trimesh.Trimesh, second: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Two real closed meshes side by side, 10 mm apart, with the zero-area triangles exporters leave.
+
+    On ``first``: an edge split at its midpoint by a T-junction, closed by the zero-area triangle over it
+    (watertight with it, open without it). On ``second``: triangles with a repeated corner.
+    """
+    second = second.copy()
+    second.apply_translation([first.bounds[1, 0] - second.bounds[0, 0] + 10.0, 0.0, 0.0])
+    vertices = np.vstack([first.vertices, second.vertices])
+    faces = np.vstack([first.faces, second.faces + len(first.vertices)])
+    i, j, k = faces[0]
+    midpoint = len(vertices)
+    vertices = np.vstack([vertices, (vertices[i] + vertices[j]) / 2])
+    faces[0] = [i, midpoint, k]
+    collapsed = second.faces[:2, :2] + len(first.vertices)
+    degenerate = [[midpoint, j, k], [i, j, midpoint], *([a, a, b] for a, b in collapsed)]
+    return trimesh.Trimesh(vertices, np.vstack([faces, degenerate]), process=False)
