@@ -29,8 +29,8 @@ from fcso.config import (
 )
 from fcso.errors import ConfigError, MeshError
 
-from .build.models import BuildConfig, parse_transform
 from .bus.ros2_config import Ros2Config
+from .plate.models import BuildConfig, parse_transform
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"

@@ -14,10 +14,10 @@ from fcso.output.layout import set_finger_path
 from fcso.report.models import FingerSetsReport
 from fcso.sets import SetsResult
 
-from ..build.build3mf import Build, BuildItem
-from ..build.models import BuildConfig
-from ..build.placement import PlacementResult, place_fingers
 from ..bus.messages import ENCODING_STL, BusMessage, DesignAttachment, PlanMessage, PlanSet, job_key
+from ..plate.build3mf import Build, BuildItem
+from ..plate.models import BuildConfig
+from ..plate.placement import PlacementResult, place_fingers
 
 
 def place_sets(build: Build, sets: SetsResult, config: BuildConfig) -> list[PlacementResult]:

@@ -19,9 +19,9 @@ from fcso.config import DesignConfig
 from fcso.errors import ConfigError, MeshError
 from fcso.parts import MESH_SUFFIXES
 
-from ..build.models import BuildConfig
 from ..bus.messages import InputFile
 from ..config import MANIFEST_NAME, JobManifest, LimitsConfig, PartEntry, parse_manifest
+from ..plate.models import BuildConfig
 
 #: (relative path, size in bytes, mtime in ns); size -1 for a missing file.
 FileStat = tuple[str, int, int]

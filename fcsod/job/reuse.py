@@ -30,10 +30,10 @@ from fcso.report.design import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 
 from .. import __version__
-from ..build.build3mf import export_build_3mf
-from ..build.placement import place_fingers
 from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now
 from ..config import DaemonConfig
+from ..plate.build3mf import export_build_3mf
+from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
 from ..service.fingers import (
     LIBRARY_NAME,

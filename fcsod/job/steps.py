@@ -18,7 +18,6 @@ from fcso.output.layout import FINGER_STL, FINGERPAD_STL, set_folder
 from fcso.sets import design_sets
 
 from .. import __version__
-from ..build.build3mf import Build, BuildItem, export_build_3mf, make_names_unique
 from ..bus.messages import (
     ENCODING_STL,
     BusMessage,
@@ -36,6 +35,7 @@ from ..bus.messages import (
     job_key,
     utc_now,
 )
+from ..plate.build3mf import Build, BuildItem, export_build_3mf, make_names_unique
 from ..record.recorder import (
     TOPIC_CANDIDATES,
     TOPIC_DESIGN,

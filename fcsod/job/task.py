@@ -23,8 +23,6 @@ import fcso
 from fcso import DesignConfig, DesignResult
 from fcso.sets import SetsResult
 
-from ..build.build3mf import Build
-from ..build.models import BuildConfig
 from ..bus.messages import (
     BusMessage,
     InputFile,
@@ -37,6 +35,8 @@ from ..bus.messages import (
 )
 from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest
+from ..plate.build3mf import Build
+from ..plate.models import BuildConfig
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
 from .inputs import PartInput
 
