@@ -508,8 +508,8 @@ def _pki(args: argparse.Namespace) -> int:
 
 
 def _fingers(args: argparse.Namespace) -> int:
+    from .job.fingers import FingerLibrary
     from .job.reuse import library_path
-    from .service.fingers import FingerLibrary
 
     config = load_daemon_config(args.config)
     path = library_path(config)

@@ -1,6 +1,6 @@
 """Finger reuse in a job (METHOD §11b): serve a job from the cell's finger library, or add the job's fingers to it.
 
-After loading, :func:`step_reuse` asks the library (:mod:`fcsod.service.fingers`)
+After loading, :func:`step_reuse` asks the library (:mod:`fcsod.job.fingers`)
 for delivered fingers whose parts have the geometry of every part of the job;
 a part of no delivered geometry is evaluated on the pads of the fingers that
 serve parts of about its size (``[reuse] similar_size_percent``) with
@@ -35,7 +35,7 @@ from ..config import DaemonConfig
 from ..plate.build3mf import export_build_3mf
 from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
-from ..service.fingers import (
+from .fingers import (
     LIBRARY_NAME,
     DeliveredFinger,
     DeliveredPart,

@@ -152,7 +152,7 @@ def unfinished_verification_message(bus, job_id: str, state: str, error: str, fi
 @dataclass
 class JobRun:
     """The state of a running job that steps read and extend (``reuse``: part name -> how the finger library serves
-    it, :class:`~fcsod.service.fingers.ServedPart`, when it serves the whole job).
+    it, :class:`~fcsod.job.fingers.ServedPart`, when it serves the whole job).
     """
 
     task: JobTask

@@ -17,6 +17,7 @@ import shutil
 import signal
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
@@ -40,7 +41,7 @@ from ..job.task import (
 )
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
-from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message
+from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message, stored_messages
 from .metrics import DaemonMetrics
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
@@ -168,7 +169,7 @@ class Daemon:
         for weakness in link_weaknesses(session_config(self.config.zenoh)):
             log.warning(f"insecure bus: {weakness}")
         self.signer = signer
-        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        self.bus = Bus(self.config.bus, self.config.zenoh, partial(stored_messages, self.journal_path))
         self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
         if self.ros2 is not None:
             log.info(

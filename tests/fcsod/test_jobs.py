@@ -14,13 +14,13 @@ import zipfile
 import pytest
 
 from fcso.errors import ConfigError, MeshError
-from fcsod.bus.messages import LogRecord, StateChangeRecord
+from fcsod.bus.messages import LogRecord, StateChangeRecord, StoredMessage
 from fcsod.config import JobManifest, LimitsConfig, PartEntry
 from fcsod.job.inputs import check_parts, hash_inputs, job_id, job_inputs
 from fcsod.job.process import worker_main
 from fcsod.record.audit import audit
 from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
-from fcsod.service.journal import Journal, StoredMessage, stored_messages
+from fcsod.service.journal import Journal, stored_messages
 from fcsod.service.systemd import notify, watchdog_interval
 from fcsod.service.watcher import FolderWatcher, Readiness
 from tests.conftest import HANG_GUARD_S

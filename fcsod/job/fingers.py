@@ -27,7 +27,7 @@ from fcso.report.models import GraspReport
 from fcso.sets.identity import same_geometry
 
 from ..bus.messages import utc_now
-from .journal import connect_database
+from ..storage import connect_database
 
 #: The library's file in the daemon's state folder.
 LIBRARY_NAME = "fingers.sqlite3"
