@@ -15,7 +15,6 @@ from __future__ import annotations
 import hashlib
 import signal
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,6 +37,7 @@ from ..config import DaemonConfig, JobManifest
 from ..plate.build3mf import Build
 from ..plate.models import BuildConfig
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
+from .events import Emit, Log, Scene
 from .inputs import PartInput
 
 #: Shortest interval between two progress lines of the same stage, s.
@@ -159,7 +159,7 @@ class JobRun:
     folder: Path
     work_dir: Path
     recorder: Recorder
-    emit: Callable[[tuple], None]
+    emit: Emit
     manifest: JobManifest | None = None
     manifest_text: str | None = None
     inputs: list[InputFile] = field(default_factory=list)
@@ -209,12 +209,12 @@ class JobRun:
     def log(self, level: str, message: str, **fields) -> None:
         """Record a log line and send it to the daemon's log."""
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
-        self.emit(("log", level, message, fields))
+        self.emit(Log(level, message, fields))
 
     def scene(self, update) -> None:
         """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene`` and send it to the daemon's live server."""
         now = time.time_ns()
-        self.emit(("foxglove", TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
+        self.emit(Scene(TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
 
     def record_published(self, message: BusMessage) -> None:
         """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""

@@ -28,6 +28,18 @@ from ..bus.ros2 import Ros2Node, node_fqn
 from ..bus.session import Bus, session_config
 from ..bus.signing import daemon_signer, signing_key_path
 from ..config import DaemonConfig
+from ..job.events import (
+    JobFinished,
+    Log,
+    Publish,
+    Scene,
+    StepFinished,
+    VerificationFinished,
+    VerificationStarted,
+    WorkerBroken,
+    WorkerEvent,
+    WorkerReady,
+)
 from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import WORKER_PRELOAD, worker_main
 from ..job.task import (
@@ -414,33 +426,36 @@ class Daemon:
                 slot.open = False
                 slot.connection.close()
                 return
-            kind = event[0]
-            if kind == "ready":
-                slot.ready = True
-            elif kind == "broken":
-                self._workers_cannot_start(event[1])
-            elif kind == "log":
-                _, level, message, fields = event
-                log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
-            elif kind == "publish":
-                if event[1].topic.partition("/")[0] == "verification":
-                    self.metrics.verified(VerificationMessage.model_validate_json(event[1].payload).passed)
-                self._publish(event[1])
-            elif kind == "foxglove":
-                if self.foxglove is not None:
-                    self.foxglove.log_scene(event[2], event[3])
-            elif kind == "step":
-                self.metrics.stage_seconds.labels(event[1]).observe(event[2])
-            elif kind == "finished":
-                self._finished(slot, *event[1:])
-            elif kind == "verifying":
-                _start_verification_clock(slot, event[1])
-            elif kind == "verified":
-                self._verified(slot, *event[1:])
+            self._handle(slot, event)
 
-    def _finished(
-        self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage], verify_limit_s: float | None
-    ) -> None:
+    def _handle(self, slot: WorkerSlot, event: WorkerEvent) -> None:
+        """Act on one event of a worker."""
+        match event:
+            case WorkerReady():
+                slot.ready = True
+            case WorkerBroken(error):
+                self._workers_cannot_start(error)
+            case Log(level, message, fields):
+                log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
+            case Publish(message):
+                if message.topic.partition("/")[0] == "verification":
+                    self.metrics.verified(VerificationMessage.model_validate_json(message.payload).passed)
+                self._publish(message)
+            case Scene(_, data, log_time_ns):
+                if self.foxglove is not None:
+                    self.foxglove.log_scene(data, log_time_ns)
+            case StepFinished(name, seconds):
+                self.metrics.stage_seconds.labels(name).observe(seconds)
+            case JobFinished():
+                self._finished(slot, event)
+            case VerificationStarted(time_limit_seconds):
+                _start_verification_clock(slot, time_limit_seconds)
+            case VerificationFinished(state, error, messages):
+                self._verified(slot, state, error, messages)
+
+    def _finished(self, slot: WorkerSlot, event: JobFinished) -> None:
+        """The job ended: journal its state, then publish its messages."""
+        state, error, messages, verify_limit_s = event.state, event.error, event.messages, event.verify_limit_seconds
         status = next(StatusMessage.model_validate_json(m.payload) for m in reversed(messages) if m.topic == "status")
         # a verification that follows is journalled with the done state: a crash during it runs it again
         row = self.journal.mark_finished(
