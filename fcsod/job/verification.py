@@ -103,7 +103,7 @@ def verification_after_done(run) -> VerifySettings | None:
 def verify_done_job(run, final_dir: Path, settings: VerifySettings) -> None:
     """After the job is done and journalled: verify every finger set's design (in memory), write, record, publish.
 
-    Ends with one ``("verified", state, error, messages)`` event.
+    Ends with one :class:`~fcsod.job.events.VerificationFinished`.
     """
     several = run.sets.several
     designs = [
