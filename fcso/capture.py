@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import maximum_filter
 
-from .config import DesignConfig, QualityConfig
+from .config import DesignConfig, VerifyConfig
 from .jit import compiled
 from .screen import ScreenGeometry, ScreenGrid, pad_case
 
@@ -141,7 +141,7 @@ def capture_landscape(
     centres_uv_mm: tuple[np.ndarray, np.ndarray],
     cell_mm: float,
     depth_mm: float,
-    config: QualityConfig,
+    config: VerifyConfig,
 ) -> CaptureLandscape:
     """Squeeze one part between two pads from every start error of a grid and tell which starts are captured.
 
@@ -158,7 +158,7 @@ def capture_landscape(
         Grid cell, mm.
     depth_mm : float
         Penetration D: where the contact lies in ``u``.
-    config : QualityConfig
+    config : VerifyConfig
         Start error box, success tolerance, friction.
 
     Returns
@@ -362,7 +362,7 @@ def pad_landscapes(
             centres,
             grid.cell_mm,
             depth,
-            config.quality,
+            config.verify,
         )
         for pair, centres in zip(chosen, centres_uv_mm)
     ]

@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 
 from .capture import CaptureLandscape, capture_landscape, pad_landscapes
-from .config import DesignConfig
+from .config import CAPTURE_CONDITIONS, DesignConfig
 from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .holding import holding_forces_n
@@ -271,7 +271,7 @@ def evaluate_candidate(
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
         holding = _holding(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
-        holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
+        holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
         measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
         results.append(
             ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)
@@ -360,7 +360,8 @@ def screen_on_pad(
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
+        conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
+        key = (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
         if key not in sample.held:
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
@@ -369,7 +370,7 @@ def screen_on_pad(
                 if len(normals)
                 else np.zeros(1)
             )
-            sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
+            sample.held[key] = min(1.0, float(held.min()) / config.verify.hold_force_n)
         return sample.held[key]
 
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
@@ -396,7 +397,7 @@ def _holding(
     )
     pads = np.concatenate([np.full(int(c.sum()), side) for side, c in enumerate(contacts)])
     density = config.print.resolved()["density_g_cm3"]
-    quality = config.quality
+    conditions = config.verify
     return holding_forces_n(
         points,
         -normals_rest,
@@ -404,9 +405,9 @@ def _holding(
         sample.sample.closing_axis,
         np.asarray(scenario.mesh.center_mass),
         float(scenario.mesh.volume) * density * 1e-6,
-        quality.friction,
-        quality.grip_force_n,
-        quality.hold_force_n,
+        conditions.friction,
+        conditions.force_limit_n,
+        conditions.hold_force_n,
     )
 
 
@@ -715,12 +716,12 @@ def evaluate_on_pad(
                 sample.centres_uv_mm,
                 grid.cell_mm,
                 config.sampler.penetration_mm,
-                config.quality,
+                config.verify,
             )
             holding = _holding(
                 scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
             )
-            holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
+            holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
             measure = scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
             results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)
         # samples not squeezed keep no measure under the capture measure

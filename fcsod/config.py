@@ -24,6 +24,7 @@ from fcso.config import (
     PrintConfig,
     SamplerConfig,
     SearchConfig,
+    VerifyConfig,
     format_validation_error,
     read_toml,
 )
@@ -201,15 +202,22 @@ class McapConfig(_Section):
     )
 
 
-class VerifySettings(_Section):
-    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""  # noqa: E501
+class VerifySettings(VerifyConfig):
+    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``.
+
+    Every setting of fcso's ``[verify]`` (the capture measure's test
+    conditions among them: the job's design ranks candidates with them),
+    and when the daemon verifies. ``choice_budget_s`` defaults to
+    ``time_limit_seconds`` and ``cache_dir`` to the state folder's.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = Field(
         True,
         description="Verify every done job's design in simulation (MuJoCo), after it is published (and with top_k, "
         "choose among candidates by it before)",
     )
-    trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
     top_k: int = Field(
         3,
         ge=0,
@@ -222,6 +230,12 @@ class VerifySettings(_Section):
         description="A verification after the job is done is stopped after this (its status on the verification key "
         "is then failed; the job stays done); choosing among top_k candidates starts no further candidate after it, s",
     )
+
+    def verify_config(self) -> VerifyConfig:
+        """fcso's ``[verify]`` of these settings: every one of its keys that was given (unset ones keep fcso's
+        defaults, so the part density still follows the design's print profile)."""
+        given = self.model_fields_set & set(VerifyConfig.model_fields)
+        return VerifyConfig(**{name: getattr(self, name) for name in given})
 
 
 #: host:port of a listening socket; the host is a name, an IPv4 address or a bracketed IPv6 address.
@@ -288,6 +302,13 @@ class DaemonConfig(_Section):
     metrics: MetricsConfig = Field(default_factory=MetricsConfig, description="The Prometheus metrics endpoint")
     foxglove: FoxgloveConfig = Field(default_factory=FoxgloveConfig, description="The live Foxglove server")
 
+    @field_validator("design", mode="before")
+    @classmethod
+    def _verify_has_one_home(cls, value: Any) -> Any:
+        if isinstance(value, dict) and "verify" in value:
+            raise ValueError("verify: the verification's settings are the daemon's [verify] section")
+        return value
+
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> DaemonConfig:
         output = self.output.root.resolve()
@@ -318,6 +339,7 @@ def _resolve_paths(data: dict, base: Path) -> None:
     fix("zenoh", "config_file")
     fix("bus", "signing_key")
     fix("bus", "verify_key")
+    fix("verify", "cache_dir")
     design = data.get("design")
     if isinstance(design, dict):
         fix_finger = design.get("finger")

@@ -24,7 +24,7 @@ import trimesh
 from pydantic import Field
 
 import fcso
-from fcso.config import DesignConfig
+from fcso.config import CAPTURE_CONDITIONS, DesignConfig
 from fcso.output.layout import REPORT_JSON, set_finger_path
 from fcso.report.design import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
@@ -102,8 +102,9 @@ def library_path(config: DaemonConfig) -> Path:
 
 
 def pad_settings(config: DesignConfig) -> str:
-    """The JSON of the settings sections a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`)."""
-    return config.model_dump_json(include=set(PAD_SECTIONS))
+    """The JSON of the settings a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`, the measure's
+    test conditions)."""
+    return config.model_dump_json(include={**dict.fromkeys(PAD_SECTIONS, True), "verify": set(CAPTURE_CONDITIONS)})
 
 
 def step_reuse(run: JobRun) -> None:

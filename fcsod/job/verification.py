@@ -266,16 +266,13 @@ VERIFICATION_CACHE_NAME = "verification-cache"
 
 
 def _verify_config(settings: VerifySettings, design_settings, state_dir: Path) -> VerifyConfig:
-    """fcso's ``[verify]`` of a job: its trials and time budget, the part density of the design's print profile, the
-    daemon's cache (``state_dir`` / :data:`VERIFICATION_CACHE_NAME`)."""
-    return with_print_density(
-        VerifyConfig(
-            trials=settings.trials,
-            choice_budget_s=settings.time_limit_seconds,
-            cache_dir=state_dir / VERIFICATION_CACHE_NAME,
-        ),
-        design_settings,
-    )
+    """fcso's ``[verify]`` of a job: its settings, the time budget of its time limit and the daemon's cache
+    (``state_dir`` / :data:`VERIFICATION_CACHE_NAME`) unless it sets its own, the part density of the design's print
+    profile unless it sets its own."""
+    config = settings.verify_config()
+    defaults = {"choice_budget_s": settings.time_limit_seconds, "cache_dir": state_dir / VERIFICATION_CACHE_NAME}
+    config = config.model_copy(update={k: v for k, v in defaults.items() if k not in config.model_fields_set})
+    return with_print_density(config, design_settings)
 
 
 def _bus_message(
