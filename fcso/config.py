@@ -410,8 +410,8 @@ class VerifyConfig(BaseModel):
         description="How far each pad's face clears the part's outermost point in its footprint as the gripper "
         "descends, before it closes (at most the gripper's full opening), mm: a flat pad's face is at that point at "
         "the seated grasp and a carved pad's is the penetration D inside it, so the designed finger opens D further "
-        "than the flat control and both clear the part alike (until 2026-12-03 both opened by this much, which left a "
-        "carved pocket's rims D closer to the part than the flat pads)",
+        "than the flat control and both clear the part alike (opening both by this much would leave a carved "
+        "pocket's rims D closer to the part than the flat pads)",
     )
     part_shell_mm: float = Field(
         1.0,

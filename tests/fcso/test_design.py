@@ -50,7 +50,7 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
             else:
                 assert quality.holding_n is None
                 factor = quality.capture
-            # capture x holding in bands of 1/20, E / (E + L W) within a band (METHOD §7b, docs/method.md)
+            # capture x holding in bands of 1/20, E / (E + L W) within a band (METHOD §7b, docs/implementation.md)
             within = quality.effective_area / (quality.effective_area + pad_area)
             expected = (np.floor(20 * factor + 1e-9) + within) / 20
             assert quality.measure == pytest.approx(expected, rel=1e-4, abs=1e-4)
