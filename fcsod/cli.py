@@ -214,8 +214,9 @@ def _run(args: argparse.Namespace) -> int:
     import zenoh
 
     from .logs import setup_logging
-    from .service.daemon import Daemon, StateDirBusy
+    from .service.daemon import Daemon
     from .service.journal import JournalCorrupt
+    from .storage import StateDirBusy
 
     config = load_daemon_config(args.config)
     setup_logging(logging.getLevelName(args.log_level.upper()))
@@ -420,8 +421,7 @@ def _pki(args: argparse.Namespace) -> int:
 
 
 def _fingers(args: argparse.Namespace) -> int:
-    from .job.fingers import FingerLibrary
-    from .job.reuse import library_path
+    from .job.fingers import FingerLibrary, library_path
 
     config = load_daemon_config(args.config)
     path = library_path(config)
@@ -448,10 +448,7 @@ def _fingers(args: argparse.Namespace) -> int:
 
 
 def _journal(args: argparse.Namespace) -> int:
-    from .bus.signing import daemon_signer
-    from .service.daemon import StateDirBusy, lock_state_dir
     from .service.journal import journal_problem
-    from .service.journal_repair import rebuild_journal
 
     config = load_daemon_config(args.config)
     path = config.state.dir / "journal.sqlite3"
@@ -462,6 +459,11 @@ def _journal(args: argparse.Namespace) -> int:
             return EXIT_FAILED
         print(f"{path}: sound" if path.exists() else f"{path}: no journal yet")
         return EXIT_OK
+    # a rebuild reads every job record and signs: its modules load only for it
+    from .bus.signing import daemon_signer
+    from .service.journal_repair import rebuild_journal
+    from .storage import StateDirBusy, lock_state_dir
+
     config.state.dir.mkdir(parents=True, exist_ok=True)
     try:
         lock = lock_state_dir(config.state.dir)

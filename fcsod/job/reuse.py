@@ -18,7 +18,6 @@ designs keeps its finger sets in the library when it is done
 from __future__ import annotations
 
 import io
-from pathlib import Path
 
 import trimesh
 from pydantic import Field
@@ -31,18 +30,17 @@ from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 
 from .. import __version__
 from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now
-from ..config import DaemonConfig
 from ..plate.build3mf import export_build_3mf
 from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
 from .fingers import (
-    LIBRARY_NAME,
     DeliveredFinger,
     DeliveredPart,
     FingerEntry,
     FingerLibrary,
     FittedPart,
     ServedPart,
+    library_path,
 )
 from .task import BUILD_NAME, FINGER_SET, JobRun
 
@@ -94,11 +92,6 @@ class ReuseReport(ReportModel):
     grasps: list[GraspReport] = Field(description="The delivered grasps, rest transforms from this job's part files")
     placement: dict = Field(description="The parts in build.3mf, no finger copies (schema: placement-report.json)")
     warnings: list[str]
-
-
-def library_path(config: DaemonConfig) -> Path:
-    """The cell's finger library in the daemon's state folder."""
-    return config.state.dir / LIBRARY_NAME
 
 
 def pad_settings(config: DesignConfig) -> str:

@@ -9,7 +9,6 @@ that imported the job's code once. One worker is started ahead of need.
 
 from __future__ import annotations
 
-import fcntl
 import logging
 import multiprocessing
 import os
@@ -53,6 +52,7 @@ from ..job.task import (
 )
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
+from ..storage import lock_state_dir
 from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message, stored_messages
 from .metrics import DaemonMetrics
 from .systemd import notify, watchdog_interval
@@ -69,27 +69,6 @@ CANCELLED_ERROR = "cancelled by the operator (fcsod cancel)"
 #: Folder of ``[output] root`` where ``fcsod retry`` keeps the records of the failed runs it replaces:
 #: ``attempts/<job_id>/<n>/job.mcap``.
 ATTEMPTS_DIR = "attempts"
-
-
-class StateDirBusy(Exception):
-    """Another daemon holds the state folder's lock."""
-
-
-def lock_state_dir(state_dir: Path):
-    """Take the state folder's lock (held while the returned file stays open).
-
-    Raises
-    ------
-    StateDirBusy
-        Another fcsod (daemon or journal repair) holds it.
-    """
-    lock_file = open(state_dir / "fcsod.lock", "w")
-    try:
-        fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        lock_file.close()
-        raise StateDirBusy(f"{state_dir}: another fcsod is running with this state folder") from None
-    return lock_file
 
 
 @dataclass
