@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import maximum_filter
 
-from .config import DesignConfig, QualityConfig
+from .config import DesignConfig, VerifyConfig
 from .jit import compiled
 from .screen import ScreenGeometry, ScreenGrid, pad_case
 
@@ -150,7 +150,7 @@ def capture_landscape(
     cell_mm: float,
     depth_mm: float,
     width_mm: float,
-    config: QualityConfig,
+    config: VerifyConfig,
 ) -> CaptureLandscape:
     """Squeeze one part between two pads from every start error of a grid and tell which starts are captured.
 
@@ -170,7 +170,7 @@ def capture_landscape(
     width_mm : float
         The part's extent along the closing axis in the pads' footprint (``a_max - a_min``), mm: the two pads'
         inner faces (``u = 0``) lie ``width - 2 D`` apart at the nominal seat.
-    config : QualityConfig
+    config : VerifyConfig
         Start error box, success tolerance, friction.
 
     Returns
@@ -440,7 +440,7 @@ def pad_landscapes(
             grid.cell_mm,
             depth,
             width,
-            config.quality,
+            config.verify,
         )
         for pair, centres, width in zip(chosen, centres_uv_mm, widths_mm)
     ]

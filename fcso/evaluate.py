@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 
 from .capture import CaptureLandscape, capture_landscape, pad_landscapes
-from .config import DesignConfig
+from .config import CAPTURE_CONDITIONS, DesignConfig
 from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .holding import holding_forces_n
@@ -277,7 +277,7 @@ def evaluate_candidate(
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
         holding = _holding(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
-        holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
+        holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
         # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores
         holds = landscapes[number].pads_gap_mm > 0
         measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config) if holds else 0.0
@@ -373,7 +373,8 @@ def screen_on_pad(
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
+        conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
+        key = (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
         if key not in sample.held:
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
@@ -382,7 +383,7 @@ def screen_on_pad(
                 if len(normals)
                 else np.zeros(1)
             )
-            sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
+            sample.held[key] = min(1.0, float(held.min()) / config.verify.hold_force_n)
         return sample.held[key]
 
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
@@ -409,7 +410,7 @@ def _holding(
     )
     pads = np.concatenate([np.full(int(c.sum()), side) for side, c in enumerate(contacts)])
     density = config.print.resolved()["density_g_cm3"]
-    quality = config.quality
+    conditions = config.verify
     return holding_forces_n(
         points,
         -normals_rest,
@@ -417,9 +418,9 @@ def _holding(
         sample.sample.closing_axis,
         np.asarray(scenario.mesh.center_mass),
         float(scenario.mesh.volume) * density * 1e-6,
-        quality.friction,
-        quality.grip_force_n,
-        quality.hold_force_n,
+        conditions.friction,
+        conditions.force_limit_n,
+        conditions.hold_force_n,
     )
 
 
@@ -735,12 +736,12 @@ def evaluate_on_pad(
                 grid.cell_mm,
                 config.sampler.penetration_mm,
                 sample.width_mm,
-                config.quality,
+                config.verify,
             )
             holding = _holding(
                 scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
             )
-            holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
+            holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
             measure = (
                 scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
                 if landscape.pads_gap_mm > 0

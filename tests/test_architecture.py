@@ -9,6 +9,7 @@ the top of a module or inside a function, except those under
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +23,10 @@ PACKAGES = ("fcso", "fcsod")
 PRESENTATION = ("fcso.output", "fcso.cli", "fcso.sim.cli", "matplotlib")
 #: What the method may take from the output package: the names of the folder layout, which the reports record.
 LAYOUT = "fcso.output.layout"
+#: Libraries that take long to import and serve only some commands: a command's start-up loads none of them
+#: unless it uses them (numba: the compiled kernels of the pipeline; MuJoCo: the verification; matplotlib: the
+#: pictures; HiGHS: the holding forces; Dask: a cluster).
+HEAVY = ("numba", "mujoco", "matplotlib", "highspy", "dask", "distributed")
 #: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
 #: ``fcso``).
 NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.sim.cli", "fcso.output")
@@ -139,6 +144,23 @@ def within(module: str, prefixes) -> bool:
     return any(module == p or module.startswith(p + ".") for p in prefixes)
 
 
+def modules_loaded_by(entry_point: str, argv: list[str]) -> set[str]:
+    """The modules a command loads: ``entry_point`` (``module:function``, the function taking ``argv``) run in a fresh
+    interpreter, its ``sys.modules`` read at its end (after the exit of ``--help``, too)."""
+    module, function = entry_point.split(":")
+    script = (
+        "import json, sys\n"
+        f"from {module} import {function}\n"
+        "try:\n"
+        f"    {function}({argv!r})\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "sys.stderr.write('\\nMODULES ' + json.dumps(sorted(sys.modules)) + '\\n')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=True)
+    return set(json.loads(result.stderr.rpartition("MODULES ")[2]))
+
+
 @pytest.mark.parametrize("package", PACKAGES)
 def test_no_import_cycle(package):
     assert cycles(import_graph((package,))) == []
@@ -204,3 +226,41 @@ def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tm
     result = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=True)
     assert result.stdout.strip().splitlines()[-1] == "[]"
     assert any(tmp_path.glob("*.json"))
+
+
+#: What an fcsod operator command needs none of: fcso's design, simulation and pictures, and the libraries that only
+#: they (or the bus) use.
+NOT_FOR_OPERATORS = (*HEAVY, "fcso.design", "fcso.pipeline", "fcso.sets", "fcso.sim", "fcso.output", "trimesh", "zenoh")
+
+
+@pytest.fixture(scope="module")
+def operator_config(tmp_path_factory):
+    """A daemon config whose journal holds one job, so ``fcsod jobs`` lists it rather than stopping early."""
+    from fcsod.service.journal import Journal
+    from tests.fcsod_helpers import free_port, write_config
+
+    base = tmp_path_factory.mktemp("operator")
+    config = write_config(base, free_port())
+    (base / "state").mkdir()
+    journal = Journal(base / "state" / "journal.sqlite3")
+    journal.add("job-1", str(base / "watch" / "job"), "2026-01-01T00:00:00+00:00")
+    journal.close()
+    return config
+
+
+@pytest.mark.xfail(
+    strict=True, reason="fcso's facade imports the whole pipeline: its lazy imports are fcso's half of issue 45"
+)
+@pytest.mark.parametrize(
+    "argv",
+    [["jobs"], ["jobs", "--json"], ["journal", "check"], ["fingers", "list"], ["cancel", "job-1", "--timeout", "0"]],
+)
+def test_an_operator_command_loads_neither_the_design_nor_the_heavy_libraries(operator_config, argv):
+    """The start-up budget of ``fcsod jobs`` and the other operator commands as an import list, not a time."""
+    loaded = modules_loaded_by("fcsod.cli:main", [*argv, "--config", str(operator_config)])
+    assert sorted(m for m in loaded if within(m, NOT_FOR_OPERATORS)) == []
+
+
+def test_the_operator_import_list_sees_a_heavy_import(tmp_path):
+    """The check above can fail: ``fcsod schema`` writes the verification's schemas, so it loads fcso.sim."""
+    assert "fcso.sim" in modules_loaded_by("fcsod.cli:main", ["schema", "--out", str(tmp_path)])
