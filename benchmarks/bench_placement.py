@@ -21,9 +21,9 @@ from trimesh.path import packing
 
 from fcso.config import DesignConfig
 from fcso.finger import parametric_finger
-from fcsod.build.build3mf import Build, BuildItem
-from fcsod.build.models import BuildConfig
-from fcsod.build.placement import place_fingers
+from fcsod.plate.build3mf import Build, BuildItem
+from fcsod.plate.models import BuildConfig
+from fcsod.plate.placement import place_fingers
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 #: Fixture meshes and their length in mm per file unit.

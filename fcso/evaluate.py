@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 
 from .capture import CaptureLandscape, pad_landscapes
-from .config import DesignConfig
+from .config import CAPTURE_CONDITIONS, DesignConfig
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
@@ -64,6 +64,11 @@ class SampleGeometry:
     #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
     #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def width_mm(self) -> float:
+        """The part's extent along the closing axis in the pads' footprint (``a_max - a_min``), mm."""
+        return self.sample.a_max_mm - self.sample.a_min_mm
 
     @property
     def surfaces(self) -> tuple[SurfaceSamples, SurfaceSamples]:
@@ -166,7 +171,7 @@ def sample_geometry(
     )
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
-        capture = pad_landscapes([screens], [centres], grid, config)[0].fraction
+        capture = pad_landscapes([screens], [centres], [sample.a_max_mm - sample.a_min_mm], grid, config)[0].fraction
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -254,6 +259,7 @@ def evaluate_candidate(
         landscapes = pad_landscapes(
             [s.screen for s in chosen],
             [s.centres_uv_mm for s in chosen],
+            [s.width_mm for s in chosen],
             ScreenGrid.for_config(config),
             config,
             flat=flat,
@@ -269,8 +275,10 @@ def evaluate_candidate(
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
         holding = holding_n(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
-        holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
-        measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
+        holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
+        # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores
+        holds = landscapes[number].pads_gap_mm > 0
+        measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config) if holds else 0.0
         results.append(
             ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)
         )
@@ -327,7 +335,7 @@ def screen_on_pad(
     from the landscapes :func:`evaluate_candidate` measures (the same
     :func:`fcso.capture.pad_landscapes`, a few milliseconds), and with
     ``holding`` its holding from its screened contacts (the same
-    :func:`_holding`: six linear programs per scenario, tenths of a second).
+    :func:`holding_n`: six linear programs per scenario, tenths of a second).
     Under the paper's measure this is :func:`fcso.screen.screen`.
 
     Parameters
@@ -354,11 +362,17 @@ def screen_on_pad(
         return screen(screens, config, lattice)
     if captures is None:
         grid = ScreenGrid.for_config(config)
-        captures = [s.fraction for s in pad_landscapes(screens, [s.centres_uv_mm for s in chosen], grid, config)]
+        captures = [
+            s.fraction
+            for s in pad_landscapes(
+                screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], grid, config
+            )
+        ]
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        key = (*(np.packbits(c).tobytes() for c in contacts), config.quality, config.print.resolved()["density_g_cm3"])
+        conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
+        key = (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
         if key not in sample.held:
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
@@ -367,7 +381,7 @@ def screen_on_pad(
                 if len(normals)
                 else np.zeros(1)
             )
-            sample.held[key] = min(1.0, float(held.min()) / config.quality.hold_force_n)
+            sample.held[key] = min(1.0, float(held.min()) / config.verify.hold_force_n)
         return sample.held[key]
 
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
@@ -394,7 +408,7 @@ def holding_n(
     )
     pads = np.concatenate([np.full(int(c.sum()), side) for side, c in enumerate(contacts)])
     density = config.print.resolved()["density_g_cm3"]
-    quality = config.quality
+    conditions = config.verify
     return holding_forces_n(
         points,
         -normals_rest,
@@ -402,9 +416,9 @@ def holding_n(
         sample.sample.closing_axis,
         np.asarray(scenario.mesh.center_mass),
         float(scenario.mesh.volume) * density * 1e-6,
-        quality.friction,
-        quality.grip_force_n,
-        quality.hold_force_n,
+        conditions.friction,
+        conditions.force_limit_n,
+        conditions.hold_force_n,
     )
 
 
@@ -440,7 +454,7 @@ def versus_flat(
     for number, scenario in enumerate(scenarios):
         chosen = best.scenarios[number].capture
         sample = scenario.samples[best.choice[number]]
-        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], grid, config, flat=True)[0]
+        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], [sample.width_mm], grid, config, flat=True)[0]
         tried = max(
             [chosen.fraction]
             + [e.scenarios[number].capture.fraction for e in finalists]
@@ -484,7 +498,13 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
 
     def worst_capture(angle: float) -> float:
         drafted = config.updated({"print": {"lead_in_deg": angle}})
-        landscapes = pad_landscapes([s.screen for s in samples], [s.centres_uv_mm for s in samples], grid, drafted)
+        landscapes = pad_landscapes(
+            [s.screen for s in samples],
+            [s.centres_uv_mm for s in samples],
+            [s.width_mm for s in samples],
+            grid,
+            drafted,
+        )
         return min(landscape.fraction for landscape in landscapes)
 
     captures = {angle: worst_capture(angle) for angle in [lead_in, *alternatives]}

@@ -234,13 +234,18 @@ def evaluate_on_pad(
                 sample.centres_uv_mm,
                 grid.cell_mm,
                 config.sampler.penetration_mm,
-                config.quality,
+                sample.width_mm,
+                config.verify,
             )
             holding = holding_n(
                 scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
             )
-            holding_share = min(1.0, float(holding.min()) / config.quality.hold_force_n)
-            measure = scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
+            holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
+            measure = (
+                scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
+                if landscape.pads_gap_mm > 0
+                else 0.0
+            )
             results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)
         # samples not squeezed keep no measure under the capture measure
         kept = set(int(i) for i in ranked)

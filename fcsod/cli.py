@@ -9,12 +9,9 @@ record, corrupt journal, a zenoh session that cannot open, an unknown job).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import logging
-import re
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -217,8 +214,9 @@ def _run(args: argparse.Namespace) -> int:
     import zenoh
 
     from .logs import setup_logging
-    from .service.daemon import Daemon, StateDirBusy
+    from .service.daemon import Daemon
     from .service.journal import JournalCorrupt
+    from .storage import StateDirBusy
 
     config = load_daemon_config(args.config)
     setup_logging(logging.getLevelName(args.log_level.upper()))
@@ -349,27 +347,15 @@ def _replay(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _subscriber_endpoints(config: DaemonConfig, override: list[str] | None) -> list[str]:
-    """Where the subscriber connects: the override, the config's connect endpoints, or its listen endpoints on this
-    host.
-    """
-    if override:
-        return override
-    if config.zenoh.connect:
-        return config.zenoh.connect
-    return [re.sub(r"/(0\.0\.0\.0|\[::\]):", "/127.0.0.1:", e) for e in config.zenoh.listen or []]
-
-
 def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .bus.messages import ENCODING_JSON, daemon_key, jobs_key
+    from .bus.client import Enough, subscribe, subscriber_endpoints
     from .bus.session import open_session
-    from .bus.signing import SignatureError, load_verify_key, verify_key_path, verify_message
+    from .bus.signing import load_verify_key, verify_key_path
     from .config import ZenohConfig
 
     config = load_daemon_config(args.config)
-    prefix, cell = config.bus.prefix, config.bus.cell
     verify_key = load_verify_key(args.verify_key or verify_key_path(config))
     if args.zenoh_config is not None:
         if not args.zenoh_config.is_file():
@@ -377,101 +363,28 @@ def _subscribe(args: argparse.Namespace) -> int:
         settings = ZenohConfig(config_file=args.zenoh_config, multicast_scouting=config.zenoh.multicast_scouting)
         connect = args.connect
     else:
-        settings, connect = config.zenoh, _subscriber_endpoints(config, args.connect)
+        settings, connect = config.zenoh, subscriber_endpoints(config, args.connect)
     try:
         # the subscriber must not bind the daemon's listen endpoints
         session = open_session(settings, listen=[], connect=connect)
     except zenoh.ZError as exc:
         print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    jobs_prefix = f"{prefix}/{cell}/jobs/"
-    finished: set[str] = set()
-    verified: set[tuple[str, str]] = set()
-    lock = threading.Lock()
-    all_done = threading.Event()
-
-    def show(sample, source: str) -> None:
-        key = str(sample.key_expr)
-        payload = sample.payload.to_bytes()
-        attachment_bytes = sample.attachment.to_bytes() if sample.attachment is not None else None
-        try:
-            attachment = verify_message(key, payload, attachment_bytes, verify_key)
-        except SignatureError as exc:
-            # a forged or altered message: shown as refused, never as a result
-            with lock:
-                print(json.dumps({"source": source, "key": key, "rejected": str(exc)}), flush=True)
-            return
-        # <prefix>/<cell>/jobs/<job_id>/<topic>, where a finger set's design is the topic design/<set>
-        job_id, _, topic = (
-            key.removeprefix(jobs_prefix).partition("/")
-            if key.startswith(jobs_prefix)
-            else (None, "", key.rsplit("/", 1)[-1])
-        )
-        line: dict = {
-            "source": source,
-            "key": key,
-            "topic": topic,
-            "encoding": str(sample.encoding),
-            "bytes": len(payload),
-        }
-        line["job_id"] = job_id
-        if str(sample.encoding).startswith(ENCODING_JSON):
-            line["body"] = json.loads(payload)
-        else:
-            line["sha256"] = hashlib.sha256(payload).hexdigest()
-        line["attachment"] = attachment
-        line["signature_ok"] = True
-        if "sha256" in attachment:
-            line["sha256_ok"] = attachment["sha256"] == line.get("sha256")
-        if args.save is not None and topic.partition("/")[0] == "design":
-            args.save.mkdir(parents=True, exist_ok=True)
-            target = args.save / (
-                f"{job_id}.stl" if topic == "design" else f"{job_id}-set-{topic.partition('/')[2]}.stl"
-            )
-            target.write_bytes(payload)
-            line["saved"] = str(target)
-        with lock:
-            print(json.dumps(line), flush=True)
-            body = line.get("body") or {}
-            if line["topic"] == "status" and body.get("state") in ("done", "failed"):
-                finished.add(line["job_id"])
-                if args.exit_after is not None and len(finished) >= args.exit_after:
-                    all_done.set()
-            if line["topic"].partition("/")[0] == "verification":
-                verified.add((line["job_id"], line["topic"]))
-                if args.exit_after_verifications is not None and len(verified) >= args.exit_after_verifications:
-                    all_done.set()
-
-    # every time the daemon appears (at start, or after it or the network was down) ask it for what was missed
-    ask = threading.Event()
-
-    def liveliness(sample) -> None:
-        state = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
-        with lock:
-            print(json.dumps({"source": "liveliness", "key": str(sample.key_expr), "daemon": state}), flush=True)
-        if state == "alive" and not args.no_query:
-            ask.set()
-
-    deadline = time.monotonic() + args.timeout if args.timeout is not None else None
+    enough = Enough(finished_jobs=args.exit_after, verifications=args.exit_after_verifications)
     try:
-        subscriber = session.declare_subscriber(jobs_key(prefix, cell), lambda s: show(s, "live"))
-        watcher = session.liveliness().declare_subscriber(daemon_key(prefix, cell), liveliness, history=True)
-        while not all_done.is_set() and (deadline is None or time.monotonic() < deadline):
-            if ask.is_set():
-                ask.clear()
-                for reply in session.get(jobs_key(prefix, cell), timeout=5.0):
-                    if reply.ok is not None:
-                        show(reply.ok, "query")
-            all_done.wait(timeout=0.2)
-        subscriber.undeclare()
-        watcher.undeclare()
-    except KeyboardInterrupt:
-        pass
+        reached = subscribe(
+            session,
+            config.bus.prefix,
+            config.bus.cell,
+            verify_key,
+            enough,
+            save=args.save,
+            query=not args.no_query,
+            timeout_seconds=args.timeout,
+        )
     finally:
         session.close()
-    if (args.exit_after is not None or args.exit_after_verifications is not None) and not all_done.is_set():
-        return EXIT_FAILED
-    return EXIT_OK
+    return EXIT_FAILED if enough.bounded and not reached else EXIT_OK
 
 
 def _schema(args: argparse.Namespace) -> int:
@@ -508,8 +421,7 @@ def _pki(args: argparse.Namespace) -> int:
 
 
 def _fingers(args: argparse.Namespace) -> int:
-    from .job.reuse import library_path
-    from .service.fingers import FingerLibrary
+    from .job.fingers import FingerLibrary, library_path
 
     config = load_daemon_config(args.config)
     path = library_path(config)
@@ -536,10 +448,7 @@ def _fingers(args: argparse.Namespace) -> int:
 
 
 def _journal(args: argparse.Namespace) -> int:
-    from .bus.signing import daemon_signer
-    from .service.daemon import StateDirBusy, lock_state_dir
     from .service.journal import journal_problem
-    from .service.journal_repair import rebuild_journal
 
     config = load_daemon_config(args.config)
     path = config.state.dir / "journal.sqlite3"
@@ -550,6 +459,11 @@ def _journal(args: argparse.Namespace) -> int:
             return EXIT_FAILED
         print(f"{path}: sound" if path.exists() else f"{path}: no journal yet")
         return EXIT_OK
+    # a rebuild reads every job record and signs: its modules load only for it
+    from .bus.signing import daemon_signer
+    from .service.journal_repair import rebuild_journal
+    from .storage import StateDirBusy, lock_state_dir
+
     config.state.dir.mkdir(parents=True, exist_ok=True)
     try:
         lock = lock_state_dir(config.state.dir)

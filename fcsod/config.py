@@ -14,6 +14,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from fcso.config import (
+    DEFAULT_TOP_K,
     ComputeConfig,
     ContactConfig,
     DesignConfig,
@@ -24,13 +25,37 @@ from fcso.config import (
     PrintConfig,
     SamplerConfig,
     SearchConfig,
+    VerifyConfig,
     format_validation_error,
     read_toml,
 )
 from fcso.errors import ConfigError, MeshError
 
-from .build.models import BuildConfig, parse_transform
-from .bus.ros2_config import Ros2Config
+from .plate.models import BuildConfig, parse_transform
+
+#: Admin space of rmw_zenoh's liveliness tokens.
+LIVELINESS_ADMIN_SPACE = "@ros2_lv"
+
+
+#: A ROS 2 name token (node names, namespace parts).
+NAME_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
+
+
+class Ros2Config(BaseModel):
+    """``[ros2]``: the daemon as a ROS 2 node on zenoh, in rmw_zenoh's wire format."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = Field(False, description="Also publish the ROS 2 topics on the daemon's zenoh session")
+    domain_id: int = Field(0, ge=0, le=232, description="ROS_DOMAIN_ID of the cell")
+    namespace: str = Field(
+        "/", pattern=rf"^/({NAME_TOKEN}(/{NAME_TOKEN})*)?$", description="ROS 2 namespace of the node, e.g. /cell1"
+    )
+    node_name: str = Field("fcsod", pattern=rf"^{NAME_TOKEN}$", description="ROS 2 node name")
+    history_depth: int = Field(
+        10, ge=1, description="Keep-last depth: samples per topic a late transient-local subscriber receives"
+    )
+
 
 #: Name of the optional manifest in a job folder.
 MANIFEST_NAME = "job.toml"
@@ -178,17 +203,24 @@ class McapConfig(_Section):
     )
 
 
-class VerifySettings(_Section):
-    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``."""  # noqa: E501
+class VerifySettings(VerifyConfig):
+    """``[verify]``: grasp verification in simulation (fcso.sim), in ``fcsod.toml`` for every job or in a ``job.toml``.
+
+    Every setting of fcso's ``[verify]`` (the capture measure's test
+    conditions among them: the job's design ranks candidates with them),
+    and when the daemon verifies. ``choice_budget_s`` defaults to
+    ``time_limit_seconds`` and ``cache_dir`` to the state folder's.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = Field(
         True,
         description="Verify every done job's design in simulation (MuJoCo), after it is published (and with top_k, "
         "choose among candidates by it before)",
     )
-    trials: int = Field(10, ge=0, description="Precision trials per scenario and finger")
     top_k: int = Field(
-        3,
+        DEFAULT_TOP_K,
         ge=0,
         description="Verify up to K candidates in the order of the design's measure and deliver the first that passes "
         "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets)",
@@ -199,6 +231,12 @@ class VerifySettings(_Section):
         description="A verification after the job is done is stopped after this (its status on the verification key "
         "is then failed; the job stays done); choosing among top_k candidates starts no further candidate after it, s",
     )
+
+    def verify_config(self) -> VerifyConfig:
+        """fcso's ``[verify]`` of these settings: every one of its keys that was given (unset ones keep fcso's
+        defaults, so the part density still follows the design's print profile)."""
+        given = self.model_fields_set & set(VerifyConfig.model_fields)
+        return VerifyConfig(**{name: getattr(self, name) for name in given})
 
 
 #: host:port of a listening socket; the host is a name, an IPv4 address or a bracketed IPv6 address.
@@ -265,6 +303,13 @@ class DaemonConfig(_Section):
     metrics: MetricsConfig = Field(default_factory=MetricsConfig, description="The Prometheus metrics endpoint")
     foxglove: FoxgloveConfig = Field(default_factory=FoxgloveConfig, description="The live Foxglove server")
 
+    @field_validator("design", mode="before")
+    @classmethod
+    def _verify_has_one_home(cls, value: Any) -> Any:
+        if isinstance(value, dict) and "verify" in value:
+            raise ValueError("verify: the verification's settings are the daemon's [verify] section")
+        return value
+
     @model_validator(mode="after")
     def _output_outside_watch_roots(self) -> DaemonConfig:
         output = self.output.root.resolve()
@@ -295,6 +340,7 @@ def _resolve_paths(data: dict, base: Path) -> None:
     fix("zenoh", "config_file")
     fix("bus", "signing_key")
     fix("bus", "verify_key")
+    fix("verify", "cache_dir")
     design = data.get("design")
     if isinstance(design, dict):
         fix_finger = design.get("finger")

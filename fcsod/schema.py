@@ -9,7 +9,6 @@ from pydantic import BaseModel
 from fcso.schema import write_schemas
 from fcso.sim.report import VerificationReport
 
-from .build.models import PlacementReport
 from .bus.messages import (
     DesignAttachment,
     GraspsMessage,
@@ -22,6 +21,7 @@ from .bus.messages import (
 )
 from .config import DaemonConfig, JobManifest
 from .job.reuse import ReuseReport
+from .plate.models import PlacementReport
 from .record.recorder import CHANNELS, TOPIC_VERIFICATION
 
 

@@ -186,18 +186,7 @@ def test_no_import_cycle(package):
     assert cycles(import_graph((package,))) == []
 
 
-@pytest.mark.parametrize(
-    "package",
-    [
-        "fcso",
-        pytest.param(
-            "fcsod",
-            marks=pytest.mark.xfail(
-                strict=True, reason="bus.session -> service.journal and record.audit -> job: fcsod's half of issue 45"
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("package", PACKAGES)
 def test_no_package_cycle(package):
     """Between the subpackages and top-level modules of a package: a layer imports only layers below it."""
     assert cycles(package_graph(package)) == []
@@ -234,9 +223,9 @@ def test_the_package_graph_finds_a_cycle_the_modules_do_not_have(tmp_path, monke
 )
 def test_a_command_starts_without_the_heavy_libraries(entry_point, argv):
     """The start-up budget as an import list, not a time: a command that does not design, draw or simulate loads
-    none of :data:`HEAVY`, nor the pipeline."""
+    none of :data:`HEAVY`, nor the pipeline, the finger sets or the pages (the verification's settings are light)."""
     loaded = modules_loaded_by(entry_point, argv)
-    assert sorted(m for m in loaded if within(m, HEAVY + ("fcso.pipeline", "fcso.sim"))) == []
+    assert sorted(m for m in loaded if within(m, (*HEAVY, "fcso.pipeline", "fcso.sets", "fcso.output"))) == []
 
 
 def test_the_import_list_sees_a_heavy_import(tmp_path):
@@ -305,3 +294,38 @@ def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tm
     result = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, check=True)
     assert result.stdout.strip().splitlines()[-1] == "[]"
     assert any(tmp_path.glob("*.json"))
+
+
+#: What an fcsod operator command needs none of: fcso's design, simulation and pictures, and the libraries that only
+#: they (or the bus) use.
+NOT_FOR_OPERATORS = (*HEAVY, "fcso.pipeline", "fcso.sets", "fcso.sim", "fcso.output", "trimesh", "zenoh")
+
+
+@pytest.fixture(scope="module")
+def operator_config(tmp_path_factory):
+    """A daemon config whose journal holds one job, so ``fcsod jobs`` lists it rather than stopping early."""
+    from fcsod.service.journal import Journal
+    from tests.fcsod_helpers import free_port, write_config
+
+    base = tmp_path_factory.mktemp("operator")
+    config = write_config(base, free_port())
+    (base / "state").mkdir()
+    journal = Journal(base / "state" / "journal.sqlite3")
+    journal.add("job-1", str(base / "watch" / "job"), "2026-01-01T00:00:00+00:00")
+    journal.close()
+    return config
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["jobs"], ["jobs", "--json"], ["journal", "check"], ["fingers", "list"], ["cancel", "job-1", "--timeout", "0"]],
+)
+def test_an_operator_command_loads_neither_the_design_nor_the_heavy_libraries(operator_config, argv):
+    """The start-up budget of ``fcsod jobs`` and the other operator commands as an import list, not a time."""
+    loaded = modules_loaded_by("fcsod.cli:main", [*argv, "--config", str(operator_config)])
+    assert sorted(m for m in loaded if within(m, NOT_FOR_OPERATORS)) == []
+
+
+def test_the_operator_import_list_sees_a_heavy_import(tmp_path):
+    """The check above can fail: ``fcsod schema`` writes the verification's schemas, so it loads fcso.sim."""
+    assert "fcso.sim" in modules_loaded_by("fcsod.cli:main", ["schema", "--out", str(tmp_path)])

@@ -41,7 +41,7 @@ exact: the sanity tests' fingers closed 0.27 mm past their seat.
 MuJoCo's signed distance fields of meshes (``needsdf``, a ``type="sdf"``
 geom; no decomposition at all) made 2-7 contacts where the prisms make
 39-289, and the bunny slipped out of its pads in every pose; with 200
-start points 10-20x slower and still dropped (``docs/benchmarks.md``).
+start points 10-20x slower and still dropped (``CHANGELOG.md``, issue 22).
 """
 
 from __future__ import annotations

@@ -42,17 +42,11 @@ FRAME_RATE_HZ = 20.0
 #: :data:`CREEP_CARRY_MM` or turn the part :data:`CREEP_CARRY_DEG`, and as the creep is known: its uncertainty (how
 #: much the lines fitted through each half of the steps differ) times the stretch stays within
 #: :data:`CREEP_ERROR_MM` and :data:`CREEP_ERROR_DEG` (:func:`creep_horizon_s`); then the creep is measured again over
-#: fresh steps (projective integration). A part held in the pads is seldom at rest in MuJoCo's soft friction: the
-#: bunny creeps 0.05-0.4 mm/s and 0.1-0.5 degrees/s through the whole lift, and in its pose 3 it also chatters in the
-#: pads, its halves' slopes differing by 0.06-0.08 mm/s and 0.12 degrees/s, more than its creep. A first rule that
-#: carried a creep on only when the halves agreed within 0.01 mm/s and 0.02 degrees/s never passed there, and those
-#: trials stepped through the whole lift. Measured against the stepped lift on 32 grasps (the bunny's poses 1 and 3
-#: designed, pose 1 between flat pads, the demo's xyz cube and solar tracker): every final pose within 0.035 mm and
-#: 0.041 degrees of the stepped one, but for two trials that slide out of the pads, whose stepped lifts started
-#: 0.0001 mm elsewhere end 0.2-13 mm elsewhere (``docs/benchmarks.md``). Carried on in one stretch, the dying rocking
-#: of the xyz cube ended up to 0.09 degrees off and a bunny sliding out of flat pads up to 0.9 degrees; fitted lines
-#: rather than two differences, since these let the contacts' chatter through. A part that rocks or slides unsteadily
-#: has a large uncertainty, and is stepped.
+#: fresh steps (projective integration). Why so: a part held in the pads is seldom at rest in MuJoCo's soft friction,
+#: so a rule that waited for rest, or for both halves to agree closely, would step through most lifts; bounding the
+#: error the carried creep can make instead keeps the final pose within the success tolerance's small fraction. Lines
+#: are fitted, rather than two differences taken, so the contacts' chatter does not pass for creep; a part that rocks
+#: or slides unsteadily has a large uncertainty, and is stepped.
 CREEP_WINDOW_STEPS = 50
 CREEP_CARRY_MM = 0.05
 CREEP_CARRY_DEG = 0.05

@@ -435,3 +435,19 @@ class VerificationMessage(BaseModel):
     chosen_candidate: int | None = Field(None, description="top_k: the candidate verification delivered")
     choice: str | None = Field(None, description="top_k: which candidate was delivered and why")
     warnings: list[str]
+
+
+@dataclass
+class StoredMessage:
+    """The latest message of one topic of one job, as the journal keeps it for late joiners.
+
+    A design's payload is read from ``file``.
+    """
+
+    job_id: str
+    topic: str
+    key_expr: str
+    encoding: str
+    payload: bytes | None
+    attachment: str | None
+    file: str | None

@@ -30,7 +30,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from fcso.errors import ConfigError
 
-from .ros2_config import LIVELINESS_ADMIN_SPACE
+from ..config import LIVELINESS_ADMIN_SPACE
 from .signing import SIGNING_KEY_NAME, VERIFY_KEY_NAME, generate_signing_key, write_private
 
 #: Certificate lifetimes, days.

@@ -47,8 +47,8 @@ import zenoh
 import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
+from ..config import LIVELINESS_ADMIN_SPACE, Ros2Config
 from .messages import ENCODING_JSON, BusMessage
-from .ros2_config import LIVELINESS_ADMIN_SPACE, Ros2Config
 
 if TYPE_CHECKING:
     from ..record.recorder import Recorder

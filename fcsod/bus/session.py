@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import logging
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
 
 from ..config import BusConfig, ZenohConfig
-from ..service.journal import stored_messages
-from .messages import BusMessage, daemon_key, jobs_key
+from .messages import BusMessage, StoredMessage, daemon_key, jobs_key
 
 log = logging.getLogger("fcsod.bus")
 
@@ -72,8 +72,8 @@ class Bus:
     """The daemon's presence on zenoh.
 
     Declares the liveliness token ``<prefix>/<cell>/daemon`` and a queryable
-    on ``<prefix>/<cell>/jobs/**`` that answers from the journal's stored
-    messages (design payloads are read from the job's output folder).
+    on ``<prefix>/<cell>/jobs/**`` that answers from the stored messages
+    (design payloads are read from the job's output folder).
 
     Parameters
     ----------
@@ -81,13 +81,13 @@ class Bus:
         Prefix and cell.
     settings : ZenohConfig
         Session settings.
-    journal_path : Path
-        The SQLite journal the queryable reads.
+    stored : callable
+        The latest message of every topic of every job (the journal's), read at each query.
     """
 
-    def __init__(self, bus: BusConfig, settings: ZenohConfig, journal_path: Path):
+    def __init__(self, bus: BusConfig, settings: ZenohConfig, stored: Callable[[], list[StoredMessage]]):
         self.bus = bus
-        self.journal_path = journal_path
+        self.stored = stored
         self.session = open_session(settings)
         self._lock = threading.Lock()
         self._token = self.session.liveliness().declare_token(daemon_key(bus.prefix, bus.cell))
@@ -102,7 +102,7 @@ class Bus:
         """Reply with every stored message whose key the query's key expression intersects."""
         wanted = query.key_expr
         try:
-            for stored in stored_messages(self.journal_path):
+            for stored in self.stored():
                 if not wanted.intersects(zenoh.KeyExpr(stored.key_expr)):
                     continue
                 payload = stored.payload

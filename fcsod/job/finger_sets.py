@@ -9,15 +9,14 @@ from __future__ import annotations
 
 import hashlib
 
-import fcso
 from fcso.layout import set_finger_path
 from fcso.report.models import FingerSetsReport
 from fcso.sets import SetsResult
 
-from ..build.build3mf import Build, BuildItem
-from ..build.models import BuildConfig
-from ..build.placement import PlacementResult, place_fingers
 from ..bus.messages import ENCODING_STL, BusMessage, DesignAttachment, PlanMessage, PlanSet, job_key
+from ..plate.build3mf import Build, BuildItem
+from ..plate.models import BuildConfig
+from ..plate.placement import PlacementResult, place_fingers
 
 
 def place_sets(build: Build, sets: SetsResult, config: BuildConfig) -> list[PlacementResult]:
@@ -117,35 +116,3 @@ def plan_message(
         partition=report.search.description,
     )
     return BusMessage.json_body(prefix, cell, "plan", plan)
-
-
-def plan_lines(plan: dict) -> list[str]:
-    """The pick plan as ``fcsod audit`` tells it, from a plan message's JSON body."""
-    lines = [
-        f"pick plan: {len(plan['sets'])} finger set(s), worst retained "
-        + ("-" if plan["worst_retained"] is None else f"{plan['worst_retained']:.3f}")
-        + f", min_retained {plan['min_retained']:g} "
-        + ("reached" if plan["min_retained_reached"] else "NOT reached")
-    ]
-    for entry in plan["sets"]:
-        reused = entry.get("finger_id")
-        lines.append(
-            f"  set {entry['set']}: mount "
-            + (f"library finger {reused} delivered by {entry['reused_from_job']}, " if reused is not None else "")
-            + f"{entry['finger_file']} ({entry['finger_copies']} copies in build.3mf, "
-            f"sha256 {entry['finger_sha256']}, "
-            f"{fcso.quality_words(entry['quality'], entry['quality_measure'])})"
-        )
-        for part in entry["parts"]:
-            lines.append(
-                f"    pick {part['quantity']} x {part['part']} (poses "
-                f"{', '.join(str(g['pose_index']) for g in part['grasps'])})"
-            )
-    for entry in plan.get("not_served", []):
-        lines.append(
-            f"  not served: {entry['quantity']} x {entry['part']} to {entry['fallback'].replace('_', ' ')} "
-            f"(best set {entry['best_set']} keeps {entry['retained']:.3f}: {entry['reason']})"
-        )
-    if plan["ungraspable_parts"]:
-        lines.append("  not picked (no set can grasp them): " + ", ".join(plan["ungraspable_parts"]))
-    return lines

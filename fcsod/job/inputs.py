@@ -19,9 +19,10 @@ from fcso.config import DesignConfig
 from fcso.errors import ConfigError, MeshError
 from fcso.parts import MESH_SUFFIXES
 
-from ..build.models import BuildConfig
 from ..bus.messages import InputFile
 from ..config import MANIFEST_NAME, JobManifest, LimitsConfig, PartEntry, parse_manifest
+from ..plate.models import BuildConfig
+from ..storage import file_sha256
 
 #: (relative path, size in bytes, mtime in ns); size -1 for a missing file.
 FileStat = tuple[str, int, int]
@@ -124,15 +125,6 @@ def slug(name: str) -> str:
     """
     text = re.sub(r"[^a-z0-9_-]+", "-", name.lower()).strip("-_")
     return text[:48] or "job"
-
-
-def file_sha256(path: Path) -> str:
-    """SHA-256 of a file's content, hex."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def hash_inputs(folder: Path, inputs: FolderInputs, max_file_bytes: int) -> list[InputFile]:

@@ -14,6 +14,7 @@ import signal
 import threading
 from multiprocessing.connection import Connection
 
+from .events import WorkerBroken, WorkerReady
 from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, VerificationTask, Withdrawn
 
 #: The job's code (fcso's design, MuJoCo, matplotlib), imported once by the fork server that workers are forked from.
@@ -65,10 +66,10 @@ def worker_main(connection: Connection, life_line: Connection) -> None:
     except Exception as exc:
         # a broken installation (a dependency missing or changed): every worker would die the same way, so the
         # daemon is told why instead of starting the next one
-        connection.send(("broken", f"{type(exc).__name__}: {exc}"))
+        connection.send(WorkerBroken(f"{type(exc).__name__}: {exc}"))
         raise
 
-    connection.send(("ready", os.getpid()))
+    connection.send(WorkerReady(os.getpid()))
     task = connection.recv()
     if task is None:
         return

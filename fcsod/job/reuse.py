@@ -1,6 +1,6 @@
 """Finger reuse in a job (METHOD §11b): serve a job from the cell's finger library, or add the job's fingers to it.
 
-After loading, :func:`step_reuse` asks the library (:mod:`fcsod.service.fingers`)
+After loading, :func:`step_reuse` asks the library (:mod:`fcsod.job.fingers`)
 for delivered fingers whose parts have the geometry of every part of the job;
 a part of no delivered geometry is evaluated on the pads of the fingers that
 serve parts of about its size (``[reuse] similar_size_percent``) with
@@ -18,31 +18,29 @@ designs keeps its finger sets in the library when it is done
 from __future__ import annotations
 
 import io
-from pathlib import Path
 
 import trimesh
 from pydantic import Field
 
 import fcso
-from fcso.config import DesignConfig
+from fcso.config import CAPTURE_CONDITIONS, DesignConfig
 from fcso.layout import REPORT_JSON, set_finger_path
 from fcso.pipeline.report import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
 
 from .. import __version__
-from ..build.build3mf import export_build_3mf
-from ..build.placement import place_fingers
 from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now
-from ..config import DaemonConfig
+from ..plate.build3mf import export_build_3mf
+from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
-from ..service.fingers import (
-    LIBRARY_NAME,
+from .fingers import (
     DeliveredFinger,
     DeliveredPart,
     FingerEntry,
     FingerLibrary,
     FittedPart,
     ServedPart,
+    library_path,
 )
 from .task import BUILD_NAME, FINGER_SET, JobRun
 
@@ -96,14 +94,10 @@ class ReuseReport(ReportModel):
     warnings: list[str]
 
 
-def library_path(config: DaemonConfig) -> Path:
-    """The cell's finger library in the daemon's state folder."""
-    return config.state.dir / LIBRARY_NAME
-
-
 def pad_settings(config: DesignConfig) -> str:
-    """The JSON of the settings sections a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`)."""
-    return config.model_dump_json(include=set(PAD_SECTIONS))
+    """The JSON of the settings a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`, the measure's
+    test conditions)."""
+    return config.model_dump_json(include={**dict.fromkeys(PAD_SECTIONS, True), "verify": set(CAPTURE_CONDITIONS)})
 
 
 def step_reuse(run: JobRun) -> None:

@@ -9,7 +9,6 @@ import os
 import shutil
 import time
 import traceback
-from collections.abc import Callable
 from pathlib import Path
 
 from fcso import FcsoError
@@ -17,21 +16,23 @@ from fcso import FcsoError
 from ..bus.messages import BusMessage, StateChangeRecord, utc_now
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_STATE, Recorder
+from .events import Emit, JobFinished, Log, Publish, StepFinished
 from .steps import job_steps
 from .task import JobFolderDeleted, JobRun, JobTask, TimeLimitExceeded, Withdrawn, status_message, time_limit_error
 from .verification import verification_after_done, verify_done_job
 
 
-def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
+def run_job(task: JobTask, emit: Emit) -> None:
     """Run one job start to end; always leaves a finished ``job.mcap`` in the job's output folder.
 
     Parameters
     ----------
     task : JobTask
     emit : callable
-        Receives ``("log", level, message, fields)``, ``("publish", BusMessage)``,
-        ``("step", name, seconds)`` after each step, ``("foxglove", topic, protobuf bytes, log time ns)`` for
-        each scene, and finally ``("finished", state, error, [BusMessage, ...])``.
+        Receives :class:`~fcsod.job.events.Log`, :class:`~fcsod.job.events.Publish`,
+        :class:`~fcsod.job.events.StepFinished` after each step, :class:`~fcsod.job.events.Scene` for each scene,
+        and one :class:`~fcsod.job.events.JobFinished`; then, when a verification follows, what
+        :func:`~fcsod.job.verification.verify_done_job` sends.
     """
     config = task.config
     output_root = config.output.root
@@ -45,12 +46,12 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         # not even the record can start (a full disk): the journal and the bus still say why
         error = io_failure(exc, Path(task.folder), output_root) or f"internal error: {type(exc).__name__}: {exc}"
         shutil.rmtree(work_dir, ignore_errors=True)
-        emit(("log", "error", error, {}))
-        emit(("finished", "failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)], None))
+        emit(Log("error", error))
+        emit(JobFinished("failed", error, [status_message(task, "failed", finished_at=utc_now(), error=error)], None))
         return
     run = JobRun(task=task, folder=Path(task.folder), work_dir=work_dir, recorder=recorder, emit=emit)
     recorder.write(TOPIC_STATE, StateChangeRecord(job_id=task.job_id, state="queued", at=task.queued_at))
-    emit(("publish", run.status("running")))
+    emit(Publish(run.status("running")))
     error = None
     try:
         recorder.flush()
@@ -59,7 +60,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
             step(run)
             name, seconds = step.__name__.removeprefix("step_"), time.perf_counter() - started
             run.log("info", f"step {name} finished in {seconds:.2f} s", stage=name)
-            emit(("step", name, seconds))
+            emit(StepFinished(name, seconds))
             recorder.flush()
     except FcsoError as exc:
         # a part that vanished is the symptom; a deleted folder is the cause
@@ -96,8 +97,7 @@ def run_job(task: JobTask, emit: Callable[[tuple], None]) -> None:
         _fsync_dir(output_root)
     verification = verification_after_done(run) if error is None else None
     emit(
-        (
-            "finished",
+        JobFinished(
             "done" if error is None else "failed",
             error,
             publish,
@@ -160,8 +160,7 @@ def finish_failed(run: JobRun, error: str) -> BusMessage:
     except OSError:
         shutil.rmtree(run.work_dir, ignore_errors=True)
         run.emit(
-            (
-                "log",
+            Log(
                 "error",
                 "no space even for the job's record: nothing of the job is kept on disk",
                 {"path": str(run.work_dir)},

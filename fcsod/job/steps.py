@@ -18,7 +18,6 @@ from fcso.output.files import sets_output_files
 from fcso.sets import design_sets
 
 from .. import __version__
-from ..build.build3mf import Build, BuildItem, export_build_3mf, make_names_unique
 from ..bus.messages import (
     ENCODING_STL,
     BusMessage,
@@ -36,6 +35,7 @@ from ..bus.messages import (
     job_key,
     utc_now,
 )
+from ..plate.build3mf import Build, BuildItem, export_build_3mf, make_names_unique
 from ..record.recorder import (
     TOPIC_CANDIDATES,
     TOPIC_DESIGN,
@@ -61,8 +61,12 @@ def step_inputs(run: JobRun) -> None:
     run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
     try:
         run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
-        # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere
-        run.settings = run.manifest.design_config(config.design).updated({"compute": config.compute.model_dump()})
+        # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere. The design's
+        # measure predicts the verification the job's [verify] sets up, under its conditions
+        verify = job_settings(config.verify, run.manifest.verify).verify_config()
+        run.settings = run.manifest.design_config(config.design).updated(
+            {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
+        )
         run.build_settings = run.manifest.build_config(config.build)
         run.parts = check_parts(run.folder, run.manifest, config.limits)
     finally:

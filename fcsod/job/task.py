@@ -15,7 +15,6 @@ from __future__ import annotations
 import hashlib
 import signal
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,8 +22,6 @@ import fcso
 from fcso import DesignConfig, DesignResult
 from fcso.sets import SetsResult
 
-from ..build.build3mf import Build
-from ..build.models import BuildConfig
 from ..bus.messages import (
     BusMessage,
     InputFile,
@@ -37,7 +34,10 @@ from ..bus.messages import (
 )
 from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest
+from ..plate.build3mf import Build
+from ..plate.models import BuildConfig
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
+from .events import Emit, Log, Scene
 from .inputs import PartInput
 
 #: Shortest interval between two progress lines of the same stage, s.
@@ -152,14 +152,14 @@ def unfinished_verification_message(bus, job_id: str, state: str, error: str, fi
 @dataclass
 class JobRun:
     """The state of a running job that steps read and extend (``reuse``: part name -> how the finger library serves
-    it, :class:`~fcsod.service.fingers.ServedPart`, when it serves the whole job).
+    it, :class:`~fcsod.job.fingers.ServedPart`, when it serves the whole job).
     """
 
     task: JobTask
     folder: Path
     work_dir: Path
     recorder: Recorder
-    emit: Callable[[tuple], None]
+    emit: Emit
     manifest: JobManifest | None = None
     manifest_text: str | None = None
     inputs: list[InputFile] = field(default_factory=list)
@@ -209,12 +209,12 @@ class JobRun:
     def log(self, level: str, message: str, **fields) -> None:
         """Record a log line and send it to the daemon's log."""
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
-        self.emit(("log", level, message, fields))
+        self.emit(Log(level, message, fields))
 
     def scene(self, update) -> None:
         """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene`` and send it to the daemon's live server."""
         now = time.time_ns()
-        self.emit(("foxglove", TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
+        self.emit(Scene(TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
 
     def record_published(self, message: BusMessage) -> None:
         """Record a message to publish on the bus channel and, in its ROS 2 form, on the ROS 2 channels."""

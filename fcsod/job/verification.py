@@ -43,6 +43,7 @@ from ..record.recorder import (
     Recorder,
 )
 from ..record.scene import scene_updates
+from .events import Emit, Log, VerificationFinished, VerificationStarted
 from .inputs import read_manifest
 from .task import TimeLimitExceeded, VerificationTask, time_limit_error, unfinished_verification_message
 
@@ -102,7 +103,7 @@ def verification_after_done(run) -> VerifySettings | None:
 def verify_done_job(run, final_dir: Path, settings: VerifySettings) -> None:
     """After the job is done and journalled: verify every finger set's design (in memory), write, record, publish.
 
-    Ends with one ``("verified", state, error, messages)`` event.
+    Ends with one :class:`~fcsod.job.events.VerificationFinished`.
     """
     several = run.sets.several
     designs = [
@@ -118,12 +119,12 @@ def verify_done_job(run, final_dir: Path, settings: VerifySettings) -> None:
     )
 
 
-def verify_again(task: VerificationTask, emit: Callable[[tuple], None]) -> None:
+def verify_again(task: VerificationTask, emit: Emit) -> None:
     """Run a done job's verification again (after a crash or a stop cut it off), from its output folder.
 
     The job's ``[verify]`` is read again from its folder's ``job.toml`` under
-    the daemon's current settings. Starts with ``("verifying", time limit
-    in s)`` and ends with one ``("verified", state, error, messages)``.
+    the daemon's current settings. Starts with :class:`VerificationStarted`
+    and ends with one :class:`VerificationFinished`.
     """
     config = task.config
     final_dir = config.output.root / task.job_id
@@ -132,10 +133,10 @@ def verify_again(task: VerificationTask, emit: Callable[[tuple], None]) -> None:
         manifest, _ = read_manifest(Path(task.folder), config.design, config.limits, config.build)
         settings = job_settings(config.verify, manifest.verify)
     except Exception as exc:  # the job folder changed or went away since the job ran
-        emit(("verifying", config.verify.time_limit_seconds))
+        emit(VerificationStarted(config.verify.time_limit_seconds))
         _unfinished(config, task.job_id, [None], "failed", f"the job's settings cannot be read again: {exc}", emit)
         return
-    emit(("verifying", settings.time_limit_seconds))
+    emit(VerificationStarted(settings.time_limit_seconds))
     sets = sorted(final_dir.glob("set-*/report.json"))
     folders = [(path.parent, int(path.parent.name.removeprefix("set-"))) for path in sets] or [(final_dir, None)]
     if not (settings.enabled or settings.top_k > 0):
@@ -155,8 +156,8 @@ def _loaded(folder: Path):
     return design, report.settings
 
 
-def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit: Callable[[tuple], None]) -> None:
-    """Verify every design, then write each one's files, then send ``("verified", ...)`` with every message.
+def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit: Emit) -> None:
+    """Verify every design, then write each one's files, then send :class:`VerificationFinished` with every message.
 
     ``designs``: (output folder, finger set or None, callable giving the
     DesignUnderTest and the design's settings). A time limit or a failure
@@ -165,7 +166,7 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
 
     def log(level: str, message: str, **fields) -> None:
         # job.mcap is closed: these lines go to the daemon's log only
-        emit(("log", level, message, fields))
+        emit(Log(level, message, fields))
 
     started = time.perf_counter()
     try:
@@ -198,17 +199,16 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
         error = f"{type(exc).__name__}: {exc}"
         _unfinished(config, job_id, [number for _, number, _ in designs], "failed", error, emit, designs)
         return
-    emit(("verified", "done", None, messages))
+    emit(VerificationFinished("done", None, messages))
 
 
 def _unfinished(config, job_id: str, sets: list, state: str, error: str, emit, designs=()) -> None:
-    """Remove what a cut-off verification wrote and send ``("verified", state, error, messages)``, one per key."""
+    """Remove what a cut-off verification wrote and send :class:`VerificationFinished`, a message per key."""
     for out, _, _ in designs:
         _remove_verification_files(out)
-    emit(("log", "warning", f"verification {state}: {error}", {}))
+    emit(Log("warning", f"verification {state}: {error}"))
     emit(
-        (
-            "verified",
+        VerificationFinished(
             state,
             error,
             [unfinished_verification_message(config.bus, job_id, state, error, number) for number in sets],
@@ -266,16 +266,13 @@ VERIFICATION_CACHE_NAME = "verification-cache"
 
 
 def _verify_config(settings: VerifySettings, design_settings, state_dir: Path) -> VerifyConfig:
-    """fcso's ``[verify]`` of a job: its trials and time budget, the part density of the design's print profile, the
-    daemon's cache (``state_dir`` / :data:`VERIFICATION_CACHE_NAME`)."""
-    return with_print_density(
-        VerifyConfig(
-            trials=settings.trials,
-            choice_budget_s=settings.time_limit_seconds,
-            cache_dir=state_dir / VERIFICATION_CACHE_NAME,
-        ),
-        design_settings,
-    )
+    """fcso's ``[verify]`` of a job: its settings, the time budget of its time limit and the daemon's cache
+    (``state_dir`` / :data:`VERIFICATION_CACHE_NAME`) unless it sets its own, the part density of the design's print
+    profile unless it sets its own."""
+    config = settings.verify_config()
+    defaults = {"choice_budget_s": settings.time_limit_seconds, "cache_dir": state_dir / VERIFICATION_CACHE_NAME}
+    config = config.model_copy(update={k: v for k, v in defaults.items() if k not in config.model_fields_set})
+    return with_print_density(config, design_settings)
 
 
 def _bus_message(

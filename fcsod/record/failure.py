@@ -7,8 +7,7 @@ from pathlib import Path
 
 from ..bus.messages import BusMessage, LogRecord, StateChangeRecord
 from ..bus.ros2 import record_ros2
-from ..bus.ros2_config import Ros2Config
-from ..config import McapConfig
+from ..config import McapConfig, Ros2Config
 from .recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_LOG, TOPIC_STATE, salvage
 
 

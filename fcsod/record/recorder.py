@@ -26,7 +26,6 @@ from pydantic import BaseModel
 from fcso.schema import schema_text
 
 from .. import __version__
-from ..build.models import PlacementReport
 from ..bus.messages import (
     BusRecord,
     CandidateRecord,
@@ -40,6 +39,7 @@ from ..bus.messages import (
     SamplesRecord,
     StateChangeRecord,
 )
+from ..plate.models import PlacementReport
 
 #: The record of every job, in its output folder.
 JOB_RECORD_NAME = "job.mcap"

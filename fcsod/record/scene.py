@@ -34,8 +34,8 @@ from fcso.sim.report import VerificationReport
 from fcso.sim.scene import pad_in_world
 from fcso.sim.verify import DesignUnderTest
 
-from ..build.build3mf import BuildItem
-from ..build.models import BuildConfig, PlacementReport
+from ..plate.build3mf import BuildItem
+from ..plate.models import BuildConfig, PlacementReport
 
 #: No rotation.
 UNROTATED = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)

@@ -9,7 +9,6 @@ that imported the job's code once. One worker is started ahead of need.
 
 from __future__ import annotations
 
-import fcntl
 import logging
 import multiprocessing
 import os
@@ -17,6 +16,7 @@ import shutil
 import signal
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
@@ -27,6 +27,18 @@ from ..bus.ros2 import Ros2Node, node_fqn
 from ..bus.session import Bus, session_config
 from ..bus.signing import daemon_signer, signing_key_path
 from ..config import DaemonConfig
+from ..job.events import (
+    JobFinished,
+    Log,
+    Publish,
+    Scene,
+    StepFinished,
+    VerificationFinished,
+    VerificationStarted,
+    WorkerBroken,
+    WorkerEvent,
+    WorkerReady,
+)
 from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import WORKER_PRELOAD, worker_main
 from ..job.task import (
@@ -40,7 +52,8 @@ from ..job.task import (
 )
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
-from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message
+from ..storage import lock_state_dir
+from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message, stored_messages
 from .metrics import DaemonMetrics
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
@@ -56,27 +69,6 @@ CANCELLED_ERROR = "cancelled by the operator (fcsod cancel)"
 #: Folder of ``[output] root`` where ``fcsod retry`` keeps the records of the failed runs it replaces:
 #: ``attempts/<job_id>/<n>/job.mcap``.
 ATTEMPTS_DIR = "attempts"
-
-
-class StateDirBusy(Exception):
-    """Another daemon holds the state folder's lock."""
-
-
-def lock_state_dir(state_dir: Path):
-    """Take the state folder's lock (held while the returned file stays open).
-
-    Raises
-    ------
-    StateDirBusy
-        Another fcsod (daemon or journal repair) holds it.
-    """
-    lock_file = open(state_dir / "fcsod.lock", "w")
-    try:
-        fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        lock_file.close()
-        raise StateDirBusy(f"{state_dir}: another fcsod is running with this state folder") from None
-    return lock_file
 
 
 @dataclass
@@ -168,7 +160,7 @@ class Daemon:
         for weakness in link_weaknesses(session_config(self.config.zenoh)):
             log.warning(f"insecure bus: {weakness}")
         self.signer = signer
-        self.bus = Bus(self.config.bus, self.config.zenoh, self.journal_path)
+        self.bus = Bus(self.config.bus, self.config.zenoh, partial(stored_messages, self.journal_path))
         self.ros2 = Ros2Node(self.bus.session, self.config.ros2) if self.config.ros2.enabled else None
         if self.ros2 is not None:
             log.info(
@@ -413,33 +405,36 @@ class Daemon:
                 slot.open = False
                 slot.connection.close()
                 return
-            kind = event[0]
-            if kind == "ready":
-                slot.ready = True
-            elif kind == "broken":
-                self._workers_cannot_start(event[1])
-            elif kind == "log":
-                _, level, message, fields = event
-                log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
-            elif kind == "publish":
-                if event[1].topic.partition("/")[0] == "verification":
-                    self.metrics.verified(VerificationMessage.model_validate_json(event[1].payload).passed)
-                self._publish(event[1])
-            elif kind == "foxglove":
-                if self.foxglove is not None:
-                    self.foxglove.log_scene(event[2], event[3])
-            elif kind == "step":
-                self.metrics.stage_seconds.labels(event[1]).observe(event[2])
-            elif kind == "finished":
-                self._finished(slot, *event[1:])
-            elif kind == "verifying":
-                _start_verification_clock(slot, event[1])
-            elif kind == "verified":
-                self._verified(slot, *event[1:])
+            self._handle(slot, event)
 
-    def _finished(
-        self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage], verify_limit_s: float | None
-    ) -> None:
+    def _handle(self, slot: WorkerSlot, event: WorkerEvent) -> None:
+        """Act on one event of a worker."""
+        match event:
+            case WorkerReady():
+                slot.ready = True
+            case WorkerBroken(error):
+                self._workers_cannot_start(error)
+            case Log(level, message, fields):
+                log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
+            case Publish(message):
+                if message.topic.partition("/")[0] == "verification":
+                    self.metrics.verified(VerificationMessage.model_validate_json(message.payload).passed)
+                self._publish(message)
+            case Scene(_, data, log_time_ns):
+                if self.foxglove is not None:
+                    self.foxglove.log_scene(data, log_time_ns)
+            case StepFinished(name, seconds):
+                self.metrics.stage_seconds.labels(name).observe(seconds)
+            case JobFinished():
+                self._finished(slot, event)
+            case VerificationStarted(time_limit_seconds):
+                _start_verification_clock(slot, time_limit_seconds)
+            case VerificationFinished(state, error, messages):
+                self._verified(slot, state, error, messages)
+
+    def _finished(self, slot: WorkerSlot, event: JobFinished) -> None:
+        """The job ended: journal its state, then publish its messages."""
+        state, error, messages, verify_limit_s = event.state, event.error, event.messages, event.verify_limit_seconds
         status = next(StatusMessage.model_validate_json(m.payload) for m in reversed(messages) if m.topic == "status")
         # a verification that follows is journalled with the done state: a crash during it runs it again
         row = self.journal.mark_finished(

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from ..bus.messages import BusMessage, JobState
+from ..bus.messages import BusMessage, JobState, StoredMessage
+from ..storage import connect_database
 
 VerificationState = Literal["running", "done", "failed", "skipped"]
 
@@ -97,19 +98,6 @@ class VerificationRow:
     started_at: str | None
     finished_at: str | None
     error: str | None
-
-
-@dataclass
-class StoredMessage:
-    """The latest message of one topic of one job; a design's payload is read from ``file``."""
-
-    job_id: str
-    topic: str
-    key_expr: str
-    encoding: str
-    payload: bytes | None
-    attachment: str | None
-    file: str | None
 
 
 def stored_message(message: BusMessage, output_root: Path) -> StoredMessage:
@@ -387,11 +375,3 @@ def _request(row: tuple) -> OperatorRequest:
     return OperatorRequest(
         request_id, job_id, action, requested_at, handled_at, None if accepted is None else bool(accepted), outcome
     )
-
-
-def connect_database(path: Path) -> sqlite3.Connection:
-    """A connection to one of the daemon's SQLite files: WAL, every commit synced (survives ``kill -9``)."""
-    db = sqlite3.connect(path, timeout=30.0, isolation_level="DEFERRED")
-    db.execute("PRAGMA journal_mode = WAL")
-    db.execute("PRAGMA synchronous = FULL")
-    return db

@@ -1,7 +1,7 @@
 """Production 3MF: ``build.3mf`` read back by lib3mf (the 3MF consortium's library) in strict mode.
 
 A real design's finger (fcso on the test cube) and real part meshes are
-written by :func:`fcsod.build.build3mf.export_build_3mf`, and a daemon job's own
+written by :func:`fcsod.plate.build3mf.export_build_3mf`, and a daemon job's own
 ``build.3mf`` is checked the same way.
 """
 
@@ -18,7 +18,7 @@ import trimesh
 from lxml import etree
 
 from fcso import DesignConfig, design, load_part
-from fcsod.build.build3mf import BuildItem, export_build_3mf
+from fcsod.plate.build3mf import BuildItem, export_build_3mf
 from tests.fcsod_helpers import DATA, drop_job, finished, free_port, start_daemon, start_subscriber, write_config
 
 CUBE = DATA / "20mm-xyz-cube.stl"

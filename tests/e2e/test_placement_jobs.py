@@ -1,6 +1,6 @@
 """Build placement in the daemon: ``fcsod run`` and ``fcsod subscribe`` as separate processes, real job folders.
 
-Each job's ``build.3mf`` must reload (trimesh and :func:`fcsod.build.build3mf.read_build`)
+Each job's ``build.3mf`` must reload (trimesh and :func:`fcsod.plate.build3mf.read_build`)
 with the items and transforms of the placement section of ``report.json``,
 which the MCAP record and zenoh carry too.
 """
@@ -16,9 +16,9 @@ import trimesh
 
 from fcso import DesignConfig
 from fcso.errors import ConfigError
-from fcsod.build.build3mf import BuildItem, read_build, write_build_3mf
 from fcsod.cli import main
 from fcsod.config import load_daemon_config, parse_manifest
+from fcsod.plate.build3mf import BuildItem, read_build, write_build_3mf
 from fcsod.record.recorder import TOPIC_PLACEMENT, TOPIC_SCENE, read_record
 from tests.fcsod_helpers import (
     DATA,

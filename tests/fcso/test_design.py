@@ -39,7 +39,7 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
     mesh = featured_cube(notch_mm=8.0)
     config = fcso.DesignConfig().updated(upright_grasp_settings(mesh))
     report = fcso.design([Part(name="cube", path="featured_cube", mesh=mesh)], config).report
-    hold = config.quality.hold_force_n
+    hold = config.verify.hold_force_n
     pad_area = config.sampler.length_mm * config.sampler.width_mm
     for candidate in report.candidates:
         for quality in candidate.per_scenario:
@@ -50,7 +50,7 @@ def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
             else:
                 assert quality.holding_n is None
                 factor = quality.capture
-            # capture x holding in bands of 1/20, E / (E + L W) within a band (METHOD §7b, docs/method.md)
+            # capture x holding in bands of 1/20, E / (E + L W) within a band (METHOD §7b, docs/implementation.md)
             within = quality.effective_area / (quality.effective_area + pad_area)
             expected = (np.floor(20 * factor + 1e-9) + within) / 20
             assert quality.measure == pytest.approx(expected, rel=1e-4, abs=1e-4)

@@ -7,6 +7,7 @@ from scipy.spatial import Delaunay
 from fcso import ConfigError, load_config, load_part, stable_poses
 from fcso.config import DesignConfig, PosesConfig
 from fcso.poses import select_poses, toppling_poses
+from fcso.sim.config import load_verify_config
 from tests.conftest import REPO, data_path
 
 
@@ -95,3 +96,15 @@ def test_config_from_toml_and_defaults(tmp_path):
         '[finger]\nmesh = "f.stl"\ncontact_origin_mm = [0, 0, 0]\ncontact_normal = [1, 0, 0]\nup = [0, 0, 1]\n'
     )
     assert load_config(relative).finger.mesh == tmp_path / "f.stl"
+
+
+def test_the_capture_measure_reads_its_test_conditions_from_verify(tmp_path):
+    # one home: the start errors, tolerances, friction and forces are [verify]'s, which the measure predicts
+    path = tmp_path / "conditions.toml"
+    path.write_text("[verify]\nposition_error_mm = 1.5\nforce_limit_n = 45\n")
+    config = load_config(path)
+    assert config.verify.position_error_mm == 1.5 and config.verify.force_limit_n == 45
+    assert load_verify_config(path).force_limit_n == 45
+    path.write_text("[quality]\ngrip_force_n = 45\n")
+    with pytest.raises(ConfigError, match="quality.grip_force_n: unknown key"):
+        load_config(path)

@@ -53,6 +53,18 @@ def test_bad_config_fails_naming_the_key(tmp_path, old, new, key):
     assert str(error.value).startswith(f"{path}: ") and key in str(error.value)
 
 
+def test_verify_takes_every_verification_setting_and_is_their_only_home(tmp_path):
+    path = write_config(tmp_path, free_port(), verify='enabled = false\nforce_limit_n = 45\ncache_dir = "sim-cache"')
+    settings = load_daemon_config(path).verify
+    verification = settings.verify_config()
+    assert verification.force_limit_n == 45 and verification.cache_dir == tmp_path / "sim-cache"
+    # a density not given follows the design's print profile, as in fcso verify
+    assert "density_g_cm3" not in verification.model_fields_set
+    path.write_text(path.read_text() + "\n[design.verify]\nforce_limit_n = 50\n")
+    with pytest.raises(ConfigError, match="design: .*daemon's \\[verify\\]"):
+        load_daemon_config(path)
+
+
 def test_output_inside_a_watch_root_is_refused(tmp_path):
     path = write_config(tmp_path, free_port())
     path.write_text(path.read_text().replace('root = "out"', 'root = "watch/results"'))

@@ -11,7 +11,7 @@ import trimesh
 
 from fcso import load_part
 from fcso.report.models import GraspReport
-from fcsod.service.fingers import DeliveredFinger, DeliveredPart, FingerLibrary, FittedPart
+from fcsod.job.fingers import DeliveredFinger, DeliveredPart, FingerLibrary, FittedPart
 from tests.fcsod_helpers import DATA
 
 CUBE = DATA / "20mm-xyz-cube.stl"

@@ -14,13 +14,14 @@ import zipfile
 import pytest
 
 from fcso.errors import ConfigError, MeshError
-from fcsod.bus.messages import LogRecord, StateChangeRecord
+from fcsod.bus.messages import LogRecord, StateChangeRecord, StoredMessage
 from fcsod.config import JobManifest, LimitsConfig, PartEntry
+from fcsod.job.events import WorkerReady
 from fcsod.job.inputs import check_parts, hash_inputs, job_id, job_inputs
 from fcsod.job.process import worker_main
 from fcsod.record.audit import audit
 from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
-from fcsod.service.journal import Journal, StoredMessage, stored_messages
+from fcsod.service.journal import Journal, stored_messages
 from fcsod.service.systemd import notify, watchdog_interval
 from fcsod.service.watcher import FolderWatcher, Readiness
 from tests.conftest import HANG_GUARD_S
@@ -227,7 +228,7 @@ def test_a_worker_ends_itself_when_the_daemons_life_line_ends_though_its_task_pi
     worker.start()
     theirs.close()
     try:
-        assert ours.poll(HANG_GUARD_S) and ours.recv()[0] == "ready"
+        assert ours.poll(HANG_GUARD_S) and isinstance(ours.recv(), WorkerReady)
         # the worker now waits for its task on a pipe that stays open: only the life line can end it
         daemon_end.close()
         worker.join(HANG_GUARD_S)

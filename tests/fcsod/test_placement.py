@@ -21,7 +21,7 @@ from fcso.config import DesignConfig
 from fcso.errors import MeshError
 from fcso.finger import parametric_finger
 from fcso.threemf import check_zip_archive
-from fcsod.build.build3mf import (
+from fcsod.plate.build3mf import (
     Build,
     BuildItem,
     export_build_3mf,
@@ -30,8 +30,8 @@ from fcsod.build.build3mf import (
     read_build_3mf,
     write_build_3mf,
 )
-from fcsod.build.models import BuildConfig, PlacementReport
-from fcsod.build.placement import place_fingers
+from fcsod.plate.models import BuildConfig, PlacementReport
+from fcsod.plate.placement import place_fingers
 
 DATA = Path(__file__).parents[1] / "data"
 INCH_MM = 25.4
@@ -320,7 +320,7 @@ def test_spare_fingers_are_placed_when_there_is_room(finger):
 
 def test_surface_voxels_hold_every_surface_point():
     """The voxeliser is a superset of the voxels the surface touches, thin and slanted triangles included."""
-    from fcsod.build.voxels import surface_voxels
+    from fcsod.plate.voxels import surface_voxels
 
     sliver = trimesh.Trimesh(
         vertices=[[0.3, 0.2, 0.1], [97.1, 40.3, 13.7], [97.4, 40.9, 13.2], [50.0, 20.0, 60.0]],

@@ -19,18 +19,27 @@ import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from fcso.report.models import GraspReport
-from fcso.sets.identity import same_geometry
 
 from ..bus.messages import utc_now
-from .journal import connect_database
+from ..config import DaemonConfig
+from ..storage import connect_database
+
+if TYPE_CHECKING:
+    import trimesh
 
 #: The library's file in the daemon's state folder.
 LIBRARY_NAME = "fingers.sqlite3"
+
+
+def library_path(config: DaemonConfig) -> Path:
+    """The cell's finger library in the daemon's state folder."""
+    return config.state.dir / LIBRARY_NAME
+
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS fingers (
@@ -398,6 +407,8 @@ class FingerLibrary:
 
     def pad(self, finger_id: int) -> trimesh.Trimesh:
         """The pad alone of a library finger, its pad frame (mm)."""
+        import trimesh  # loaded where a mesh is made: `fcsod fingers list` makes none
+
         blob = self._db.execute("SELECT pad_stl FROM fingers WHERE finger_id = ?", (finger_id,)).fetchone()[0]
         return trimesh.load(io.BytesIO(blob), file_type="stl")
 
@@ -413,6 +424,9 @@ class FingerLibrary:
         self, finger_ids: list[int], mesh: trimesh.Trimesh
     ) -> tuple[int, str, np.ndarray, list[GraspReport]] | None:
         """The newest of ``finger_ids`` with a part of ``mesh``'s geometry: id, part name, its corner, its grasps."""
+        # fcso.sets loads the design's pipeline: not for the operator's `fcsod fingers`, which never compares
+        from fcso.sets.identity import same_geometry
+
         if not finger_ids:
             return None
         volume = float(mesh.volume)
@@ -455,5 +469,7 @@ def _geometry_blob(vertices: np.ndarray, faces: np.ndarray) -> bytes:
 
 
 def _geometry_mesh(blob: bytes) -> trimesh.Trimesh:
+    import trimesh
+
     arrays = np.load(io.BytesIO(blob))
     return trimesh.Trimesh(arrays["vertices"], arrays["faces"], process=False)
