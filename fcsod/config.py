@@ -14,7 +14,6 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from fcso.config import (
-    DEFAULT_TOP_K,
     ComputeConfig,
     ContactConfig,
     DesignConfig,
@@ -30,6 +29,7 @@ from fcso.config import (
     read_toml,
 )
 from fcso.errors import ConfigError, MeshError
+from fcso.verify_config import DEFAULT_TOP_K
 
 from .plate.models import BuildConfig, parse_transform
 
