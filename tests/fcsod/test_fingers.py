@@ -10,8 +10,8 @@ import pytest
 import trimesh
 
 from fcso import load_part
-from fcso.report.models import GraspReport
 from fcso.config import DesignConfig
+from fcso.report.models import GraspReport
 from fcsod.job.reuse import finger_settings, settings_difference
 from fcsod.service.fingers import DeliveredFinger, DeliveredPart, FingerLibrary, FittedPart
 from tests.fcsod_helpers import DATA
