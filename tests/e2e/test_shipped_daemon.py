@@ -231,6 +231,12 @@ def _two_solids(base: Path) -> Path:
 
 
 def test_the_shipped_daemon_designs_a_two_solid_file_keeping_both_solids(tmp_path):
+    """A regression test of issue 44's item 4 through the shipped daemon (repair on): both solids are kept as parts.
+
+    This file does not reproduce the dropped solid of the issue's real file: fcso before issue 44 kept both of its
+    solids too (as it does tests.broken_meshes.two_solids_with_degenerate_triangles'), so this test guards the
+    daemon's path, it did not fail before.
+    """
     cell = Cell(tmp_path)
     cell.start()
     try:
