@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 import fcso
-from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
+from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings, zigzag_l_part
 from fcso.config import DesignConfig
 from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.finger import parametric_finger
@@ -37,7 +37,7 @@ def two_part_design():
 
 def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
     mesh = featured_cube(notch_mm=8.0)
-    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh))
+    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"length_mm": 20.0}})
     report = fcso.design([Part(name="cube", path="featured_cube", mesh=mesh)], config).report
     hold = config.quality.hold_force_n
     pad_area = config.sampler.length_mm * config.sampler.width_mm
@@ -98,6 +98,24 @@ def test_a_featureless_plate_gets_flat_pads_not_a_carving(tmp_path):
     assert flat.case == "bad"
     assert flat.scenarios[0].capture.fraction == pytest.approx(carved.report.scenarios[0].flat_capture, abs=1e-6)
     assert flat.scenarios[0].capture.fraction < carved.report.scenarios[0].capture
+
+
+def test_a_v_notched_edge_is_found_by_the_default_sampler():
+    # an L plate whose only cageable feature is two 2 mm V-notches in the outer edge of its long arm, at x in
+    # [26, 34] of y = 0 (by construction): a 20 mm pad over them sees mostly straight edge, METHOD §5 labels that
+    # bad and the design stays flat; the default pad sizes hold one short enough to carve the notches
+    mesh = zigzag_l_part(teeth=2, tooth_mm=2.0)
+    result = fcso.design([Part(name="zigzag", path="zigzag", mesh=mesh)], fcso.DesignConfig())
+    report = result.report
+    assert not report.finger.flat_pads
+    length = report.settings.sampler.length_mm
+    for grasp in report.grasps:
+        to_part = np.linalg.inv(np.asarray(grasp.rest_transform))
+        centre = to_part[:3, :3] @ grasp.position_mm + to_part[:3, 3]
+        closing = to_part[:3, :3] @ grasp.closing_axis
+        # closing across the long arm, the pad's footprint along x holds both notches
+        assert abs(closing[1]) == pytest.approx(1.0, abs=1e-6)
+        assert abs(centre[0] - 30.0) + 4.0 <= length / 2.0 + 1e-6
 
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):

@@ -13,6 +13,8 @@ from fcso.sampler import REJECTION_REASONS, FingerPlate, face_yaws, feature_cent
 from tests.conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
+#: The product's settings with the paper's one 20 x 20 mm pad (the default designs two lengths, one at a time).
+PAPER_PAD = DesignConfig().updated({"sampler": {"length_mm": 20.0}})
 
 
 def block_part() -> trimesh.Trimesh:
@@ -116,7 +118,7 @@ def _volume_inside(part: manifold3d.Manifold, lower, upper) -> float:
 
 
 def test_valid_bunny_samples_pass_every_check_independently():
-    config = DesignConfig()
+    config = PAPER_PAD
     mesh = bunny_in_pose(1)
     sampler, gripper = config.sampler, config.gripper
     plate = built_in_plate(sampler, gripper)
@@ -213,7 +215,7 @@ def test_paper_bunny_has_base_level_grasps():
 
 
 def test_every_nth_pad_position_together_make_the_whole_sampling():
-    config = DesignConfig()
+    config = PAPER_PAD
     mesh = bunny_in_pose(1)
     plate = built_in_plate(config.sampler, config.gripper)
     whole = sample_grasps(mesh, config.sampler, config.gripper, plate)
