@@ -65,7 +65,8 @@ class SamplerConfig(_Section):
     face_yaws: bool = Field(
         True,
         description="Besides yaw_deg, close square to the part's flat side faces that yaw_deg misses (a chamfer, a "
-        "hexagon's face; at most one more yaw per scenario, fcso.sampler.face_yaws); false: yaw_deg only, the "
+        "hexagon's face) and into the pockets of its outline the others miss (a notch off the bounding box's axes); "
+        "at most one more yaw per scenario for each (fcso.sampler.face_yaws, pocket_yaws); false: yaw_deg only, the "
         "paper's sampler",
     )
 
