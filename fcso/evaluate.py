@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 
 from .capture import CaptureLandscape, pad_landscapes
-from .config import CAPTURE_CONDITIONS, DesignConfig
+from .config import DesignConfig
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
@@ -34,6 +34,7 @@ from .screen import (
     screen,
     screened_bound,
 )
+from .verify_config import CAPTURE_CONDITIONS
 
 
 @dataclass

@@ -35,16 +35,6 @@ _INF = np.inf
 #: Resolution of the extent profiles that find features, mm, and the least dip that is one.
 PROFILE_STEP_MM = 0.25
 FEATURE_DEPTH_MM = 0.2
-#: Side faces whose normal is within this of horizontal give closing directions, degrees.
-SIDE_FACE_TILT_DEG = 15.0
-#: Closing directions of side faces are collected in bins this wide, degrees; a bin within two bins of a
-#: configured yaw adds nothing (those pads already face it).
-FACE_YAW_BIN_DEG = 5.0
-#: A direction is added when its faces make at least this share of the part's side area ...
-FACE_YAW_MIN_SHARE = 0.05
-#: ... and at most this many directions per scenario, the largest: each costs one more yaw's samples, and
-#: a symmetric part (a chamfered cube, a hexagon) offers the same grasp at each of its directions.
-MAX_FACE_YAWS = 1
 
 
 @dataclass(frozen=True)
@@ -389,66 +379,6 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
             ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
             centres[number].append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
     return np.unique(np.concatenate(centres[0])), np.unique(np.concatenate(centres[1]))
-
-
-def face_yaws(mesh: trimesh.Trimesh, configured_deg: list[float], min_area_mm2: float) -> list[float]:
-    """Closing directions normal to a part's flat side faces that the configured yaws miss (beyond METHOD §3).
-
-    The stride and feature positions of METHOD §3b slide pads along ``b``;
-    the closing axis stays at the configured yaws (the bounding-box frame's
-    0 and 90 degrees by default). A part whose side faces are not square to
-    that frame (a chamfered edge, a hexagon, a notch's flank) is then only
-    grasped obliquely, though pads square to those faces would hold a V
-    between them: measured on a 30 mm cube with chamfered vertical edges,
-    closing along the bounding box captured displaced parts from one side
-    only (6 of 10 simulated trials), closing square to the chamfers seated
-    10 of 10. Side faces (normal within :data:`SIDE_FACE_TILT_DEG` of
-    horizontal) are binned by the direction of their normal modulo 180
-    degrees, weighted by area; a bin holding at least
-    :data:`FACE_YAW_MIN_SHARE` of the side area and ``min_area_mm2`` per
-    side, away from the configured yaws, gives its area-weighted mean
-    direction of most area. Round and organic sides spread over many bins and add none.
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        The part in its resting frame (mm), table normal ``+z``.
-    configured_deg : list of float
-        ``[sampler] yaw_deg``.
-    min_area_mm2 : float
-        Least face area per side of a direction (the sampler's least contact area), mm².
-
-    Returns
-    -------
-    list of float
-        At most :data:`MAX_FACE_YAWS` yaws in [0, 180) degrees, largest side area first.
-    """
-    normals, areas = np.asarray(mesh.face_normals), np.asarray(mesh.area_faces)
-    side = np.abs(normals[:, 2]) < np.sin(np.radians(SIDE_FACE_TILT_DEG))
-    if not side.any():
-        return []
-    yaws = np.degrees(np.arctan2(normals[side, 1], normals[side, 0])) % 180.0
-    weights = areas[side]
-    bins = int(round(180.0 / FACE_YAW_BIN_DEG))
-    number = np.minimum((yaws / FACE_YAW_BIN_DEG).astype(int), bins - 1)
-    area = np.bincount(number, weights=weights, minlength=bins)
-    # within a bin, the direction of the most face area (0.1 degree steps): a flat face's own direction,
-    # not its mean with the facets of a round wall beside it
-    fine = np.round(yaws, 1) % 180.0
-    taken = [int(round(y / FACE_YAW_BIN_DEG)) % bins for y in np.asarray(configured_deg) % 180.0]
-    chosen: list[float] = []
-    for k in np.argsort(-area, kind="stable"):
-        if len(chosen) == MAX_FACE_YAWS or area[k] < max(FACE_YAW_MIN_SHARE * weights.sum(), 2.0 * min_area_mm2):
-            break
-        # a local maximum only: one face direction can straddle two bins
-        if area[k] < max(area[(k - 1) % bins], area[(k + 1) % bins]):
-            continue
-        if any(min((k - t) % bins, (t - k) % bins) <= 2 for t in taken):
-            continue
-        taken.append(int(k))
-        directions, at = np.unique(fine[number == k], return_inverse=True)
-        chosen.append(float(directions[np.argmax(np.bincount(at, weights=weights[number == k]))]))
-    return chosen
 
 
 def _end_dips(heights: np.ndarray) -> np.ndarray:

@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .config import DEFAULT_TOP_K
+from .verify_config import DEFAULT_TOP_K
 
 if TYPE_CHECKING:
-    from .config import VerifyConfig
     from .sim.report import VerificationReport
+    from .verify_config import VerifyConfig
 
 # the parser's options need nothing of the simulation: each command imports it when it runs (fcso.cli)
 

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..closing_yaws import face_yaws
 from ..config import DesignConfig
 from ..errors import NoGraspError
 from ..evaluate import (
@@ -33,7 +34,7 @@ from ..progress import Progress, progress_with_note
 from ..report.models import (
     UngraspableReport,
 )
-from ..sampler import SamplerResult, face_yaws, sample_grasps
+from ..sampler import SamplerResult, sample_grasps
 from ..screen import NormalLattice, ScreenedCandidate, screen
 from .report import (
     ungraspable_report,
@@ -122,7 +123,14 @@ def prepare(
     Returns
     -------
     Prepared
+
+    Raises
+    ------
+    ValueError
+        ``config`` holds several pad sizes: each is prepared apart (:meth:`DesignConfig.pad_size_configs`).
     """
+    if len(config.sampler.pad_sizes()) > 1:
+        raise ValueError("prepare() takes one pad size; design each of config.pad_size_configs() apart")
     report_progress = progress_with_note(progress)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
