@@ -17,12 +17,12 @@ captured when steepest descent of ``s`` from it ends within the success
 tolerance of the seat.
 
 In the pad frame of side ``σ`` (``u = σ a``, ``v = σ b``, :meth:`fcso.sampler.
-GraspSample.pad_frame`), the displaced part's surface moves by ``Δv = σ t + θ
-(u - u_c)`` and ``Δu = -θ (v - v_c)``, ``(u_c, v_c)`` being its centre of mass
-there. The part's column heights are shifted by whole cells along ``v`` (the
-shift at ``u = D``, where the contact lies) and tilted by ``Δu``; the pad's
-heights stay. ``s`` then is a minimum over cells of shifted height maps:
-a landscape of a few hundred ``δ`` costs about a millisecond.
+GraspSample.pad_frame`), the displaced part is its outline turned by ``θ``
+about its centre of mass ``(u_c, v_c)`` there, exactly (METHOD §7c: a
+feature round about the vertical turns into itself and fixes no rotation),
+then shifted by ``σ t`` along ``v``. The pad's heights stay. ``s`` then is
+a minimum over cells of turned and shifted height maps: a landscape of a few
+hundred ``δ`` costs a few milliseconds.
 
 Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it:
 the clearance grows each carved geometry by ``c`` (a disc-shaped maximum
@@ -47,6 +47,10 @@ YAW_STEP_DEG = 0.5
 #: How far the landscape reaches beyond the start error box, mm and degrees:
 #: a descent may leave the box on its way to the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
+#: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
+#: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
+#: 0.1-0.25 mm under 60 N), and which made a cylinder in its round pocket capture every start yaw.
+TURN_RESOLUTION_MM = 0.02
 #: Spacing of the rows across the pad width that the landscape reads, mm.
 W_STEP_MM = 0.6
 
@@ -68,7 +72,10 @@ class CaptureLandscape:
     in_box : (nt, ny) bool
         Starts inside the test's error box.
     fraction : float
-        Captured share of the starts in the box, in [0, 1].
+        Captured share of the starts in the box, in [0, 1]; 0 when the pads meet before they squeeze the part.
+    pads_gap_mm : float
+        How far apart the two pads still are when, closing from the nominal seat, both first touch the part
+        (METHOD §5b), mm; ``<= 0``: the printed pads meet each other first and the grasp does not hold.
     """
 
     offsets_mm: np.ndarray
@@ -77,6 +84,7 @@ class CaptureLandscape:
     captured: np.ndarray
     in_box: np.ndarray
     fraction: float
+    pads_gap_mm: float
 
 
 def fitted_pad_heights(
@@ -141,6 +149,7 @@ def capture_landscape(
     centres_uv_mm: tuple[np.ndarray, np.ndarray],
     cell_mm: float,
     depth_mm: float,
+    width_mm: float,
     config: VerifyConfig,
 ) -> CaptureLandscape:
     """Squeeze one part between two pads from every start error of a grid and tell which starts are captured.
@@ -158,6 +167,9 @@ def capture_landscape(
         Grid cell, mm.
     depth_mm : float
         Penetration D: where the contact lies in ``u``.
+    width_mm : float
+        The part's extent along the closing axis in the pads' footprint (``a_max - a_min``), mm: the two pads'
+        inner faces (``u = 0``) lie ``width - 2 D`` apart at the nominal seat.
     config : VerifyConfig
         Start error box, success tolerance, friction.
 
@@ -186,20 +198,26 @@ def capture_landscape(
         entered = (heights > 0).any(axis=0)
         entered[np.argmax(entered)] = True
         part = np.where(heights[:, entered] > 0, heights[:, entered], -np.inf)
+        # the part turned by every start yaw about its centre of mass, exactly (METHOD §7c): a feature round about
+        # the vertical turns into itself and so fixes no rotation
+        turned = _turned_heights(np.ascontiguousarray(part), v_mm, float(u_c), float(v_c), yaws)
         # the shift along v of every start in cells: the clearance per column is known for whole
         # cells and interpolated between them, so the landscape has no steps of a cell's rounding
-        shift = (sign * offsets[:, None] + yaws[None, :] * (depth_mm - u_c)) / cell_mm
+        shift = sign * offsets / cell_mm
         whole = np.floor(shift).astype(np.int64)
         fraction = shift - whole
-        _add_side_gaps(
-            np.ascontiguousarray(pad_mm[:, entered]), np.ascontiguousarray(part), whole, fraction, v_mm, v_c, yaws, gap
-        )
+        _add_side_gaps(np.ascontiguousarray(pad_mm[:, entered]), turned, whole, fraction, gap)
         levers.append(abs(depth_mm - u_c))
     centre = (steps, turns)
     # a centre no pad touches has an infinite gap: every separation is then inf - inf, read as never seated
     with np.errstate(invalid="ignore"):
         separation = -(gap - gap[centre])
     separation[~np.isfinite(separation)] = np.inf
+    # METHOD §5b: closing from the nominal seat, the pads must both touch the part before they touch each other.
+    # The "-" pad is the "+" pad turned about the vertical: at the same column its face is the "+" pad's at the
+    # mirrored v, and the faces lie H+ + H- + width - 2 D apart.
+    pads_apart = float(np.min(pad_mm + pad_mm[::-1, :])) + width_mm - 2.0 * depth_mm
+    pads_gap = pads_apart - float(gap[centre]) if np.isfinite(gap[centre]) else -np.inf
     lever_mm = max(float(np.mean(levers)), cell_mm)
     successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * lever_mm, config.friction)
     seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (
@@ -215,7 +233,8 @@ def capture_landscape(
         separation_mm=separation,
         captured=captured,
         in_box=in_box,
-        fraction=float(captured[in_box].mean()),
+        fraction=float(captured[in_box].mean()) if pads_gap > 0 else 0.0,
+        pads_gap_mm=pads_gap,
     )
 
 
@@ -224,8 +243,8 @@ def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: f
 
     A move to one of the eight neighbours is taken when its drop exceeds
     what friction holds back: a slide along the pads must drop ``s`` by
-    more than ``2 μ`` per mm (two jaws), a turn only needs to drop it at
-    all, since the part pivots about a contact instead of sliding along it
+    more than ``2 μ`` per mm (two jaws), a turn only needs to drop it by
+    more than :data:`TURN_RESOLUTION_MM`, since the part pivots about a contact instead of sliding along it
     (measured: friction-gated turns left the zig-zag L-part and the hex
     prism at captures of 0.19 and 0.62 where the simulation seats 10/10).
     Among the moves taken the steepest (drop per length) wins.
@@ -238,41 +257,97 @@ def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: f
     return successor
 
 
-@compiled(
-    "(float64[:, ::1], float64[:, ::1], int64[:, ::1], float64[:, ::1], float64[::1], float64, "
-    "float64[::1], float64[:, ::1])"
-)
-def _add_side_gaps(pad, part, whole, fraction, v_mm, v_c, yaws, gap):
+@compiled("(float64[:, ::1], float64[::1], float64, float64, float64[::1])")
+def _turned_heights(part, v_mm, u_c, v_c, yaws):
+    """The part's column heights turned by each yaw about its centre of mass ``(u_c, v_c)`` in the pad frame.
+
+    Each row of ``w`` is the part's outline ``u(v)`` towards the pad, a polyline through the cell centres where the
+    part is in the box; turned exactly (``u' = u_c + (u - u_c) cos θ - (v - v_c) sin θ``, ``v' = v_c + (u - u_c)
+    sin θ + (v - v_c) cos θ``) and read back on the cells as its upper envelope. A linear shift and tilt of the
+    heights (``Δv = θ (D - u_c)`` for every column) moved a round boss's flanks as if turning moved the boss, so
+    a boss captured every start yaw where the simulation keeps it.
+
+    Parameters
+    ----------
+    part : (count_v, columns) float
+        Column heights, mm; ``-inf`` where the part is not in the box.
+    v_mm : (count_v,) float
+        Cell centres along ``v``, mm.
+    u_c, v_c : float
+        Centre of mass in the pad frame, mm.
+    yaws : (yaws,) float
+        Radians.
+
+    Returns
+    -------
+    (yaws, count_v, columns) float
+        ``-inf`` where the turned part is not in the box.
+    """
+    count_v, columns = part.shape
+    cell = v_mm[1] - v_mm[0] if count_v > 1 else 1.0
+    turned = np.full((yaws.shape[0], count_v, columns), -np.inf)
+    for k in range(yaws.shape[0]):
+        cos, sin = np.cos(yaws[k]), np.sin(yaws[k])
+        for column in range(columns):
+            previous_v, previous_u, previous_in = 0.0, 0.0, False
+            for v in range(count_v):
+                height = part[v, column]
+                if not np.isfinite(height):
+                    previous_in = False
+                    continue
+                u_turned = u_c + (height - u_c) * cos - (v_mm[v] - v_c) * sin
+                v_turned = v_c + (height - u_c) * sin + (v_mm[v] - v_c) * cos
+                alone = not previous_in and (v + 1 == count_v or not np.isfinite(part[v + 1, column]))
+                if alone:
+                    # a lone column, on its nearest cell; the others are read where their segments span a cell
+                    # centre (on the nearest cell, a sloping outline would be off by its slope over half a cell)
+                    nearest = int(np.floor(v_turned / cell))
+                    if 0 <= nearest < count_v and u_turned > turned[k, nearest, column]:
+                        turned[k, nearest, column] = u_turned
+                if previous_in:
+                    # the segment from the previous point: every cell centre it spans, interpolated
+                    low, high = min(previous_v, v_turned), max(previous_v, v_turned)
+                    first = max(int(np.ceil(low / cell - 0.5)), 0)
+                    last = min(int(np.floor(high / cell - 0.5)), count_v - 1)
+                    for target in range(first, last + 1):
+                        centre = (target + 0.5) * cell
+                        share = 0.0 if high - low < 1e-12 else (centre - previous_v) / (v_turned - previous_v)
+                        value = previous_u + share * (u_turned - previous_u)
+                        if value > turned[k, target, column]:
+                            turned[k, target, column] = value
+                previous_v, previous_u, previous_in = v_turned, u_turned, True
+    return turned
+
+
+@compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
+def _add_side_gaps(pad, turned, whole, fraction, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
 
     Parameters
     ----------
-    pad, part : (count_v, columns) float
-        The pad's face heights and the part's column heights (``-inf`` where
-        it is not in the box) on the rows of ``w`` the part enters, mm.
-    whole, fraction : (offsets, yaws) int64, float
+    pad : (count_v, columns) float
+        The pad's face heights on the rows of ``w`` the part enters, mm.
+    turned : (yaws, count_v, columns) float
+        The part's column heights turned by each start yaw (:func:`_turned_heights`), ``-inf`` where it is not in
+        the box, mm.
+    whole, fraction : (offsets,) int64, float
         Each start's shift along ``v`` in cells: its whole cells and the rest.
-    v_mm : (count_v,) float
-        Cell centres along ``v``, mm.
-    v_c : float
-        The part's centre of mass along ``v``, mm.
-    yaws : (yaws,) float
-        Start yaws, radians.
     """
     count_v, columns = pad.shape
     lowest = whole.min()
-    # the clearance of every whole shift per row of v: its least over the rows of w
-    per_shift = np.empty((whole.max() + 2 - lowest, count_v))
-    for shift in range(per_shift.shape[0]):
-        for v in range(count_v):
-            source = min(max(v - (lowest + shift), 0), count_v - 1)
-            least = np.inf
-            for column in range(columns):
-                least = min(least, pad[v, column] - part[source, column])
-            per_shift[shift, v] = least
-    for offset in range(whole.shape[0]):
-        for yaw in range(whole.shape[1]):
-            row, share = whole[offset, yaw] - lowest, fraction[offset, yaw]
+    shifts = whole.max() + 2 - lowest
+    for yaw in range(turned.shape[0]):
+        # the clearance of every whole shift per row of v: its least over the rows of w
+        per_shift = np.empty((shifts, count_v))
+        for shift in range(shifts):
+            for v in range(count_v):
+                source = min(max(v - (lowest + shift), 0), count_v - 1)
+                least = np.inf
+                for column in range(columns):
+                    least = min(least, pad[v, column] - turned[yaw, source, column])
+                per_shift[shift, v] = least
+        for offset in range(whole.shape[0]):
+            row, share = whole[offset] - lowest, fraction[offset]
             least = np.inf
             for v in range(count_v):
                 # interpolated between whole cells, so the landscape has no steps of a cell's rounding; inf - inf
@@ -280,8 +355,7 @@ def _add_side_gaps(pad, part, whole, fraction, v_mm, v_c, yaws, gap):
                 shifted = (1.0 - share) * per_shift[row, v] + share * per_shift[row + 1, v]
                 if np.isnan(shifted):
                     shifted = np.inf
-                # tilt: the displaced surface rises by -θ (v - v_c)
-                least = min(least, shifted + yaws[yaw] * (v_mm[v] - v_c))
+                least = min(least, shifted)
             gap[offset, yaw] += least
 
 
@@ -296,7 +370,7 @@ def _steepest_moves(separation, step_mm, turn_mm, friction):
             if dr == 0 and dc == 0:
                 continue
             length = np.hypot(dr * step_mm, dc * turn_mm)
-            held_below = 2.0 * friction * abs(dr) * step_mm + 1e-9
+            held_below = 2.0 * friction * abs(dr) * step_mm + TURN_RESOLUTION_MM * abs(dc) + 1e-9
             for r in range(rows):
                 for c in range(columns):
                     inside = 0 <= r + dr < rows and 0 <= c + dc < columns
@@ -323,6 +397,7 @@ def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.nda
 def pad_landscapes(
     chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
     centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+    widths_mm: list[float],
     grid: ScreenGrid,
     config: DesignConfig,
     flat: bool = False,
@@ -335,6 +410,8 @@ def pad_landscapes(
         One sample's "+" and "-" geometries per scenario: a candidate, or one sample alone.
     centres_uv_mm : list of two (2,) float
         Each scenario's centre of mass ``(u, v)`` in the "+" and "-" pad frames, mm.
+    widths_mm : list of float
+        Each scenario's part extent along the closing axis in the footprint (``a_max - a_min``), mm.
     grid : ScreenGrid
     config : DesignConfig
     flat : bool
@@ -362,7 +439,8 @@ def pad_landscapes(
             centres,
             grid.cell_mm,
             depth,
+            width,
             config.verify,
         )
-        for pair, centres in zip(chosen, centres_uv_mm)
+        for pair, centres, width in zip(chosen, centres_uv_mm, widths_mm)
     ]

@@ -275,7 +275,7 @@ def _report_sets(job: SetsResult, args) -> int:
             print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
         else:
             print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
-    if args.verify or args.verify_top:
+    if args.verify or args.verify_top is not None:
         for number, result in enumerate(job.designs, start=1):
             out = args.out / set_folder(number, job.several)
             code = verify_design_outputs(

@@ -425,6 +425,18 @@ class VerifyConfig(BaseModel):
         gt=0,
         description="Largest overlap of part and pad pieces at the nominal seated grasp without a warning, mm",
     )
+    arena_mb: float | None = Field(
+        None,
+        gt=0,
+        description="MuJoCo's memory (arena) for one simulation's contacts, constraints and solver, MB; null: sized "
+        "from the part's and the pads' collision pieces (16 MiB and 32 KiB per piece, fcso.sim.scene)",
+    )
+    arena_retry_factor: float = Field(
+        4.0,
+        ge=1,
+        description="A scenario whose simulation runs out of its arena is simulated again once with this many times "
+        "the arena; if it runs out again, or with 1 (no retry), the scenario fails with the reason",
+    )
     choice_budget_s: float = Field(
         600.0,
         gt=0,

@@ -68,6 +68,11 @@ class SampleGeometry:
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
 
     @property
+    def width_mm(self) -> float:
+        """The part's extent along the closing axis in the pads' footprint (``a_max - a_min``), mm."""
+        return self.sample.a_max_mm - self.sample.a_min_mm
+
+    @property
     def surfaces(self) -> tuple[SurfaceSamples, SurfaceSamples]:
         """The contact samples of the "+" and "-" geometries, pad frames (drawn anew: read once per use)."""
         return tuple(
@@ -168,7 +173,7 @@ def sample_geometry(
     )
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
-        capture = pad_landscapes([screens], [centres], grid, config)[0].fraction
+        capture = pad_landscapes([screens], [centres], [sample.a_max_mm - sample.a_min_mm], grid, config)[0].fraction
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -256,6 +261,7 @@ def evaluate_candidate(
         landscapes = pad_landscapes(
             [s.screen for s in chosen],
             [s.centres_uv_mm for s in chosen],
+            [s.width_mm for s in chosen],
             ScreenGrid.for_config(config),
             config,
             flat=flat,
@@ -272,7 +278,9 @@ def evaluate_candidate(
             continue
         holding = _holding(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
-        measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config)
+        # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores
+        holds = landscapes[number].pads_gap_mm > 0
+        measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config) if holds else 0.0
         results.append(
             ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)
         )
@@ -356,7 +364,12 @@ def screen_on_pad(
         return screen(screens, config, lattice)
     if captures is None:
         grid = ScreenGrid.for_config(config)
-        captures = [s.fraction for s in pad_landscapes(screens, [s.centres_uv_mm for s in chosen], grid, config)]
+        captures = [
+            s.fraction
+            for s in pad_landscapes(
+                screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], grid, config
+            )
+        ]
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
@@ -443,7 +456,7 @@ def versus_flat(
     for number, scenario in enumerate(scenarios):
         chosen = best.scenarios[number].capture
         sample = scenario.samples[best.choice[number]]
-        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], grid, config, flat=True)[0]
+        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], [sample.width_mm], grid, config, flat=True)[0]
         tried = max(
             [chosen.fraction]
             + [e.scenarios[number].capture.fraction for e in finalists]
@@ -487,7 +500,13 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
 
     def worst_capture(angle: float) -> float:
         drafted = config.updated({"print": {"lead_in_deg": angle}})
-        landscapes = pad_landscapes([s.screen for s in samples], [s.centres_uv_mm for s in samples], grid, drafted)
+        landscapes = pad_landscapes(
+            [s.screen for s in samples],
+            [s.centres_uv_mm for s in samples],
+            [s.width_mm for s in samples],
+            grid,
+            drafted,
+        )
         return min(landscape.fraction for landscape in landscapes)
 
     captures = {angle: worst_capture(angle) for angle in [lead_in, *alternatives]}
@@ -716,13 +735,18 @@ def evaluate_on_pad(
                 sample.centres_uv_mm,
                 grid.cell_mm,
                 config.sampler.penetration_mm,
+                sample.width_mm,
                 config.verify,
             )
             holding = _holding(
                 scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
             )
             holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
-            measure = scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
+            measure = (
+                scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
+                if landscape.pads_gap_mm > 0
+                else 0.0
+            )
             results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)
         # samples not squeezed keep no measure under the capture measure
         kept = set(int(i) for i in ranked)

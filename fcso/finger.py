@@ -10,7 +10,7 @@ import numpy as np
 import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
-from .errors import ConfigError, GeometryError
+from .errors import ConfigError, GeometryError, UnwritableSolidError
 from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points, volume_about
 from .parts import read_mesh, unit_factor, validate_mesh
 from .printfit import SIMPLIFY_TOLERANCE_MM
@@ -224,7 +224,8 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
     that Booleans left closer together than float32 resolution (slivers of
     near-coincident faces, :mod:`fcso.printfit`) would merge when the file is
     read, leaving zero-area faces and a surface in pieces. So the solid is
-    rebuilt by manifold3d from its float32 mesh, which collapses the faces
+    rebuilt by manifold3d from its float32 mesh (pinched vertices kept
+    apart, :func:`float32_apart`), which collapses the faces
     that rounding made degenerate, and simplified to
     :data:`fcso.printfit.SIMPLIFY_TOLERANCE_MM`, which removes sheets of
     zero thickness at float32 resolution (a solar tracker's and a DC-DC
@@ -232,10 +233,10 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
     subset of the vertices, so the coordinates stay exactly the file's. The
     result is the written file read back with trimesh.
     """
-    mesh = solid.to_mesh()
+    mesh = solid.to_mesh64()
     snapped = manifold3d.Manifold(
         manifold3d.Mesh(
-            vert_properties=np.array(np.asarray(mesh.vert_properties)[:, :3], dtype=np.float32, order="C"),
+            vert_properties=float32_apart(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts)),
             tri_verts=np.array(np.asarray(mesh.tri_verts), dtype=np.uint32, order="C"),
         )
     )
@@ -252,6 +253,55 @@ def as_written(solid: manifold3d.Manifold) -> WrittenMesh:
         bodies=len(written.split(only_watertight=False)) if len(written.faces) else 0,
         volume_mm3=float(written.volume),
     )
+
+
+def float32_apart(exact: np.ndarray, faces: np.ndarray, passes: int = 4) -> np.ndarray:
+    """Vertices rounded to float32, kept apart where distinct vertices would be one point in the file.
+
+    A Boolean can leave a pinch: two sheets of the solid touching along an
+    edge, with distinct vertices at one position, or closer than float32
+    resolution (the two-ridge block's fused finger). Merged when the STL is
+    read, they give edges of four faces: not watertight. Each later vertex of
+    such a pair is put one float32 step from the other, on its own side (where
+    its exact position lies, or else where its neighbours lie), so the file
+    keeps the sheets apart as the solid does; no vertex moves more than one
+    float32 step (under 2e-6 of its coordinate) from where rounding puts it.
+
+    Parameters
+    ----------
+    exact : (n, 3) float
+        The solid's vertices in double precision, mm.
+    faces : (m, 3) int
+        Its triangles.
+    passes : int
+        Rounds of steps (three vertices at one point need two).
+
+    Returns
+    -------
+    (n, 3) float32, C-ordered
+    """
+    rounded = np.array(exact, dtype=np.float32, order="C")
+    for _ in range(passes):
+        _, first, inverse = np.unique(rounded, axis=0, return_index=True, return_inverse=True)
+        holder = first[inverse.ravel()]
+        shared = np.flatnonzero(holder != np.arange(len(rounded)))
+        if not len(shared):
+            break
+        for vertex in shared:
+            other = holder[vertex]
+            gap = exact[vertex] - exact[other]
+            if not gap.any():
+                gap = _neighbours_centre(vertex, exact, faces) - _neighbours_centre(other, exact, faces)
+            axis = int(np.argmax(np.abs(gap)))
+            toward = np.float32(np.inf if gap[axis] > 0 else -np.inf)
+            rounded[vertex, axis] = np.nextafter(rounded[other, axis], toward)
+    return rounded
+
+
+def _neighbours_centre(vertex: int, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Mean position of the vertices that share a triangle with ``vertex``."""
+    fan = faces[(faces == vertex).any(axis=1)].ravel()
+    return vertices[fan[fan != vertex]].mean(axis=0)
 
 
 #: A piece of a written mesh enclosing less than this is a flap of zero thickness, not material, mm³.
@@ -331,12 +381,14 @@ def print_ready(solid: manifold3d.Manifold, what: str) -> WrittenMesh:
 
     Raises
     ------
-    GeometryError
+    UnwritableSolidError
         Naming ``what`` and the defects.
     """
     written = as_written(solid)
     if written.defects():
-        raise GeometryError(f"{what} is not one watertight body as written to STL: {', '.join(written.defects())}")
+        raise UnwritableSolidError(
+            f"{what} is not one watertight body as written to STL: {', '.join(written.defects())}"
+        )
     return written
 
 

@@ -145,13 +145,14 @@ def read_mesh(path: str | Path) -> trimesh.Trimesh:
         _check_stl_size(path)
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False)
-        # STL stores every triangle's corners separately: sharing them is
-        # reading the file, not repairing it
-        loaded.merge_vertices()
     except Exception as exc:  # trimesh raises many types for malformed files
         raise MeshError(path, f"cannot be read as {suffix[1:].upper()}: {exc}") from None
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+    if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(path, "empty mesh: no triangles")
+    refuse_unrepairable(loaded, path)
+    # STL stores every triangle's corners separately: sharing them is
+    # reading the file, not repairing it
+    loaded.merge_vertices()
     return loaded
 
 
@@ -173,15 +174,32 @@ def _check_stl_size(path: Path) -> None:
         )
 
 
+def unrepairable_defect(mesh: trimesh.Trimesh) -> str | None:
+    """A defect no repair can mend (no triangles, NaN or infinite coordinates), or None."""
+    if len(mesh.faces) == 0:
+        return "empty mesh: no triangles"
+    non_finite = int((~np.isfinite(mesh.vertices)).any(axis=1).sum())
+    if non_finite:
+        return f"non-finite coordinates (NaN or infinity) in {non_finite} vertices"
+    return None
+
+
+def refuse_unrepairable(mesh: trimesh.Trimesh, path: str | Path) -> None:
+    """Refuse a mesh no repair can mend, before any repair (:class:`MeshError` naming ``path`` and the defect).
+
+    The same refusal with repair on or off: a repair must never be the first
+    code to meet such coordinates.
+    """
+    defect = unrepairable_defect(mesh)
+    if defect is not None:
+        raise MeshError(path, defect)
+
+
 def mesh_defects(mesh: trimesh.Trimesh) -> list[str]:
     """Defects that stop a mesh from being a closed, oriented volume; empty list if none."""
-    if len(mesh.faces) == 0:
-        return ["empty mesh: no triangles"]
-    if not np.all(np.isfinite(mesh.vertices)):
-        return [
-            "non-finite coordinates (NaN or infinity) in "
-            f"{int((~np.isfinite(mesh.vertices)).any(axis=1).sum())} vertices"
-        ]
+    defect = unrepairable_defect(mesh)
+    if defect is not None:
+        return [defect]
     defects = []
     merged = mesh.copy()
     merged.merge_vertices()
@@ -243,10 +261,10 @@ def validate_mesh(mesh: trimesh.Trimesh, path: str | Path, repair: bool = False)
     Raises
     ------
     MeshError
-        Naming ``path`` and the first defect (after repair, if it was asked for).
+        Naming ``path`` and the first defect (after repair, if it was asked for; one
+        no repair can mend before it).
     """
-    if len(mesh.faces) == 0:
-        raise MeshError(path, "empty mesh: no triangles")
+    refuse_unrepairable(mesh, path)
     if repair:
         solids, _, summary = _repaired_solids(mesh, path)
         return trimesh.util.concatenate([s.mesh for s in solids]), summary.lines
@@ -527,8 +545,7 @@ def load_parts(
         name = path.stem if one_object else item.name
         where = path if one_object or not path.suffix.lower() == ".3mf" else f"{path} (build item {item.name})"
         mesh = item.mesh
-        if not np.all(np.isfinite(mesh.vertices)) and not repair:
-            raise MeshError(where, mesh_defects(mesh)[0])
+        refuse_unrepairable(mesh, where)
         summary = None
         if repair:
             solids, closed, summary = _repaired_solids(mesh, where)

@@ -125,7 +125,7 @@ def repair_shells(
     Parameters
     ----------
     mesh : trimesh.Trimesh
-        Any triangles, in any unit; not changed.
+        Any triangles with finite coordinates, in any unit; not changed.
     close_holes : callable
         Closes one consistently wound open shell (None: it cannot); the
         default is MeshFix, others are measured in ``benchmarks.bench_repair``.
@@ -137,6 +137,11 @@ def repair_shells(
         united); empty when no shell could be closed.
     summary : RepairSummary
         What changed; ``summary.lines`` says it in words.
+
+    Raises
+    ------
+    ValueError
+        No triangles, or NaN or infinite coordinates: no repair mends them.
     """
     # open and flat shells have zero volume: trimesh divides by it for their centre of mass
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -146,16 +151,12 @@ def repair_shells(
 def _repair(
     mesh: trimesh.Trimesh, close_holes: Callable[[trimesh.Trimesh], trimesh.Trimesh | None]
 ) -> tuple[list[trimesh.Trimesh], RepairSummary]:
+    if len(mesh.faces) == 0 or not np.isfinite(mesh.vertices).all():
+        # the loader refuses these before any repair (fcso.parts.refuse_unrepairable)
+        raise ValueError("repair needs triangles with finite coordinates")
     summary = RepairSummary()
     source = mesh
     mesh = mesh.copy()
-    finite = np.isfinite(mesh.vertices).all(axis=1)
-    if not finite.all():
-        keep = finite[mesh.faces].all(axis=1)
-        summary.lines.append(f"removed {int((~keep).sum())} triangles with non-finite vertices")
-        mesh.update_faces(keep)
-        mesh.remove_unreferenced_vertices()
-        source = mesh.copy()
     n_vertices = len(mesh.vertices)
     _weld(mesh, WELD_TOLERANCE * float(np.linalg.norm(mesh.extents)))
     summary.vertices_merged = n_vertices - len(mesh.vertices)
@@ -210,7 +211,7 @@ def _repair(
             np.ascontiguousarray(source.faces, dtype=np.int64),
         )
         summary.max_deviation = float(np.sqrt(squared.max()))
-    summary.lines = summary.lines + _describe(summary)
+    summary.lines = _describe(summary)
     return closed, summary
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import manifold3d
@@ -100,3 +102,76 @@ def sheet_stl(path: Path) -> bytes:
     """
     mesh = trimesh.load(path, force="mesh")
     return trimesh.Trimesh(mesh.vertices, mesh.faces[mesh.face_normals[:, 2] > 0.99]).export(file_type="stl")
+
+
+@dataclass(frozen=True)
+class BadInput:
+    """A part file every loader refuses, repair on or off, and the words its one-line refusal holds.
+
+    Attributes
+    ----------
+    file : str
+        File name in the folder :func:`write_bad_inputs` wrote to.
+    defect : str
+        Words of the refusal without repair.
+    defect_with_repair : str
+        Words of the refusal with repair on (the same defect: repair cannot mend it).
+    """
+
+    file: str
+    defect: str
+    defect_with_repair: str
+
+
+#: Files the loader refuses with repair on as without: repair mends open, flipped, overlapping shells, never these.
+BAD_INPUTS = (
+    BadInput("truncated.stl", "truncated binary STL", "truncated binary STL"),
+    BadInput("nan.stl", "non-finite coordinates", "non-finite coordinates"),
+    BadInput("nan_everywhere.stl", "non-finite coordinates", "non-finite coordinates"),
+    BadInput("infinite.ply", "non-finite coordinates", "non-finite coordinates"),
+    BadInput("empty.stl", "empty mesh", "empty mesh"),
+    BadInput("garbage.ply", "cannot be read as PLY", "cannot be read as PLY"),
+    BadInput("notes.txt", "unsupported file type", "unsupported file type"),
+    BadInput("zip_bomb.3mf", "zip bomb", "zip bomb"),
+    BadInput("sheet.stl", "not watertight", "even after --repair"),
+)
+
+
+def write_bad_inputs(folder: Path, source: Path) -> None:
+    """Write every file of :data:`BAD_INPUTS` to ``folder``, made from the real closed mesh at ``source``."""
+    mesh = trimesh.load(source, force="mesh")
+    (folder / "truncated.stl").write_bytes(mesh.export(file_type="stl")[:3000])
+    one_corner = mesh.vertices.copy()
+    one_corner[3] = np.nan
+    trimesh.Trimesh(one_corner, mesh.faces, process=False).export(folder / "nan.stl")
+    nowhere = np.full_like(mesh.vertices, np.nan)
+    trimesh.Trimesh(nowhere, mesh.faces, process=False).export(folder / "nan_everywhere.stl")
+    far = mesh.vertices.copy()
+    far[7] = np.inf
+    trimesh.Trimesh(far, mesh.faces, process=False).export(folder / "infinite.ply")
+    (folder / "empty.stl").write_bytes(b"\0" * 80 + (0).to_bytes(4, "little"))
+    header = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n"
+    (folder / "garbage.ply").write_bytes(header + bytes(range(256)))
+    (folder / "notes.txt").write_text("not a mesh\n")
+    with zipfile.ZipFile(folder / "zip_bomb.3mf", "w", compression=zipfile.ZIP_BZIP2) as archive:
+        archive.writestr("3D/3dmodel.model", b"\0" * (64 << 20))
+    (folder / "sheet.stl").write_bytes(sheet_stl(source))
+
+
+def two_solids_with_degenerate_triangles(first: trimesh.Trimesh, second: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Two real closed meshes side by side, 10 mm apart, with the zero-area triangles exporters leave.
+
+    On ``first``: an edge split at its midpoint by a T-junction, closed by the zero-area triangle over it
+    (watertight with it, open without it). On ``second``: triangles with a repeated corner.
+    """
+    second = second.copy()
+    second.apply_translation([first.bounds[1, 0] - second.bounds[0, 0] + 10.0, 0.0, 0.0])
+    vertices = np.vstack([first.vertices, second.vertices])
+    faces = np.vstack([first.faces, second.faces + len(first.vertices)])
+    i, j, k = faces[0]
+    midpoint = len(vertices)
+    vertices = np.vstack([vertices, (vertices[i] + vertices[j]) / 2])
+    faces[0] = [i, midpoint, k]
+    collapsed = second.faces[:2, :2] + len(first.vertices)
+    degenerate = [[midpoint, j, k], [i, j, midpoint], *([a, a, b] for a, b in collapsed)]
+    return trimesh.Trimesh(vertices, np.vstack([faces, degenerate]), process=False)

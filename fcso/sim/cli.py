@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .config import VerifyConfig, load_verify_config, with_print_density
+from .config import DEFAULT_TOP_K, VerifyConfig, load_verify_config, with_print_density
 from .report import VerificationReport, reused_note
 
 
@@ -30,13 +30,19 @@ def add_settings_options(parser) -> None:
 
 def add_design_options(parser) -> None:
     """``--verify`` and ``--verify-top`` of ``fcso design``."""
-    parser.add_argument("--verify", action="store_true", help="verify the design in simulation as the last stage")
+    parser.add_argument(
+        "--verify",
+        action="store_true",
+        help=f"verify in simulation as the last stage, choosing among the {DEFAULT_TOP_K} best candidates as the "
+        "daemon does (--verify-top sets how many)",
+    )
     parser.add_argument(
         "--verify-top",
         type=int,
-        default=0,
+        default=None,
         metavar="K",
-        help="verify up to K candidates in the order of the measure and deliver the first that passes (0: off)",
+        help=f"verify up to K candidates in the order of the measure and deliver the first that passes (implies "
+        f"--verify; default {DEFAULT_TOP_K}, the daemon's [verify] top_k; 0: verify the design's own choice only)",
     )
 
 
@@ -101,8 +107,9 @@ def verify_design_outputs(result, args, progress) -> int:
 
     config = with_print_density(settings(args), result.report.settings)
     try:
-        if args.verify_top > 0:
-            chosen, verification, design, ranking = verify_top(result, args.verify_top, config, progress)
+        top = DEFAULT_TOP_K if args.verify_top is None else args.verify_top
+        if top > 0:
+            chosen, verification, design, ranking = verify_top(result, top, config, progress)
             if chosen is not result:
                 # report.html is rebuilt from report.json: the pictures follow the newly chosen candidate
                 write_outputs(chosen, args.out)

@@ -195,7 +195,7 @@ def step_choose_by_verification(run: JobRun) -> None:
     """
     if run.sets.several:
         settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
-        if settings.top_k > 0:
+        if settings.enabled and settings.top_k > 0:
             run.log(
                 "warning",
                 "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "

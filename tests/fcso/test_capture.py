@@ -5,14 +5,18 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import manifold3d
 import numpy as np
 import pytest
+import trimesh
 
 import fcso
 from examples.sim_parts import (
     featured_cube,
+    hex_prism,
     holed_notched_cube,
     plain_box,
+    plain_cylinder,
     ribbed_block,
     two_ridge_block,
     upright_grasp_settings,
@@ -40,7 +44,9 @@ def _sample_at(prepared, s_mm: float, h_mm: float):
 
 
 def _landscape(prepared, config, sample, flat: bool = False):
-    return pad_landscapes([sample.screen], [sample.centres_uv_mm], ScreenGrid.for_config(config), config, flat=flat)[0]
+    return pad_landscapes(
+        [sample.screen], [sample.centres_uv_mm], [sample.width_mm], ScreenGrid.for_config(config), config, flat=flat
+    )[0]
 
 
 def _captured_at(landscape, offset_mm: float, yaw_deg: float = 0.0) -> bool:
@@ -73,6 +79,43 @@ def test_flat_pads_turn_a_wide_part_into_line_but_do_not_centre_it():
     flat = _landscape(prepared, config, _sample_at(prepared, 0.0, 5.0), flat=True)
     assert all(_captured_at(flat, 0.0, yaw) for yaw in (-3.0, -2.0, 2.0, 3.0))
     assert not any(_captured_at(flat, t, yaw) for t in (-2.0, -1.0, 1.0, 2.0) for yaw in (-3.0, 0.0, 3.0))
+
+
+def test_a_round_boss_in_its_round_pocket_captures_no_rotation():
+    # a cylinder turned about its own axis is the same cylinder: no pad shape can turn it back, so only the starts
+    # already within the success test's 1 degree succeed, whatever the offset (METHOD §7c). The box of +-3 degrees
+    # on 0.5-degree steps holds 13 yaws, 5 of them within 1 degree.
+    prepared, config = _prepared(plain_cylinder(15.0, 30.0), "cylinder")
+    carved = _landscape(prepared, config, _sample_at(prepared, 0.0, 5.0))
+    assert not any(_captured_at(carved, t, yaw) for t in (-1.0, 0.0, 1.0) for yaw in (-3.0, -2.0, -1.5, 1.5, 2.0, 3.0))
+    assert all(_captured_at(carved, t, yaw) for t in (-1.0, 0.0, 1.0) for yaw in (-0.5, 0.0, 0.5))
+    assert carved.fraction <= 5 / 13 + 1e-9
+
+
+def test_a_hex_prism_in_its_pocket_is_turned_back_into_its_seat():
+    # the pocket of a hexagon's two opposite sides: a turned hexagon presses a corner into a wall, so closing turns
+    # it back (the counterpart of the round boss above)
+    prepared, config = _prepared(hex_prism(24.0, 20.0), "hex")
+    carved = _landscape(prepared, config, _sample_at(prepared, 0.0, 5.0))
+    assert all(_captured_at(carved, 0.0, yaw) for yaw in (-3.0, -2.0, 2.0, 3.0))
+
+
+def test_pads_that_meet_each_other_before_they_squeeze_the_part_capture_nothing():
+    # a T-slot nut's neck, 8.6 mm across: pads reaching D = 4 mm into it from both sides leave their uncarved rims
+    # above the neck 0.6 mm apart; printed with MJF's 0.4 mm clearance each pad must close 0.4 mm before it touches
+    # the neck, so the rims meet 0.2 mm before the part is squeezed (METHOD §5b). The exact pocket still holds.
+    flange = manifold3d.Manifold.cube([20.0, 30.0, 4.0])
+    neck = manifold3d.Manifold.cube([8.6, 30.0, 12.0]).translate([5.7, 0.0, 3.9])
+    solid = (flange + neck).to_mesh()
+    mesh = trimesh.Trimesh(np.asarray(solid.vert_properties[:, :3]), np.asarray(solid.tri_verts))
+    for profile, holds in (("mjf-pa12", False), ("custom", True)):
+        prepared, config = _prepared(mesh, "nut", print={"profile": profile})
+        over_the_neck = _sample_at(prepared, 0.0, 13.0)
+        assert over_the_neck.width_mm == pytest.approx(8.6, abs=0.01)
+        landscape = _landscape(prepared, config, over_the_neck)
+        expected_gap = 8.6 - 2 * 4.0 - (0.8 if profile == "mjf-pa12" else 0.0)
+        assert landscape.pads_gap_mm == pytest.approx(expected_gap, abs=0.05)
+        assert (landscape.fraction > 0) == holds
 
 
 def test_the_capture_measure_ranks_by_capture_bands_then_by_e():

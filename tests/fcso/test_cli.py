@@ -9,6 +9,7 @@ import pytest
 import trimesh
 
 from examples.sim_parts import holed_notched_cube
+from tests.broken_meshes import BAD_INPUTS, write_bad_inputs
 from tests.conftest import HANG_GUARD_S, REPO, data_path
 
 
@@ -42,6 +43,22 @@ def test_a_quiet_design_writes_nothing(tmp_path):
 
 def test_open_mesh(tmp_path):
     assert_bad_input(fcso("design", data_path("encoder.stl"), "--out", tmp_path), "encoder.stl", "not watertight")
+
+
+@pytest.fixture(scope="module")
+def bad_inputs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bad_inputs")
+    write_bad_inputs(folder, data_path("20mm-xyz-cube.stl"))
+    return folder
+
+
+@pytest.mark.parametrize("repair", [False, True], ids=["repair-off", "repair-on"])
+@pytest.mark.parametrize("bad", BAD_INPUTS, ids=[bad.file for bad in BAD_INPUTS])
+def test_bad_input_is_refused_before_any_repair(bad_inputs, tmp_path, bad, repair):
+    # what repair cannot mend is refused the same way with it: NaN coordinates once reached the repair's welding
+    run = fcso("design", bad_inputs / bad.file, "--out", tmp_path / "out", *(["--repair"] if repair else []))
+    assert_bad_input(run, bad.file, bad.defect_with_repair if repair else bad.defect)
+    assert not (tmp_path / "out").exists()
 
 
 def test_truncated_stl(tmp_path):

@@ -1,5 +1,6 @@
 """The whole pipeline on fixture meshes: report consistency, determinism, finger and grasps."""
 
+import importlib
 import json
 
 import numpy as np
@@ -7,9 +8,10 @@ import pytest
 import trimesh
 
 import fcso
-from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
+from examples.sim_parts import featured_cube, plain_box, two_ridge_block, upright_grasp_settings
 from fcso.config import DesignConfig
 from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
+from fcso.errors import UnwritableSolidError
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
@@ -17,6 +19,8 @@ from fcso.parts import Part
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
 
+#: The module fcso.design (the package's ``fcso.design`` is the function).
+design_module = importlib.import_module("fcso.design")
 TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 
@@ -273,3 +277,45 @@ def test_a_finish_given_the_exact_evaluation_reports_as_one_that_evaluates_again
     again = finish_candidates(candidates, config)[0]
     assert given[2].exact.quality > 0
     assert given[1:] == again[1:]
+
+
+def _exact_ranking(report) -> list[int]:
+    """The report's exactly evaluated candidates, best first (quality, then mean effective area, then index)."""
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    return [c.index for c in sorted(exact, key=lambda c: (-c.quality, -c.mean_effective_area, c.index))]
+
+
+def test_a_candidate_whose_finger_is_not_one_body_as_written_gives_way_to_the_next(monkeypatch):
+    # no real part is known whose fused finger is still refused as written (the two-ridge block's was, until its
+    # pinches were kept apart): the written check is made to refuse the chosen candidate's finger, recognised by its
+    # pad (a pad of the same volume, another candidate's, would be refused too)
+    part = Part(name="two-ridge block", path="two-ridge block", mesh=two_ridge_block())
+    config = fcso.DesignConfig().updated({"poses": {"count": 1}})
+    first = fcso.design([part], config)
+    ranking = _exact_ranking(first.report)
+    assert ranking[0] == first.report.best and len(ranking) > 1
+    refused_pad_mm3 = first.best.fingerpad.pad.volume()
+    refuse_every_pad = [False]
+    real_fuse = design_module.fuse
+    fused_pads = []
+
+    def fuse(finger, pad, sampler, overlap_mm):
+        fused_pads.append(pad.volume())
+        if refuse_every_pad[0] or abs(pad.volume() - refused_pad_mm3) <= 1e-9 * refused_pad_mm3:
+            raise UnwritableSolidError("built-in: fused finger is not one watertight body as written to STL: 2 bodies")
+        return real_fuse(finger, pad, sampler, overlap_mm)
+
+    monkeypatch.setattr(design_module, "fuse", fuse)
+    second = fcso.design([part], config)
+    assert second.report.best == ranking[1] and second.report.finger.watertight and second.finger.is_watertight
+    assert second.report.candidates == first.report.candidates
+    assert (
+        f"candidate {ranking[0]} is not delivered: built-in: fused finger is not one watertight body as written to "
+        f"STL: 2 bodies; candidate {ranking[1]}, the next by its exact figures, is tried instead"
+    ) in second.report.warnings
+    # when no candidate's finger can be written, the design fails after the chosen one and WRITTEN_FALLBACKS more
+    fused_pads.clear()
+    refuse_every_pad[0] = True
+    with pytest.raises(UnwritableSolidError, match="not one watertight body as written"):
+        fcso.design([part], config)
+    assert len(fused_pads) == 1 + min(design_module.WRITTEN_FALLBACKS, len(ranking) - 1)

@@ -8,7 +8,7 @@ import trimesh
 
 from fcso import MeshError, RepairToleranceError, load_parts
 from fcso.parts import read_mesh
-from tests.broken_meshes import KINDS, break_mesh, intact_volume
+from tests.broken_meshes import KINDS, break_mesh, intact_volume, two_solids_with_degenerate_triangles
 from tests.conftest import data_path
 from tests.fcso.test_cli import FAST, assert_bad_input, fcso
 
@@ -150,3 +150,20 @@ def test_a_sheet_without_volume_is_refused_in_one_line(tmp_path):
         load_parts(sheet, repair=True)
     run = fcso("design", sheet, "--out", tmp_path / "out", "--repair")
     assert_bad_input(run, "top_face.stl", "not watertight", "even after --repair")
+
+
+def test_two_solids_with_degenerate_triangles_are_designed_as_two_parts(tmp_path):
+    # a printed file of two closed solids and a few zero-area triangles: repair dropped the smaller solid
+    cube, bunny = read_mesh(data_path("20mm-xyz-cube.stl")), read_mesh(data_path("stanford_bunny_closed.ply"))
+    bunny.apply_scale(40.0 / bunny.extents.max())
+    path = tmp_path / "two_solids.stl"
+    two_solids_with_degenerate_triangles(cube, bunny).export(path)
+    config = tmp_path / "fast.toml"
+    config.write_text(FAST)
+    run = fcso("design", path, "--out", tmp_path / "out", "--config", config, "--repair")
+    assert run.returncode == 0, run.stderr
+    parts = json.loads((tmp_path / "out" / "report.json").read_text())["parts"]
+    assert [p["name"] for p in parts] == ["two_solids#1", "two_solids#2"]
+    # the file holds float32 corners: within 1e-4 of the meshes it was written from, largest first
+    assert [p["volume_mm3"] for p in parts] == pytest.approx([bunny.volume, cube.volume], rel=1e-4)
+    assert abs(parts[0]["repair"]["volume_change_percent"]) < 0.01

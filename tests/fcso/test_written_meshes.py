@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import collections
 import json
+import subprocess
+import sys
 
 import manifold3d
 import numpy as np
@@ -20,9 +22,10 @@ import trimesh
 
 import fcso
 from examples.batch_demo import batch_demo_part_files, batch_demo_settings
+from examples.sim_parts import two_ridge_block
 from fcso.finger import without_zero_area_faces
 from fcso.output.files import output_files
-from tests.conftest import REPO, data_path, small_config
+from tests.conftest import HANG_GUARD_S, REPO, data_path, small_config
 
 PROFILES = ["custom", "mjf-pa12", "fdm-pla", "sla-resin"]
 #: Smallest face area that counts as non-zero after the float32 read-back, mm².
@@ -161,3 +164,18 @@ def test_a_zero_area_face_of_a_closed_surface_is_flipped_away():
     assert len(mended.faces) == len(needled.faces)
     # a mesh without such a face is returned as it is
     assert without_zero_area_faces(box) is box
+
+
+def test_the_two_ridge_block_gets_a_written_finger_with_the_defaults(tmp_path):
+    # its fused finger has a pinch, two sheets touching along an edge with distinct vertices at one position:
+    # merged when the STL was read, they made edges of four faces and the design failed
+    part = tmp_path / "two_ridge_block.stl"
+    two_ridge_block().export(part)
+    run = subprocess.run(
+        [sys.executable, "-m", "fcso.cli", "design", str(part), "--poses", "1", "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+    )
+    assert run.returncode == 0, run.stderr
+    _assert_one_body(_read_back(tmp_path / "out" / "finger.stl"), "two_ridge_block finger.stl")
