@@ -210,7 +210,14 @@ def prepare(
     Returns
     -------
     Prepared
+
+    Raises
+    ------
+    ValueError
+        ``config`` holds several pad sizes: each is prepared apart (:meth:`DesignConfig.pad_size_configs`).
     """
+    if len(config.sampler.pad_sizes()) > 1:
+        raise ValueError("prepare() takes one pad size; design each of config.pad_size_configs() apart")
     report_progress = _progress_with_note(progress)
     timings: dict[str, float] = {}
     clock = time.perf_counter()

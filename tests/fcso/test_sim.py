@@ -89,7 +89,7 @@ def ridged(tmp_path_factory):
     config = DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {"yaw_deg": [0.0], "feature_positions": False, "face_yaws": False},
+            "sampler": {"length_mm": 20.0, "yaw_deg": [0.0], "feature_positions": False, "face_yaws": False},
             "print": {"profile": "custom"},
         }
     )
