@@ -24,6 +24,9 @@ MAX_FACE_YAWS = 1
 OUTLINE_LEVELS = (0.25, 0.5, 0.75)
 #: A pocket of an outline smaller than this is no feature, mm².
 MIN_POCKET_MM2 = 1.0
+#: ... nor one whose opening (the hull edge over it) is longer than the longest default pad, mm: no pad centres on
+#: it (an L's inner corner), and closing into it grips the part's corners obliquely instead of its features.
+MAX_POCKET_OPENING_MM = 20.0
 
 
 def face_yaws(mesh: trimesh.Trimesh, configured_deg: list[float], min_area_mm2: float) -> list[float]:
@@ -99,7 +102,8 @@ def pocket_yaws(mesh: trimesh.Trimesh, taken_deg: list[float]) -> list[float]:
     each side at 30 degrees from its bounding box: neither 0, 90 nor a side
     face's direction closes into them). The outline is cut at
     :data:`OUTLINE_LEVELS` of the part's height; each pocket of at least
-    :data:`MIN_POCKET_MM2` adds its area to the direction of the outward
+    :data:`MIN_POCKET_MM2` whose opening is at most
+    :data:`MAX_POCKET_OPENING_MM` adds its area to the direction of the outward
     normal of the longest hull edge over it, binned modulo 180 degrees as in
     :func:`face_yaws`; the bin of most pocket area, if more than two bins
     from every yaw taken, gives the direction of its largest pocket.
@@ -139,6 +143,8 @@ def pocket_yaws(mesh: trimesh.Trimesh, taken_deg: list[float]) -> list[float]:
             if not over.any():
                 continue
             edge = np.flatnonzero(over)[np.argmax(lengths[over])]
+            if lengths[edge] > MAX_POCKET_OPENING_MM:
+                continue
             k = min(int(yaws[edge] / FACE_YAW_BIN_DEG), bins - 1)
             area[k] += pocket_area
             if pocket_area > largest.get(k, (0.0, 0.0))[0]:

@@ -172,7 +172,7 @@ def sample_geometry(
     )
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
-        capture = pad_landscapes([screens], [centres], [sample.a_max_mm - sample.a_min_mm], grid, config)[0].fraction
+        capture = printed_draft([screens], [centres], [sample.a_max_mm - sample.a_min_mm], config)[1][0]
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -362,13 +362,9 @@ def screen_on_pad(
     if config.quality.measure != "capture":
         return screen(screens, config, lattice)
     if captures is None:
-        grid = ScreenGrid.for_config(config)
-        captures = [
-            s.fraction
-            for s in pad_landscapes(
-                screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], grid, config
-            )
-        ]
+        # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
+        # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
+        _, captures, _ = printed_draft(screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], config)
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
@@ -490,32 +486,57 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     why : str or None
         A sentence when a wider draft was taken.
     """
+    samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
+    angle, _, why = printed_draft(
+        [s.screen for s in samples], [s.centres_uv_mm for s in samples], [s.width_mm for s in samples], config
+    )
+    return angle, why
+
+
+def printed_draft(
+    screens: list[tuple[ScreenGeometry, ScreenGeometry]],
+    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+    widths_mm: list[float],
+    config: DesignConfig,
+) -> tuple[float, list[float], str | None]:
+    """:func:`printed_lead_in_deg` of a candidate's samples, with every scenario's capture under that draft.
+
+    Parameters
+    ----------
+    screens, centres_uv_mm, widths_mm : list
+        Per scenario, its sample's two geometries, centres of mass and width, as :func:`fcso.capture.pad_landscapes`.
+    config : DesignConfig
+
+    Returns
+    -------
+    lead_in_deg : float
+    captures : list of float
+        Per scenario, its capture on the candidate's pad printed with that draft.
+    why : str or None
+    """
     lead_in = config.print.resolved()["lead_in_deg"]
     alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
-    if lead_in <= 0 or not alternatives or config.quality.measure != "capture":
-        return lead_in, None
+    if lead_in <= 0 or config.quality.measure != "capture":
+        alternatives = []
     grid = ScreenGrid.for_config(config)
-    samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
 
-    def worst_capture(angle: float) -> float:
-        drafted = config.updated({"print": {"lead_in_deg": angle}})
-        landscapes = pad_landscapes(
-            [s.screen for s in samples],
-            [s.centres_uv_mm for s in samples],
-            [s.width_mm for s in samples],
-            grid,
-            drafted,
-        )
-        return min(landscape.fraction for landscape in landscapes)
+    def captures_at(angle: float) -> list[float]:
+        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
+        return [landscape.fraction for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, grid, drafted)]
 
-    captures = {angle: worst_capture(angle) for angle in [lead_in, *alternatives]}
-    widest = max(captures.values())
-    if widest < captures[lead_in] + FLAT_MARGIN:
-        return lead_in, None
-    angle = min(a for a, capture in captures.items() if capture >= widest - 1e-9)
-    return angle, (
-        f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
-        f"the worst scenario's capture is {captures[angle]:.2f} against {captures[lead_in]:.2f}"
+    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
+    worst = {angle: min(values) for angle, values in captures.items()}
+    widest = max(worst.values())
+    if widest < worst[lead_in] + FLAT_MARGIN:
+        return lead_in, captures[lead_in], None
+    angle = min(a for a, capture in worst.items() if capture >= widest - 1e-9)
+    return (
+        angle,
+        captures[angle],
+        (
+            f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
+            f"the worst scenario's capture is {worst[angle]:.2f} against {worst[lead_in]:.2f}"
+        ),
     )
 
 

@@ -16,6 +16,7 @@ from ..errors import GeometryError
 from ..evaluate import (
     CandidateEvaluation,
     evaluate_candidate,
+    printed_lead_in_deg,
     screen_on_pad,
 )
 from ..measure import quality_words, scenario_measure
@@ -324,7 +325,17 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
+    """A finalist's exact figures under the draft it would be printed with (:func:`printed_lead_in_deg`).
+
+    Ranked under the default lead-in only, a finalist that captures fully once its pocket is drafted wider lost to
+    one that captures half at any draft (the ribbed block: closed square to its ribs, capture 0.48 at 15° and 1.0 at
+    45°, lost to an oblique grasp of 0.53 whose trials missed by 2 mm): the measure scores the pocket as printed
+    (METHOD §5b).
+    """
     scenarios, config = context
+    angle, _ = printed_lead_in_deg(scenarios, choice, config)
+    if angle != config.print.resolved()["lead_in_deg"]:
+        config = config.updated({"print": {"lead_in_deg": angle}})
     return evaluate_candidate(scenarios, choice, config, keep_pad=False)
 
 

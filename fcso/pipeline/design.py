@@ -60,7 +60,8 @@ def design(
         file may give several parts; load them yourself for other units or
         scaling).
     config : DesignConfig, optional
-        Settings; defaults reproduce the paper's set-up.
+        Settings; the defaults are the product's (METHOD §7b's capture measure, the mjf-pa12 fit), and
+        ``examples/paper.toml`` holds the paper's set-up (METHOD §10).
     progress : callable, optional
         ``progress(stage, done, total, note)``.
     repair : bool
