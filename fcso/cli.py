@@ -162,7 +162,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (2 for bad input, 1 for a failed design)."""
+    """Entry point; returns the exit code (2 for bad input, 1 for a failed design, 3 for a design verified in simulation
+    that did not pass: ``fcso verify``, ``fcso design --verify``)."""
     args = _parser().parse_args(argv)
     try:
         if args.command == "design":
@@ -275,17 +276,19 @@ def _report_sets(job: SetsResult, args) -> int:
             print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
         else:
             print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
+    codes = [0]
     if args.verify or args.verify_top is not None:
+        # every set is verified; the exit code is the worst of theirs (3: one did not pass)
         for number, result in enumerate(job.designs, start=1):
             out = args.out / set_folder(number, job.several)
-            code = verify_design_outputs(
-                result,
-                argparse.Namespace(**{**vars(args), "out": out}),
-                ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()),
+            codes.append(
+                verify_design_outputs(
+                    result,
+                    argparse.Namespace(**{**vars(args), "out": out}),
+                    ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()),
+                )
             )
-            if code:
-                return code
-    return 0
+    return max(codes)
 
 
 def _report(args) -> int:

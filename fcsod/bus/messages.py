@@ -387,6 +387,14 @@ class ScenarioOutcome(BaseModel):
 
     part: str
     pose_index: int
+    verdict: str = Field(
+        description='The scenario\'s figures, what to read first: "designed 9/10, flat 1/10, holds 30 N" (successful '
+        "precision trials of the designed and of flat fingers, the weakest push the designed grasp held, N)"
+    )
+    weakest_holding_n: float | None = Field(
+        description="The smallest push at which the designed grasp let the part slip, over the six directions, N "
+        "(hold_force_n: held every push; 0: does not hold the part at all; null: not tested)"
+    )
     success_rate: float = Field(
         description="Designed finger's precision trials within the success limits, of those run, 0..1"
     )
@@ -417,7 +425,22 @@ class VerificationMessage(BaseModel):
         "error); skipped: nothing to verify (see error)",
     )
     error: str | None = Field(None, description="Why the verification failed or was skipped")
+    verdict: str = Field(
+        "",
+        description='What to read first (METHOD §12b): "verified" or "not verified", then per scenario "designed '
+        '9/10, flat 1/10, holds 30 N"; empty unless state is done',
+    )
     passed: bool = Field(description="Every scenario reached the success threshold (false unless state is done)")
+    better_than_flat: bool = Field(
+        False,
+        description="The designed finger passed, or did at least as well as flat pads in every scenario (successful "
+        "trials, holding) and better in one (false unless state is done)",
+    )
+    not_held: list[str] = Field(
+        default_factory=list,
+        description="Scenarios ('<part> pose <index>') the designed grasp does not hold at all (0 N in every push "
+        "direction): a finger near zero quality; never move the robot on these",
+    )
     file: str | None = Field(description="The full result, relative to the job's output folder (none unless done)")
     finger_set: int | None = Field(
         None, description="The finger set verified when the job has several (key .../verification/<set>)"

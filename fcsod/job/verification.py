@@ -30,8 +30,16 @@ from fcso.output.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density
-from fcso.sim.report import VerificationReport, reused_note
-from fcso.sim.verify import DesignUnderTest, design_under_test, verify
+from fcso.sim.report import (
+    VerificationReport,
+    better_than_flat,
+    not_held,
+    reused_note,
+    scenario_verdict,
+    verdict_text,
+    weakest_hold_n,
+)
+from fcso.sim.verify import DesignUnderTest, design_under_test, verify_delivered
 
 from ..bus.messages import BusMessage, ScenarioOutcome, VerificationMessage
 from ..config import VerifySettings
@@ -66,6 +74,7 @@ def choose_by_verification(run) -> None:
     )
     run.sets.designs[0] = chosen
     run.verified = (verification, design, ranking_html(ranking, verification.choice))
+    run.log("info" if verification.passed else "warning", f"verification: {verdict_text(verification)}")
     run.log("info", f"verification delivered {verification.choice}")
 
 
@@ -175,7 +184,8 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             name = "verification" if number is None else f"verification of finger set {number}"
             log("info", f"{name}: started")
             design, design_settings = build()
-            verification = verify(design, _verify_config(settings, design_settings, config.state.dir), _progress(log))
+            config_of_design = _verify_config(settings, design_settings, config.state.dir)
+            verification = verify_delivered(design, config_of_design, _progress(log))
             results.append((out, number, name, design, verification))
         messages = []
         for out, number, name, design, verification in results:
@@ -186,8 +196,8 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             reused = reused_note(verification)
             log(
                 "info" if verification.passed else "warning",
-                f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
-                f"{time.perf_counter() - started:.1f} s" + (f" ({reused})" if reused else ""),
+                f"{name}: {verdict_text(verification)}, in {time.perf_counter() - started:.1f} s"
+                + (f" ({reused})" if reused else ""),
             )
             for warning in verification.warnings:
                 log("warning", f"{name}: {warning}")
@@ -286,15 +296,21 @@ def _bus_message(
 
 def _message(job_id: str, verification: VerificationReport, file: str, finger_set: int | None) -> VerificationMessage:
     chosen = next((r.index for r in verification.ranking or [] if r.chosen), None)
+    settings = verification.settings
     return VerificationMessage(
         job_id=job_id,
+        verdict=verdict_text(verification),
         passed=verification.passed,
+        better_than_flat=better_than_flat(verification),
+        not_held=not_held(verification),
         file=file,
         finger_set=finger_set,
         scenarios=[
             ScenarioOutcome(
                 part=s.part,
                 pose_index=s.pose_index,
+                verdict=scenario_verdict(s, settings),
+                weakest_holding_n=weakest_hold_n(s.fcso, settings.hold_force_n),
                 success_rate=s.fcso.success_rate,
                 flat_success_rate=s.flat.success_rate,
                 trials_run=len(s.fcso.trials),

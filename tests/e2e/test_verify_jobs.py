@@ -170,6 +170,12 @@ def test_time_limit_publishes_failed_and_leaves_nothing_and_top_k_delivers_a_ver
     assert [v["topic"] for v in lines][-2:] == ["status", "verification"]
     body = chosen_message["body"]
     assert body["state"] == "done" and body["passed"] and body["file"] == "verification.json"
+    # the verdict leads the message: designed against flat, every trial run, the weakest hold
+    scenario = body["scenarios"][0]
+    flat = round(scenario["flat_success_rate"] * 2)
+    assert scenario["verdict"].startswith(f"designed 2/2, flat {flat}/2, ")
+    assert body["verdict"] == f"verified: {scenario['part']} pose {scenario['pose_index']} {scenario['verdict']}"
+    assert body["better_than_flat"] and body["not_held"] == []
     assert body["choice"].startswith(f"candidate {body['chosen_candidate']} (rank 1 by the measure")
     assert "the first whose every scenario passed, after 1 of 2 verified" in body["choice"]
     assert {"verification.json", "verification.mcap", "report.html"} <= set(chosen_done["body"]["outputs"])
