@@ -1,8 +1,9 @@
-"""Command line: ``fcsod run | jobs | retry | cancel | audit | replay | subscribe | pki | journal | fingers | schema``.
+"""Command line: ``fcsod run | jobs | retry | cancel | approve | reject | audit | replay | subscribe | pki | journal |
+fingers | schema``.
 
 Exit codes: 0 success, 1 a check failed (audit, journal check), nothing
 arrived in time (subscribe) or the daemon refused or did not answer a
-request (retry, cancel), 2 bad input (config file, arguments, unreadable
+request (retry, cancel, approve, reject), 2 bad input (config file, arguments, unreadable
 record, corrupt journal, a zenoh session that cannot open, an unknown job).
 """
 
@@ -36,11 +37,15 @@ def _parser() -> argparse.ArgumentParser:
 
     jobs = commands.add_parser("jobs", help="list the journal's jobs: id, folder, state, attempt, times, error")
     jobs.add_argument("--config", required=True, type=Path, help="daemon settings (state folder)")
-    jobs.add_argument("--state", action="append", choices=["queued", "running", "done", "failed"], help="only these")
+    jobs.add_argument(
+        "--state", action="append", choices=["queued", "running", "done", "failed", "held"], help="only these"
+    )
     jobs.add_argument("--json", action="store_true", help="one JSON object per line instead of a table")
     for name, text in (
         ("retry", "run a failed job again (the daemon keeps the failed run's record in <output>/attempts/)"),
         ("cancel", "end a queued or running job failed, with the reason cancelled"),
+        ("approve", "release a held job: place its finger into build.3mf and publish its grasps"),
+        ("reject", "end a held job failed: its finger is not delivered"),
     ):
         command = commands.add_parser(name, help=text)
         command.add_argument("job", metavar="JOB", help="job id, or a prefix of exactly one job id")
@@ -190,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "jobs":
             return _jobs(args)
-        if args.command in ("retry", "cancel"):
+        if args.command in ("retry", "cancel", "approve", "reject"):
             return _request(args)
         if args.command == "audit":
             return _audit(args)
@@ -262,7 +267,8 @@ def _jobs(args: argparse.Namespace) -> int:
 
 
 def _request(args: argparse.Namespace) -> int:
-    """``fcsod retry | cancel JOB``: ask the daemon through the journal's request table and print its answer."""
+    """``fcsod retry | cancel | approve | reject JOB``: ask the daemon through the journal's request table and print
+    its answer."""
     from .bus.messages import utc_now
     from .service.journal import read_jobs, read_request, submit_request
 

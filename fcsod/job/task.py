@@ -46,6 +46,10 @@ PROGRESS_INTERVAL_S = 1.0
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
 
+#: A held job's build with its finger placed, beside ``build.3mf`` (the parts alone): ``fcsod approve`` puts it in
+#: ``build.3mf``'s place.
+HELD_BUILD_NAME = "build.held.3mf"
+
 #: Number of the finger set of a job served by one finger, in ``build.3mf``.
 FINGER_SET = 1
 
@@ -175,6 +179,8 @@ class JobRun:
     after_done: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verified: tuple | None = None
+    #: why the finger misses the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject)
+    held: str | None = None
     reuse: dict | None = None
 
     @property

@@ -62,20 +62,45 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
 
 
 def choose_by_verification(run) -> None:
-    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes."""
+    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes;
+    with a delivery policy other than ``always`` (and ``top_k`` 0), verify the design's own choice. Either way the
+    job is held (``run.held``) when its finger misses the policy (:func:`held_reason`)."""
     settings = _settings(run)
-    if settings.top_k <= 0:
+    config = _verify_config(settings, run.result.report.settings, run.task.config.state.dir)
+    if settings.top_k > 0:
+        chosen, verification, design, ranking = verify_top(run.result, settings.top_k, config, _progress(run.log))
+        run.sets.designs[0] = chosen
+        run.verified = (verification, design, ranking_html(ranking, verification.choice))
+        run.log("info", f"verification delivered {verification.choice}")
+    elif settings.deliver != "always":
+        design = design_under_test(run.result)
+        verification = verify_delivered(design, config, _progress(run.log))
+        run.verified = (verification, design, "")
+    else:
         return
-    chosen, verification, design, ranking = verify_top(
-        run.result,
-        settings.top_k,
-        _verify_config(settings, run.result.report.settings, run.task.config.state.dir),
-        _progress(run.log),
-    )
-    run.sets.designs[0] = chosen
-    run.verified = (verification, design, ranking_html(ranking, verification.choice))
     run.log("info" if verification.passed else "warning", f"verification: {verdict_text(verification)}")
-    run.log("info", f"verification delivered {verification.choice}")
+    if missed := not_held(verification):
+        # a finger near zero quality: said on the done status too, whatever the policy
+        run.warnings.append(f"the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)")
+    run.held = held_reason(verification, settings.deliver)
+    if run.held is not None:
+        run.log("warning", f"held for an operator: {run.held}")
+
+
+def held_reason(verification: VerificationReport, deliver: str) -> str | None:
+    """Why a finger with this verification misses the delivery policy ``deliver`` (``[verify] deliver``), or None
+    when it is delivered."""
+    verdict = verdict_text(verification)
+    if deliver == "verified" and not verification.passed:
+        missed = "did not pass verification"
+    elif deliver == "better_than_flat" and not better_than_flat(verification):
+        missed = "is not better than flat pads"
+    else:
+        return None
+    return (
+        f"the finger {missed} ([verify] deliver = {deliver!r}; {verdict}): fcsod approve places and publishes it, "
+        "fcsod reject fails the job"
+    )
 
 
 #: The page of a verification made after the job is done: ``report.html`` stays as ``job.mcap`` vouches for it.
