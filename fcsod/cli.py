@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -23,6 +24,9 @@ from .config import DaemonConfig, load_daemon_config
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
+
+#: How often ``fcsod subscribe`` tries again to reach endpoints that do not listen yet, s.
+SUBSCRIBE_RETRY_S = 0.5
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -213,6 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader stopped reading (fcsod jobs --json | head): nothing more to say, and nothing left to flush
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -317,6 +325,8 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    import zenoh
+
     from .bus.messages import BusMessage, BusRecord, jobs_key
     from .bus.session import open_session, put
     from .bus.signing import Signer, signing_key_path
@@ -331,7 +341,16 @@ def _replay(args: argparse.Namespace) -> int:
     messages = [BusMessage.from_record(BusRecord.model_validate(b)) for b in content.of(TOPIC_BUS)]
     if content.truncated:
         print(f"record is truncated ({content.problem}): replaying the {len(messages)} messages before the cut")
-    session = open_session(config.zenoh, listen=args.listen, connect=args.connect)
+    try:
+        session = open_session(config.zenoh, listen=args.listen, connect=args.connect)
+    except zenoh.ZError as exc:
+        where = "--listen/--connect" if args.listen or args.connect else f"{args.config}'s [zenoh] listen"
+        print(
+            f"fcsod: zenoh session cannot open on {where} ({str(exc).split(' at ')[0]}): with the daemon running, "
+            "replay on another endpoint: --listen tcp/127.0.0.1:<free port>, subscribers --connect there",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
     try:
         # samples put before a subscriber has been discovered are lost: wait for one
         probe = session.declare_publisher(jobs_key(config.bus.prefix, config.bus.cell))
@@ -370,12 +389,32 @@ def _subscribe(args: argparse.Namespace) -> int:
         connect = args.connect
     else:
         settings, connect = config.zenoh, subscriber_endpoints(config, args.connect)
-    try:
-        # the subscriber must not bind the daemon's listen endpoints
-        session = open_session(settings, listen=[], connect=connect)
-    except zenoh.ZError as exc:
-        print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    deadline = None if args.timeout is None else time.monotonic() + args.timeout
+    waiting = False
+    while True:
+        try:
+            # the subscriber must not bind the daemon's listen endpoints
+            session = open_session(settings, listen=[], connect=connect)
+            break
+        except zenoh.ZError as exc:
+            endpoints = ", ".join(connect or []) or f"the endpoints of {settings.config_file}"
+            if "Unable to connect" not in str(exc):
+                print(
+                    f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr
+                )
+                return EXIT_BAD_INPUT
+            if deadline is not None and time.monotonic() >= deadline:
+                print(
+                    f"fcsod: nothing listened on {endpoints} within {args.timeout:g} s: start the daemon (fcsod run) "
+                    "or --connect to where it listens",
+                    file=sys.stderr,
+                )
+                return EXIT_FAILED
+            if not waiting:
+                # a cell controller may start before the print server: wait for it, as zenoh peers do
+                print(f"waiting for {endpoints} to listen (is the daemon running?)", file=sys.stderr, flush=True)
+                waiting = True
+            time.sleep(SUBSCRIBE_RETRY_S)
     enough = Enough(finished_jobs=args.exit_after, verifications=args.exit_after_verifications)
     try:
         reached = subscribe(
@@ -386,7 +425,7 @@ def _subscribe(args: argparse.Namespace) -> int:
             enough,
             save=args.save,
             query=not args.no_query,
-            timeout_seconds=args.timeout,
+            timeout_seconds=None if deadline is None else max(0.0, deadline - time.monotonic()),
         )
     finally:
         session.close()
