@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
 
     config = BuildConfig(voxel_mm=args.voxel_mm)
-    design = DesignConfig()
+    design = DesignConfig().updated({"sampler": {"length_mm": 20.0}})
     finger = parametric_finger(design.sampler, design.gripper).mesh
     parts = benchmark_parts(config)
     box_fill = sum(np.prod(item.mesh.extents) for item in parts) / np.prod(config.volume_mm)

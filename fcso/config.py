@@ -30,10 +30,13 @@ PadSize = (
 class SamplerConfig(_Section):
     """Pad box size and the sliding-window grasp sampler (METHOD §3)."""
 
+    # small features need small pads: a 20 mm pad over an 8 mm slot sees mostly flat face, which METHOD §5's filter
+    # labels bad, and the design stays flat (measured on development parts: a block with round slots, a bar with
+    # two V-notches); a 10 mm pad carves them. 20 mm stays for long rows of notches, where it captures more.
     length_mm: PadSize = Field(
-        20.0,
+        [10.0, 20.0],
         description="Pad length L along the sliding axis b, mm; a short list: every length is designed and the best "
-        "kept (METHOD §3b: a pad longer than the part's face wraps its edges)",
+        "kept (METHOD §3b: small features need short pads, and a pad longer than the part's face wraps its edges)",
     )
     width_mm: PadSize = Field(
         20.0, description="Pad width W along the vertical axis, mm; a short list: as length_mm, every pair is designed"
@@ -63,7 +66,8 @@ class SamplerConfig(_Section):
     face_yaws: bool = Field(
         True,
         description="Besides yaw_deg, close square to the part's flat side faces that yaw_deg misses (a chamfer, a "
-        "hexagon's face; at most one more yaw per scenario, fcso.sampler.face_yaws); false: yaw_deg only, the "
+        "hexagon's face) and into the pockets of its outline the others miss (a notch off the bounding box's axes); "
+        "at most one more yaw per scenario for each (fcso.sampler.face_yaws, pocket_yaws); false: yaw_deg only, the "
         "paper's sampler",
     )
 
@@ -424,6 +428,18 @@ class VerifyConfig(BaseModel):
         0.2,
         gt=0,
         description="Largest overlap of part and pad pieces at the nominal seated grasp without a warning, mm",
+    )
+    arena_mb: float | None = Field(
+        None,
+        gt=0,
+        description="MuJoCo's memory (arena) for one simulation's contacts, constraints and solver, MB; null: sized "
+        "from the part's and the pads' collision pieces (16 MiB and 32 KiB per piece, fcso.sim.scene)",
+    )
+    arena_retry_factor: float = Field(
+        4.0,
+        ge=1,
+        description="A scenario whose simulation runs out of its arena is simulated again once with this many times "
+        "the arena; if it runs out again, or with 1 (no retry), the scenario fails with the reason",
     )
     choice_budget_s: float = Field(
         600.0,

@@ -16,7 +16,7 @@ import trimesh
 
 from . import __version__
 from .config import DesignConfig
-from .errors import GeometryError, NoGraspError
+from .errors import GeometryError, NoGraspError, UnwritableSolidError
 from .evaluate import (
     CandidateEvaluation,
     SampleGeometry,
@@ -210,7 +210,14 @@ def prepare(
     Returns
     -------
     Prepared
+
+    Raises
+    ------
+    ValueError
+        ``config`` holds several pad sizes: each is prepared apart (:meth:`DesignConfig.pad_size_configs`).
     """
+    if len(config.sampler.pad_sizes()) > 1:
+        raise ValueError("prepare() takes one pad size; design each of config.pad_size_configs() apart")
     report_progress = _progress_with_note(progress)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -916,15 +923,20 @@ def finish_design(
     return made
 
 
+#: Candidates tried, in the order of their exact figures, after a chosen one whose finger is not one watertight body
+#: as written to STL, before its design fails.
+WRITTEN_FALLBACKS = 3
+
+
 def finish_designs(
     designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig, progress: Progress | None = None
 ) -> list[DesignResult | GeometryError]:
     """The fingers of chosen candidates (METHOD §9) and their designs' reports: the rest of :func:`design_prepared`.
 
-    The candidates are finished together (:func:`finish_candidates`, on the
-    batches' workers): a job's finger sets carve their printed-fit pockets
-    and open their thin walls side by side. Each design's ``finger`` timing
-    holds an equal share of that.
+    A design whose finger (or fingerpad) is not one watertight body as
+    written to STL is made with the next of its exact finalists instead, up
+    to ``WRITTEN_FALLBACKS`` of them, and its report's warnings say which
+    and why (:func:`_written_or_next`).
 
     Parameters
     ----------
@@ -937,6 +949,53 @@ def finish_designs(
     -------
     list of DesignResult or GeometryError
         Per design, its result, or the error saying why its fused finger is not one printable body.
+    """
+    results = _finished_designs(designs, config, progress)
+    return [_written_or_next(*design, made, config, progress) for design, made in zip(designs, results)]
+
+
+def _written_or_next(
+    prepared: Prepared,
+    chosen: ChosenCandidate,
+    made: DesignResult | GeometryError,
+    config: DesignConfig,
+    progress: Progress | None,
+) -> DesignResult | GeometryError:
+    """``made``, the design of ``chosen``; when its finger is not one watertight body as written to STL, the design
+    of the next of the exact finalists (by their exact figures, as :func:`choose_candidate` chose) whose finger is,
+    trying at most ``WRITTEN_FALLBACKS``; each one passed over is a warning of the report."""
+    exact, indices = chosen.exact, chosen.indices
+    ranked = sorted(exact, key=lambda c: (exact[c].quality, exact[c].mean_effective_area, -indices[c]), reverse=True)
+    tried = [chosen.choice]
+    while isinstance(made, UnwritableSolidError) and len(tried) <= WRITTEN_FALLBACKS:
+        following = [c for c in ranked if c not in tried]
+        if not following:
+            break
+        choice = following[0]
+        note = (
+            f"candidate {indices[tried[-1]]} is not delivered: {made}; candidate {indices[choice]}, the next by its "
+            "exact figures, is tried instead"
+        )
+        chosen = dataclasses.replace(
+            chosen,
+            choice=choice,
+            candidate=candidate_reports([choice], {choice: exact[choice]}, {}, indices)[0],
+            warnings=[*chosen.warnings, note],
+        )
+        tried.append(choice)
+        made = _finished_designs([(prepared, chosen)], config, progress)[0]
+    return made
+
+
+def _finished_designs(
+    designs: Sequence[tuple[Prepared, ChosenCandidate]], config: DesignConfig, progress: Progress | None = None
+) -> list[DesignResult | GeometryError]:
+    """:func:`finish_designs` of the chosen candidates themselves.
+
+    The candidates are finished together (:func:`finish_candidates`, on the
+    batches' workers): a job's finger sets carve their printed-fit pockets
+    and open their thin walls side by side. Each design's ``finger`` timing
+    holds an equal share of that. Parameters and returns as :func:`finish_designs`.
     """
     clock = time.perf_counter()
     jobs = max(prepared.jobs for prepared, _ in designs)
@@ -969,7 +1028,7 @@ def finish_designs(
             # a pad Boolean failed: each design alone says whose
             if len(designs) == 1:
                 return [error]
-            return [made for design in designs for made in finish_designs([design], config, progress)]
+            return [made for design in designs for made in _finished_designs([design], config, progress)]
         shared_s = (time.perf_counter() - clock) / len(designs)
         clock = time.perf_counter()
         listed = listed_later()

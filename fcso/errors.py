@@ -64,6 +64,10 @@ class GeometryError(FcsoError):
     """A Boolean or mesh operation whose result breaks the method's contract."""
 
 
+class UnwritableSolidError(GeometryError):
+    """A solid that is not one watertight body once written to STL (its corners rounded to float32)."""
+
+
 class NoGraspError(FcsoError):
     """A grasp scenario with no valid sample, so no finger can be designed."""
 

@@ -10,7 +10,7 @@ import numpy as np
 import trimesh
 
 from .config import FingerConfig, GripperConfig, SamplerConfig
-from .errors import ConfigError, GeometryError
+from .errors import ConfigError, GeometryError, UnwritableSolidError
 from .geometry import affine_3x4, box, clip_to_box, ray_hits, to_manifold, to_trimesh, transform_points, volume_about
 from .parts import read_mesh, unit_factor, validate_mesh
 from .printfit import SIMPLIFY_TOLERANCE_MM
@@ -381,12 +381,14 @@ def print_ready(solid: manifold3d.Manifold, what: str) -> WrittenMesh:
 
     Raises
     ------
-    GeometryError
+    UnwritableSolidError
         Naming ``what`` and the defects.
     """
     written = as_written(solid)
     if written.defects():
-        raise GeometryError(f"{what} is not one watertight body as written to STL: {', '.join(written.defects())}")
+        raise UnwritableSolidError(
+            f"{what} is not one watertight body as written to STL: {', '.join(written.defects())}"
+        )
     return written
 
 

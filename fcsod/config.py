@@ -217,13 +217,15 @@ class VerifySettings(VerifyConfig):
     enabled: bool = Field(
         True,
         description="Verify every done job's design in simulation (MuJoCo), after it is published (and with top_k, "
-        "choose among candidates by it before)",
+        "choose among candidates by it before); false: no verification at all, no choice by it (top_k is then "
+        "ignored), no message on the verification key",
     )
     top_k: int = Field(
         DEFAULT_TOP_K,
         ge=0,
         description="Verify up to K candidates in the order of the design's measure and deliver the first that passes "
-        "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets)",
+        "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets and when "
+        "enabled is false)",
     )
     time_limit_seconds: float = Field(
         600.0,

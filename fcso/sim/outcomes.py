@@ -59,6 +59,9 @@ NOT_SIMULATED = frozenset(
         "hold_tolerance_n",
         "max_seated_penetration_mm",
         "choice_budget_s",
+        # a simulation runs the same in any arena it fits in (one it does not fit in fails, and is not stored)
+        "arena_mb",
+        "arena_retry_factor",
         "jobs",
         "cache_dir",
         "reuse_simulations",

@@ -112,6 +112,11 @@ class ScenarioVerification(_Model):
         description="Grasps and holding pushes of this scenario whose outcome was read from the cache: simulated "
         "before with the same geometry, start, settings and code (reuse_simulations)",
     )
+    failure_reason: str | None = Field(
+        None,
+        description="Why the scenario could not be simulated and failed (MuJoCo ran out of its arena, arena_mb, "
+        "after its retry); null: it was simulated",
+    )
 
 
 class RankedCandidate(_Model):

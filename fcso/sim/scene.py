@@ -19,6 +19,7 @@ lets the part creep down the pads.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass, field
 
@@ -54,6 +55,13 @@ COLLIDES = {
 #: Soft-contact parameters: a 2 ms time constant (>= 2 time steps) and a stiff impedance.
 CONTACT_SOLREF = "0.002 1"
 CONTACT_SOLIMP = "0.95 0.99 0.0005"
+#: MuJoCo's arena (contacts, constraints and the solver's stack) of a scene whatever its pieces, bytes: MuJoCo's own
+#: default for these scenes (14 MiB) and some.
+ARENA_BASE_BYTES = 16 * 2**20
+#: ... and per convex piece of the part and of a pad, bytes: a contact with its four constraint rows (elliptic cone,
+#: condim 4) and its share of the solver takes about 2.2 kB (14 MiB ran out at 25933 rows, 6483 contacts), and a piece
+#: touches a few others at up to four contacts each (multiccd).
+ARENA_BYTES_PER_PIECE = 32 * 2**10
 
 
 @dataclass
@@ -121,6 +129,10 @@ class Scene:
     #: How far the pads' faces lie inside the part's outermost point at the seated grasp (q = 0), mm: the penetration
     #: D for carved pads, 0 for flat ones (whose face is there).
     pad_inset_mm: float = 0.0
+    #: The model's source without its arena size (the hash's, so that the arena leaves the outcomes' cache alone).
+    xml: str = ""
+    #: MuJoCo's arena of each simulation of the model, bytes (:func:`scene_arena_bytes`, :func:`with_arena`).
+    arena_bytes: int = ARENA_BASE_BYTES
     #: Unit vector (world) along which the lift joint raises the gripper.
     lift_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     #: Address of the part's free joint in qpos and in qvel.
@@ -244,7 +256,8 @@ def build_scene(
     <position name="minus" joint="minus" kp="{kp:.9g}" forcelimited="true" forcerange="{-force} {force}"/>
   </actuator>
 </mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
+    arena = scene_arena_bytes(len(part_pieces), len(pad_pieces or []), config)
+    model = _compiled(xml, arena)
     part_body = model.body("part").id
     pad_geoms = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("pad_")])
     return Scene(
@@ -261,7 +274,28 @@ def build_scene(
         part_dof=int(model.jnt_dofadr[model.joint("part").id]),
         model_sha256=hashlib.sha256(xml.encode()).hexdigest(),
         pad_inset_mm=0.0 if pad_pieces is None else float(depth),
+        xml=xml,
+        arena_bytes=arena,
     )
+
+
+def scene_arena_bytes(part_pieces: int, pad_pieces: int, config: VerifyConfig) -> int:
+    """MuJoCo's arena of a scene's simulations, bytes: ``config.arena_mb`` when set, else sized from its convex
+    pieces (the part's and both pads')."""
+    if config.arena_mb is not None:
+        return int(config.arena_mb * 2**20)
+    return ARENA_BASE_BYTES + ARENA_BYTES_PER_PIECE * (part_pieces + 2 * pad_pieces)
+
+
+def with_arena(scene: Scene, arena_bytes: int) -> Scene:
+    """``scene`` compiled again with an arena of ``arena_bytes`` (the same bodies, joints and geoms)."""
+    return dataclasses.replace(scene, model=_compiled(scene.xml, arena_bytes), arena_bytes=arena_bytes)
+
+
+def _compiled(xml: str, arena_bytes: int) -> mujoco.MjModel:
+    """The model of ``xml`` (no ``<size>`` element) with an arena of ``arena_bytes``."""
+    head, _, body = xml.partition("\n")
+    return mujoco.MjModel.from_xml_string(f'{head}\n  <size memory="{arena_bytes}"/>\n{body}')
 
 
 def pad_in_world(snapshot: PoseSnapshot, side: int, pad_gap_mm: float, pad_size_mm) -> np.ndarray:

@@ -31,7 +31,7 @@ from .outcomes import (
     scene_key,
 )
 from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
-from .scene import GraspCase, Scene, build_scene
+from .scene import GraspCase, Scene, build_scene, with_arena
 from .trials import (
     HOLD_DIRECTIONS,
     Frame,
@@ -160,7 +160,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         timings["simulation"] += time.perf_counter() - clock
         warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
         ran = len(scenario.fcso.trials)
-        if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
+        if scenario.failure_reason is not None:
+            warnings.append(f"{case.name}: not simulated: {scenario.failure_reason}")
+        elif scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
             stop = (
                 f"; stopped after {ran} of {config.trials}: it can no longer pass"
                 if scenario.stopped_after_trials is not None
@@ -332,15 +334,6 @@ def verify_case(
         "flat": build_scene(case, pieces.pieces, None, finger_hull_mm, config),
     }
     penetration, pads_overlap = seated_overlaps_mm(scenes["fcso"])
-    simulated = scenario_simulations(scenes, case, errors, config, advance)
-    runs, trials, stopped, holding = simulated.runs, simulated.trials, simulated.stopped_after, simulated.holding
-    precision_failed = simulated.precision_failed
-    results = {}
-    for kind, (nominal, *perturbed) in runs.items():
-        offset = pose_error(nominal.part_in_gripper, np.linalg.inv(case.tcp), scenes[kind].part_com_mm)
-        pictured = perturbed[0].frames if perturbed else None
-        results[kind] = _finger_result(kind, nominal.held, offset, trials[kind], holding[kind], pictured)
-    frames = runs["fcso"][0].frames or []
     fidelity = Fidelity(
         part_pieces=len(pieces.pieces),
         part_volume_error=round(pieces.excess_fraction, 6),
@@ -352,6 +345,29 @@ def verify_case(
         decomposition_cached=pieces.cached,
     )
     part_name, _, pose = case.name.rpartition(" pose ")
+    pose_index = int(pose) if pose.isdigit() else 0
+    simulated = simulations_within_arena(scenes, case, errors, config, advance)
+    if isinstance(simulated, str):
+        unsimulated = {kind: _finger_result(kind, False, (0.0, 0.0), [], {}, None) for kind in scenes}
+        return ScenarioVerification(
+            part=part_name,
+            pose_index=pose_index,
+            fidelity=fidelity,
+            fcso=unsimulated["fcso"],
+            flat=unsimulated["flat"],
+            holds_as_flat=None,
+            passed=False,
+            frames=[],
+            failure_reason=simulated,
+        )
+    runs, trials, stopped, holding = simulated.runs, simulated.trials, simulated.stopped_after, simulated.holding
+    precision_failed = simulated.precision_failed
+    results = {}
+    for kind, (nominal, *perturbed) in runs.items():
+        offset = pose_error(nominal.part_in_gripper, np.linalg.inv(case.tcp), scenes[kind].part_com_mm)
+        pictured = perturbed[0].frames if perturbed else None
+        results[kind] = _finger_result(kind, nominal.held, offset, trials[kind], holding[kind], pictured)
+    frames = runs["fcso"][0].frames or []
     holds = (
         not weaker_than_flat(results["fcso"].holding_n, results["flat"].holding_n, config)
         if results["fcso"].holding_n
@@ -359,7 +375,7 @@ def verify_case(
     )
     return ScenarioVerification(
         part=part_name,
-        pose_index=int(pose) if pose.isdigit() else 0,
+        pose_index=pose_index,
         fidelity=fidelity,
         fcso=results["fcso"],
         flat=results["flat"],
@@ -369,6 +385,43 @@ def verify_case(
         frames=[_snapshot(f) for f in frames],
         reused_simulations=simulated.reused,
     )
+
+
+def simulations_within_arena(
+    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+) -> ScenarioSimulations | str:
+    """:func:`scenario_simulations`, run again once with ``config.arena_retry_factor`` times the arena when MuJoCo
+    runs out of it (a part of many pieces in many contacts).
+
+    Returns
+    -------
+    ScenarioSimulations, or str
+        Why the scenario could not be simulated: it ran out of its arena again, or there was no retry.
+    """
+    arenas = []
+    while True:
+        arenas.append(max(scene.arena_bytes for scene in scenes.values()))
+        try:
+            return scenario_simulations(scenes, case, errors, config, advance)
+        except mujoco.FatalError as error:
+            if not out_of_arena(error):
+                raise
+            message = str(error).splitlines()[0]
+        if len(arenas) > 1 or config.arena_retry_factor <= 1.0:
+            sizes = " then ".join(f"{arena / 2**20:.3g} MiB" for arena in arenas)
+            return (
+                f"MuJoCo ran out of its memory arena ({sizes}; {message}): the part's contacts need more, raise "
+                "[verify] arena_mb"
+            )
+        scenes = {
+            kind: with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
+            for kind, scene in scenes.items()
+        }
+
+
+def out_of_arena(error: mujoco.FatalError) -> bool:
+    """Whether MuJoCo's fatal ``error`` is its arena running out (too many contacts and constraints)."""
+    return "out of memory" in str(error)
 
 
 def weaker_than_flat(

@@ -60,3 +60,12 @@ def cell_grasps(
             )
         )
     return cell
+
+
+def verification_note(enabled: bool, several: bool) -> str:
+    """The verdict of grasps published before their finger's verification: where it follows, or that it is off
+    (``[verify] enabled``); ``several``: a job of several finger sets (a key per set)."""
+    if not enabled:
+        return "not verified: [verify] enabled is false"
+    key = "verification/<set>" if several else "verification"
+    return f"not verified yet: the verification follows on .../{key}"

@@ -6,7 +6,9 @@ delivered finger). A finger is kept with the geometry of every part it
 serves (vertices and triangles in mm, moved so their bounding box starts at
 the origin, as :func:`fcso.sets.identity.same_geometry` compares them), the
 grasps of those parts, the finger STL and its sha256, its pad alone (pad
-frame) with the settings the pad depends on, and the jobs it served.
+frame), the settings it and its grasps were designed with, and the jobs it
+served. A finger serves only jobs of the same settings (a finger kept before
+the library recorded them serves none).
 Workers of concurrent jobs open it each on their own connection; a reuse
 claims its fingers in one write transaction, so the wear count cannot be
 passed by two jobs at once.
@@ -57,7 +59,7 @@ CREATE TABLE IF NOT EXISTS fingers (
     created_at     TEXT NOT NULL,
     retired_at     TEXT,
     pad_stl        BLOB,
-    pad_settings   TEXT,
+    design_settings TEXT,
     UNIQUE (job_id, finger_set)
 );
 CREATE TABLE IF NOT EXISTS finger_parts (
@@ -103,10 +105,11 @@ class DeliveredPart:
 class DeliveredFinger:
     """One finger set a done job delivered: what the library keeps of it.
 
-    ``pad_stl`` is the pad alone in its pad frame (:attr:`fcso.DesignResult.fingerpad`)
-    and ``pad_settings`` the JSON of the settings sections it was designed
-    with (:func:`fcsod.job.reuse.pad_settings`): with both, the finger can be
-    evaluated on parts that are not the same (:func:`fcso.fit_pads`).
+    ``design_settings`` is the JSON of the settings sections the finger and its
+    grasps were designed with (:func:`fcsod.job.reuse.finger_settings`): it
+    serves only jobs whose own are the same. ``pad_stl`` is the pad alone in
+    its pad frame (:attr:`fcso.DesignResult.fingerpad`): with it, the finger
+    can be evaluated on parts that are not the same (:func:`fcso.fit_pads`).
     """
 
     job_id: str
@@ -118,8 +121,8 @@ class DeliveredFinger:
     quality_measure: str
     worst_retained: float
     parts: list[DeliveredPart]
+    design_settings: str
     pad_stl: bytes | None = None
-    pad_settings: str | None = None
 
 
 @dataclass
@@ -202,11 +205,12 @@ class FingerLibrary:
             # a library written before qualities named their measure: its qualities are the default measure's
             if "quality_mm2" in columns:
                 self._db.execute("ALTER TABLE fingers RENAME COLUMN quality_mm2 TO quality")
-            # ... and before pads were kept: its fingers serve the same parts only
+            # ... and before pads and the design's settings were kept: its fingers serve no job (their settings
+            # are unknown), ``fcsod fingers list`` still lists them
             for column, kind in (
                 ("quality_measure", "TEXT NOT NULL DEFAULT 'capture'"),
                 ("pad_stl", "BLOB"),
-                ("pad_settings", "TEXT"),
+                ("design_settings", "TEXT"),
             ):
                 if column not in columns:
                     self._db.execute(f"ALTER TABLE fingers ADD COLUMN {column} {kind}")
@@ -219,7 +223,7 @@ class FingerLibrary:
         with self._db:
             self._db.execute(
                 "INSERT OR IGNORE INTO fingers (cell, job_id, finger_set, finger_file, design_key, sha256, finger_stl, "
-                "quality, quality_measure, worst_retained, created_at, pad_stl, pad_settings) "
+                "quality, quality_measure, worst_retained, created_at, pad_stl, design_settings) "
                 "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     cell,
@@ -234,7 +238,7 @@ class FingerLibrary:
                     finger.worst_retained,
                     utc_now(),
                     finger.pad_stl,
-                    finger.pad_settings,
+                    finger.design_settings,
                 ),
             )
             finger_id = self._db.execute(
@@ -292,6 +296,7 @@ class FingerLibrary:
         job_id: str,
         meshes: dict[str, trimesh.Trimesh],
         reprint_after_jobs: int,
+        design_settings: str,
         fitted: dict[str, FittedPart] | None = None,
     ) -> dict[str, ServedPart] | None:
         """Serve every part of a job from the library, and count the job on the fingers that serve it.
@@ -306,6 +311,9 @@ class FingerLibrary:
             Part name -> part mesh in mm, file frame (:func:`fcso.load_parts`).
         reprint_after_jobs : int
             A finger that served this many jobs is worn: it serves no more.
+        design_settings : str
+            The job's settings (:func:`fcsod.job.reuse.finger_settings`):
+            only a finger designed with the same serves it.
         fitted : dict, optional
             Part name -> a finger the part keeps ``min_retained`` on, for
             parts that are not the same as a delivered part.
@@ -314,13 +322,14 @@ class FingerLibrary:
         -------
         dict or None
             Part name -> how it is served; None (and nothing counted) unless
-            every part has the same geometry as a part of an active finger
-            (the newest such finger serves it) or is fitted to one still active.
+            every part has the same geometry as a part of an active finger of
+            the same settings (the newest such finger serves it) or is fitted
+            to one still active.
         """
         with self._db:
             # one write transaction: concurrent jobs see each other's claims
             self._db.execute("BEGIN IMMEDIATE")
-            entries = self._active(cell, job_id, reprint_after_jobs)
+            entries = self._active(cell, job_id, reprint_after_jobs, design_settings)
             served = {}
             for name, mesh in meshes.items():
                 match = self._serving(list(entries), mesh)
@@ -348,18 +357,15 @@ class FingerLibrary:
         job_id: str,
         meshes: dict[str, trimesh.Trimesh],
         reprint_after_jobs: int,
-        pad_settings: str,
+        design_settings: str,
         size_percent: float,
     ) -> dict[str, list[int]] | None:
         """The fingers worth evaluating for the parts no delivered part has the geometry of.
 
         Parameters
         ----------
-        cell, job_id, meshes, reprint_after_jobs
-            As for :meth:`claim`.
-        pad_settings : str
-            The job's pad settings (:func:`fcsod.job.reuse.pad_settings`): a
-            finger designed with others is not evaluated.
+        cell, job_id, meshes, reprint_after_jobs, design_settings
+            As for :meth:`claim`: a finger designed with other settings is not evaluated.
         size_percent : float
             A finger is evaluated for a part when one of its parts has every
             bounding-box side (sorted) and the volume within this percentage.
@@ -371,13 +377,10 @@ class FingerLibrary:
             first, for every part not of a delivered geometry; None when a part
             has neither (the library cannot serve the job).
         """
-        entries = self._active(cell, job_id, reprint_after_jobs)
+        entries = self._active(cell, job_id, reprint_after_jobs, design_settings)
         with_pad = [
             r[0]
-            for r in self._db.execute(
-                "SELECT finger_id FROM fingers WHERE pad_stl IS NOT NULL AND pad_settings = ? ORDER BY finger_id DESC",
-                (pad_settings,),
-            )
+            for r in self._db.execute("SELECT finger_id FROM fingers WHERE pad_stl IS NOT NULL ORDER BY finger_id DESC")
             if r[0] in entries
         ]
         kept = [
@@ -412,9 +415,32 @@ class FingerLibrary:
         blob = self._db.execute("SELECT pad_stl FROM fingers WHERE finger_id = ?", (finger_id,)).fetchone()[0]
         return trimesh.load(io.BytesIO(blob), file_type="stl")
 
-    def _active(self, cell: str, job_id: str, reprint_after_jobs: int) -> dict[int, FingerEntry]:
-        """The fingers that may serve ``job_id``: the cell's, not retired, not worn, not delivered by the job itself."""
+    def other_settings(
+        self, cell: str, job_id: str, meshes: dict[str, trimesh.Trimesh], reprint_after_jobs: int, design_settings: str
+    ) -> dict[int, str | None]:
+        """The active fingers with a part of the geometry of one of ``meshes`` that were designed with other settings
+        than ``design_settings``: finger id -> the settings they were designed with (None: not recorded).
+
+        Parameters as for :meth:`claim`; what tells a job why such a finger does not serve it.
+        """
+        entries = self._active(cell, job_id, reprint_after_jobs)
+        kept = dict(self._db.execute("SELECT finger_id, design_settings FROM fingers"))
+        other = [i for i in entries if kept[i] != design_settings]
+        matches = [self._serving(other, mesh) for mesh in meshes.values()]
+        return {i: kept[i] for i in sorted({m[0] for m in matches if m is not None})}
+
+    def _active(
+        self, cell: str, job_id: str, reprint_after_jobs: int, design_settings: str | None = None
+    ) -> dict[int, FingerEntry]:
+        """The fingers that may serve ``job_id``: the cell's, not retired, not worn, not delivered by the job itself;
+        with ``design_settings``, only those designed with them."""
         entries = {e.finger_id: e for e in self.entries(cell) if e.retired_at is None and e.job_id != job_id}
+        if design_settings is not None:
+            same = {
+                r[0]
+                for r in self._db.execute("SELECT finger_id FROM fingers WHERE design_settings = ?", (design_settings,))
+            }
+            entries = {i: e for i, e in entries.items() if i in same}
         return {i: e for i, e in entries.items() if e.jobs < reprint_after_jobs or job_id in self._served(i)}
 
     def _served(self, finger_id: int) -> set[str]:

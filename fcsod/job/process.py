@@ -14,7 +14,7 @@ import signal
 import threading
 from multiprocessing.connection import Connection
 
-from .events import WorkerBroken, WorkerReady
+from .events import Emit, WorkerBroken, WorkerEvent, WorkerReady
 from .task import SIGNAL_TIME_LIMIT, SIGNAL_WITHDRAWN, TimeLimitExceeded, VerificationTask, Withdrawn
 
 #: The job's code (fcso's design, MuJoCo, matplotlib), imported once by the fork server that workers are forked from.
@@ -36,6 +36,19 @@ def _die_with_daemon(life_line: Connection) -> None:
     except (EOFError, OSError):
         pass
     os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _to_daemon(connection: Connection) -> Emit:
+    """``connection.send``, but a worker whose daemon is gone (kill -9) ends itself quietly, as its life line would
+    end it a moment later, instead of dying of a broken pipe with a traceback in the daemon's log."""
+
+    def send(event: WorkerEvent) -> None:
+        try:
+            connection.send(event)
+        except (BrokenPipeError, ConnectionResetError):
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    return send
 
 
 def worker_main(connection: Connection, life_line: Connection) -> None:
@@ -69,12 +82,17 @@ def worker_main(connection: Connection, life_line: Connection) -> None:
         connection.send(WorkerBroken(f"{type(exc).__name__}: {exc}"))
         raise
 
-    connection.send(WorkerReady(os.getpid()))
-    task = connection.recv()
+    send = _to_daemon(connection)
+    send(WorkerReady(os.getpid()))
+    try:
+        task = connection.recv()
+    except EOFError:
+        # the daemon died before it handed a task (its life line ends this process too)
+        return
     if task is None:
         return
     if isinstance(task, VerificationTask):
-        verify_again(task, connection.send)
+        verify_again(task, send)
     else:
-        run_job(task, connection.send)
+        run_job(task, send)
     connection.close()

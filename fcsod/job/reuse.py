@@ -1,7 +1,10 @@
 """Finger reuse in a job (METHOD §11b): serve a job from the cell's finger library, or add the job's fingers to it.
 
 After loading, :func:`step_reuse` asks the library (:mod:`fcsod.job.fingers`)
-for delivered fingers whose parts have the geometry of every part of the job;
+for delivered fingers, designed with the job's own settings of the finger and
+its grasps (:func:`finger_settings`), whose parts have the geometry of every
+part of the job (a finger of other settings is named in the log with what
+differs);
 a part of no delivered geometry is evaluated on the pads of the fingers that
 serve parts of about its size (``[reuse] similar_size_percent``) with
 :func:`fcso.fit_pads`, and is served by the one it keeps most on, when every
@@ -18,6 +21,7 @@ designs keeps its finger sets in the library when it is done
 from __future__ import annotations
 
 import io
+import json
 
 import trimesh
 from pydantic import Field
@@ -33,7 +37,7 @@ from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMess
 from ..plate.build3mf import export_build_3mf
 from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
-from .cell_grasps import cell_grasps
+from .cell_grasps import cell_grasps, verification_note
 from .fingers import (
     DeliveredFinger,
     DeliveredPart,
@@ -45,9 +49,13 @@ from .fingers import (
 )
 from .task import BUILD_NAME, FINGER_SET, JobRun
 
-#: The settings sections a pad and its evaluation depend on: a finger serves parts that are not the same only in a job
-#: with the same ones.
-PAD_SECTIONS = frozenset({"sampler", "gripper", "filter", "finger", "print", "contact", "quality"})
+#: The settings sections that shape a finger, its pad's evaluation and its grasps: a finger serves a job only when the
+#: job's are the same (the gripper it opens in, the pad, the print, the measure, the poses planned for), and the
+#: measure's test conditions in ``[verify]`` too (:func:`finger_settings`).
+FINGER_SECTIONS = frozenset({"sampler", "gripper", "filter", "finger", "print", "contact", "quality", "poses"})
+
+#: Most setting differences a log line names.
+NAMED_DIFFERENCES = 4
 
 
 class ReusedPartReport(ReportModel):
@@ -95,10 +103,34 @@ class ReuseReport(ReportModel):
     warnings: list[str]
 
 
-def pad_settings(config: DesignConfig) -> str:
-    """The JSON of the settings a finger's pad and its evaluation depend on (:data:`PAD_SECTIONS`, the measure's
-    test conditions)."""
-    return config.model_dump_json(include={**dict.fromkeys(PAD_SECTIONS, True), "verify": set(CAPTURE_CONDITIONS)})
+def finger_settings(config: DesignConfig) -> str:
+    """The JSON of the settings a finger, its pad's evaluation and its grasps depend on, as the library keeps and
+    compares them: :data:`FINGER_SECTIONS` and the ``[verify]`` test conditions the capture measure ranks candidates
+    under (:data:`fcso.config.CAPTURE_CONDITIONS`)."""
+    return config.model_dump_json(include={**dict.fromkeys(FINGER_SECTIONS, True), "verify": set(CAPTURE_CONDITIONS)})
+
+
+def settings_difference(kept: str | None, job: str) -> str:
+    """Why a finger designed with the settings ``kept`` (None: not recorded) does not serve a job of ``job``, e.g.
+    ``gripper.max_opening_mm 50.0 -> 85.0``."""
+    if kept is None:
+        return "it was kept before the library recorded the settings a finger was designed with"
+    before, now = _flat(json.loads(kept)), _flat(json.loads(job))
+    names = sorted(n for n in before.keys() | now.keys() if before.get(n, "unset") != now.get(n, "unset"))
+    words = [f"{n} {before.get(n, 'unset')} -> {now.get(n, 'unset')}" for n in names[:NAMED_DIFFERENCES]]
+    more = f" and {len(names) - NAMED_DIFFERENCES} more" if len(names) > NAMED_DIFFERENCES else ""
+    return "settings differ: " + ", ".join(words) + more
+
+
+def _flat(settings: dict, prefix: str = "") -> dict[str, object]:
+    """Nested settings as dotted names -> values."""
+    flat = {}
+    for name, value in settings.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{name}."))
+        else:
+            flat[f"{prefix}{name}"] = value
+    return flat
 
 
 def step_reuse(run: JobRun) -> None:
@@ -108,18 +140,25 @@ def step_reuse(run: JobRun) -> None:
     if not config.reuse.enabled or not run.loaded:
         return
     meshes = {p.name: p.mesh for p in run.loaded}
+    settings = finger_settings(run.settings)
+    claim = (config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs, settings)
     library = FingerLibrary(library_path(config))
     try:
-        served = library.claim(config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs)
+        served = library.claim(*claim)
         if served is None and config.reuse.similar_size_percent > 0:
             fitted = _fitted_parts(run, library)
             if fitted is not None:
-                served = library.claim(
-                    config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs, fitted
-                )
+                served = library.claim(*claim, fitted)
+        other = library.other_settings(*claim) if served is None else {}
     finally:
         library.close()
     if served is None:
+        for finger_id, kept in other.items():
+            run.log(
+                "info",
+                f"finger library: finger {finger_id} holds parts of this job but does not serve it: "
+                f"{settings_difference(kept, settings)}",
+            )
         run.log("info", "finger library: not every part is served by a delivered finger; designing")
         return
     run.reuse = served
@@ -137,7 +176,7 @@ def _fitted_parts(run: JobRun, library: FingerLibrary) -> dict[str, FittedPart] 
         run.task.job_id,
         {p.name: p.mesh for p in run.loaded},
         config.reuse.reprint_after_jobs,
-        pad_settings(settings),
+        finger_settings(settings),
         config.reuse.similar_size_percent,
     )
     if near is None:
@@ -211,7 +250,7 @@ def step_reused_outputs(run: JobRun) -> None:
         run.settings,
         False,
         None,
-        "not verified in this job: the finger library's finger, verified with the job that delivered it",
+        verification_note(run.verify_settings.enabled, False),
     )
     run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
     min_retained = run.settings.finger_sets.min_retained
@@ -342,8 +381,8 @@ def step_add_to_library(run: JobRun) -> None:
                 quality_measure=run.settings.quality.measure,
                 worst_retained=worst,
                 parts=[DeliveredPart(name, meshes[name], grasps) for name, grasps in picks if name in meshes],
+                design_settings=finger_settings(run.settings),
                 pad_stl=run.sets.designs[number - 1].fingerpad.export(file_type="stl"),
-                pad_settings=pad_settings(run.settings),
             )
         )
     library = FingerLibrary(library_path(config))

@@ -47,7 +47,7 @@ from ..record.recorder import (
     TOPIC_SPEC,
 )
 from ..record.scene import base64_text, build_scene_update, scene_update
-from .cell_grasps import cell_grasps
+from .cell_grasps import cell_grasps, verification_note
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
 from .reuse import step_add_to_library, step_reuse, step_reused_outputs
@@ -67,7 +67,8 @@ def step_inputs(run: JobRun) -> None:
         run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
         # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere. The design's
         # measure predicts the verification the job's [verify] sets up, under its conditions
-        verify = job_settings(config.verify, run.manifest.verify).verify_config()
+        run.verify_settings = job_settings(config.verify, run.manifest.verify)
+        verify = run.verify_settings.verify_config()
         run.settings = run.manifest.design_config(config.design).updated(
             {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
         )
@@ -191,7 +192,7 @@ def step_choose_by_verification(run: JobRun) -> None:
     """
     if run.sets.several:
         settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
-        if settings.top_k > 0:
+        if settings.enabled and settings.top_k > 0:
             run.log(
                 "warning",
                 "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
@@ -214,15 +215,8 @@ def step_record_design(run: JobRun) -> None:
 def job_grasps(run: JobRun) -> list:
     """Every finger set's grasps as the cell runs them (:func:`fcsod.job.cell_grasps.cell_grasps`): the verdict of a
     verification made before the job is done, or where it follows."""
-    settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
     several = run.sets.several
-    if run.verified is not None and not several:
-        unverified = ""
-    elif settings.enabled or (settings.top_k > 0 and not several):
-        key = "verification/<set>" if several else "verification"
-        unverified = f"not verified yet: the verification follows on .../{key}"
-    else:
-        unverified = "not verified: [verify] enabled is false"
+    unverified = verification_note(run.verify_settings.enabled, several)
     verification = run.verified[0] if run.verified is not None and not several else None
     return [
         grasp

@@ -33,7 +33,7 @@ from ..bus.messages import (
     utc_now,
 )
 from ..bus.ros2 import record_ros2
-from ..config import DaemonConfig, JobManifest
+from ..config import DaemonConfig, JobManifest, VerifySettings
 from ..plate.build3mf import Build
 from ..plate.models import BuildConfig
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
@@ -169,6 +169,8 @@ class JobRun:
     inputs: list[InputFile] = field(default_factory=list)
     parts: list[PartInput] = field(default_factory=list)
     settings: DesignConfig | None = None
+    #: the job's [verify] (its manifest's, else the daemon's), once its manifest is read
+    verify_settings: VerifySettings | None = None
     build_settings: BuildConfig | None = None
     loaded: list[fcso.Part] = field(default_factory=list)
     build: Build = field(default_factory=Build)

@@ -17,16 +17,23 @@ output folder (:func:`verify_again`); its files are written only once every
 set is simulated, and its messages published only once they are all
 written. A verification over ``time_limit_seconds`` or that fails is
 published as ``failed`` on the verification key, with nothing of it on disk;
-the job stays done.
+the job stays done. A job the finger library serves designs nothing: each
+reused finger is verified after it is done on the job's own parts and the
+grasps delivered for them (:func:`reused_designs`). ``[verify] enabled =
+false`` turns all of it off, the choice among ``top_k`` candidates included.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from fcso.output.layout import REPORT_HTML, VERIFICATION_JSON, set_folder
+import trimesh
+
+from fcso.output.layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, VERIFICATION_JSON, set_folder
+from fcso.output.read import read_report, read_stl, reload_parts
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density
@@ -39,7 +46,7 @@ from fcso.sim.report import (
     verdict_text,
     weakest_hold_n,
 )
-from fcso.sim.verify import DesignUnderTest, design_under_test, verify_delivered
+from fcso.sim.verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify_delivered
 
 from ..bus.messages import BusMessage, ScenarioOutcome, VerificationMessage
 from ..config import VerifySettings
@@ -53,6 +60,7 @@ from ..record.recorder import (
 from ..record.scene import scene_updates
 from .events import Emit, Log, VerificationFinished, VerificationStarted
 from .inputs import read_manifest
+from .reuse import ReuseReport
 from .task import TimeLimitExceeded, VerificationTask, time_limit_error, unfinished_verification_message
 
 
@@ -66,6 +74,8 @@ def choose_by_verification(run) -> None:
     with a delivery policy other than ``always`` (and ``top_k`` 0), verify the design's own choice. Either way the
     job is held (``run.held``) when its finger misses the policy (:func:`held_reason`)."""
     settings = _settings(run)
+    if not settings.enabled:
+        return
     config = _verify_config(settings, run.result.report.settings, run.task.config.state.dir)
     if settings.top_k > 0:
         chosen, verification, design, ranking = verify_top(run.result, settings.top_k, config, _progress(run.log))
@@ -127,9 +137,14 @@ def write_chosen_verification(run) -> None:
 
 
 def verification_after_done(run) -> VerifySettings | None:
-    """The job's ``[verify]`` when its design is to be verified after it is done, else None."""
+    """The job's ``[verify]`` when its design is to be verified after it is done, else None.
+
+    Not when verification is off, nor when the design step's choice by
+    verification already verified the one delivered design; a job the finger
+    library serves has its reused fingers verified on its own parts.
+    """
     settings = _settings(run)
-    if not (settings.enabled or settings.top_k > 0) or (run.verified is not None and not run.sets.several):
+    if not settings.enabled or (run.verified is not None and not run.sets.several):
         return None
     return settings
 
@@ -137,8 +152,13 @@ def verification_after_done(run) -> VerifySettings | None:
 def verify_done_job(run, final_dir: Path, settings: VerifySettings) -> None:
     """After the job is done and journalled: verify every finger set's design (in memory), write, record, publish.
 
-    Ends with one :class:`~fcsod.job.events.VerificationFinished`.
+    A job the finger library served verifies each reused finger on this job's parts and grasps
+    (:func:`reused_designs`). Ends with one :class:`~fcsod.job.events.VerificationFinished`.
     """
+    if run.reuse is not None:
+        parts = {p.name: p.mesh for p in run.loaded}
+        _verify_designs(run.task.config, run.task.job_id, reused_designs(final_dir, parts), settings, run.emit)
+        return
     several = run.sets.several
     designs = [
         (final_dir / set_folder(number) if several else final_dir, number if several else None, result)
@@ -171,23 +191,68 @@ def verify_again(task: VerificationTask, emit: Emit) -> None:
         _unfinished(config, task.job_id, [None], "failed", f"the job's settings cannot be read again: {exc}", emit)
         return
     emit(VerificationStarted(settings.time_limit_seconds))
-    sets = sorted(final_dir.glob("set-*/report.json"))
-    folders = [(path.parent, int(path.parent.name.removeprefix("set-"))) for path in sets] or [(final_dir, None)]
-    if not (settings.enabled or settings.top_k > 0):
-        _unfinished(config, task.job_id, [n for _, n in folders], "skipped", "verification is off now", emit)
+    if is_reuse_report(final_dir):
+        try:
+            designs = reused_designs(final_dir, None)
+        except Exception as exc:  # the job's report cannot be read: its verification cannot run again
+            _unfinished(config, task.job_id, [None], "failed", f"{type(exc).__name__}: {exc}", emit)
+            return
+    else:
+        sets = sorted(final_dir.glob(f"set-*/{REPORT_JSON}"))
+        folders = [(p.parent, int(p.parent.name.removeprefix("set-"))) for p in sets] or [(final_dir, None)]
+        designs = [(out, number, lambda out=out: _loaded(out)) for out, number in folders]
+    if not settings.enabled:
+        _unfinished(config, task.job_id, [n for _, n, _ in designs], "skipped", "verification is off now", emit)
         return
-    _verify_designs(
-        config,
-        task.job_id,
-        [(out, number, lambda out=out: _loaded(out)) for out, number in folders],
-        settings,
-        emit,
-    )
+    _verify_designs(config, task.job_id, designs, settings, emit)
 
 
 def _loaded(folder: Path):
     report, design = load_design(folder)
     return design, report.settings
+
+
+def is_reuse_report(folder: Path) -> bool:
+    """Whether the job output ``folder`` is a job the finger library served (its ``report.json`` names reused
+    fingers)."""
+    path = folder / REPORT_JSON
+    return path.is_file() and "reused" in json.loads(path.read_text(encoding="utf-8"))
+
+
+def reused_designs(final_dir: Path, parts: dict[str, trimesh.Trimesh] | None) -> list[tuple]:
+    """The designs under test of a job the finger library served: each reused finger with this job's parts and the
+    grasps it delivered for them, in the form :func:`_verify_designs` takes.
+
+    Each finger is read from the delivering job's folder (its finger, pad and ``report.json`` with the settings it
+    was designed with, which a reuse requires to be this job's); ``parts`` are the job's loaded meshes, or None to
+    read them again from the files the job's report names. A job served by several fingers verifies each as its
+    set (``set-<n>/``, ``.../verification/<n>``), as a job of several finger sets does.
+    """
+    report = ReuseReport.model_validate_json((final_dir / REPORT_JSON).read_text(encoding="utf-8"))
+    several = len(report.reused) > 1
+
+    def build(number: int):
+        reused = report.reused[number - 1]
+        meshes = parts
+        if meshes is None:
+            meshes = {part.name: part.mesh for part in reload_parts(report, final_dir)}
+        delivered = (final_dir / reused.finger_file).parent
+        design = read_report(delivered)
+        served = {p.part for p in reused.parts}
+        cases = [grasp_case(design, g, meshes[g.part]) for g in report.grasps if g.part in served]
+        finger = read_stl(delivered / FINGER_STL)
+        if several:
+            (final_dir / set_folder(number)).mkdir(exist_ok=True)
+        return DesignUnderTest(cases, read_stl(delivered / FINGERPAD_STL), finger_hull(design, finger)), design.settings
+
+    return [
+        (
+            final_dir / set_folder(number) if several else final_dir,
+            number if several else None,
+            lambda n=number: build(n),
+        )
+        for number in range(1, len(report.reused) + 1)
+    ]
 
 
 def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit: Emit) -> None:

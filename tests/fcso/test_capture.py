@@ -32,7 +32,9 @@ from fcso.screen import ScreenGrid
 
 def _prepared(mesh, name: str, **sections):
     config = (
-        fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"stride_mm": 2.0}, **sections})
+        fcso.DesignConfig()
+        .updated(upright_grasp_settings(mesh))
+        .updated({"sampler": {"length_mm": 20.0, "stride_mm": 2.0}, **sections})
     )
     return prepare([Part(name=name, path=name, mesh=mesh)], config), config
 

@@ -1,5 +1,6 @@
 """The whole pipeline on fixture meshes: report consistency, determinism, finger and grasps."""
 
+import importlib
 import json
 
 import numpy as np
@@ -7,9 +8,10 @@ import pytest
 import trimesh
 
 import fcso
-from examples.sim_parts import featured_cube, plain_box, upright_grasp_settings
+from examples.sim_parts import featured_cube, plain_box, two_ridge_block, upright_grasp_settings, zigzag_l_part
 from fcso.config import DesignConfig
 from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
+from fcso.errors import UnwritableSolidError
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
@@ -17,6 +19,8 @@ from fcso.parts import Part
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
 
+#: The module fcso.design (the package's ``fcso.design`` is the function).
+design_module = importlib.import_module("fcso.design")
 TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 
@@ -37,7 +41,7 @@ def two_part_design():
 
 def test_the_capture_measure_ranks_candidates_and_chooses_the_design():
     mesh = featured_cube(notch_mm=8.0)
-    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh))
+    config = fcso.DesignConfig().updated(upright_grasp_settings(mesh)).updated({"sampler": {"length_mm": 20.0}})
     report = fcso.design([Part(name="cube", path="featured_cube", mesh=mesh)], config).report
     hold = config.verify.hold_force_n
     pad_area = config.sampler.length_mm * config.sampler.width_mm
@@ -98,6 +102,56 @@ def test_a_featureless_plate_gets_flat_pads_not_a_carving(tmp_path):
     assert flat.case == "bad"
     assert flat.scenarios[0].capture.fraction == pytest.approx(carved.report.scenarios[0].flat_capture, abs=1e-6)
     assert flat.scenarios[0].capture.fraction < carved.report.scenarios[0].capture
+
+
+def test_a_v_notched_edge_is_found_by_the_default_sampler():
+    # an L plate whose only cageable feature is two 2 mm V-notches in the outer edge of its long arm, at x in
+    # [26, 34] of y = 0 (by construction): a 20 mm pad over them sees mostly straight edge, METHOD §5 labels that
+    # bad and the design stays flat; the default pad sizes hold one short enough to carve the notches
+    mesh = zigzag_l_part(teeth=2, tooth_mm=2.0)
+    result = fcso.design([Part(name="zigzag", path="zigzag", mesh=mesh)], fcso.DesignConfig())
+    report = result.report
+    assert not report.finger.flat_pads
+    length = report.settings.sampler.length_mm
+    for grasp in report.grasps:
+        to_part = np.linalg.inv(np.asarray(grasp.rest_transform))
+        centre = to_part[:3, :3] @ grasp.position_mm + to_part[:3, 3]
+        closing = to_part[:3, :3] @ grasp.closing_axis
+        # closing across the long arm, the pad's footprint along x holds both notches
+        assert abs(closing[1]) == pytest.approx(1.0, abs=1e-6)
+        assert abs(centre[0] - 30.0) + 4.0 <= length / 2.0 + 1e-6
+
+
+def notched_d_disc(notch_axis_deg: float = 60.0) -> trimesh.Trimesh:
+    """A 10 mm thick disc (radius 15 mm) lying flat, cut flat at x = 11 mm, with a 4 mm deep 90-degree V-notch on each
+    side along ``notch_axis_deg`` from x."""
+    import manifold3d
+
+    disc = manifold3d.Manifold.cylinder(10.0, 15.0, circular_segments=96)
+    disc = disc - manifold3d.Manifold.cube([10.0, 40.0, 12.0]).translate([11.0, -20.0, -1.0])
+    wedge = [[0.0, 0.0], [5.0, -5.0], [5.0, 5.0]]
+    notch = manifold3d.Manifold.extrude(manifold3d.CrossSection([wedge]), 12.0).translate([11.0, 0.0, -1.0])
+    for angle in (notch_axis_deg, notch_axis_deg + 180.0):
+        disc = disc - notch.rotate([0.0, 0.0, angle])
+    mesh = disc.to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties[:, :3]), np.asarray(mesh.tri_verts))
+
+
+def test_pads_close_into_notches_that_lie_off_the_bounding_box_axes():
+    # a disc whose flat sets its bounding box's axes (0 and 90 degrees) and whose only cageable features, two
+    # V-notches, lie on an axis at 60 degrees (by construction): closing along the box's axes or square to a notch's
+    # flank (15 or 105 degrees), the pads meet the round rim beside the notches; square to the convex hull's faces
+    # over the notches they enter both
+    mesh = notched_d_disc(60.0)
+    result = fcso.design(
+        [Part(name="disc", path="disc", mesh=mesh)], fcso.DesignConfig().updated({"poses": {"count": 1}})
+    )
+    report = result.report
+    assert not report.finger.flat_pads
+    (grasp,) = report.grasps
+    closing = np.linalg.inv(np.asarray(grasp.rest_transform))[:3, :3] @ grasp.closing_axis
+    notch_axis = [np.cos(np.radians(60.0)), np.sin(np.radians(60.0)), 0.0]
+    assert abs(np.dot(closing, notch_axis)) == pytest.approx(1.0, abs=1e-3)
 
 
 def test_counts_qualities_and_best_are_consistent(two_part_design):
@@ -273,3 +327,45 @@ def test_a_finish_given_the_exact_evaluation_reports_as_one_that_evaluates_again
     again = finish_candidates(candidates, config)[0]
     assert given[2].exact.quality > 0
     assert given[1:] == again[1:]
+
+
+def _exact_ranking(report) -> list[int]:
+    """The report's exactly evaluated candidates, best first (quality, then mean effective area, then index)."""
+    exact = [c for c in report.candidates if c.evaluation == "exact"]
+    return [c.index for c in sorted(exact, key=lambda c: (-c.quality, -c.mean_effective_area, c.index))]
+
+
+def test_a_candidate_whose_finger_is_not_one_body_as_written_gives_way_to_the_next(monkeypatch):
+    # no real part is known whose fused finger is still refused as written (the two-ridge block's was, until its
+    # pinches were kept apart): the written check is made to refuse the chosen candidate's finger, recognised by its
+    # pad (a pad of the same volume, another candidate's, would be refused too)
+    part = Part(name="two-ridge block", path="two-ridge block", mesh=two_ridge_block())
+    config = fcso.DesignConfig().updated({"poses": {"count": 1}})
+    first = fcso.design([part], config)
+    ranking = _exact_ranking(first.report)
+    assert ranking[0] == first.report.best and len(ranking) > 1
+    refused_pad_mm3 = first.best.fingerpad.pad.volume()
+    refuse_every_pad = [False]
+    real_fuse = design_module.fuse
+    fused_pads = []
+
+    def fuse(finger, pad, sampler, overlap_mm):
+        fused_pads.append(pad.volume())
+        if refuse_every_pad[0] or abs(pad.volume() - refused_pad_mm3) <= 1e-9 * refused_pad_mm3:
+            raise UnwritableSolidError("built-in: fused finger is not one watertight body as written to STL: 2 bodies")
+        return real_fuse(finger, pad, sampler, overlap_mm)
+
+    monkeypatch.setattr(design_module, "fuse", fuse)
+    second = fcso.design([part], config)
+    assert second.report.best == ranking[1] and second.report.finger.watertight and second.finger.is_watertight
+    assert second.report.candidates == first.report.candidates
+    assert (
+        f"candidate {ranking[0]} is not delivered: built-in: fused finger is not one watertight body as written to "
+        f"STL: 2 bodies; candidate {ranking[1]}, the next by its exact figures, is tried instead"
+    ) in second.report.warnings
+    # when no candidate's finger can be written, the design fails after the chosen one and WRITTEN_FALLBACKS more
+    fused_pads.clear()
+    refuse_every_pad[0] = True
+    with pytest.raises(UnwritableSolidError, match="not one watertight body as written"):
+        fcso.design([part], config)
+    assert len(fused_pads) == 1 + min(design_module.WRITTEN_FALLBACKS, len(ranking) - 1)

@@ -9,10 +9,12 @@ from fcso import load_part, stable_poses
 from fcso.config import DesignConfig, FingerConfig, GripperConfig, SamplerConfig, load_config
 from fcso.finger import finger_plate, load_finger, parametric_finger
 from fcso.geometry import box, to_manifold, to_trimesh
-from fcso.sampler import REJECTION_REASONS, FingerPlate, face_yaws, feature_centres, sample_grasps
+from fcso.sampler import REJECTION_REASONS, FingerPlate, face_yaws, feature_centres, pocket_yaws, sample_grasps
 from tests.conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
+#: The product's settings with the paper's one 20 x 20 mm pad (the default designs two lengths, one at a time).
+PAPER_PAD = DesignConfig().updated({"sampler": {"length_mm": 20.0}})
 
 
 def block_part() -> trimesh.Trimesh:
@@ -116,7 +118,7 @@ def _volume_inside(part: manifold3d.Manifold, lower, upper) -> float:
 
 
 def test_valid_bunny_samples_pass_every_check_independently():
-    config = DesignConfig()
+    config = PAPER_PAD
     mesh = bunny_in_pose(1)
     sampler, gripper = config.sampler, config.gripper
     plate = built_in_plate(sampler, gripper)
@@ -213,7 +215,7 @@ def test_paper_bunny_has_base_level_grasps():
 
 
 def test_every_nth_pad_position_together_make_the_whole_sampling():
-    config = DesignConfig()
+    config = PAPER_PAD
     mesh = bunny_in_pose(1)
     plate = built_in_plate(config.sampler, config.gripper)
     whole = sample_grasps(mesh, config.sampler, config.gripper, plate)
@@ -270,6 +272,23 @@ def test_closing_axes_square_to_side_faces_the_configured_yaws_miss():
     assert face_yaws(block_part(), [0.0, 90.0], 40.0) == []
     cylinder = to_trimesh(manifold3d.Manifold.cylinder(30.0, 15.0, circular_segments=96))
     assert face_yaws(cylinder, [0.0, 90.0], 40.0) == []
+
+
+def test_closing_axes_into_the_pockets_of_the_outline_the_taken_yaws_miss():
+    # by construction: a 4 mm deep 90-degree V-notch in each side of a round 10 mm plate, on an axis 60 degrees
+    # from x
+    wedge = manifold3d.Manifold.extrude(manifold3d.CrossSection([[[0.0, 0.0], [5.0, -5.0], [5.0, 5.0]]]), 12.0)
+    plate = manifold3d.Manifold.cylinder(10.0, 15.0, circular_segments=96)
+    for angle in (60.0, 240.0):
+        plate = plate - wedge.translate([11.0, 0.0, -1.0]).rotate([0.0, 0.0, angle])
+    notched = to_trimesh(plate)
+    assert pocket_yaws(notched, [0.0, 90.0]) == [60.0]
+    assert pocket_yaws(notched, [0.0, 60.0, 90.0]) == []
+    # convex parts have no pockets: a chamfered block, a hexagon, a round cylinder
+    hexagon = to_trimesh(manifold3d.Manifold.cylinder(20.0, 12.0, circular_segments=6))
+    cylinder = to_trimesh(manifold3d.Manifold.cylinder(30.0, 15.0, circular_segments=96))
+    for convex in (chamfered_block(), hexagon, cylinder):
+        assert pocket_yaws(convex, [0.0, 90.0]) == []
 
 
 def test_pads_that_would_meet_beside_a_thin_section_are_rejected():

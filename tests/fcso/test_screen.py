@@ -9,6 +9,8 @@ from fcso.screen import NormalLattice, ScreenGeometry, screen
 #: One row of four 1 mm cells.
 SHAPE = (1, 4)
 AREA_MM2 = 0.25
+#: The product's settings with one pad size (screening takes one; the default designs two lengths apart).
+CONFIG = fcso.DesignConfig().updated({"sampler": {"length_mm": 20.0}})
 
 
 def geometry(heights, high, good, points_u, points_cell, depth_mm=10.0) -> ScreenGeometry:
@@ -36,7 +38,7 @@ def test_samples_buried_by_another_scenario_carving_do_not_touch():
     # scenario 0 carves 1 mm everywhere and samples each cell at its top; scenario 1 carves 2 mm in cells 2 and 3
     first = geometry([1, 1, 1, 1], [1, 1, 1, 1], True, [1.0, 1.0, 1.0, 1.0], [0, 1, 2, 3])
     second = geometry([0, 0, 2, 2], [0, 0, 2, 2], True, [2.0, 2.0], [2, 3])
-    screened = screen([(first, empty()), (second, empty())], fcso.DesignConfig(), NormalLattice())
+    screened = screen([(first, empty()), (second, empty())], CONFIG, NormalLattice())
     # the first keeps cells 0 and 1; the second's own carving buries none of its samples, the first's is lower
     assert [s.contact_area_mm2 for s in screened.scenarios] == [2 * AREA_MM2, 2 * AREA_MM2]
     assert screened.case == "good"
@@ -44,7 +46,7 @@ def test_samples_buried_by_another_scenario_carving_do_not_touch():
 
 
 def test_a_bad_geometry_is_seated_on_the_high_map_and_touches_between_the_maps():
-    config = fcso.DesignConfig()
+    config = CONFIG
     eps = config.contact.eps_mm
     carving = geometry([1, 1, 1, 1], [1.5, 1.5, 1.5, 1.5], True, [1.0], [0])
     # highest sample 1.5 mm above the high map: seated 1.5 mm - eps back; then 3.0 -> 1.5 + eps (the high map's

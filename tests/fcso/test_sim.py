@@ -34,6 +34,7 @@ from fcso.sim.report import Fidelity, VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
+    DesignUnderTest,
     design_under_test,
     finger_hull,
     fitted_pieces,
@@ -88,7 +89,7 @@ def ridged(tmp_path_factory):
     config = DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
-            "sampler": {"yaw_deg": [0.0], "feature_positions": False, "face_yaws": False},
+            "sampler": {"length_mm": 20.0, "yaw_deg": [0.0], "feature_positions": False, "face_yaws": False},
             "print": {"profile": "custom"},
         }
     )
@@ -734,3 +735,28 @@ def test_a_design_delivered_with_flat_pads_is_simulated_as_the_flat_control(tmp_
     carved = trimesh.creation.box(bounds=[[case.penetration_mm, 0.0, 0.0], [case.pad_size_mm[0], 20.0, 20.0]])
     carved = carved.difference(trimesh.creation.box(bounds=[[3.0, 5.0, 5.0], [4.5, 10.0, 10.0]]))
     assert not is_flat_control(carved, case.pad_size_mm, case.penetration_mm)
+
+
+def test_a_scenario_out_of_mujocos_arena_is_simulated_again_with_a_larger_one_or_fails_with_the_reason(tmp_path):
+    case = _cube_case()
+    under_test = DesignUnderTest([case], flat_pad(case.pad_size_mm, case.penetration_mm), np.zeros((0, 3)))
+    settings = {"lift_mm": 10.0, "trials": 2, "hold_ramp_n_s": 300.0}
+    sized = verify(under_test, _config(tmp_path, **settings))
+    assert sized.scenarios[0].failure_reason is None and sized.scenarios[0].fcso.trials
+    # 30 kB is too little for the cube's contacts (MuJoCo's FatalError "mj_stackAlloc: out of memory"), 120 kB is
+    # enough: the scenario is simulated again and ends as it does with the arena sized from its pieces
+    retried = verify(under_test, _config(tmp_path, arena_mb=0.03, **settings))
+    pieces_cached = {"fidelity": {"decomposition_cached"}}
+    assert retried.scenarios[0].model_dump(exclude=pieces_cached) == sized.scenarios[0].model_dump(
+        exclude=pieces_cached
+    )
+    assert retried.warnings == sized.warnings
+    # without a retry, or when the larger arena runs out too (20 kB, then 80 kB), the scenario fails with the reason
+    for arena in ({"arena_mb": 0.03, "arena_retry_factor": 1.0}, {"arena_mb": 0.02}):
+        report = verify(under_test, _config(tmp_path, **arena, **settings))
+        scenario = report.scenarios[0]
+        assert not report.passed and not scenario.passed and scenario.fcso.trials == scenario.flat.trials == []
+        assert scenario.failure_reason.startswith("MuJoCo ran out of its memory arena (")
+        assert "out of memory" in scenario.failure_reason and "raise [verify] arena_mb" in scenario.failure_reason
+        assert report.warnings == [f"cube: not simulated: {scenario.failure_reason}"]
+    assert "0.02 MiB then 0.08 MiB" in scenario.failure_reason

@@ -21,6 +21,7 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     mesh = two_ridge_block()
     settings = upright_grasp_settings(mesh)
     settings["print"] = {"profile": "mjf-pa12"}
+    settings["sampler"]["length_mm"] = 20.0
     # ranked by the paper's Q, which is fooled here: verification is what corrects it (the capture measure,
     # the default, already chooses the vertical ridge: tests/fcso/test_capture.py)
     settings["quality"] = {"measure": "paper"}

@@ -88,7 +88,7 @@ def check_build(items, config: BuildConfig, expected_count: int) -> list[trimesh
 
 @pytest.fixture(scope="module")
 def finger() -> trimesh.Trimesh:
-    config = DesignConfig()
+    config = DesignConfig().updated({"sampler": {"length_mm": 20.0}})
     return parametric_finger(config.sampler, config.gripper).mesh
 
 
