@@ -286,8 +286,10 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             reused = reused_note(verification)
             log(
                 "info" if verification.passed else "warning",
-                f"{name}: {verdict_text(verification)}, in {time.perf_counter() - started:.1f} s"
-                + (f" ({reused})" if reused else ""),
+                f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
+                f"{time.perf_counter() - started:.1f} s"
+                + (f" ({reused})" if reused else "")
+                + f": {verdict_text(verification)}",
             )
             for warning in verification.warnings:
                 log("warning", f"{name}: {warning}")

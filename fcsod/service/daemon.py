@@ -423,8 +423,6 @@ class Daemon:
             case Log(level, message, fields):
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             case Publish(message):
-                if message.topic.partition("/")[0] == "verification":
-                    self.metrics.verified(VerificationMessage.model_validate_json(message.payload).passed)
                 self._publish(message)
             case Scene(_, data, log_time_ns):
                 if self.foxglove is not None:
@@ -446,7 +444,10 @@ class Daemon:
         row = self.journal.mark_finished(
             slot.job.job_id, state, status.finished_at, error, verifying=verify_limit_s is not None
         )
-        self.metrics.jobs_finished.labels(state).inc()
+        self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else state).inc()
+        self.metrics.job_seconds.labels(state).observe(time.monotonic() - slot.started)
+        if state == "done":
+            self.metrics.last_success.set_to_current_time()
         slot.finished = True
         if verify_limit_s is not None:
             _start_verification_clock(slot, verify_limit_s)
@@ -473,6 +474,7 @@ class Daemon:
             extra={"job_id": slot.job.job_id, "state": state},
         )
         for message in signed:
+            self._count_verification(message)
             self.bus.publish(message)
             if self.ros2 is not None:
                 self.ros2.publish(message)
@@ -512,7 +514,7 @@ class Daemon:
         work_dir = self.output_root / f".tmp-{row.job_id}"
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
-        self.metrics.jobs_finished.labels("failed").inc()
+        self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else "failed").inc()
         status = self._status(row)
         try:
             work_dir.mkdir(parents=True, exist_ok=True)
@@ -673,8 +675,18 @@ class Daemon:
         )
         return BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", body)
 
+    def _count_verification(self, message: BusMessage) -> None:
+        """Count a verification's result, wherever it ran (the design step's choice, after the job, again after a
+        crash): a verification message that finished (``state`` done)."""
+        if message.topic.partition("/")[0] != "verification":
+            return
+        body = VerificationMessage.model_validate_json(message.payload)
+        if body.state == "done":
+            self.metrics.verified(body.passed)
+
     def _publish(self, message: BusMessage) -> None:
-        """Sign the message, keep it for the queryable, then publish it."""
+        """Sign the message, keep it for the queryable, count a verification, then publish it."""
+        self._count_verification(message)
         message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
         transports = [("zenoh", self.bus), ("ros2", self.ros2), ("foxglove", self.foxglove)]

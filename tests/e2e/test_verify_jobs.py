@@ -10,6 +10,7 @@ import re
 import signal
 import sqlite3
 import time
+import urllib.request
 
 import pytest
 
@@ -270,7 +271,14 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
 
     port = free_port()
     # the paper's Q puts the pad on a horizontal ridge, where a displaced part slides (tests/fcso/test_sim_choose.py)
-    config = write_config(tmp_path, port, verify="enabled = true", design='[design.quality]\nmeasure = "paper"\n')
+    metrics_port = free_port()
+    config = write_config(
+        tmp_path,
+        port,
+        verify="enabled = true",
+        design='[design.quality]\nmeasure = "paper"\n',
+        extra=f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n',
+    )
     mesh = two_ridge_block()
     part = tmp_path / "two-ridge.stl"
     mesh.export(part)
@@ -293,6 +301,8 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
         held_names = _object_names(out / "build.3mf")
         with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
             journalled = db.execute("SELECT state FROM jobs").fetchall()
+        with urllib.request.urlopen(f"http://127.0.0.1:{metrics_port}/metrics", timeout=HANG_GUARD_S) as reply:
+            metrics = reply.read().decode()
         early = [v["topic"] for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
         assert fcsod_main(["approve", job_id[:12], "--config", str(config)]) == 0
         done = subscriber.wait_for(lambda v: _is("status", job_id)(v) and v["body"]["state"] == "done")
@@ -303,6 +313,9 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
     assert "did not pass verification" in held["body"]["error"] and "fcsod approve" in held["body"]["error"]
     assert not verification["body"]["passed"] and verification["body"]["verdict"].startswith("not verified: ")
     assert journalled == [("held",)]
+    # the verification made inside the design step is counted, and the held job is a state of its own
+    assert 'fcsod_verifications_total{result="failed"} 1.0' in metrics
+    assert 'fcsod_jobs{state="held"} 1.0' in metrics and 'fcsod_jobs_finished_total{state="held"} 1.0' in metrics
     # held: the build has the part, no finger; the finger's grasps and design are not published
     assert held_names == ["two-ridge"]
     assert not {"grasps", "design", "quality", "placement"} & set(early)
