@@ -40,8 +40,8 @@ import numpy as np
 
 import fcso
 from examples.sim_parts import holed_notched_cube
-from fcso.design import prepare, screen_choice
 from fcso.parallel import WorkerPool, resolve_jobs
+from fcso.pipeline import prepare, screen_choice
 
 REPO = Path(__file__).resolve().parent.parent
 PARTS = REPO / "examples" / "parts"

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 import fcso
-from fcso.design import evaluate_exact, prepare, screen_choice
+from fcso.pipeline import evaluate_exact, prepare, screen_choice
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -162,8 +162,8 @@ def job(parts: int) -> list[fcso.Part]:
 def retained_of_single(single: fcso.DesignResult, stars: dict[tuple[str, int], float]) -> np.ndarray:
     """E / E* of every graspable scenario with one finger for all (E* from the sets run).
 
-    E is read as the sets' report reads it (fcso.report.sets.exact_retained): the chosen candidate's exact measure
-    per scenario, E in mm² under the paper's measure, METHOD §7b's measure under the capture measure.
+    E is read as the sets' report reads it (fcso.pipeline.sets_report.exact_retained): the chosen candidate's exact
+    measure per scenario, E in mm² under the paper's measure, METHOD §7b's measure under the capture measure.
     """
     measures = [q.measure for q in chosen_candidate(single.report).per_scenario]
     values = [

@@ -39,8 +39,9 @@ import numpy as np
 from scipy.ndimage import maximum_filter
 
 from .config import DesignConfig, VerifyConfig
+from .grid import ScreenGrid
 from .jit import compiled
-from .screen import ScreenGeometry, ScreenGrid, pad_case
+from .screen import ScreenGeometry, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
 YAW_STEP_DEG = 0.5

@@ -7,28 +7,17 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .config import DesignConfig, format_validation_error, load_config
-from .errors import FcsoError, GeometryError, NoGraspError
-from .output.design_page import rebuild_report
-from .output.files import rebuild_job_report, write_set_outputs
-from .output.layout import set_folder
-from .output.picture_process import PictureProcess
-from .output.read import is_job_folder
-from .output.sets_page import pad_sizes_line, pick_plan_text
-from .output.table import quality_table
-from .parts import load_part, load_parts, units_hint
-from .poses import stable_poses
-from .schema import write_schemas
-from .sets import SetsResult, design_sets
-from .sim.cli import (
-    add_design_options,
-    add_settings_options,
-    add_verify_command,
-    restore_section,
-    run_verify,
-    verify_design_outputs,
-)
+from .errors import FcsoError, GeometryError
+from .verify_cli import add_design_options, add_settings_options, add_verify_command
+
+if TYPE_CHECKING:
+    from .config import DesignConfig
+    from .sets import SetsResult
+
+# each command imports what it uses when it runs: ``fcso --help`` and the small commands load neither the pipeline
+# (numba, its compiled kernels) nor the simulation nor matplotlib (tests/test_architecture.py)
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -55,7 +44,7 @@ class ProgressLine:
         self.last_draw = 0.0
 
     def __call__(self, stage: str, done: int, total: int, note: str = "") -> None:
-        """``progress(stage, done, total, note)`` as :func:`fcso.design.design` calls it."""
+        """``progress(stage, done, total, note)`` as :func:`fcso.pipeline.design` calls it."""
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -176,7 +165,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "report":
             return _report(args)
         if args.command == "verify":
+            from .verify_cli import run_verify
+
             return run_verify(args, ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()))
+        from .schema import write_schemas
+
         for path in write_schemas(args.out):
             print(path)
         return 0
@@ -189,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _config(args) -> DesignConfig:
+    from .config import DesignConfig, format_validation_error, load_config
+
     config = load_config(args.config) if args.config else DesignConfig()
     overrides: dict = {}
     if args.poses is not None:
@@ -218,6 +213,13 @@ def _config(args) -> DesignConfig:
 
 
 def _design(args) -> int:
+    # the method's modules load before the picture process forks: it inherits them (fcso.output.picture_process)
+    from .errors import NoGraspError
+    from .output.files import write_set_outputs
+    from .output.picture_process import PictureProcess
+    from .parts import load_parts, units_hint
+    from .sets import design_sets
+
     # forked first, so the drawing code loads while the parts load and the design runs
     with PictureProcess() as draw_pictures:
         config = _config(args)
@@ -269,6 +271,11 @@ def _print_parts(parts, scenarios, ungraspable) -> None:
 
 def _report_sets(job: SetsResult, args) -> int:
     """Print what a job's finger sets (one or several) made, and verify each set's finger when asked."""
+    from .layout import set_folder
+    from .output.sets_page import pad_sizes_line, pick_plan_text
+    from .output.table import quality_table
+    from .verify_cli import verify_design_outputs
+
     report, sets = job.job(), job.report
     if not args.quiet:
         _print_parts(report.parts, [s for d in job.designs for s in d.report.scenarios], (sets or report).ungraspable)
@@ -301,6 +308,11 @@ def _report_sets(job: SetsResult, args) -> int:
 
 
 def _report(args) -> int:
+    from .output.design_page import rebuild_report
+    from .output.files import rebuild_job_report
+    from .output.read import is_job_folder
+    from .verify_cli import restore_section
+
     progress = ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
     try:
         if is_job_folder(args.directory):
@@ -317,6 +329,9 @@ def _report(args) -> int:
 
 
 def _poses(args) -> int:
+    from .parts import load_part
+    from .poses import stable_poses
+
     part = load_part(args.part, units=args.units, scale_to_mm=args.scale_to, repair=args.repair)
     transforms, probabilities = stable_poses(part.mesh)
     print(f"{part.name}: {len(probabilities)} stable poses (extents in the resting frame, mm)")

@@ -14,28 +14,27 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .capture import CaptureLandscape, capture_landscape, pad_landscapes
-from .config import CAPTURE_CONDITIONS, DesignConfig
-from .contact import PadContact, PadPlacement, SurfaceSamples, sample_surface, seat
+from .capture import CaptureLandscape, pad_landscapes
+from .config import DesignConfig
+from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
+from .grid import ScreenGrid, column_heights
 from .holding import holding_forces_n
 from .measure import scenario_measure
-from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry, surface_in_pad
+from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
 from .parts import Part
 from .printfit import carve, closing_travel_mm, open_thin_walls
-from .report.models import DesignReport, chosen_candidate
-from .rles import largest_empty_cap, rles
+from .rles import rles
 from .sampler import SIDES, GraspSample, SamplerResult
 from .screen import (
     NormalLattice,
     ScreenedCandidate,
     ScreenGeometry,
-    ScreenGrid,
-    column_heights,
     prepare_geometry,
     screen,
     screened_bound,
 )
+from .verify_config import CAPTURE_CONDITIONS
 
 
 @dataclass
@@ -173,7 +172,7 @@ def sample_geometry(
     )
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
-        capture = pad_landscapes([screens], [centres], [sample.a_max_mm - sample.a_min_mm], grid, config)[0].fraction
+        capture = printed_draft([screens], [centres], [sample.a_max_mm - sample.a_min_mm], config)[1][0]
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -276,7 +275,7 @@ def evaluate_candidate(
         if not by_capture:
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
-        holding = _holding(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
+        holding = holding_n(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
         # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores
         holds = landscapes[number].pads_gap_mm > 0
@@ -337,7 +336,7 @@ def screen_on_pad(
     from the landscapes :func:`evaluate_candidate` measures (the same
     :func:`fcso.capture.pad_landscapes`, a few milliseconds), and with
     ``holding`` its holding from its screened contacts (the same
-    :func:`_holding`: six linear programs per scenario, tenths of a second).
+    :func:`holding_n`: six linear programs per scenario, tenths of a second).
     Under the paper's measure this is :func:`fcso.screen.screen`.
 
     Parameters
@@ -363,13 +362,9 @@ def screen_on_pad(
     if config.quality.measure != "capture":
         return screen(screens, config, lattice)
     if captures is None:
-        grid = ScreenGrid.for_config(config)
-        captures = [
-            s.fraction
-            for s in pad_landscapes(
-                screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], grid, config
-            )
-        ]
+        # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
+        # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
+        _, captures, _ = printed_draft(screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], config)
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
@@ -379,7 +374,7 @@ def screen_on_pad(
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
             held = (
-                _holding(scenarios[number], sample, surfaces, contacts, normals, config)
+                holding_n(scenarios[number], sample, surfaces, contacts, normals, config)
                 if len(normals)
                 else np.zeros(1)
             )
@@ -389,7 +384,7 @@ def screen_on_pad(
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
 
 
-def _holding(
+def holding_n(
     scenario: Scenario,
     sample: SampleGeometry,
     surfaces: tuple[SurfaceSamples, SurfaceSamples],
@@ -491,32 +486,57 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     why : str or None
         A sentence when a wider draft was taken.
     """
+    samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
+    angle, _, why = printed_draft(
+        [s.screen for s in samples], [s.centres_uv_mm for s in samples], [s.width_mm for s in samples], config
+    )
+    return angle, why
+
+
+def printed_draft(
+    screens: list[tuple[ScreenGeometry, ScreenGeometry]],
+    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+    widths_mm: list[float],
+    config: DesignConfig,
+) -> tuple[float, list[float], str | None]:
+    """:func:`printed_lead_in_deg` of a candidate's samples, with every scenario's capture under that draft.
+
+    Parameters
+    ----------
+    screens, centres_uv_mm, widths_mm : list
+        Per scenario, its sample's two geometries, centres of mass and width, as :func:`fcso.capture.pad_landscapes`.
+    config : DesignConfig
+
+    Returns
+    -------
+    lead_in_deg : float
+    captures : list of float
+        Per scenario, its capture on the candidate's pad printed with that draft.
+    why : str or None
+    """
     lead_in = config.print.resolved()["lead_in_deg"]
     alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
-    if lead_in <= 0 or not alternatives or config.quality.measure != "capture":
-        return lead_in, None
+    if lead_in <= 0 or config.quality.measure != "capture":
+        alternatives = []
     grid = ScreenGrid.for_config(config)
-    samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
 
-    def worst_capture(angle: float) -> float:
-        drafted = config.updated({"print": {"lead_in_deg": angle}})
-        landscapes = pad_landscapes(
-            [s.screen for s in samples],
-            [s.centres_uv_mm for s in samples],
-            [s.width_mm for s in samples],
-            grid,
-            drafted,
-        )
-        return min(landscape.fraction for landscape in landscapes)
+    def captures_at(angle: float) -> list[float]:
+        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
+        return [landscape.fraction for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, grid, drafted)]
 
-    captures = {angle: worst_capture(angle) for angle in [lead_in, *alternatives]}
-    widest = max(captures.values())
-    if widest < captures[lead_in] + FLAT_MARGIN:
-        return lead_in, None
-    angle = min(a for a, capture in captures.items() if capture >= widest - 1e-9)
-    return angle, (
-        f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
-        f"the worst scenario's capture is {captures[angle]:.2f} against {captures[lead_in]:.2f}"
+    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
+    worst = {angle: min(values) for angle, values in captures.items()}
+    widest = max(worst.values())
+    if widest < worst[lead_in] + FLAT_MARGIN:
+        return lead_in, captures[lead_in], None
+    angle = min(a for a, capture in worst.items() if capture >= widest - 1e-9)
+    return (
+        angle,
+        captures[angle],
+        (
+            f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
+            f"the worst scenario's capture is {worst[angle]:.2f} against {worst[lead_in]:.2f}"
+        ),
     )
 
 
@@ -565,193 +585,3 @@ def fitted_geometries(
             sample.fitted[key] = fitted_sample(scenario, sample, config)
         fitted.extend(sample.fitted[key])
     return fitted
-
-
-@dataclass
-class GraspScene:
-    """What the page shows of one grasp scenario of the chosen candidate.
-
-    Attributes
-    ----------
-    mesh : trimesh.Trimesh
-        The part in its resting frame (mm).
-    sample : GraspSample
-        The chosen sample.
-    placements : list of PadPlacement
-        The seated "+" and "-" pads with their contact masks.
-    normals : (n, 3) float
-        Contact normals, resting frame.
-    rles : float
-        Chord radius of the largest empty cap of ``normals``.
-    cap_centre : (3,) float
-        Its centre.
-    """
-
-    mesh: trimesh.Trimesh
-    sample: GraspSample
-    placements: list[PadPlacement]
-    normals: np.ndarray
-    rles: float
-    cap_centre: np.ndarray
-
-
-def chosen_grasp_scenes(scenarios: list[Scenario], best: CandidateEvaluation) -> list[GraspScene]:
-    """The grasps of a design's chosen candidate, one per scenario, from the design just run."""
-    grasps = []
-    for scenario, index, evaluation in zip(scenarios, best.choice, best.scenarios):
-        chosen = scenario.samples[index]
-        placements = [
-            PadPlacement(frame, contact.offset_mm, surface, contact.contact)
-            for frame, contact, surface in zip(chosen.frames, evaluation.contacts, chosen.surfaces)
-        ]
-        radius, centre = largest_empty_cap(evaluation.contact_normals)
-        grasps.append(GraspScene(scenario.mesh, chosen.sample, placements, evaluation.contact_normals, radius, centre))
-    return grasps
-
-
-def reseat_grasps(report: DesignReport, parts: list[Part], fingerpad: trimesh.Trimesh) -> list[GraspScene]:
-    """The grasps of a reported design's chosen candidate, re-seated (METHOD §6).
-
-    The parts are moved into their recorded resting poses; each chosen
-    sample's pad frames are rebuilt, the part surface inside each pad box is
-    sampled with the design's seeds and seated against ``fingerpad``.
-
-    Parameters
-    ----------
-    report : DesignReport
-    parts : list of Part
-        The report's parts, in its order, mm.
-    fingerpad : trimesh.Trimesh
-        The chosen pad, pad frame (mm), with merged vertices.
-    """
-    config = report.settings
-    pad_vertices, pad_faces = np.asarray(fingerpad.vertices), np.asarray(fingerpad.faces)
-    part_number = 0
-    grasps = []
-    for number, (scenario, index) in enumerate(zip(report.scenarios, chosen_candidate(report).samples)):
-        # scenarios come part by part, in the order of the parts
-        while parts[part_number].name != scenario.part:
-            part_number += 1
-        mesh = parts[part_number].mesh.copy()
-        mesh.apply_transform(np.asarray(scenario.rest_transform, dtype=float))
-        reported = scenario.samples[index]
-        sample = GraspSample(
-            yaw_deg=reported.yaw_deg,
-            s_mm=reported.s_mm,
-            h_mm=reported.h_mm,
-            a_max_mm=reported.a_max_mm,
-            a_min_mm=reported.a_min_mm,
-            area_plus_mm2=reported.surface_area_mm2[0],
-            area_minus_mm2=reported.surface_area_mm2[1],
-        )
-        frames = [sample.pad_frame(side, config.sampler) for side in SIDES]
-        surfaces = [
-            contact_samples(
-                *surface_in_pad(mesh.vertices, mesh.faces, frame, config.sampler), config, number, index, side_number
-            )
-            for side_number, frame in enumerate(frames)
-        ]
-        travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
-        contacts = seat(surfaces, pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
-        placements = [PadPlacement(f, c.offset_mm, s, c.contact) for f, c, s in zip(frames, contacts, surfaces)]
-        normals = np.vstack([s.normals[c.contact] @ f[:3, :3] for f, c, s in zip(frames, contacts, surfaces)])
-        radius, centre = largest_empty_cap(normals)
-        grasps.append(GraspScene(mesh, sample, placements, normals, radius, centre))
-    return grasps
-
-
-def pad_face_heights(
-    pad_vertices: np.ndarray, pad_faces: np.ndarray, grid: ScreenGrid, thickness_mm: float
-) -> np.ndarray:
-    """The face heights ``P = {u >= H}`` of a pad mesh as it was printed: the smallest ``u`` on each cell's ray.
-
-    Parameters
-    ----------
-    pad_vertices, pad_faces : ndarray
-        The pad, pad frame (mm).
-    grid : ScreenGrid
-    thickness_mm : float
-        Pad thickness T: the face where the pad is open through (a thin wall removed).
-
-    Returns
-    -------
-    (count_v, count_w) float, mm
-    """
-    # the largest u' = T + 1 - u is the smallest u; 0 (no triangle on the ray) means open through
-    flipped = np.column_stack([thickness_mm + 1.0 - pad_vertices[:, 0], pad_vertices[:, 1:]])
-    top = column_heights(flipped, pad_faces, grid).astype(np.float64)
-    heights = np.where(top > 0, thickness_mm + 1.0 - top, thickness_mm)
-    return heights.reshape(grid.count_v, grid.count_w)
-
-
-def evaluate_on_pad(
-    scenario: Scenario, pad_vertices: np.ndarray, pad_faces: np.ndarray, config: DesignConfig
-) -> tuple[int, ScenarioEvaluation] | None:
-    """The best grasp of one scenario on a given printed pad (a finger delivered before, METHOD §11b).
-
-    Every valid sample is seated against the pad (METHOD §6, with the closing
-    travel of ``[print]``'s clearance, as the printed pad is evaluated); under
-    the capture measure the ``search.exact_top_k`` samples of largest E are
-    squeezed and pushed (METHOD §7b) and the best measure wins.
-
-    Parameters
-    ----------
-    scenario : Scenario
-        With its samples (:func:`fcso.design.prepare`).
-    pad_vertices, pad_faces : ndarray
-        The printed pad, pad frame (mm), a closed mesh.
-    config : DesignConfig
-        The settings the pad was designed with (pad size, contact tolerance, fit, measure).
-
-    Returns
-    -------
-    (sample index, ScenarioEvaluation), or None when no sample touches the pad.
-    """
-    if not scenario.samples:
-        return None
-    travel = closing_travel_mm(config.print.resolved()["clearance_mm"])
-    drawn = [sample.surfaces for sample in scenario.samples]
-    seated = seat([s for pair in drawn for s in pair], pad_vertices, pad_faces, config.contact.eps_mm, travel_mm=travel)
-    results = []
-    for index, sample in enumerate(scenario.samples):
-        contacts = (seated[2 * index], seated[2 * index + 1])
-        normals = np.vstack(
-            [s.normals[c.contact] @ f[:3, :3] for s, c, f in zip(drawn[index], contacts, sample.frames)]
-        )
-        area = float(sum(c.contact_area_mm2 for c in contacts))
-        radius = rles(normals) if len(normals) else 2.0
-        effective = area / radius if area > 0 else 0.0
-        results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
-    if config.quality.measure == "capture":
-        grid = ScreenGrid.for_config(config)
-        pad = pad_face_heights(pad_vertices, pad_faces, grid, config.sampler.thickness_mm)
-        shape = (grid.count_v, grid.count_w)
-        ranked = np.argsort([-r.effective_area for r in results], kind="stable")[: config.search.exact_top_k]
-        for index in ranked:
-            sample, result = scenario.samples[index], results[index]
-            landscape = capture_landscape(
-                pad,
-                (sample.screen[0].heights_mm.reshape(shape), sample.screen[1].heights_mm.reshape(shape)),
-                sample.centres_uv_mm,
-                grid.cell_mm,
-                config.sampler.penetration_mm,
-                sample.width_mm,
-                config.verify,
-            )
-            holding = _holding(
-                scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config
-            )
-            holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
-            measure = (
-                scenario_measure(landscape.fraction, holding_share, result.effective_area, config)
-                if landscape.pads_gap_mm > 0
-                else 0.0
-            )
-            results[index] = dataclasses.replace(result, measure=measure, capture=landscape, holding_n=holding)
-        # samples not squeezed keep no measure under the capture measure
-        kept = set(int(i) for i in ranked)
-        results = [r if i in kept else dataclasses.replace(r, measure=0.0) for i, r in enumerate(results)]
-    best = int(np.argmax([r.measure for r in results]))
-    if results[best].measure <= 0:
-        return None
-    return best, results[best]

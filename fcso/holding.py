@@ -16,7 +16,6 @@ about the contact patch, and only friction spread over the patch resists.
 
 from __future__ import annotations
 
-import highspy
 import numpy as np
 
 #: Edges of each linearised friction cone.
@@ -144,6 +143,8 @@ def _largest_pushes(balance: np.ndarray, rhs: np.ndarray, directions: np.ndarray
     (k,) float
         N; 0 where no ``F >= 0`` balances (the contacts cannot hold the part still).
     """
+    import highspy  # the LP solver loads when a holding force is first computed, not with the method
+
     count = balance.shape[1]
     lp = highspy.HighsLp()
     lp.num_col_, lp.num_row_ = count + 1, len(rhs)

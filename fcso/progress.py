@@ -15,3 +15,10 @@ class Progress(Protocol):
     """
 
     def __call__(self, stage: str, done: int, total: int, note: str = "", /) -> None: ...
+
+
+def progress_with_note(progress: Progress | None) -> Progress:
+    """``progress`` with its note optional, or a no-op."""
+    if progress is None:
+        return lambda stage, done, total, note="": None
+    return lambda stage, done, total, note="": progress(stage, done, total, note)

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import manifold3d
 import numpy as np
 import trimesh
 
@@ -17,7 +20,7 @@ from .geometry import (
     to_manifold,
     triangle_areas_normals,
 )
-from .screen import ScreenGrid, column_heights
+from .grid import ScreenGrid, column_heights
 
 #: Rejection reasons, in the order the checks run.
 REJECTION_REASONS = ("contact", "fit", "collision_pads", "collision_finger", "collision_descent")
@@ -32,20 +35,6 @@ _INF = np.inf
 #: Resolution of the extent profiles that find features, mm, and the least dip that is one.
 PROFILE_STEP_MM = 0.25
 FEATURE_DEPTH_MM = 0.2
-#: Side faces whose normal is within this of horizontal give closing directions, degrees.
-SIDE_FACE_TILT_DEG = 15.0
-#: Closing directions of side faces are collected in bins this wide, degrees; a bin within two bins of a
-#: configured yaw adds nothing (those pads already face it).
-FACE_YAW_BIN_DEG = 5.0
-#: A direction is added when its faces make at least this share of the part's side area ...
-FACE_YAW_MIN_SHARE = 0.05
-#: ... and at most this many directions per scenario, the largest: each costs one more yaw's samples, and
-#: a symmetric part (a chamfered cube, a hexagon) offers the same grasp at each of its directions.
-MAX_FACE_YAWS = 1
-#: Heights, as shares of the part's height, at which its outline is cut to find the pockets its convex hull bridges.
-OUTLINE_LEVELS = (0.25, 0.5, 0.75)
-#: A pocket of an outline smaller than this is no feature, mm².
-MIN_POCKET_MM2 = 1.0
 
 
 @dataclass(frozen=True)
@@ -180,10 +169,7 @@ def sample_grasps(
         count of rejections per reason in :data:`REJECTION_REASONS`.
     """
     length, width = sampler.length_mm, sampler.width_mm
-    thickness, depth = sampler.thickness_mm, sampler.penetration_mm
     stride, clearance = sampler.stride, sampler.table_clearance_mm
-    open_half = gripper.max_opening_mm / 2.0
-    plate_height = width + gripper.finger_height_mm
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     top = float(vertices[:, 2].max())
@@ -196,7 +182,6 @@ def sample_grasps(
         b = np.cross([0.0, 0.0, 1.0], a)
         # (a, b, z) coordinates: every footprint and plate is an axis-aligned box here
         local = np.column_stack([vertices @ a, vertices @ b, vertices[:, 2]])
-        part_local = None  # the part as a solid in (a, b, z), made when a thin section needs it
         b_min, b_max = local[:, 1].min(), local[:, 1].max()
         positions = np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride)
         if len(positions) == 0:
@@ -209,86 +194,131 @@ def sample_grasps(
             feature_heights = along_z - width / 2.0
             feature_heights = feature_heights[(feature_heights >= clearance) & (feature_heights < top)]
         stride_positions = set(np.arange(b_min + length / 2.0, b_max - length / 2.0 + 1e-9, stride).tolist())
+        stride_heights = np.arange(clearance, top, stride)
+        heights = _merge_positions(stride_heights, feature_heights)
+        # the part as a solid in (a, b, z), made when a thin section first needs it
+        part_solid = functools.cache(functools.partial(_solid, local, faces))
         for s in positions[centres[0] :: centres[1]]:
-            slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
-            if len(slab_f) == 0:
-                continue
-            # "+" plate: v = b - (s - L/2); "-" plate: v = (s + L/2) - b
-            plate_b = {
-                1: (s - length / 2.0 + plate.v_min_mm, s - length / 2.0 + plate.v_max_mm),
-                -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
-            }
-            plate_slabs = {
-                side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)))
-                for side, (low, high) in plate_b.items()
-            }
-            stride_heights = np.arange(clearance, top, stride)
-            heights = _merge_positions(stride_heights, feature_heights)
-            bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
-            for h in heights:
-                prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
-                if len(prism_f) == 0:
-                    continue
-                tried += 1
-                a_min, a_max = extent
-                area_plus = half_space_area(prism_v, prism_f, prism_areas, 0, 1.0, a_max - depth)
-                area_minus = half_space_area(prism_v, prism_f, prism_areas, 0, -1.0, -(a_min + depth))
-                if min(area_plus, area_minus) < sampler.min_contact_area:
-                    rejected["contact"] += 1
-                    continue
-                span = a_max - a_min
-                fits_open = span + clearance <= gripper.max_opening_mm - 2.0 * thickness
-                fits_closed = span - 2.0 * depth + 2.0 * thickness >= gripper.min_opening_mm
-                if not (fits_open and fits_closed):
-                    rejected["fit"] += 1
-                    continue
-                # seated, each pad's inner face lies D inside the part's extent: across a section thinner than 2D
-                # the two pad boxes overlap, and where the part does not fill that overlap both pads keep material
-                # there, so the fingers meet before the part is seated (the paper's bunny by its ear: 1.4 mm)
-                if span < 2.0 * depth:
-                    if part_local is None:
-                        part_local = to_manifold(trimesh.Trimesh(local, faces, process=False))
-                    crossing = box((a_max - depth, s - length / 2.0, h), (a_min + depth, s + length / 2.0, h + width))
-                    empty_mm3 = crossing.volume() - (crossing ^ part_local).volume()
-                    if empty_mm3 > PADS_MEET_SHARE * crossing.volume():
-                        rejected["collision_pads"] += 1
-                        continue
-                closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
-                if any(
-                    plate_slabs[side].meets_box(
-                        *_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height)
-                    )
-                    for side in SIDES
-                ):
-                    rejected["collision_finger"] += 1
-                    continue
-                centre = (a_max + a_min) / 2.0
-                column = bands.above(h)
-                open_back = {1: centre + open_half, -1: centre - open_half}
-                if (
-                    column is not None
-                    and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)
-                ) or any(
-                    plate_slabs[side].meets_box(
-                        *_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF)
-                    )
-                    for side in SIDES
-                ):
-                    rejected["collision_descent"] += 1
-                    continue
-                samples.append(
-                    GraspSample(
-                        yaw_deg=float(yaw_deg),
-                        s_mm=float(s),
-                        h_mm=float(h),
-                        a_max_mm=a_max,
-                        a_min_mm=a_min,
-                        area_plus_mm2=area_plus,
-                        area_minus_mm2=area_minus,
-                        on_feature=bool(s not in stride_positions or not np.isin(h, stride_heights)),
-                    )
-                )
+            found, tried_here = _samples_at(
+                local,
+                faces,
+                float(yaw_deg),
+                s,
+                s in stride_positions,
+                heights,
+                stride_heights,
+                sampler,
+                gripper,
+                plate,
+                part_solid,
+                rejected,
+            )
+            samples += found
+            tried += tried_here
     return SamplerResult(samples=samples, rejected=rejected, tried=tried)
+
+
+def _samples_at(
+    local: np.ndarray,
+    faces: np.ndarray,
+    yaw_deg: float,
+    s: float,
+    on_stride: bool,
+    heights: np.ndarray,
+    stride_heights: np.ndarray,
+    sampler: SamplerConfig,
+    gripper: GripperConfig,
+    plate: FingerPlate,
+    part_solid: Callable[[], manifold3d.Manifold],
+    rejected: dict[str, int],
+) -> tuple[list[GraspSample], int]:
+    """The valid samples of one pad position ``s`` along the sliding axis of one yaw, at every height, and how many
+    heights had any part between the pads (:func:`sample_grasps`; ``local``: the part in (a, b, z); ``on_stride``:
+    ``s`` is a stride position, not only a feature's; rejections counted into ``rejected``)."""
+    length, width = sampler.length_mm, sampler.width_mm
+    thickness, depth = sampler.thickness_mm, sampler.penetration_mm
+    clearance = sampler.table_clearance_mm
+    open_half = gripper.max_opening_mm / 2.0
+    plate_height = width + gripper.finger_height_mm
+    samples: list[GraspSample] = []
+    tried = 0
+    slab_v, slab_f = clip_to_box(local, faces, (-_INF, s - length / 2.0, -_INF), (_INF, s + length / 2.0, _INF))
+    if len(slab_f) == 0:
+        return [], 0
+    # "+" plate: v = b - (s - L/2); "-" plate: v = (s + L/2) - b
+    plate_b = {
+        1: (s - length / 2.0 + plate.v_min_mm, s - length / 2.0 + plate.v_max_mm),
+        -1: (s + length / 2.0 - plate.v_max_mm, s + length / 2.0 - plate.v_min_mm),
+    }
+    plate_slabs = {
+        side: _Slab(*clip_to_box(local, faces, (-_INF, low, -_INF), (_INF, high, _INF)))
+        for side, (low, high) in plate_b.items()
+    }
+    bands = Bands(slab_v, slab_f, np.concatenate([heights, heights + width]))
+    for h in heights:
+        prism_v, prism_f, prism_areas, extent = bands.between(h, h + width)
+        if len(prism_f) == 0:
+            continue
+        tried += 1
+        a_min, a_max = extent
+        area_plus = half_space_area(prism_v, prism_f, prism_areas, 0, 1.0, a_max - depth)
+        area_minus = half_space_area(prism_v, prism_f, prism_areas, 0, -1.0, -(a_min + depth))
+        if min(area_plus, area_minus) < sampler.min_contact_area:
+            rejected["contact"] += 1
+            continue
+        span = a_max - a_min
+        fits_open = span + clearance <= gripper.max_opening_mm - 2.0 * thickness
+        fits_closed = span - 2.0 * depth + 2.0 * thickness >= gripper.min_opening_mm
+        if not (fits_open and fits_closed):
+            rejected["fit"] += 1
+            continue
+        # seated, each pad's inner face lies D inside the part's extent: across a section thinner than 2D
+        # the two pad boxes overlap, and where the part does not fill that overlap both pads keep material
+        # there, so the fingers meet before the part is seated (the paper's bunny by its ear: 1.4 mm)
+        if span < 2.0 * depth:
+            crossing = box((a_max - depth, s - length / 2.0, h), (a_min + depth, s + length / 2.0, h + width))
+            empty_mm3 = crossing.volume() - (crossing ^ part_solid()).volume()
+            if empty_mm3 > PADS_MEET_SHARE * crossing.volume():
+                rejected["collision_pads"] += 1
+                continue
+        closed_back = {1: a_max - depth + thickness, -1: a_min + depth - thickness}
+        if any(
+            plate_slabs[side].meets_box(
+                *_plate_box(closed_back[side], side, plate.thickness_mm, plate_b[side], h, h + plate_height)
+            )
+            for side in SIDES
+        ):
+            rejected["collision_finger"] += 1
+            continue
+        centre = (a_max + a_min) / 2.0
+        column = bands.above(h)
+        open_back = {1: centre + open_half, -1: centre - open_half}
+        if (
+            column is not None
+            and (column[1] > centre + open_half - thickness or column[0] < centre - open_half + thickness)
+        ) or any(
+            plate_slabs[side].meets_box(*_plate_box(open_back[side], side, plate.thickness_mm, plate_b[side], h, _INF))
+            for side in SIDES
+        ):
+            rejected["collision_descent"] += 1
+            continue
+        samples.append(
+            GraspSample(
+                yaw_deg=yaw_deg,
+                s_mm=float(s),
+                h_mm=float(h),
+                a_max_mm=a_max,
+                a_min_mm=a_min,
+                area_plus_mm2=area_plus,
+                area_minus_mm2=area_minus,
+                on_feature=bool(not on_stride or not np.isin(h, stride_heights)),
+            )
+        )
+    return samples, tried
+
+
+def _solid(local: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
+    return to_manifold(trimesh.Trimesh(local, faces, process=False))
 
 
 def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -349,150 +379,6 @@ def feature_centres(local: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
             ends = np.flatnonzero(run & ~np.concatenate([run[1:], [False]]))
             centres[number].append(origin + ((starts + ends) / 2.0 + 0.5) * PROFILE_STEP_MM)
     return np.unique(np.concatenate(centres[0])), np.unique(np.concatenate(centres[1]))
-
-
-def face_yaws(mesh: trimesh.Trimesh, configured_deg: list[float], min_area_mm2: float) -> list[float]:
-    """Closing directions normal to a part's flat side faces that the configured yaws miss (beyond METHOD §3).
-
-    The stride and feature positions of METHOD §3b slide pads along ``b``;
-    the closing axis stays at the configured yaws (the bounding-box frame's
-    0 and 90 degrees by default). A part whose side faces are not square to
-    that frame (a chamfered edge, a hexagon, a notch's flank) is then only
-    grasped obliquely, though pads square to those faces would hold a V
-    between them: measured on a 30 mm cube with chamfered vertical edges,
-    closing along the bounding box captured displaced parts from one side
-    only (6 of 10 simulated trials), closing square to the chamfers seated
-    10 of 10. Side faces (normal within :data:`SIDE_FACE_TILT_DEG` of
-    horizontal) are binned by the direction of their normal modulo 180
-    degrees, weighted by area; a bin holding at least
-    :data:`FACE_YAW_MIN_SHARE` of the side area and ``min_area_mm2`` per
-    side, away from the configured yaws, gives its area-weighted mean
-    direction of most area. Round and organic sides spread over many bins and add none.
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        The part in its resting frame (mm), table normal ``+z``.
-    configured_deg : list of float
-        ``[sampler] yaw_deg``.
-    min_area_mm2 : float
-        Least face area per side of a direction (the sampler's least contact area), mm².
-
-    Returns
-    -------
-    list of float
-        At most :data:`MAX_FACE_YAWS` yaws in [0, 180) degrees, largest side area first.
-    """
-    normals, areas = np.asarray(mesh.face_normals), np.asarray(mesh.area_faces)
-    side = np.abs(normals[:, 2]) < np.sin(np.radians(SIDE_FACE_TILT_DEG))
-    if not side.any():
-        return []
-    yaws = np.degrees(np.arctan2(normals[side, 1], normals[side, 0])) % 180.0
-    weights = areas[side]
-    bins = int(round(180.0 / FACE_YAW_BIN_DEG))
-    number = np.minimum((yaws / FACE_YAW_BIN_DEG).astype(int), bins - 1)
-    area = np.bincount(number, weights=weights, minlength=bins)
-    # within a bin, the direction of the most face area (0.1 degree steps): a flat face's own direction,
-    # not its mean with the facets of a round wall beside it
-    fine = np.round(yaws, 1) % 180.0
-    taken = [int(round(y / FACE_YAW_BIN_DEG)) % bins for y in np.asarray(configured_deg) % 180.0]
-    chosen: list[float] = []
-    for k in np.argsort(-area, kind="stable"):
-        if len(chosen) == MAX_FACE_YAWS or area[k] < max(FACE_YAW_MIN_SHARE * weights.sum(), 2.0 * min_area_mm2):
-            break
-        # a local maximum only: one face direction can straddle two bins
-        if area[k] < max(area[(k - 1) % bins], area[(k + 1) % bins]):
-            continue
-        if any(min((k - t) % bins, (t - k) % bins) <= 2 for t in taken):
-            continue
-        taken.append(int(k))
-        directions, at = np.unique(fine[number == k], return_inverse=True)
-        chosen.append(float(directions[np.argmax(np.bincount(at, weights=weights[number == k]))]))
-    return chosen + pocket_yaws(mesh, [*configured_deg, *chosen])
-
-
-def pocket_yaws(mesh: trimesh.Trimesh, taken_deg: list[float]) -> list[float]:
-    """A closing direction into the pockets of a part's outline that the yaws taken miss (beyond METHOD §3).
-
-    A notch, a slot or a gap between teeth is a pocket of the part's
-    outline seen from above: a region inside its convex hull and outside
-    the part. Pads closing square to the hull's face over a pocket push
-    into it and carve it; closing along any other axis they meet the part
-    beside it. Where the part's flat faces are square to the configured yaws
-    (a block, a bar) those yaws already close into its pockets; a round or
-    polygonal part's pockets can lie at any angle (a disc with a V-notch on
-    each side at 30 degrees from its bounding box: neither 0, 90 nor a side
-    face's direction closes into them). The outline is cut at
-    :data:`OUTLINE_LEVELS` of the part's height; each pocket of at least
-    :data:`MIN_POCKET_MM2` adds its area to the direction of the outward
-    normal of the longest hull edge over it, binned modulo 180 degrees as in
-    :func:`face_yaws`; the bin of most pocket area, if more than two bins
-    from every yaw taken, gives the direction of its largest pocket.
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        The part in its resting frame (mm), table normal ``+z``.
-    taken_deg : list of float
-        Yaws already sampled (``[sampler] yaw_deg`` and the side faces' of :func:`face_yaws`).
-
-    Returns
-    -------
-    list of float
-        At most one yaw in [0, 180) degrees.
-    """
-    solid = to_manifold(mesh)
-    low, high = float(mesh.bounds[0, 2]), float(mesh.bounds[1, 2])
-    bins = int(round(180.0 / FACE_YAW_BIN_DEG))
-    area = np.zeros(bins)
-    largest: dict[int, tuple[float, float]] = {}  # bin -> (pocket area, direction)
-    for share in OUTLINE_LEVELS:
-        section = solid.slice(low + share * (high - low))
-        if section.is_empty():
-            continue
-        hull = section.hull()
-        corners = np.concatenate([np.asarray(c, dtype=float) for c in hull.to_polygons()])
-        # hull edges of a counter-clockwise contour: outward normal (dy, -dx)
-        ends = np.roll(corners, -1, axis=0)
-        middles, lengths = (corners + ends) / 2.0, np.linalg.norm(ends - corners, axis=1)
-        yaws = np.degrees(np.arctan2(-(ends - corners)[:, 0], (ends - corners)[:, 1])) % 180.0
-        for pocket in (hull - section).decompose():
-            pocket_area = pocket.area()
-            if pocket_area < MIN_POCKET_MM2:
-                continue
-            over = _on_outline(middles, pocket.to_polygons())
-            if not over.any():
-                continue
-            edge = np.flatnonzero(over)[np.argmax(lengths[over])]
-            k = min(int(yaws[edge] / FACE_YAW_BIN_DEG), bins - 1)
-            area[k] += pocket_area
-            if pocket_area > largest.get(k, (0.0, 0.0))[0]:
-                largest[k] = (pocket_area, round(float(yaws[edge]), 1) % 180.0)
-    taken = [int(round(y / FACE_YAW_BIN_DEG)) % bins for y in np.asarray(taken_deg, dtype=float) % 180.0]
-    for k in np.argsort(-area, kind="stable"):
-        if area[k] == 0.0:
-            break
-        # one pocket direction can straddle two bins: the larger one speaks for both
-        if area[k] < max(area[(k - 1) % bins], area[(k + 1) % bins]):
-            continue
-        if any(min((k - t) % bins, (t - k) % bins) <= 2 for t in taken):
-            continue
-        return [largest[int(k)][1]]
-    return []
-
-
-def _on_outline(points: np.ndarray, contours: list, tolerance_mm: float = 1e-3) -> np.ndarray:
-    """Which ``points`` (n, 2) lie within ``tolerance_mm`` of a contour's edges (closed polygons)."""
-    near = np.zeros(len(points), dtype=bool)
-    for contour in contours:
-        start = np.asarray(contour, dtype=float)
-        end = np.roll(start, -1, axis=0)
-        along = end - start
-        length2 = np.maximum((along**2).sum(axis=1), 1e-18)
-        t = np.clip(((points[:, None, :] - start[None]) * along[None]).sum(axis=2) / length2[None], 0.0, 1.0)
-        closest = start[None] + t[..., None] * along[None]
-        near |= (np.linalg.norm(points[:, None, :] - closest, axis=2) <= tolerance_mm).any(axis=1)
-    return near
 
 
 def _end_dips(heights: np.ndarray) -> np.ndarray:

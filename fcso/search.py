@@ -1,7 +1,7 @@
 """Candidate search: exhaustive, best-first branch and bound, then coordinate ascent from seeds (METHOD §8, §8b).
 
 The search ranks candidates by a quality function it is given (the
-screening evaluation in :func:`fcso.design.design`) and evaluates them in
+screening evaluation in :func:`fcso.pipeline.design`) and evaluates them in
 batches, so a batch can be spread over worker processes. It never decides
 the final design alone: the best candidates it returns are re-evaluated
 exactly by the caller.

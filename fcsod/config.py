@@ -29,7 +29,7 @@ from fcso.config import (
     read_toml,
 )
 from fcso.errors import ConfigError, MeshError
-from fcso.sim.config import DEFAULT_TOP_K
+from fcso.verify_config import DEFAULT_TOP_K
 
 from .plate.models import BuildConfig, parse_transform
 

@@ -1,5 +1,6 @@
-"""The layout the code keeps: no import cycles, the method free of presentation, no private name used across modules,
-and a daemon whose supervisor loads neither MuJoCo nor matplotlib.
+"""The layout the code keeps: no import cycles between modules nor between packages, the method free of presentation,
+no private name used across modules, commands that start without the heavy libraries, and a daemon whose supervisor
+loads neither MuJoCo nor matplotlib.
 
 The imports are read from the source files with :mod:`ast` (every import, at
 the top of a module or inside a function, except those under
@@ -20,16 +21,16 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("fcso", "fcsod")
 
 #: Presentation: writing folders, pages and pictures. The method must not import it.
-PRESENTATION = ("fcso.output", "fcso.cli", "fcso.sim.cli", "matplotlib")
+PRESENTATION = ("fcso.output", "fcso.cli", "fcso.verify_cli", "matplotlib")
 #: What the method may take from the output package: the names of the folder layout, which the reports record.
-LAYOUT = "fcso.output.layout"
+LAYOUT = "fcso.layout"
 #: Libraries that take long to import and serve only some commands: a command's start-up loads none of them
 #: unless it uses them (numba: the compiled kernels of the pipeline; MuJoCo: the verification; matplotlib: the
 #: pictures; HiGHS: the holding forces; Dask: a cluster).
 HEAVY = ("numba", "mujoco", "matplotlib", "highspy", "dask", "distributed")
 #: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
 #: ``fcso``).
-NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.sim.cli", "fcso.output")
+NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.verify_cli", "fcso.output")
 
 
 def module_name(path: Path) -> str:
@@ -144,6 +145,25 @@ def within(module: str, prefixes) -> bool:
     return any(module == p or module.startswith(p + ".") for p in prefixes)
 
 
+def package_of(module: str, package: str) -> str:
+    """The part of ``package`` that ``module`` belongs to: its subpackage, or itself when it is a module of the
+    package's top level (``fcso.report.models`` -> ``fcso.report``, ``fcso.cli`` -> ``fcso.cli``)."""
+    return ".".join(module.split(".")[: package.count(".") + 2])
+
+
+def package_graph(package: str) -> dict[str, set[str]]:
+    """The import graph of ``package`` one level up: its subpackages and top-level modules, and which import which
+    (a module of one importing a module of another)."""
+    graph: dict[str, set[str]] = {}
+    for name, targets in import_graph((package,)).items():
+        if name == package:
+            continue
+        source = package_of(name, package)
+        graph.setdefault(source, set())
+        graph[source] |= {package_of(t, package) for t in targets} - {source}
+    return graph
+
+
 def modules_loaded_by(entry_point: str, argv: list[str]) -> set[str]:
     """The modules a command loads: ``entry_point`` (``module:function``, the function taking ``argv``) run in a fresh
     interpreter, its ``sys.modules`` read at its end (after the exit of ``--help``, too)."""
@@ -164,6 +184,54 @@ def modules_loaded_by(entry_point: str, argv: list[str]) -> set[str]:
 @pytest.mark.parametrize("package", PACKAGES)
 def test_no_import_cycle(package):
     assert cycles(import_graph((package,))) == []
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_package_cycle(package):
+    """Between the subpackages and top-level modules of a package: a layer imports only layers below it."""
+    assert cycles(package_graph(package)) == []
+
+
+def test_the_package_graph_finds_a_cycle_the_modules_do_not_have(tmp_path, monkeypatch):
+    """Two packages that import each other through different modules: no module cycle, a package cycle."""
+    for folder, text in {
+        "loop": "",
+        "loop/low": "",
+        "loop/low/model.py": "X = 1\n",
+        "loop/low/use.py": "from ..high.page import Y\n",
+        "loop/high": "",
+        "loop/high/page.py": "from ..low.model import X\n\nY = X\n",
+    }.items():
+        path = tmp_path / folder
+        if path.suffix:
+            path.write_text(text)
+        else:
+            path.mkdir()
+            (path / "__init__.py").write_text(text)
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert cycles(import_graph(("loop",))) == []
+    assert cycles(package_graph("loop")) == [["loop.high", "loop.low"]]
+
+
+@pytest.mark.parametrize(
+    ("entry_point", "argv"),
+    [
+        ("fcso.cli:main", ["--help"]),
+        ("fcso.cli:main", ["design", "--help"]),
+        ("fcso.cli:main", ["verify", "--help"]),
+    ],
+)
+def test_a_command_starts_without_the_heavy_libraries(entry_point, argv):
+    """The start-up budget as an import list, not a time: a command that does not design, draw or simulate loads
+    none of :data:`HEAVY`, nor the pipeline, the finger sets or the pages (the verification's settings are light)."""
+    loaded = modules_loaded_by(entry_point, argv)
+    assert sorted(m for m in loaded if within(m, (*HEAVY, "fcso.pipeline", "fcso.sets", "fcso.output"))) == []
+
+
+def test_the_import_list_sees_a_heavy_import(tmp_path):
+    """The check above can fail: ``fcso design`` loads the pipeline and numba before it finds its part missing."""
+    loaded = modules_loaded_by("fcso.cli:main", ["design", str(tmp_path / "missing.stl"), "--out", str(tmp_path)])
+    assert {"numba", "fcso.pipeline"} <= loaded
 
 
 def test_the_cycle_finder_finds_a_cycle_hidden_in_a_function(tmp_path, monkeypatch):
@@ -230,7 +298,7 @@ def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tm
 
 #: What an fcsod operator command needs none of: fcso's design, simulation and pictures, and the libraries that only
 #: they (or the bus) use.
-NOT_FOR_OPERATORS = (*HEAVY, "fcso.design", "fcso.pipeline", "fcso.sets", "fcso.sim", "fcso.output", "trimesh", "zenoh")
+NOT_FOR_OPERATORS = (*HEAVY, "fcso.pipeline", "fcso.sets", "fcso.sim", "fcso.output", "trimesh", "zenoh")
 
 
 @pytest.fixture(scope="module")
@@ -248,9 +316,6 @@ def operator_config(tmp_path_factory):
     return config
 
 
-@pytest.mark.xfail(
-    strict=True, reason="fcso's facade imports the whole pipeline: its lazy imports are fcso's half of issue 45"
-)
 @pytest.mark.parametrize(
     "argv",
     [["jobs"], ["jobs", "--json"], ["journal", "check"], ["fingers", "list"], ["cancel", "job-1", "--timeout", "0"]],

@@ -1,11 +1,11 @@
-"""Writing a design's output folder: its layout, the files, the HTML pages and their pictures.
+"""Writing a design's output folder: the files, the HTML pages and their pictures.
 
 The method (the rest of :mod:`fcso`) knows nothing of folders or pages; this
 package turns its results into files. Submodules:
 
-- :mod:`~fcso.output.layout`: the folder layout (file names, ``set-<k>`` folders) and atomic writes
 - :mod:`~fcso.output.files`: a design's or a job's files, written and rebuilt
 - :mod:`~fcso.output.html`: building blocks of the report pages
+- :mod:`~fcso.output.grasp_scenes`: the chosen candidate's grasps as the page shows them
 - :mod:`~fcso.output.design_page`: ``report.html`` of one design, with the data its pictures are drawn from
 - :mod:`~fcso.output.sets_page`: the finger-sets sections, the job page and the terminal's pick plan
 - :mod:`~fcso.output.render`: drawing meshes off screen (matplotlib's Agg canvas): views, layers, panels, PNG
@@ -17,5 +17,5 @@ package turns its results into files. Submodules:
 - :mod:`~fcso.output.picture_process`: a process that draws the pictures beside the design
 - :mod:`~fcso.output.table`: the quality table (the paper's Table I layout)
 
-This package's ``__init__`` imports nothing, so the layout alone loads light.
+The folder layout is :mod:`fcso.layout`, below the method, which records its names.
 """

@@ -1,7 +1,7 @@
 """``report.html``: one self-contained page of pictures and tables per design.
 
 The page is built from :class:`ReportInputs`, which come either from a
-fresh :class:`~fcso.design.DesignResult` (:func:`report_inputs`) or from an
+fresh :class:`~fcso.pipeline.DesignResult` (:func:`report_inputs`) or from an
 output folder (:func:`load_report_inputs`: ``report.json``, the part files it
 names, ``finger.stl`` and ``fingerpad.stl``), so ``fcso report DIR`` redraws
 the same page without designing again.
@@ -16,16 +16,16 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ..design import DesignResult, flat_finger
-from ..evaluate import GraspScene, chosen_grasp_scenes, reseat_grasps
 from ..finger import pad_to_finger
+from ..layout import REPORT_HTML, write_atomic
 from ..measure import quality_decimals, quality_title, quality_words
 from ..parallel import WorkerPool, resolve_jobs
+from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
 from ..sampler import REJECTION_REASONS
+from .grasp_scenes import GraspScene, chosen_grasp_scenes, reseat_grasps
 from .html import closing_sections, html_page, image, key_value_table, text, unverified_verdict
-from .layout import REPORT_HTML, write_atomic
 from .read import read_design_folder
 from .sets_page import finger_sets_section, pad_sizes_section
 from .table import SCENARIO_GROUPS, quality_columns, scenario_labels

@@ -1,16 +1,16 @@
-"""The files of a design or of a job's finger sets (layout: :mod:`fcso.output.layout`), written and rebuilt."""
+"""The files of a design or of a job's finger sets (layout: :mod:`fcso.layout`), written and rebuilt."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..design import DesignResult
 from ..errors import MeshError
+from ..layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, set_folder, write_atomic
+from ..pipeline import DesignResult
 from ..progress import Progress
 from ..report.models import JobReport
 from ..sets import SetsResult
 from .design_page import DrawPictures, rebuild_report, report_html
-from .layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, set_folder, write_atomic
 from .read import read_stl
 from .sets_page import job_html
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import trimesh
 
 from ..errors import MeshError
+from ..layout import FINGER_STL, FINGERPAD_STL, REPORT_JSON
 from ..parts import Part, load_parts
 from ..report.models import DesignReport
-from .layout import FINGER_STL, FINGERPAD_STL, REPORT_JSON
 
 
 def read_stl(path: Path) -> trimesh.Trimesh:

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import trimesh
 
-from ..design import flat_finger
 from ..finger import pad_to_finger
+from ..pipeline import flat_finger
 from ..report.models import FingerSetsReport, JobReport, PadSizeReport
 from .html import closing_sections, html_page, image, text
 from .viewer import VIEW_FACES, glb_base64, viewer_section
@@ -143,6 +143,34 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
         )
         + ".</p>",
     ]
+    section += _search_sections(search)
+    if sets.identical_parts:
+        section.append(
+            "<h3>Identical parts, designed once</h3><ul>"
+            + "".join(
+                f"<li>{text(g.part)}: {text(', '.join(g.copies))} ({g.quantity} pieces)</li>"
+                for g in sets.identical_parts
+            )
+            + "</ul>"
+        )
+    if sets.ungraspable_parts:
+        section.append(
+            "<h3>Parts no set can grasp</h3><ul>"
+            + "".join(
+                f"<li>{text(u.part)} in stable pose {u.pose_index}: {text(u.reason)}</li>"
+                for u in sets.ungraspable
+                if u.part in sets.ungraspable_parts
+            )
+            + "</ul>"
+        )
+    section += pad_sizes_section(sets.pad_sizes)
+    return section
+
+
+def _search_sections(search) -> list[str]:
+    """HTML of how the split was found beyond its bound: why ``min_retained`` is not reached, the partitions judged
+    exactly, the parts that cannot share a finger."""
+    section: list[str] = []
     if search.explanation:
         section.append(f"<p><b>Why min_retained is not reached:</b> {text(search.explanation)}.</p>")
     if search.attempts:
@@ -173,26 +201,6 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             "b</th></tr>"
             f"{pairs}</table>"
         )
-    if sets.identical_parts:
-        section.append(
-            "<h3>Identical parts, designed once</h3><ul>"
-            + "".join(
-                f"<li>{text(g.part)}: {text(', '.join(g.copies))} ({g.quantity} pieces)</li>"
-                for g in sets.identical_parts
-            )
-            + "</ul>"
-        )
-    if sets.ungraspable_parts:
-        section.append(
-            "<h3>Parts no set can grasp</h3><ul>"
-            + "".join(
-                f"<li>{text(u.part)} in stable pose {u.pose_index}: {text(u.reason)}</li>"
-                for u in sets.ungraspable
-                if u.part in sets.ungraspable_parts
-            )
-            + "</ul>"
-        )
-    section += pad_sizes_section(sets.pad_sizes)
     return section
 
 

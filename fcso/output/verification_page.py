@@ -14,6 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..geometry import transform_points
+from ..layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from ..report.models import DesignReport
 from ..sim.report import (
     RankedCandidate,
@@ -29,7 +30,6 @@ from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
 from .decimate import decimate
 from .html import VERDICT_BEGIN, VERDICT_END, insert_verdict
-from .layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from .read import read_design_folder
 from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, draw_layers, png_bytes
 

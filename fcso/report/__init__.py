@@ -1,8 +1,7 @@
-"""The reports of fcso: their pydantic models (:mod:`~fcso.report.models`, ``report.json``)
-and their assembly from a design's results (:mod:`~fcso.report.design`) and a job's
-finger sets (:mod:`~fcso.report.sets`).
+"""The reports of fcso: their pydantic models (:mod:`~fcso.report.models`, ``report.json``).
 
-This ``__init__`` gives the models only, so reading a report loads no method code.
+They are assembled by the pipeline (:mod:`fcso.pipeline.report`, :mod:`fcso.pipeline.sets_report`); this package
+holds the models only, so reading a report loads no method code.
 """
 
 from .models import (

@@ -8,22 +8,21 @@ alone, so that every graspable scenario keeps ``retained = E / E*`` of its
 solo quality ``E*``.
 
 Sampling and pad geometries depend on a scenario alone, so they are made
-once for the whole job (:func:`fcso.design.prepare`); the partition search
+once for the whole job (:func:`fcso.pipeline.prepare`); the partition search
 only screens candidate sets (:func:`screen_set`) and the chosen sets are
-designed exactly (:func:`fcso.design.design_prepared`). Every quality is an
+designed exactly (:func:`fcso.pipeline.design_prepared`). Every quality is an
 effective area E in mm²; retained qualities are ratios (0..1).
 """
 
 from .design import SetsResult, design_sets
 from .identity import SAME_GEOMETRY_TOLERANCE_MM, identical_groups, same_geometry
+from .judged import PartitionAttempt, search_judged_exactly
 from .partition import (
-    PartitionAttempt,
     PartitionOutcome,
     canonical_assignment,
     max_clique,
     partition_key,
     restricted_growth,
-    search_judged_exactly,
     search_partition,
 )
 from .screening import SetScreener, SetScreening, SoloQuality, screen_set, screening_pools, solo_quality

@@ -12,11 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..config import DesignConfig
-from ..design import (
+from ..errors import GeometryError, NoGraspError
+from ..parallel import WorkerPool
+from ..parts import Part
+from ..pipeline import (
     ChosenCandidate,
     DesignResult,
+    Prepared,
     SizeScore,
     best_pad_size,
     choose_candidates,
@@ -26,15 +29,14 @@ from ..design import (
     prepare,
     subset,
 )
-from ..errors import GeometryError, NoGraspError
-from ..parallel import WorkerPool
-from ..parts import Part
+from ..pipeline.report import part_report
+from ..pipeline.sets_report import exact_retained, sets_report, zero_quality_report
 from ..progress import Progress
-from ..report.design import part_report
-from ..report.models import DesignReport, FingerSetsReport, JobReport, chosen_candidate
-from ..report.sets import exact_retained, sets_report, zero_quality_report
+from ..report.models import DesignReport, FingerSetsReport, JobReport, UngraspableReport, chosen_candidate
+from ..version import __version__
 from .identity import identical_groups
-from .partition import search_judged_exactly
+from .judged import PartitionAttempt, search_judged_exactly
+from .partition import PartitionOutcome
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality
 
 
@@ -79,22 +81,22 @@ def design_sets(
     is found (:func:`solo_quality`), the distinct parts are partitioned
     (:func:`search_partition`, under screening), and every set's finger is
     designed exactly by METHOD §1-9 for that set alone
-    (:func:`fcso.design.design_prepared`).
+    (:func:`fcso.pipeline.design_prepared`).
 
     Parameters
     ----------
     parts, config, progress, repair
-        As for :func:`fcso.design.design`.
+        As for :func:`fcso.pipeline.design`.
 
     Returns
     -------
     SetsResult
-        With ``[finger_sets] max = 1``, exactly :func:`fcso.design.design` of every part.
+        With ``[finger_sets] max = 1``, exactly :func:`fcso.pipeline.design` of every part.
 
     Raises
     ------
     MeshError, ConfigError, NoGraspError
-        As :func:`fcso.design.design`; NoGraspError also when no scenario keeps any contact.
+        As :func:`fcso.pipeline.design`; NoGraspError also when no scenario keeps any contact.
     """
     config = config or DesignConfig()
     if config.finger_sets.max == 1:
@@ -131,33 +133,14 @@ def _design_sets_of_one_size(
     unique = [loaded[g[0]] for g in groups]
     dedup_s = time.perf_counter() - clock
     prepared = prepare(unique, config, progress=progress, repair=repair)
-    warnings = list(prepared.warnings)
+    warnings = list(prepared.warnings) + _identical_warnings(loaded, groups)
     timings = dict(prepared.timings_s, identical_parts=dedup_s)
-    for group in groups:
-        if len(group) > 1:
-            names = ", ".join(loaded[i].name for i in group)
-            warnings.append(f"{names} have the same geometry: designed once as {loaded[group[0]].name}")
 
     clock = time.perf_counter()
-    report_progress("solo quality", 0, len(prepared.scenarios), "")
-    # no more workers than tasks: forking costs more than one small task
-    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
-        solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
-    keep_held(prepared, {(m, k): entries for m, solo in enumerate(solos) for k, entries in solo.held.items()})
-    report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
+    solos = _solo_qualities(prepared, config, report_progress)
     timings["solo_quality"] = time.perf_counter() - clock
     ungraspable = list(prepared.ungraspable)
-    for scenario, solo in zip(prepared.scenarios, solos):
-        if solo.exact <= 0:
-            ungraspable.append(zero_quality_report(scenario))
-            warnings.append(
-                f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left "
-                f"out"
-            )
-    part_scenarios = [
-        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact > 0]
-        for u in range(len(unique))
-    ]
+    part_scenarios = _scenarios_with_contact(prepared, solos, len(unique), ungraspable, warnings)
     graspable = [u for u in range(len(unique)) if part_scenarios[u]]
     if not graspable:
         raise NoGraspError(
@@ -166,31 +149,146 @@ def _design_sets_of_one_size(
         )
 
     clock = time.perf_counter()
-    pools = screening_pools(solos, config.finger_sets.screen_samples)
-    set_scenarios = [part_scenarios[u] for u in graspable]
-    chosen_candidates: dict[frozenset[int], ChosenCandidate] = {}
-    exact_designs: dict[frozenset[int], DesignResult] = {}
-    failures: dict[frozenset[int], str] = {}
+    sets = _ExactSets(prepared, config, solos, [part_scenarios[u] for u in graspable], progress, report_progress)
+    # no more workers than sets to screen: one part has one partition
+    with WorkerPool(
+        (prepared, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config),
+        prepared.jobs if len(graspable) > 1 else 1,
+        config.compute.scheduler,
+    ) as pool:
+        sets.screener = SetScreener(prepared, sets.set_scenarios, solos, config, pool)
+        outcome, attempts = search_judged_exactly(
+            sets.screener,
+            len(graspable),
+            config,
+            lambda stage, done, total, note="": report_progress(stage, done, total, note),
+            sets.design_exactly,
+            sets.finish_exactly,
+        )
+    # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
+    timings["partition"] = time.perf_counter() - clock
 
-    def numbers_of(members: frozenset[int]) -> list[int]:
-        return sorted(m for p in members for m in set_scenarios[p])
+    clock = time.perf_counter()
+    designs, members = _delivered_designs(outcome, graspable, part_scenarios, sets)
+    report_progress("finger sets", len(designs), len(designs), "")
+    timings["finger_sets"] = time.perf_counter() - clock
+    screened = _screened_retained(outcome, attempts, graspable, part_scenarios, sets.screener)
+    finger_sets = sets_report(
+        prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
+    )
+    timings = {k: round(v, 3) for k, v in timings.items()}
+    if len(designs) == 1:
+        design_report = designs[0].report
+        designs[0].report = design_report.model_copy(
+            update={
+                "parts": [part_report(p) for p in unique],
+                "ungraspable": ungraspable,
+                "warnings": warnings + design_report.warnings,
+                "timings_s": dict(timings, **design_report.timings_s),
+                "finger_sets": finger_sets,
+            }
+        )
+        return SetsResult(designs, finger_sets, None)
+    set_warnings = [f"set {k}: {w}" for k, d in enumerate(designs, start=1) for w in d.report.warnings]
+    job = JobReport(
+        fcso_version=__version__,
+        parts=[part_report(p) for p in unique],
+        finger_sets=finger_sets,
+        timings_s=timings,
+        warnings=warnings + set_warnings,
+        settings=config,
+    )
+    return SetsResult(designs, finger_sets, job)
 
-    def failed(members: frozenset[int], error: GeometryError) -> str:
+
+def _identical_warnings(loaded: list[Part], groups: list[list[int]]) -> list[str]:
+    """A warning per group of parts of the same geometry, designed once."""
+    return [
+        f"{', '.join(loaded[i].name for i in group)} have the same geometry: designed once as {loaded[group[0]].name}"
+        for group in groups
+        if len(group) > 1
+    ]
+
+
+def _solo_qualities(prepared: Prepared, config: DesignConfig, report_progress: Progress) -> list[SoloQuality]:
+    """Every scenario's solo quality E* (:func:`solo_quality`), on workers; the contacts they found kept for the
+    screening (:func:`keep_held`)."""
+    report_progress("solo quality", 0, len(prepared.scenarios), "")
+    # no more workers than tasks: forking costs more than one small task
+    with WorkerPool((prepared, config), min(prepared.jobs, len(prepared.scenarios)), config.compute.scheduler) as pool:
+        solos = pool.map(_solo_task, list(range(len(prepared.scenarios))))
+    keep_held(prepared, {(m, k): entries for m, solo in enumerate(solos) for k, entries in solo.held.items()})
+    report_progress("solo quality", len(prepared.scenarios), len(prepared.scenarios), "")
+    return solos
+
+
+def _scenarios_with_contact(
+    prepared: Prepared,
+    solos: list[SoloQuality],
+    unique_parts: int,
+    ungraspable: list[UngraspableReport],
+    warnings: list[str],
+) -> list[list[int]]:
+    """Per distinct part, its scenarios that keep some contact (E* > 0); the others are added to ``ungraspable`` and
+    ``warnings``."""
+    for scenario, solo in zip(prepared.scenarios, solos):
+        if solo.exact <= 0:
+            ungraspable.append(zero_quality_report(scenario))
+            warnings.append(
+                f"{scenario.part.name} in stable pose {scenario.pose_index} keeps no contact with any pad and is left "
+                f"out"
+            )
+    return [
+        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u and solos[m].exact > 0]
+        for u in range(unique_parts)
+    ]
+
+
+@dataclass
+class _ExactSets:
+    """The sets the partition search judges exactly (:func:`search_judged_exactly`): each set's chosen candidate and
+    finger, made once, and why a set could not be made.
+
+    Attributes
+    ----------
+    set_scenarios : list of list of int
+        Per graspable part (a set's member), its scenario numbers.
+    screener : SetScreener
+        Set when the search's workers start; told of each set's exact figures.
+    """
+
+    prepared: Prepared
+    config: DesignConfig
+    solos: list[SoloQuality]
+    set_scenarios: list[list[int]]
+    progress: Progress | None
+    report_progress: Progress
+    screener: SetScreener | None = None
+    chosen_candidates: dict[frozenset[int], ChosenCandidate] = dataclasses.field(default_factory=dict)
+    exact_designs: dict[frozenset[int], DesignResult] = dataclasses.field(default_factory=dict)
+    failures: dict[frozenset[int], str] = dataclasses.field(default_factory=dict)
+
+    def numbers_of(self, members: frozenset[int]) -> list[int]:
+        return sorted(m for p in members for m in self.set_scenarios[p])
+
+    def failed(self, members: frozenset[int], error: GeometryError) -> str:
         # such a set keeps nothing, so the search moves on from it
-        failures[members] = str(error)
-        screener.judge_exactly(members, np.zeros(len(numbers_of(members))))
-        return failures[members]
+        self.failures[members] = str(error)
+        self.screener.judge_exactly(members, np.zeros(len(self.numbers_of(members))))
+        return self.failures[members]
 
-    def design_exactly(sets: list[frozenset[int]], fallback: frozenset[int] | None = None) -> list[str | None]:
-        """Sets' candidates by METHOD §6-8, each once, side by side (:func:`fcso.design.choose_candidates`); the
+    def design_exactly(self, sets: list[frozenset[int]], fallback: frozenset[int] | None = None) -> list[str | None]:
+        """Sets' candidates by METHOD §6-8, each once, side by side (:func:`fcso.pipeline.choose_candidates`); the
         screener then judges each set by its exact figures.
 
         ``fallback`` (one finger for every part) is designed beside them as soon as one of them keeps less than
         ``min_retained`` in a scenario or cannot be designed: the partition is then compared with it. Its finger
-        (printed-fit pockets, fusing) is made only if the set is delivered (:func:`finish_exactly`): the retained
+        (printed-fit pockets, fusing) is made only if the set is delivered (:meth:`finish_exactly`): the retained
         qualities are the chosen candidate's exact ones either way. Returns per set why it cannot be designed (a pad
         Boolean that failed), or None.
         """
+        chosen_candidates, failures, screener = self.chosen_candidates, self.failures, self.screener
+        config, solos, numbers_of, report_progress = self.config, self.solos, self.numbers_of, self.report_progress
         todo = list(dict.fromkeys(m for m in sets if m not in chosen_candidates and m not in failures))
         if not todo:
             return [failures.get(members) for members in sets]
@@ -219,7 +317,7 @@ def _design_sets_of_one_size(
 
         report_progress("finger sets", 0, len(wanted), f"designing {len(wanted)} set(s)")
         starting = [numbers_of(m) for m in wanted.values()]
-        chosen_all = choose_candidates(prepared, starting, config, then if compare else None, progress)
+        chosen_all = choose_candidates(self.prepared, starting, config, then if compare else None, self.progress)
         # the fallback, when asked for, came last
         made = dict(zip(wanted.values(), chosen_all))
         report_progress("finger sets", len(made), len(made), "")
@@ -227,58 +325,46 @@ def _design_sets_of_one_size(
         for members in todo + [m for m in made if m not in todo]:
             chosen = made[members]
             if isinstance(chosen, GeometryError):
-                failed(members, chosen)
+                self.failed(members, chosen)
                 continue
             chosen_candidates[members] = chosen
             numbers = numbers_of(members)
             kept = dict(zip(numbers, exact_retained(chosen.candidate, numbers, solos)))
-            screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in set_scenarios[p]]))
+            screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in self.set_scenarios[p]]))
         return [failures.get(members) for members in sets]
 
-    def finish_exactly(sets: list[frozenset[int]]) -> list[str | None]:
-        """The fingers of sets designed by :func:`design_exactly`, each made once, together
-        (:func:`fcso.design.finish_designs`); per set why its finger could not be made (a pad so carved that the
+    def finish_exactly(self, sets: list[frozenset[int]]) -> list[str | None]:
+        """The fingers of sets designed by :meth:`design_exactly`, each made once, together
+        (:func:`fcso.pipeline.finish_designs`); per set why its finger could not be made (a pad so carved that the
         fused finger is not one printable body), or None."""
-        todo = [members for members in sets if members not in exact_designs and members not in failures]
+        todo = [members for members in sets if members not in self.exact_designs and members not in self.failures]
         if todo:
             made = finish_designs(
-                [(subset(prepared, numbers_of(m)), chosen_candidates[m]) for m in todo], config, progress
+                [(subset(self.prepared, self.numbers_of(m)), self.chosen_candidates[m]) for m in todo],
+                self.config,
+                self.progress,
             )
             for members, result in zip(todo, made):
                 if isinstance(result, GeometryError):
-                    failed(members, result)
+                    self.failed(members, result)
                 else:
-                    exact_designs[members] = result
-        return [failures.get(members) for members in sets]
+                    self.exact_designs[members] = result
+        return [self.failures.get(members) for members in sets]
 
-    # no more workers than sets to screen: one part has one partition
-    with WorkerPool(
-        (prepared, pools, solo_picks(solos), config),
-        prepared.jobs if len(graspable) > 1 else 1,
-        config.compute.scheduler,
-    ) as pool:
-        screener = SetScreener(prepared, set_scenarios, solos, config, pool)
-        outcome, attempts = search_judged_exactly(
-            screener,
-            len(graspable),
-            config,
-            lambda stage, done, total, note="": report_progress(stage, done, total, note),
-            design_exactly,
-            finish_exactly,
-        )
-    # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
-    timings["partition"] = time.perf_counter() - clock
 
-    clock = time.perf_counter()
-    labels = max(outcome.assignment) + 1
+def _delivered_designs(
+    outcome: PartitionOutcome, graspable: list[int], part_scenarios: list[list[int]], sets: _ExactSets
+) -> tuple[list[DesignResult], list[tuple[list[int], list[int]]]]:
+    """The chosen partition's designs, each grasp marked with its finger set, and per set its distinct parts and
+    scenario numbers."""
     designs, members = [], []
-    for label in range(labels):
+    for label in range(max(outcome.assignment) + 1):
         group = frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
         chosen = [graspable[p] for p in sorted(group)]
         numbers = sorted(m for u in chosen for m in part_scenarios[u])
-        if group in failures:  # every partition designed had a set that could not be made
-            raise GeometryError(failures[group])
-        made = exact_designs[group]
+        if group in sets.failures:  # every partition designed had a set that could not be made
+            raise GeometryError(sets.failures[group])
+        made = sets.exact_designs[group]
         # every grasp says which finger set makes it
         made = dataclasses.replace(
             made,
@@ -288,47 +374,29 @@ def _design_sets_of_one_size(
         )
         designs.append(made)
         members.append((chosen, numbers))
-    report_progress("finger sets", labels, labels, "")
-    timings["finger_sets"] = time.perf_counter() - clock
-    # one finger designed to compare was never screened as a set (fcso.sets.partition.PartitionAttempt): its
+    return designs, members
+
+
+def _screened_retained(
+    outcome: PartitionOutcome,
+    attempts: list[PartitionAttempt],
+    graspable: list[int],
+    part_scenarios: list[list[int]],
+    screener: SetScreener,
+) -> dict[int, float]:
+    """Scenario number -> what screening says the delivered partition retains there; empty when it was never
+    screened."""
+    # one finger designed to compare was never screened as a set (fcso.sets.judged.PartitionAttempt): its
     # scenarios have no screened figure
     delivered = next(a for a in attempts if a.assignment == outcome.assignment)
-    screened = (
-        dict(
-            zip(
-                [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
-                screener.partition_retained(outcome.assignment, exact=False),
-            )
+    if delivered.screened_worst is None:
+        return {}
+    return dict(
+        zip(
+            [m for p in range(len(graspable)) for m in part_scenarios[graspable[p]]],
+            screener.partition_retained(outcome.assignment, exact=False),
         )
-        if delivered.screened_worst is not None
-        else {}
     )
-    finger_sets = sets_report(
-        prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
-    )
-    timings = {k: round(v, 3) for k, v in timings.items()}
-    if labels == 1:
-        design_report = designs[0].report
-        designs[0].report = design_report.model_copy(
-            update={
-                "parts": [part_report(p) for p in unique],
-                "ungraspable": ungraspable,
-                "warnings": warnings + design_report.warnings,
-                "timings_s": dict(timings, **design_report.timings_s),
-                "finger_sets": finger_sets,
-            }
-        )
-        return SetsResult(designs, finger_sets, None)
-    set_warnings = [f"set {k}: {w}" for k, d in enumerate(designs, start=1) for w in d.report.warnings]
-    job = JobReport(
-        fcso_version=__version__,
-        parts=[part_report(p) for p in unique],
-        finger_sets=finger_sets,
-        timings_s=timings,
-        warnings=warnings + set_warnings,
-        settings=config,
-    )
-    return SetsResult(designs, finger_sets, job)
 
 
 def _solo_task(context, number: int) -> SoloQuality:

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import DesignConfig
 from ..progress import Progress
+from .carving import carving_descriptors, farthest_point_order, nearest_neighbour_pairs
 from .screening import SetScreener, sets_of
 
 
@@ -241,55 +241,6 @@ PROBES_PER_SET = 2
 _PAIRS_PER_PROGRESS = 2000
 
 
-def carving_descriptors(screener: SetScreener) -> np.ndarray:
-    """What each part carves into a pad, cheaply: the column heights of its scenarios' best samples.
-
-    Per part, the largest column height (:attr:`fcso.screen.ScreenGeometry.heights_mm`) over the good
-    geometries (METHOD §5, the ones carved into the pad) of each scenario's sample of best solo screened E, on
-    the pad-face grid; 0 where it carves nothing. Two parts whose carvings differ little leave each other's
-    contacts nearly as they are; a part that carves deep where another touches takes that contact away.
-
-    Returns
-    -------
-    (parts, cells) float64
-        Heights, mm.
-    """
-    prepared, picks = screener.prepared, screener.picks
-    rows = []
-    for numbers in screener.part_scenarios:
-        carving = None
-        for m in numbers:
-            for geometry in prepared.scenarios[m].samples[picks[m]].screen:
-                heights = geometry.heights_mm if geometry.good else np.zeros_like(geometry.heights_mm)
-                carving = heights if carving is None else np.maximum(carving, heights)
-        rows.append(carving)
-    return np.asarray(rows, dtype=np.float64)
-
-
-def farthest_point_order(descriptors: np.ndarray, count: int) -> list[int]:
-    """The ``count`` most dissimilar parts, in order: first the one farthest from the mean, then each the farthest
-    from those already taken (ties: the smaller index). O(parts x count) distances."""
-    parts = len(descriptors)
-    centre = descriptors.mean(axis=0)
-    nearest = np.linalg.norm(descriptors - centre, axis=1)
-    order: list[int] = []
-    for _ in range(min(count, parts)):
-        candidates = np.where(np.isin(np.arange(parts), order), -np.inf, nearest)
-        chosen = int(np.argmax(candidates))
-        order.append(chosen)
-        nearest = np.minimum(nearest, np.linalg.norm(descriptors - descriptors[chosen], axis=1))
-    return order
-
-
-def nearest_neighbour_pairs(descriptors: np.ndarray, neighbours: int) -> set[tuple[int, int]]:
-    """Every part with its ``neighbours`` nearest by descriptor (ties: the smaller index), as ordered pairs."""
-    squared = (descriptors**2).sum(axis=1)
-    distances = squared[:, None] + squared[None, :] - 2.0 * descriptors @ descriptors.T
-    np.fill_diagonal(distances, np.inf)
-    nearest = np.argsort(distances, axis=1, kind="stable")[:, : min(neighbours, len(descriptors) - 1)]
-    return {(min(i, int(j)), max(i, int(j))) for i in range(len(descriptors)) for j in nearest[i]}
-
-
 def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:
     """The partition search for many parts: a sparse conflict graph from quick screenings, set searches only where
     they leave doubt.
@@ -335,8 +286,102 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
     quick screenings (a set's size each) or a bounded number of set searches.
     """
     settings = config.finger_sets
-    max_sets, threshold = settings.max, settings.min_retained
+    threshold = settings.min_retained
+    graph = _conflict_graph(screener, parts, config, progress)
+    clique, pair_retained = _certified_clique(graph)
+    lower = max(1, len(clique))
+    screened = graph.compatibility[~np.isnan(graph.compatibility)]
+    placing = np.nan_to_num(graph.compatibility, nan=float(np.median(screened)) if len(screened) else 1.0)
+    best, tried = _partition_by_counts(screener, placing, lower, config, progress)
+    return PartitionOutcome(
+        assignment=best,
+        retained=screener.partition_retained(best),
+        method="quick_screening+colouring+local_moves"
+        if graph.every_pair
+        else "carving_neighbours+colouring+local_moves",
+        proven=False,
+        pair_retained=pair_retained,
+        lower_bound_sets=lower,
+        conflict_clique=sorted(clique),
+        worst_retained_bound=_clique_bound(sorted(clique), pair_retained, settings.max),
+        sets_tried=tried,
+        set_screenings=len(screener.cache),
+        fewest_sets_proven=partition_key(best, screener.partition_retained(best), threshold)[0] == 1
+        and max(best) + 1 == lower,
+        probed_parts=len(graph.probes),
+        screened_pairs=int((~np.isnan(graph.compatibility[np.triu_indices(parts, 1)])).sum()),
+    )
+
+
+@dataclass
+class _ConflictGraph:
+    """The pairs of parts :func:`_scaled_search` has screened and what they keep.
+
+    Attributes
+    ----------
+    every_pair : bool
+        Every pair is screened; else each part's nearest neighbours by carving and the probes' pairs.
+    descriptors : ndarray or None
+        What each part carves (:func:`carving_descriptors`), when not every pair is screened.
+    probes : list of int
+        The most dissimilar parts, every pair of which is screened.
+    compatibility : (parts, parts) float
+        Least retained of a screened pair (quick screening, raised by a set search); NaN where not screened.
+    suspected : (parts, parts) bool
+        Pairs suspected to conflict: screened and below ``min_retained``.
+    """
+
+    screener: SetScreener
+    parts: int
+    max_sets: int
+    threshold: float
+    progress: Progress
+    every_pair: bool
+    descriptors: np.ndarray | None
+    probes: list[int]
+    compatibility: np.ndarray
+    suspected: np.ndarray
+
+    def quick_pairs(self, chosen: list[tuple[int, int]]) -> None:
+        """Quick screenings of pairs ``chosen``, recorded."""
+        if not chosen:
+            return
+        compatibility, suspected, progress = self.compatibility, self.suspected, self.progress
+        # in chunks, so a large job's progress line and log move while the pairs are screened
+        for start in range(0, len(chosen), _PAIRS_PER_PROGRESS):
+            progress("pair conflicts", start, len(chosen), "quick screening")
+            chunk = chosen[start : start + _PAIRS_PER_PROGRESS]
+            for (i, j), values in zip(chunk, self.screener.quick([frozenset(p) for p in chunk])):
+                compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
+                suspected[i, j] = suspected[j, i] = compatibility[i, j] < self.threshold
+        progress("pair conflicts", len(chosen), len(chosen), "quick screening")
+
+    def extended(self, clique: list[int]) -> list[int]:
+        """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
+        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
+        if self.every_pair or not clique:
+            return clique
+        descriptors, suspected, compatibility = self.descriptors, self.suspected, self.compatibility
+        apart = np.min([np.linalg.norm(descriptors - descriptors[q], axis=1) for q in clique], axis=0)
+        # parts already suspected of conflicts first (they conflict with more), then the most dissimilar to the clique
+        degree = suspected.sum(axis=1)
+        order = sorted(range(self.parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
+        candidates = [p for p in order if p not in clique]
+        for part in candidates[: 2 * PROBES_PER_SET * self.max_sets]:
+            if len(clique) > self.max_sets:
+                break
+            self.quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
+            if all(suspected[part, q] for q in clique):
+                clique = clique + [part]
+        return sorted(clique)
+
+
+def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> _ConflictGraph:
+    """Step 1 of :func:`_scaled_search`: the pairs to screen, screened quickly."""
+    settings = config.finger_sets
+    max_sets = settings.max
     every_pair = parts - 1 <= 2 * settings.pairs_per_part
+    descriptors = None
     if every_pair:
         pairs, probes = list(itertools.combinations(range(parts), 2)), list(range(parts))
     else:
@@ -345,45 +390,31 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         pairs = sorted(
             nearest_neighbour_pairs(descriptors, settings.pairs_per_part) | set(itertools.combinations(probes, 2))
         )
-    compatibility = np.full((parts, parts), np.nan)
+    graph = _ConflictGraph(
+        screener,
+        parts,
+        max_sets,
+        settings.min_retained,
+        progress,
+        every_pair,
+        descriptors,
+        probes,
+        np.full((parts, parts), np.nan),
+        np.zeros((parts, parts), dtype=bool),
+    )
+    graph.quick_pairs(pairs)
+    return graph
 
-    def quick_pairs(chosen: list[tuple[int, int]]) -> None:
-        if not chosen:
-            return
-        # in chunks, so a large job's progress line and log move while the pairs are screened
-        for start in range(0, len(chosen), _PAIRS_PER_PROGRESS):
-            progress("pair conflicts", start, len(chosen), "quick screening")
-            chunk = chosen[start : start + _PAIRS_PER_PROGRESS]
-            for (i, j), values in zip(chunk, screener.quick([frozenset(p) for p in chunk])):
-                compatibility[i, j] = compatibility[j, i] = min(float(values[i].min()), float(values[j].min()))
-                suspected[i, j] = suspected[j, i] = compatibility[i, j] < threshold
-        progress("pair conflicts", len(chosen), len(chosen), "quick screening")
 
-    suspected = np.zeros((parts, parts), dtype=bool)
-    quick_pairs(pairs)
-
-    def extended(clique: list[int]) -> list[int]:
-        """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
-        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
-        if every_pair or not clique:
-            return clique
-        apart = np.min([np.linalg.norm(descriptors - descriptors[q], axis=1) for q in clique], axis=0)
-        # parts already suspected of conflicts first (they conflict with more), then the most dissimilar to the clique
-        degree = suspected.sum(axis=1)
-        order = sorted(range(parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
-        candidates = [p for p in order if p not in clique]
-        for part in candidates[: 2 * PROBES_PER_SET * max_sets]:
-            if len(clique) > max_sets:
-                break
-            quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
-            if all(suspected[part, q] for q in clique):
-                clique = clique + [part]
-        return sorted(clique)
-
+def _certified_clique(graph: _ConflictGraph) -> tuple[list[int], dict[tuple[int, int], tuple[float, float]]]:
+    """Step 2 of :func:`_scaled_search`: a clique of suspected conflicts whose pairs set searches confirm (empty when
+    none is certified within :data:`_CLIQUE_ROUNDS`), and every searched pair's retained qualities."""
+    screener, threshold = graph.screener, graph.threshold
+    compatibility, suspected = graph.compatibility, graph.suspected
     pair_retained: dict[tuple[int, int], tuple[float, float]] = {}
     clique: list[int] = []
     for _ in range(_CLIQUE_ROUNDS):
-        clique = extended(sorted(_greedy_clique(suspected)))
+        clique = graph.extended(sorted(_greedy_clique(suspected)))
         unsure = [pair for pair in itertools.combinations(clique, 2) if pair not in pair_retained]
         for pair, values in zip(unsure, screener.retained([frozenset(p) for p in unsure])):
             pair_retained[pair] = (float(values[pair[0]].min()), float(values[pair[1]].min()))
@@ -395,9 +426,15 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
             suspected[i, j] = suspected[j, i] = False
     else:
         clique = []  # not certified within the rounds allowed: no bound claimed
-    lower = max(1, len(clique))
-    screened = compatibility[~np.isnan(compatibility)]
-    placing = np.nan_to_num(compatibility, nan=float(np.median(screened)) if len(screened) else 1.0)
+    return clique, pair_retained
+
+
+def _partition_by_counts(
+    screener: SetScreener, placing: np.ndarray, lower: int, config: DesignConfig, progress: Progress
+) -> tuple[tuple[int, ...], list[int]]:
+    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then from ``lower`` sets up, placed greedily
+    by ``placing`` (pairs' compatibility) and improved by moves; the best seen and the numbers of sets tried."""
+    max_sets, threshold = config.finger_sets.max, config.finger_sets.min_retained
 
     def key(assignment: tuple[int, ...]) -> tuple:
         return partition_key(assignment, screener.partition_estimate(assignment), threshold)
@@ -433,22 +470,7 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
         if reached != (count == max_sets):
             break
     progress("partition", step, step, f"{tried[-1]} sets")
-    best = max(seen, key=searched_key)
-    return PartitionOutcome(
-        assignment=best,
-        retained=screener.partition_retained(best),
-        method="quick_screening+colouring+local_moves" if every_pair else "carving_neighbours+colouring+local_moves",
-        proven=False,
-        pair_retained=pair_retained,
-        lower_bound_sets=lower,
-        conflict_clique=sorted(clique),
-        worst_retained_bound=_clique_bound(sorted(clique), pair_retained, max_sets),
-        sets_tried=tried,
-        set_screenings=len(screener.cache),
-        fewest_sets_proven=searched_key(best)[0] == 1 and max(best) + 1 == lower,
-        probed_parts=len(probes),
-        screened_pairs=int((~np.isnan(compatibility[np.triu_indices(parts, 1)])).sum()),
-    )
+    return max(seen, key=searched_key), tried
 
 
 def _short(values: dict[int, np.ndarray], threshold: float) -> bool:
@@ -546,166 +568,3 @@ def _worst_parts(screener: SetScreener, assignment: tuple[int, ...], retained: n
     worst_set = assignment[owners[int(np.argmin(retained))]]
     members = [p for p in range(len(assignment)) if assignment[p] == worst_set]
     return sorted(members, key=lambda p: (float(retained[owners == p].min()), p))[:count]
-
-
-@dataclass
-class PartitionAttempt:
-    """A partition judged exactly (METHOD §11 revision 3).
-
-    Attributes
-    ----------
-    assignment : tuple of int
-        Set of every part (canonical).
-    screened_worst : float or None
-        Least screened ``r`` over its graspable scenarios; None for one finger designed to compare (a set search of
-        every part, seconds to minutes at farm scale, would only be reported: its design judges it).
-    exact_worst : float
-        Least exact ``r``: of its sets' designs when ``designed``, else of the exact evaluation of each set's
-        screened best candidate (:meth:`SetScreener.probe`).
-    source : str
-        ``"search"``: proposed by the partition search; ``"one_finger"``:
-        every part in one set, designed to compare.
-    failure : str or None
-        Why a set's finger could not be made (it then keeps nothing), or None.
-    designed : bool
-        Its sets' candidates were designed by METHOD §6-8 (the partition delivered, and one finger when compared);
-        only the delivered partition's fingers are made (METHOD §9).
-    """
-
-    assignment: tuple[int, ...]
-    screened_worst: float | None
-    exact_worst: float
-    source: str
-    failure: str | None = None
-    designed: bool = False
-
-
-def search_judged_exactly(
-    screener: SetScreener,
-    parts: int,
-    config: DesignConfig,
-    progress: Progress,
-    design_exactly: Callable[[list[frozenset[int]], frozenset[int] | None], list[str | None]],
-    finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
-) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
-    """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
-
-    Each proposed partition's sets are judged by the exact evaluation of
-    their screened best candidates (:meth:`SetScreener.probe`, one exact
-    evaluation per set), so the next search sees the exact figure of every
-    set judged so far: a set whose exact figure misses ``min_retained`` no
-    longer looks feasible, and the search moves its parts or tries more sets.
-    It goes on only while a proposal that screening said reaches
-    ``min_retained`` misses it exactly and has fewer than ``max`` sets, and
-    stops when the search proposes a partition already judged, or after
-    ``[finger_sets] max`` proposals. The best proposal by the exact objective
-    is then designed (``design_exactly`` on each of its sets: search and
-    exact re-evaluation, METHOD §6-8); if its designed sets miss
-    ``min_retained`` (or a set cannot be made), one finger for every part is
-    designed too, and the better of the two designed partitions by the exact
-    objective is chosen, so the sets never keep less in their worst scenario
-    than one finger does. Only the chosen partition's fingers are made
-    (``finish_exactly``, METHOD §9): the figures that judge a partition are
-    its chosen candidates' exact ones, which making the finger does not change.
-
-    Parameters
-    ----------
-    screener : SetScreener
-    parts : int
-        Distinct graspable parts.
-    config : DesignConfig
-    progress : callable
-    design_exactly : callable
-        ``design_exactly(sets_of_parts, fallback)``: chooses each set's
-        candidate by METHOD §6-8 and calls ``screener.judge_exactly`` with
-        its exact retained qualities (zeros when it cannot be designed);
-        returns per set why not, or None. ``fallback`` (every part in one
-        set, or None) is to be designed and judged too, beside the sets,
-        when one of them misses ``min_retained`` or cannot be designed: it
-        is then compared.
-    finish_exactly : callable
-        ``finish_exactly(sets_of_parts)``: makes the fingers of sets
-        ``design_exactly`` designed (METHOD §9), together, called only for the
-        sets of the partition delivered; per set, when its finger cannot be
-        made it judges the set at zeros and says why (else None), and the next
-        best designed partition is delivered instead.
-
-    Returns
-    -------
-    PartitionOutcome
-        Of the chosen partition, ``retained`` exact (its designed sets).
-    list of PartitionAttempt
-        Every partition judged, in the order judged.
-    """
-    threshold = config.finger_sets.min_retained
-    attempts: list[PartitionAttempt] = []
-
-    def key(assignment: tuple[int, ...]) -> tuple:
-        return partition_key(assignment, screener.partition_retained(assignment), threshold)
-
-    def judge(assignment: tuple[int, ...], source: str, failure: str | None = None, designed: bool = False) -> None:
-        # a partition designed after its probe replaces the probe's row and keeps its source
-        source = next((a.source for a in attempts if a.assignment == assignment), source)
-        screened = float(screener.partition_retained(assignment, exact=False).min()) if source == "search" else None
-        exact = screener.partition_retained(assignment)
-        judged = PartitionAttempt(assignment, screened, float(exact.min()), source, failure, designed)
-        attempts[:] = [a for a in attempts if a.assignment != assignment] + [judged]
-
-    def design(assignment: tuple[int, ...], source: str, fallback: frozenset[int] | None = None) -> PartitionAttempt:
-        progress("exact sets", 0, 1, f"designing {max(assignment) + 1} set(s)")
-        failures = [f for f in design_exactly(sets_of(assignment), fallback) if f is not None]
-        judge(assignment, source, failures[0] if failures else None, designed=True)
-        return attempts[-1]
-
-    outcome = first = search_partition(screener, parts, config, progress)
-    proposals = config.finger_sets.max
-    for proposal in range(proposals):
-        if any(a.assignment == outcome.assignment for a in attempts):
-            break
-        progress("exact sets", proposal, proposals, f"proposal {proposal + 1}: {max(outcome.assignment) + 1} sets")
-        screener.probe(sets_of(outcome.assignment))
-        judge(outcome.assignment, "search")
-        judged = attempts[-1]
-        progress(
-            "exact sets",
-            proposal + 1,
-            proposals,
-            f"proposal {proposal + 1}: worst retained screened {judged.screened_worst:.2f}, "
-            f"exact {judged.exact_worst:.2f}",
-        )
-        # METHOD §11 rev. 3: go on only where screening promised min_retained, the exact sets missed it, and max
-        # allows more sets; a proposal screening already found short is as good as the search can tell
-        if (
-            judged.exact_worst >= threshold
-            or judged.screened_worst < threshold
-            or max(outcome.assignment) + 1 >= proposals
-            or proposal + 1 == proposals
-        ):
-            break
-        outcome = search_partition(screener, parts, config, progress)
-    single = tuple([0] * parts)
-    # one finger for every part is designed beside the partition's sets as soon as one of them misses min_retained
-    best = design(max(attempts, key=lambda a: key(a.assignment)).assignment, "search", frozenset(range(parts)))
-    if (best.failure is not None or best.exact_worst < threshold) and best.assignment != single:
-        design(single, "one_finger")
-    while True:
-        # a partition with a finger that cannot be made is delivered only when every one designed has one
-        chosen = max(
-            (a for a in attempts if a.designed),
-            key=lambda a: (a.failure is None, key(a.assignment)),
-        )
-        if chosen.failure is not None:
-            break
-        failures = [f for f in finish_exactly(sets_of(chosen.assignment)) if f is not None]
-        if not failures:
-            break
-        judge(chosen.assignment, chosen.source, failures[0], designed=True)
-        if not any(a.assignment == single and a.designed for a in attempts):
-            design(single, "one_finger")
-    outcome = dataclasses.replace(
-        outcome,
-        assignment=chosen.assignment,
-        retained=screener.partition_retained(chosen.assignment),
-        fewest_sets_proven=first.fewest_sets_proven,
-    )
-    return outcome, attempts

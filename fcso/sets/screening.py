@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import DesignConfig
-from ..design import Prepared, evaluate_exact, screen_choice, subset
 from ..evaluate import screen_on_pad
 from ..parallel import WorkerPool
+from ..pipeline import Prepared, evaluate_exact, screen_choice, subset
 from ..screen import screen
 from ..search import rerank, search
 

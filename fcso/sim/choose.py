@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import time
 
-from ..design import DesignResult, finish_candidates
 from ..evaluate import CandidateEvaluation
 from ..finger import fuse
 from ..geometry import to_trimesh
 from ..parallel import resolve_jobs
+from ..pipeline import DesignResult, finish_candidates
 from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
@@ -22,7 +22,7 @@ def candidate_designs(
     """The simulation's inputs for evaluated candidates of a design, built as the design builds its choice.
 
     Each pad is carved with the design's ``[print]`` clearance and lead-in
-    (:func:`fcso.design.finish_candidates`), so the verified pad is the one
+    (:func:`fcso.pipeline.finish_candidates`), so the verified pad is the one
     that would be printed; the candidates' pads are made side by side on
     ``jobs`` workers (0: every available core).
 

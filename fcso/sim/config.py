@@ -9,10 +9,6 @@ from pydantic import ValidationError
 from ..config import DesignConfig, VerifyConfig, format_validation_error, read_toml
 from ..errors import ConfigError
 
-#: Candidates verified in the measure's order before one is delivered (the daemon's [verify] top_k and
-#: ``fcso design --verify``): the choice stops each at its first failed trial, so a few cost little more than one.
-DEFAULT_TOP_K = 3
-
 
 def load_verify_config(path: str | Path | None) -> VerifyConfig:
     """The ``[verify]`` table of a TOML file (defaults without a file or table).

@@ -11,12 +11,12 @@ import mujoco
 import numpy as np
 import trimesh
 
-from .. import __version__
-from ..design import DesignResult, flat_finger
 from ..finger import pad_to_finger
 from ..parallel import WorkerPool, resolve_jobs
+from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
 from ..report.models import DesignReport, GraspReport
+from ..version import __version__
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .diskcache import evict

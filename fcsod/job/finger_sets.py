@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 
-from fcso.output.layout import set_finger_path
+from fcso.layout import set_finger_path
 from fcso.report.models import FingerSetsReport
 from fcso.sets import SetsResult
 

@@ -27,10 +27,11 @@ import trimesh
 from pydantic import Field
 
 import fcso
-from fcso.config import CAPTURE_CONDITIONS, DesignConfig
-from fcso.output.layout import REPORT_JSON, set_finger_path
-from fcso.report.design import part_report
+from fcso.config import DesignConfig
+from fcso.layout import REPORT_JSON, set_finger_path
+from fcso.pipeline.report import part_report
 from fcso.report.models import GraspReport, PartReport, PickPart, ReportModel
+from fcso.verify_config import CAPTURE_CONDITIONS
 
 from .. import __version__
 from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMessage, PlanSet, job_key, utc_now

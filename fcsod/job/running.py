@@ -57,7 +57,7 @@ def run_job(task: JobTask, emit: Emit) -> None:
         recorder.flush()
         for step in job_steps(run):
             started = time.perf_counter()
-            step(run)
+            run.take(step(run))
             name, seconds = step.__name__.removeprefix("step_"), time.perf_counter() - started
             run.log("info", f"step {name} finished in {seconds:.2f} s", stage=name)
             emit(StepFinished(name, seconds))

@@ -1,6 +1,8 @@
 """The job's steps in order (:data:`STEPS`): inputs, loading, design, its record, build placement, output files.
 
-Each step takes the :class:`~fcsod.job.task.JobRun` and records what it made.
+Each step takes the :class:`~fcsod.job.task.JobRun` and records what it made; the first ones return it
+(:class:`~fcsod.job.task.JobInputs`, :class:`~fcsod.job.task.LoadedParts`, the finger sets), which the runner keeps in
+the run for the steps after them.
 """
 
 from __future__ import annotations
@@ -13,9 +15,9 @@ import numpy as np
 
 import fcso
 from fcso import DesignResult, MeshError, load_parts
+from fcso.layout import FINGER_STL, FINGERPAD_STL, set_folder
 from fcso.output.files import sets_output_files
-from fcso.output.layout import FINGER_STL, FINGERPAD_STL, set_folder
-from fcso.sets import design_sets
+from fcso.sets import SetsResult, design_sets
 
 from .. import __version__
 from ..bus.messages import (
@@ -51,46 +53,59 @@ from .cell_grasps import cell_grasps, verification_note
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
 from .reuse import step_add_to_library, step_reuse, step_reused_outputs
-from .task import BUILD_NAME, FINGER_SET, HELD_BUILD_NAME, PROGRESS_INTERVAL_S, JobFolderDeleted, JobRun
+from .task import (
+    BUILD_NAME,
+    FINGER_SET,
+    HELD_BUILD_NAME,
+    PROGRESS_INTERVAL_S,
+    JobFolderDeleted,
+    JobInputs,
+    JobRun,
+    LoadedParts,
+    StepResult,
+)
 from .verification import choose_by_verification, job_settings, write_chosen_verification
 
 #: Retained quality (E / E*) below which a finger set's part is flagged: a finger near zero quality for it.
 NEAR_ZERO_RETAINED = 0.05
 
 
-def step_inputs(run: JobRun) -> None:
+def step_inputs(run: JobRun) -> JobInputs:
     """Hash the inputs, read and validate the manifest, check the part files against the limits."""
     config = run.task.config
-    run.inputs = hash_inputs(run.folder, job_inputs(run.folder), config.limits.max_file_bytes)
-    run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=run.inputs))
+    files = hash_inputs(run.folder, job_inputs(run.folder), config.limits.max_file_bytes)
+    run.recorder.write(TOPIC_INPUTS, InputHashesRecord(job_id=run.task.job_id, files=files))
+    # the job's record holds what was read, as far as it went, even when a check fails
+    manifest_text, settings, build_settings, parts = None, None, None, []
     try:
-        run.manifest, run.manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
+        manifest, manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
         # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere. The design's
         # measure predicts the verification the job's [verify] sets up, under its conditions
-        run.verify_settings = job_settings(config.verify, run.manifest.verify)
-        verify = run.verify_settings.verify_config()
-        run.settings = run.manifest.design_config(config.design).updated(
+        verify_settings = job_settings(config.verify, manifest.verify)
+        verify = verify_settings.verify_config()
+        settings = manifest.design_config(config.design).updated(
             {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
         )
-        run.build_settings = run.manifest.build_config(config.build)
-        run.parts = check_parts(run.folder, run.manifest, config.limits)
+        build_settings = manifest.build_config(config.build)
+        parts = check_parts(run.folder, manifest, config.limits)
     finally:
         run.recorder.write(
             TOPIC_SPEC,
             JobSpecRecord(
                 job_id=run.task.job_id,
                 folder=run.task.folder,
-                manifest=run.manifest_text,
-                parts=[{**p.entry.model_dump(), "file": p.entry.file} for p in run.parts],
-                settings=(run.settings or config.design).model_dump(mode="json"),
-                build=(run.build_settings or config.build).model_dump(mode="json"),
+                manifest=manifest_text,
+                parts=[{**p.entry.model_dump(), "file": p.entry.file} for p in parts],
+                settings=(settings or config.design).model_dump(mode="json"),
+                build=(build_settings or config.build).model_dump(mode="json"),
                 fcsod_version=__version__,
                 fcso_version=fcso.__version__,
             ),
         )
+    return JobInputs(files, manifest, manifest_text, settings, verify_settings, build_settings, parts)
 
 
-def step_load(run: JobRun) -> None:
+def step_load(run: JobRun) -> LoadedParts:
     """Load and validate every part (closed volume, units, shells, face limit) and assemble the job's build.
 
     Parts come from :func:`fcso.load_parts`, the loader ``fcso design`` uses:
@@ -101,7 +116,8 @@ def step_load(run: JobRun) -> None:
     """
     max_faces = run.task.config.limits.max_faces
     items: list[BuildItem] = []
-    for part in run.parts:
+    distinct: list[fcso.Part] = []
+    for part in run.job_inputs.parts:
         loaded = load_parts(
             part.path,
             units=part.entry.units,
@@ -128,7 +144,7 @@ def step_load(run: JobRun) -> None:
                 )
                 # the pieces to pick (fcso counts a part's build items)
                 one.instances = [transform] * part.entry.quantity
-            run.loaded.append(one)
+            distinct.append(one)
             shells = f", {one.shell_note}" if one.shell_note else ""
             run.log(
                 "info",
@@ -137,19 +153,19 @@ def step_load(run: JobRun) -> None:
             )
             for warning in one.warnings:
                 run.log("warning", warning)
-    if len(run.loaded) > run.task.config.limits.max_parts:
+    if len(distinct) > run.task.config.limits.max_parts:
         raise MeshError(
             run.folder,
-            f"{len(run.loaded)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})",
+            f"{len(distinct)} distinct part meshes, more than limits.max_parts ({run.task.config.limits.max_parts})",
         )
     make_names_unique(items)
-    run.build = Build(items=items, source=str(run.folder))
     placed = sum(1 for item in items if item.transform is not None)
     run.log("info", f"build: {len(items)} part items, {placed} placed by the job, {len(items) - placed} to pack")
+    return LoadedParts(distinct, Build(items=items, source=str(run.folder)))
 
 
-def step_design(run: JobRun) -> None:
-    """Run fcso's design, logging progress per stage."""
+def step_design(run: JobRun) -> SetsResult:
+    """Run fcso's design of the job's finger sets (one or several), logging progress per stage."""
     last: dict[str, float] = {}
 
     def progress(stage: str, done: int, total: int, note: str = "") -> None:
@@ -159,15 +175,15 @@ def step_design(run: JobRun) -> None:
         last[stage] = now
         run.log("info", f"{stage} {done}/{total}" + (f": {note}" if note else ""), stage=stage, done=done, total=total)
 
-    run.sets = design_sets(run.loaded, run.settings, progress=progress)
-    job = run.sets.job_report or run.result.report
+    sets = design_sets(run.loaded, run.settings, progress=progress)
+    job = sets.job_report or sets.designs[0].report
     # what the design warns of (parts left out as ungraspable, files split into
     # several solids) travels with the job's done status
     run.warnings.extend(job.warnings)
-    for entry in run.sets.report.ungraspable if run.sets.report else run.result.report.ungraspable:
+    for entry in sets.report.ungraspable if sets.report else sets.designs[0].report.ungraspable:
         run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
-    if run.sets.report is not None:
-        for entry in run.sets.report.sets:
+    if sets.report is not None:
+        for entry in sets.report.sets:
             if entry.worst_retained < NEAR_ZERO_RETAINED:
                 note = (
                     f"finger set {entry.set} keeps {entry.worst_retained:.3f} of a part's quality (below "
@@ -176,14 +192,15 @@ def step_design(run: JobRun) -> None:
                 run.warnings.append(note)
                 run.log("warning", note)
         for line in (
-            run.sets.report.search.description,
+            sets.report.search.description,
             *(
                 f"set {s.set}: {', '.join(s.parts)} ({fcso.quality_words(s.quality, run.settings.quality.measure)}, "
                 f"worst retained {s.worst_retained:.3f})"
-                for s in run.sets.report.sets
+                for s in sets.report.sets
             ),
         ):
             run.log("info", f"finger sets: {line}")
+    return sets
 
 
 def step_choose_by_verification(run: JobRun) -> None:
@@ -441,7 +458,7 @@ def step_folder_kept(run: JobRun) -> None:
 
 
 #: The job's steps in order; each is logged and flushed to the record when it ends.
-STEPS: list[Callable[[JobRun], None]] = [
+STEPS: list[Callable[[JobRun], StepResult]] = [
     step_inputs,
     step_load,
     step_reuse,
@@ -455,10 +472,10 @@ STEPS: list[Callable[[JobRun], None]] = [
 ]
 
 #: The steps after :func:`step_reuse` of a job the finger library serves.
-REUSED_STEPS: list[Callable[[JobRun], None]] = [step_reused_outputs, step_folder_kept]
+REUSED_STEPS: list[Callable[[JobRun], StepResult]] = [step_reused_outputs, step_folder_kept]
 
 
-def job_steps(run: JobRun) -> Iterator[Callable[[JobRun], None]]:
+def job_steps(run: JobRun) -> Iterator[Callable[[JobRun], StepResult]]:
     """The job's steps: :data:`STEPS`, or :data:`REUSED_STEPS` once :func:`step_reuse` found every part served."""
     for step in STEPS:
         yield step

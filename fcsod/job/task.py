@@ -7,7 +7,7 @@ after every stage), then renames the folder to ``<output_root>/<job_id>/``.
 A failed job's folder holds ``job.mcap`` only. The worker never touches
 zenoh: the messages to publish go back to the daemon over a pipe, after they
 are in the record. The job runs as a list of steps (:mod:`fcsod.job.steps`);
-each takes the :class:`JobRun` and records what it made.
+each takes the :class:`JobRun`, records what it made and returns it or keeps it there.
 """
 
 from __future__ import annotations
@@ -153,10 +153,47 @@ def unfinished_verification_message(bus, job_id: str, state: str, error: str, fi
     return BusMessage.json_body(bus.prefix, bus.cell, topic, body)
 
 
+@dataclass(frozen=True)
+class JobInputs:
+    """What :func:`~fcsod.job.steps.step_inputs` makes of the job folder."""
+
+    #: every input file with its size and content hash
+    files: list[InputFile]
+    manifest: JobManifest
+    #: ``job.toml`` as written, None without one
+    manifest_text: str | None
+    #: the job's fcso settings: the daemon's, the manifest's overrides, the daemon's [compute] and the job's [verify]
+    settings: DesignConfig
+    #: the job's [verify] (its manifest's, else the daemon's)
+    verify_settings: VerifySettings
+    build_settings: BuildConfig
+    #: the part files, checked against the limits
+    parts: list[PartInput]
+
+
+@dataclass(frozen=True)
+class LoadedParts:
+    """What :func:`~fcsod.job.steps.step_load` makes of the part files."""
+
+    #: every distinct part, loaded and validated, with its pieces to pick
+    parts: list[fcso.Part]
+    #: the job's build: the part items, placed by the job or to pack (the finger copies join it when placed)
+    build: Build
+
+
+#: What a step may return: the runner keeps it in the :class:`JobRun` for the steps after it.
+StepResult = JobInputs | LoadedParts | SetsResult | None
+
+
 @dataclass
 class JobRun:
-    """The state of a running job that steps read and extend (``reuse``: part name -> how the finger library serves
-    it, :class:`~fcsod.job.fingers.ServedPart`, when it serves the whole job).
+    """A running job: what its steps share, and what each step made (``reuse``: part name -> how the finger library
+    serves it, :class:`~fcsod.job.fingers.ServedPart`, when it serves the whole job).
+
+    The first steps return what they made (:data:`StepResult`) and the runner
+    keeps it (:meth:`take`); the steps after them read it by name
+    (``run.settings``, ``run.loaded``, ...), which is empty (None, no items)
+    before the step that makes it has run.
     """
 
     task: JobTask
@@ -164,16 +201,8 @@ class JobRun:
     work_dir: Path
     recorder: Recorder
     emit: Emit
-    manifest: JobManifest | None = None
-    manifest_text: str | None = None
-    inputs: list[InputFile] = field(default_factory=list)
-    parts: list[PartInput] = field(default_factory=list)
-    settings: DesignConfig | None = None
-    #: the job's [verify] (its manifest's, else the daemon's), once its manifest is read
-    verify_settings: VerifySettings | None = None
-    build_settings: BuildConfig | None = None
-    loaded: list[fcso.Part] = field(default_factory=list)
-    build: Build = field(default_factory=Build)
+    job_inputs: JobInputs | None = None
+    loaded_parts: LoadedParts | None = None
     sets: SetsResult | None = None
     files: dict[str, bytes] = field(default_factory=dict)
     outgoing: list[BusMessage] = field(default_factory=list)
@@ -184,6 +213,40 @@ class JobRun:
     #: why the finger misses the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject)
     held: str | None = None
     reuse: dict | None = None
+
+    def take(self, made: StepResult) -> None:
+        """Keep what a step made for the steps after it."""
+        match made:
+            case JobInputs():
+                self.job_inputs = made
+            case LoadedParts():
+                self.loaded_parts = made
+            case SetsResult():
+                self.sets = made
+
+    @property
+    def manifest(self) -> JobManifest | None:
+        return self.job_inputs.manifest if self.job_inputs is not None else None
+
+    @property
+    def settings(self) -> DesignConfig | None:
+        return self.job_inputs.settings if self.job_inputs is not None else None
+
+    @property
+    def verify_settings(self) -> VerifySettings | None:
+        return self.job_inputs.verify_settings if self.job_inputs is not None else None
+
+    @property
+    def build_settings(self) -> BuildConfig | None:
+        return self.job_inputs.build_settings if self.job_inputs is not None else None
+
+    @property
+    def loaded(self) -> list[fcso.Part]:
+        return self.loaded_parts.parts if self.loaded_parts is not None else []
+
+    @property
+    def build(self) -> Build:
+        return self.loaded_parts.build if self.loaded_parts is not None else Build()
 
     @property
     def result(self) -> DesignResult:
@@ -273,12 +336,3 @@ def status_message(
         warnings=warnings or [],
     )
     return BusMessage.json_body(task.config.bus.prefix, task.config.bus.cell, "status", body)
-
-
-# ------------------------------------------------------------------------ steps
-
-
-# ------------------------------------------------------------------------ scene
-
-
-# ------------------------------------------------------------------------ running

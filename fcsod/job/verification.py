@@ -32,7 +32,7 @@ from pathlib import Path
 
 import trimesh
 
-from fcso.output.layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, VERIFICATION_JSON, set_folder
+from fcso.layout import FINGER_STL, FINGERPAD_STL, REPORT_HTML, REPORT_JSON, VERIFICATION_JSON, set_folder
 from fcso.output.read import read_report, read_stl, reload_parts
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top

@@ -19,7 +19,8 @@ import numpy as np
 import trimesh
 from lxml import etree
 
-from fcso.parts import MAX_3MF_UNCOMPRESSED_BYTES, read_3mf_items, read_mesh, unit_factor
+from fcso.parts import read_mesh, unit_factor
+from fcso.threemf import MAX_3MF_UNCOMPRESSED_BYTES, read_3mf_items
 
 from .models import parse_transform
 

@@ -22,12 +22,12 @@ from examples.sim_parts import (
     upright_grasp_settings,
 )
 from fcso.capture import pad_landscapes
-from fcso.design import finish_candidate, prepare
 from fcso.evaluate import printed_lead_in_deg
+from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
-from fcso.screen import ScreenGrid
+from fcso.pipeline import finish_candidate, prepare
 
 
 def _prepared(mesh, name: str, **sections):

@@ -10,17 +10,17 @@ import trimesh
 import fcso
 from examples.sim_parts import featured_cube, plain_box, two_ridge_block, upright_grasp_settings, zigzag_l_part
 from fcso.config import DesignConfig
-from fcso.design import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.errors import UnwritableSolidError
 from fcso.finger import parametric_finger
 from fcso.grasps import tcp_pose
 from fcso.output.files import write_outputs
 from fcso.parts import Part
+from fcso.pipeline import choose_candidate, choose_candidates, finish_candidate, finish_candidates, prepare, subset
 from fcso.sampler import GraspSample
 from tests.conftest import data_path, small_config
 
-#: The module fcso.design (the package's ``fcso.design`` is the function).
-design_module = importlib.import_module("fcso.design")
+#: The module that fuses the chosen candidates' fingers (fcso.pipeline's ``design`` is the function).
+design_module = importlib.import_module("fcso.pipeline.finish")
 TWO_PARTS = ("20mm-xyz-cube.stl", "solar_tracker.stl")
 
 

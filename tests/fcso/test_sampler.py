@@ -5,11 +5,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from examples.sim_parts import zigzag_l_part
 from fcso import load_part, stable_poses
+from fcso.closing_yaws import face_yaws, pocket_yaws
 from fcso.config import DesignConfig, FingerConfig, GripperConfig, SamplerConfig, load_config
 from fcso.finger import finger_plate, load_finger, parametric_finger
 from fcso.geometry import box, to_manifold, to_trimesh
-from fcso.sampler import REJECTION_REASONS, FingerPlate, face_yaws, feature_centres, pocket_yaws, sample_grasps
+from fcso.sampler import REJECTION_REASONS, FingerPlate, feature_centres, sample_grasps
 from tests.conftest import REPO, data_path
 
 PAD = dict(length_mm=10.0, width_mm=10.0, thickness_mm=4.0, penetration_mm=3.0, stride_mm=5.0, table_clearance_mm=1.0)
@@ -289,6 +291,8 @@ def test_closing_axes_into_the_pockets_of_the_outline_the_taken_yaws_miss():
     cylinder = to_trimesh(manifold3d.Manifold.cylinder(30.0, 15.0, circular_segments=96))
     for convex in (chamfered_block(), hexagon, cylinder):
         assert pocket_yaws(convex, [0.0, 90.0]) == []
+    # an L's inner corner is wider than any pad: no feature (the L-part's notches face the configured 90 degrees)
+    assert pocket_yaws(zigzag_l_part(), [0.0, 90.0]) == []
 
 
 def test_pads_that_would_meet_beside_a_thin_section_are_rejected():

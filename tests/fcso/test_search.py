@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fcso
-from fcso.design import prepare, screen_choice
+from fcso.pipeline import prepare, screen_choice
 from fcso.search import candidate_index, quality_upper_bound, rerank, search
 from tests.conftest import REPO, data_path, small_config
 

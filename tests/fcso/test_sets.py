@@ -18,11 +18,11 @@ import pytest
 
 import fcso
 from examples.sim_parts import holed_notched_cube
-from fcso.design import evaluate_exact, prepare, screen_choice
 from fcso.evaluate import screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.output.sets_page import pad_sizes_line, pick_plan_text
 from fcso.parts import Part
+from fcso.pipeline import evaluate_exact, prepare, screen_choice
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
 from fcso.sets.screening import quick_screen
 from tests.conftest import HANG_GUARD_S, REPO, small_config

@@ -8,8 +8,8 @@ finger, opposite tapers conflict.
 import numpy as np
 import pytest
 
-from fcso.design import prepare
 from fcso.parallel import WorkerPool
+from fcso.pipeline import prepare
 from fcso.sets import SetScreener, screening_pools, search_partition, solo_quality
 from fcso.sets.screening import solo_picks
 from tests.fcso.test_sets import NARROWING, NARROWING_BIG_PLATE, NARROWING_WIDER, WIDENING, config, knob_part

@@ -7,14 +7,15 @@ from __future__ import annotations
 import pytest
 
 import fcso
-from examples.sim_parts import plain_box, two_ridge_block, upright_grasp_settings
-from fcso.design import finish_candidate
+from examples.sim_parts import plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
 from fcso.finger import fuse
 from fcso.geometry import to_manifold
 from fcso.parts import Part
+from fcso.pipeline import finish_candidate
 from fcso.report.models import chosen_candidate
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
+from fcso.sim.verify import design_under_test, verify
 
 
 def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):
@@ -82,3 +83,18 @@ def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_pass
         assert chosen is result and chosen.report.finger.flat_pads
         assert [r.chosen for r in ranking] == [True] + [False] * (len(ranking) - 1)
         assert verification.choice.endswith("the design's flat pads are kept: only a carving that passes replaces them")
+
+
+def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_tolerance(tmp_path):
+    # METHOD §9c: a rib's flanks are parallel to the closing axis; printed with MJF's 0.4 mm clearance a pocket with
+    # walls parallel to them would let the rib rest anywhere within +-0.4 mm, beyond the 0.3 mm success tolerance. The
+    # delivered pocket's walls are drafted (the lead-in, or a wider one of [print] lead_in_alternatives_deg), so
+    # closing slides a displaced rib down the drafted walls into one seat. The product's defaults only.
+    mesh = ribbed_block()
+    result = fcso.design([Part(name="rib", path="rib", mesh=mesh)], fcso.DesignConfig())
+    assert result.report.print_fit.clearance_mm == pytest.approx(0.4)
+    verification = verify(design_under_test(result), VerifyConfig(trials=3, stop_early=False, cache_dir=tmp_path))
+    for scenario in verification.scenarios:
+        assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
+        for trial in scenario.fcso.trials:
+            assert trial.held and trial.error_mm <= 0.3, (scenario.pose_index, trial)

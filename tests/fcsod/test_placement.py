@@ -20,7 +20,7 @@ from pydantic import ValidationError
 from fcso.config import DesignConfig
 from fcso.errors import MeshError
 from fcso.finger import parametric_finger
-from fcso.parts import check_zip_archive
+from fcso.threemf import check_zip_archive
 from fcsod.plate.build3mf import (
     Build,
     BuildItem,

@@ -8,8 +8,7 @@ from ..config import DesignConfig
 from ..evaluate import CandidateEvaluation, Scenario, ScenarioEvaluation, VersusFlat
 from ..grasps import tcp_pose
 from ..parts import Part
-from ..screen import ScreenedCandidate
-from .models import (
+from ..report.models import (
     CandidateReport,
     CaptureLandscapeReport,
     GraspReport,
@@ -22,6 +21,7 @@ from .models import (
     ScenarioReport,
     UngraspableReport,
 )
+from ..screen import ScreenedCandidate
 
 #: One sentence per rejection reason, for a scenario that reason emptied.
 _REJECTION_SENTENCES = {

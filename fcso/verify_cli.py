@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .config import DEFAULT_TOP_K, VerifyConfig, load_verify_config, with_print_density
-from .report import VerificationReport, reused_note, verdict_text
+from .verify_config import DEFAULT_TOP_K
+
+if TYPE_CHECKING:
+    from .sim.report import VerificationReport
+    from .verify_config import VerifyConfig
+
+# the parser's options need nothing of the simulation: each command imports it when it runs (fcso.cli)
 
 #: ``fcso verify`` and ``fcso design --verify``: the design was verified and written, and did not pass (1: a failed
 #: design, 2: bad input).
@@ -52,6 +58,8 @@ def add_design_options(parser) -> None:
 
 def settings(args) -> VerifyConfig:
     """The ``[verify]`` settings of ``--config`` with the command line's overrides."""
+    from .sim.config import load_verify_config
+
     config = load_verify_config(getattr(args, "config", None))
     overrides = {}
     if getattr(args, "trials", None) is not None:
@@ -65,8 +73,9 @@ def settings(args) -> VerifyConfig:
 
 def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
-    from ..output.verification_page import load_design, write_verification
-    from .verify import verify_delivered
+    from .output.verification_page import load_design, write_verification
+    from .sim.config import with_print_density
+    from .sim.verify import verify_delivered
 
     report, design = load_design(args.directory)
     config = with_print_density(settings(args), report.settings)
@@ -84,6 +93,8 @@ def run_verify(args, progress) -> int:
 def verdict_exit(verification: VerificationReport, quiet: bool) -> int:
     """Print the verdict as the last line (unless ``quiet``); the exit code: 0 when the design passed, else
     :data:`EXIT_NOT_VERIFIED`."""
+    from .sim.report import verdict_text
+
     if not quiet:
         print(verdict_text(verification))
     return 0 if verification.passed else EXIT_NOT_VERIFIED
@@ -92,6 +103,8 @@ def verdict_exit(verification: VerificationReport, quiet: bool) -> int:
 def summary(verification: VerificationReport) -> str:
     """The verdict, then a few lines per scenario: success rates, median errors and holding forces, designed against
     flat."""
+    from .sim.report import reused_note, verdict_text
+
     lines = [verdict_text(verification)]
     for s in verification.scenarios:
         stopped = "" if s.stopped_after_trials is None else f" (trials stopped after {s.stopped_after_trials})"
@@ -112,11 +125,12 @@ def summary(verification: VerificationReport) -> str:
 
 def verify_design_outputs(result, args, progress) -> int:
     """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
-    from ..output.design_page import rebuild_report
-    from ..output.files import write_outputs
-    from ..output.verification_page import ranking_html, write_verification
-    from .choose import verify_top
-    from .verify import design_under_test, verify_delivered
+    from .output.design_page import rebuild_report
+    from .output.files import write_outputs
+    from .output.verification_page import ranking_html, write_verification
+    from .sim.choose import verify_top
+    from .sim.config import with_print_density
+    from .sim.verify import design_under_test, verify_delivered
 
     config = with_print_density(settings(args), result.report.settings)
     try:
@@ -144,7 +158,7 @@ def verify_design_outputs(result, args, progress) -> int:
 
 def restore_section(directory: Path) -> None:
     """After ``fcso report`` rebuilt report.html: put the verification section back when verification.json exists."""
-    from ..output.verification_page import (
+    from .output.verification_page import (
         load_design,
         ranking_html,
         read_verification,

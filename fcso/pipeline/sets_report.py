@@ -7,9 +7,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..evaluate import Scenario
-from ..output.layout import set_finger_path, set_folder
-from .design import ungraspable_entry
-from .models import (
+from ..layout import set_finger_path, set_folder
+from ..report.models import (
     CandidateReport,
     FingerSetReport,
     FingerSetsReport,
@@ -23,9 +22,11 @@ from .models import (
     UngraspableReport,
     chosen_candidate,
 )
+from .report import ungraspable_entry
 
 if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
-    from ..sets.partition import PartitionAttempt, PartitionOutcome
+    from ..sets.judged import PartitionAttempt
+    from ..sets.partition import PartitionOutcome
 
 
 def zero_quality_report(scenario: Scenario) -> UngraspableReport:
@@ -96,33 +97,7 @@ def sets_report(
                 ],
             )
         )
-    scenarios = []
-    for m, scenario in enumerate(prepared.scenarios):
-        label, area = exact.get(m, (None, 0.0))
-        star = solos[m].exact
-        scenarios.append(
-            SetScenarioReport(
-                part=scenario.part.name,
-                pose_index=scenario.pose_index,
-                set=label,
-                quality=round(float(area), 6),
-                solo_quality=round(star, 6),
-                retained=_ratio(area, star) if star > 0 else None,
-                screened_retained=round(float(screened[m]), 6) if m in screened else None,
-            )
-        )
-    for entry in prepared.ungraspable:
-        scenarios.append(
-            SetScenarioReport(
-                part=entry.part,
-                pose_index=entry.pose_index,
-                set=None,
-                quality=0.0,
-                solo_quality=0.0,
-                retained=None,
-                screened_retained=None,
-            )
-        )
+    scenarios = _scenario_entries(prepared, solos, exact, screened)
     kept = [s.retained for s in scenarios if s.retained is not None]
     served = {prepared.parts[u].name for u in graspable}
     names = [prepared.parts[u].name for u in graspable]
@@ -170,6 +145,41 @@ def sets_report(
             attempts=[_attempt_report(a, outcome, names) for a in attempts],
         ),
     )
+
+
+def _scenario_entries(
+    prepared, solos, exact: dict[int, tuple[int, float]], screened: dict[int, float]
+) -> list[SetScenarioReport]:
+    """Every scenario's entry of the sets' report: its set, E, E* and what it retains (``exact``: scenario number ->
+    its set and E), then the ungraspable ones'."""
+    scenarios = []
+    for m, scenario in enumerate(prepared.scenarios):
+        label, area = exact.get(m, (None, 0.0))
+        star = solos[m].exact
+        scenarios.append(
+            SetScenarioReport(
+                part=scenario.part.name,
+                pose_index=scenario.pose_index,
+                set=label,
+                quality=round(float(area), 6),
+                solo_quality=round(star, 6),
+                retained=_ratio(area, star) if star > 0 else None,
+                screened_retained=round(float(screened[m]), 6) if m in screened else None,
+            )
+        )
+    for entry in prepared.ungraspable:
+        scenarios.append(
+            SetScenarioReport(
+                part=entry.part,
+                pose_index=entry.pose_index,
+                set=None,
+                quality=0.0,
+                solo_quality=0.0,
+                retained=None,
+                screened_retained=None,
+            )
+        )
+    return scenarios
 
 
 def _attempt_report(attempt: PartitionAttempt, outcome: PartitionOutcome, names: list[str]) -> PartitionAttemptReport:
