@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup lint browser test demo paper bench schema clean
+.PHONY: setup lint browser promtool test demo paper bench schema clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -27,10 +27,15 @@ browser:
 	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || \
 		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium)
 
+# the daemon's metrics are checked by Prometheus' own linter: promtool from Debian's prometheus, installed when missing
+promtool:
+	@command -v promtool >/dev/null || \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends prometheus)
+
 # pytest exits 5 when it collected no tests: that is a failure here. The test files run on every core
 # (at most 4 workers); a file's tests stay on one worker, which builds its module fixtures once.
 # The ten slowest tests are listed at the end: where a slow CI machine spends its time.
-test: setup lint browser
+test: setup lint browser promtool
 	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile --durations=10; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc

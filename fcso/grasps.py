@@ -55,3 +55,17 @@ def tcp_pose(sample: GraspSample, offset_plus_mm: float, offset_minus_mm: float,
         "pad_gap_mm": float(pad_gap),
         "closing_width_mm": float(pad_gap + 2.0 * thickness),
     }
+
+
+def approach_gripper_opening_mm(
+    closing_width_mm: float, pad_inset_mm: float, open_margin_mm: float, max_opening_mm: float
+) -> float:
+    """How wide the gripper must be open as it comes down over the part (between the flat fingers' contact faces), mm:
+    each pad's face ``open_margin_mm`` clear of the part's outermost point in its footprint, at most the full opening.
+
+    A carved pad's face lies ``pad_inset_mm`` (the penetration D) inside that point at the seated grasp, a flat pad's
+    at it (0): opened less, a pocket's rim lands on the part (docs/verification.md). ``closing_width_mm`` is the grasp's
+    (:class:`fcso.report.models.GraspReport`). The simulation opens each finger by the same amount
+    (:func:`fcso.sim.trials.approach_opening_mm`, the finger joint's q).
+    """
+    return min(max_opening_mm, closing_width_mm + 2.0 * (pad_inset_mm + open_margin_mm))

@@ -580,3 +580,25 @@ def load_part(
     if name is not None:
         part.name = name
     return part
+
+
+def units_hint(part: Part, units: str | float, scale_to_mm: float | None) -> str | None:
+    """A hint naming ``--units`` for a part read in millimetres whose size suggests another unit, or None.
+
+    Under 12 mm a part may have been drawn in inches (a 5-inch part read as 5 mm), under 1 mm in metres too (a
+    20 mm part is 0.79 inch, 0.02 m), under 0.05 mm in metres only: shown when a design of it fails, where the
+    size is the likely cause.
+    """
+    if scale_to_mm is not None or unit_factor(units) != 1.0:
+        return None
+    longest = float(max(part.mesh.extents))
+    choices = []
+    if 0.05 <= longest < 12.0:
+        choices.append("in inches, load it with --units inch (x25.4)")
+    if longest < 1.0:
+        choices.append("in metres, with --units m (x1000)")
+    if not choices:
+        return None
+    return f"{part.path}: its longest side is {longest:.3g} mm read in millimetres; if the file is " + "; if ".join(
+        choices
+    )

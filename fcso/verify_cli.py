@@ -13,6 +13,10 @@ if TYPE_CHECKING:
 
 # the parser's options need nothing of the simulation: each command imports it when it runs (fcso.cli)
 
+#: ``fcso verify`` and ``fcso design --verify``: the design was verified and written, and did not pass (1: a failed
+#: design, 2: bad input).
+EXIT_NOT_VERIFIED = 3
+
 
 def add_verify_command(commands) -> None:
     """The ``verify`` subcommand."""
@@ -71,26 +75,37 @@ def run_verify(args, progress) -> int:
     """``fcso verify DIR``: write verification.json and the report section; print a summary."""
     from .output.verification_page import load_design, write_verification
     from .sim.config import with_print_density
-    from .sim.verify import verify
+    from .sim.verify import verify_delivered
 
     report, design = load_design(args.directory)
     config = with_print_density(settings(args), report.settings)
     try:
-        verification = verify(design, config, progress)
+        verification = verify_delivered(design, config, progress)
     finally:
         progress.close()
     write_verification(args.directory, verification, design)
     if not args.quiet:
         print(summary(verification))
         print(f"wrote {args.directory}/verification.json and the verification section of report.html")
-    return 0
+    return verdict_exit(verification, args.quiet)
+
+
+def verdict_exit(verification: VerificationReport, quiet: bool) -> int:
+    """Print the verdict as the last line (unless ``quiet``); the exit code: 0 when the design passed, else
+    :data:`EXIT_NOT_VERIFIED`."""
+    from .sim.report import verdict_text
+
+    if not quiet:
+        print(verdict_text(verification))
+    return 0 if verification.passed else EXIT_NOT_VERIFIED
 
 
 def summary(verification: VerificationReport) -> str:
-    """A few lines per scenario: success rates, median errors and holding forces, designed against flat."""
-    from .sim.report import reused_note
+    """The verdict, then a few lines per scenario: success rates, median errors and holding forces, designed against
+    flat."""
+    from .sim.report import reused_note, verdict_text
 
-    lines = []
+    lines = [verdict_text(verification)]
     for s in verification.scenarios:
         stopped = "" if s.stopped_after_trials is None else f" (trials stopped after {s.stopped_after_trials})"
         lines.append(f"{s.part} pose {s.pose_index}:{stopped}")
@@ -115,7 +130,7 @@ def verify_design_outputs(result, args, progress) -> int:
     from .output.verification_page import ranking_html, write_verification
     from .sim.choose import verify_top
     from .sim.config import with_print_density
-    from .sim.verify import design_under_test, verify
+    from .sim.verify import design_under_test, verify_delivered
 
     config = with_print_density(settings(args), result.report.settings)
     try:
@@ -129,7 +144,7 @@ def verify_design_outputs(result, args, progress) -> int:
             extra = ranking_html(ranking, verification.choice)
         else:
             design = design_under_test(result)
-            verification, extra = verify(design, config, progress), ""
+            verification, extra = verify_delivered(design, config, progress), ""
     finally:
         progress.close()
     write_verification(args.out, verification, design, extra)
@@ -138,7 +153,7 @@ def verify_design_outputs(result, args, progress) -> int:
         if verification.choice:
             print(f"delivered {verification.choice}")
         print(f"wrote {args.out}/verification.json and the verification section of report.html")
-    return 0
+    return verdict_exit(verification, args.quiet)
 
 
 def restore_section(directory: Path) -> None:

@@ -67,11 +67,11 @@ class VerifyConfig(BaseModel):
     )
     stop_early: bool = Field(
         True,
-        description="Stop a scenario's precision trials once the designed finger can no longer reach "
-        "pass_success_rate (with 10 trials and rate 1.0: at its first failed trial), skip its holding test and the "
-        "design's further scenarios: the verdict is that of the full run, the trials that ran keep their results "
-        "(the flat control runs the same trials); false runs every trial of every scenario (success rates for "
-        "statistics)",
+        description="Choosing among candidates: stop a candidate's precision trials once it can no longer reach "
+        "pass_success_rate (with 10 trials and rate 1.0: at its first failed trial), skip its holding test and its "
+        "further scenarios: the verdict is that of the full run, the trials that ran keep their results (the flat "
+        "control runs the same trials). The delivered candidate always runs every trial and the holding test "
+        "(METHOD §12b); false runs every trial of every candidate too",
     )
     hold_tolerance_n: float = Field(
         1.0,

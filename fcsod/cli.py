@@ -1,8 +1,9 @@
-"""Command line: ``fcsod run | jobs | retry | cancel | audit | replay | subscribe | pki | journal | fingers | schema``.
+"""Command line: ``fcsod run | jobs | retry | cancel | approve | reject | audit | replay | subscribe | pki | journal |
+fingers | schema``.
 
 Exit codes: 0 success, 1 a check failed (audit, journal check), nothing
 arrived in time (subscribe) or the daemon refused or did not answer a
-request (retry, cancel), 2 bad input (config file, arguments, unreadable
+request (retry, cancel, approve, reject), 2 bad input (config file, arguments, unreadable
 record, corrupt journal, a zenoh session that cannot open, an unknown job).
 """
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -22,6 +24,9 @@ from .config import DaemonConfig, load_daemon_config
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
+
+#: How often ``fcsod subscribe`` tries again to reach endpoints that do not listen yet, s.
+SUBSCRIBE_RETRY_S = 0.5
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -36,11 +41,15 @@ def _parser() -> argparse.ArgumentParser:
 
     jobs = commands.add_parser("jobs", help="list the journal's jobs: id, folder, state, attempt, times, error")
     jobs.add_argument("--config", required=True, type=Path, help="daemon settings (state folder)")
-    jobs.add_argument("--state", action="append", choices=["queued", "running", "done", "failed"], help="only these")
+    jobs.add_argument(
+        "--state", action="append", choices=["queued", "running", "done", "failed", "held"], help="only these"
+    )
     jobs.add_argument("--json", action="store_true", help="one JSON object per line instead of a table")
     for name, text in (
         ("retry", "run a failed job again (the daemon keeps the failed run's record in <output>/attempts/)"),
         ("cancel", "end a queued or running job failed, with the reason cancelled"),
+        ("approve", "release a held job: place its finger into build.3mf and publish its grasps"),
+        ("reject", "end a held job failed: its finger is not delivered"),
     ):
         command = commands.add_parser(name, help=text)
         command.add_argument("job", metavar="JOB", help="job id, or a prefix of exactly one job id")
@@ -190,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "jobs":
             return _jobs(args)
-        if args.command in ("retry", "cancel"):
+        if args.command in ("retry", "cancel", "approve", "reject"):
             return _request(args)
         if args.command == "audit":
             return _audit(args)
@@ -208,6 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"fcsod: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader stopped reading (fcsod jobs --json | head): nothing more to say, and nothing left to flush
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -262,7 +275,8 @@ def _jobs(args: argparse.Namespace) -> int:
 
 
 def _request(args: argparse.Namespace) -> int:
-    """``fcsod retry | cancel JOB``: ask the daemon through the journal's request table and print its answer."""
+    """``fcsod retry | cancel | approve | reject JOB``: ask the daemon through the journal's request table and print
+    its answer."""
     from .bus.messages import utc_now
     from .service.journal import read_jobs, read_request, submit_request
 
@@ -311,6 +325,8 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    import zenoh
+
     from .bus.messages import BusMessage, BusRecord, jobs_key
     from .bus.session import open_session, put
     from .bus.signing import Signer, signing_key_path
@@ -325,7 +341,16 @@ def _replay(args: argparse.Namespace) -> int:
     messages = [BusMessage.from_record(BusRecord.model_validate(b)) for b in content.of(TOPIC_BUS)]
     if content.truncated:
         print(f"record is truncated ({content.problem}): replaying the {len(messages)} messages before the cut")
-    session = open_session(config.zenoh, listen=args.listen, connect=args.connect)
+    try:
+        session = open_session(config.zenoh, listen=args.listen, connect=args.connect)
+    except zenoh.ZError as exc:
+        where = "--listen/--connect" if args.listen or args.connect else f"{args.config}'s [zenoh] listen"
+        print(
+            f"fcsod: zenoh session cannot open on {where} ({str(exc).split(' at ')[0]}): with the daemon running, "
+            "replay on another endpoint: --listen tcp/127.0.0.1:<free port>, subscribers --connect there",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
     try:
         # samples put before a subscriber has been discovered are lost: wait for one
         probe = session.declare_publisher(jobs_key(config.bus.prefix, config.bus.cell))
@@ -364,12 +389,32 @@ def _subscribe(args: argparse.Namespace) -> int:
         connect = args.connect
     else:
         settings, connect = config.zenoh, subscriber_endpoints(config, args.connect)
-    try:
-        # the subscriber must not bind the daemon's listen endpoints
-        session = open_session(settings, listen=[], connect=connect)
-    except zenoh.ZError as exc:
-        print(f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    deadline = None if args.timeout is None else time.monotonic() + args.timeout
+    waiting = False
+    while True:
+        try:
+            # the subscriber must not bind the daemon's listen endpoints
+            session = open_session(settings, listen=[], connect=connect)
+            break
+        except zenoh.ZError as exc:
+            endpoints = ", ".join(connect or []) or f"the endpoints of {settings.config_file}"
+            if "Unable to connect" not in str(exc):
+                print(
+                    f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr
+                )
+                return EXIT_BAD_INPUT
+            if deadline is not None and time.monotonic() >= deadline:
+                print(
+                    f"fcsod: nothing listened on {endpoints} within {args.timeout:g} s: start the daemon (fcsod run) "
+                    "or --connect to where it listens",
+                    file=sys.stderr,
+                )
+                return EXIT_FAILED
+            if not waiting:
+                # a cell controller may start before the print server: wait for it, as zenoh peers do
+                print(f"waiting for {endpoints} to listen (is the daemon running?)", file=sys.stderr, flush=True)
+                waiting = True
+            time.sleep(SUBSCRIBE_RETRY_S)
     enough = Enough(finished_jobs=args.exit_after, verifications=args.exit_after_verifications)
     try:
         reached = subscribe(
@@ -380,7 +425,7 @@ def _subscribe(args: argparse.Namespace) -> int:
             enough,
             save=args.save,
             query=not args.no_query,
-            timeout_seconds=args.timeout,
+            timeout_seconds=None if deadline is None else max(0.0, deadline - time.monotonic()),
         )
     finally:
         session.close()

@@ -234,6 +234,17 @@ class VerifySettings(VerifyConfig):
         "is then failed; the job stays done); choosing among top_k candidates starts no further candidate after it, s",
     )
 
+    deliver: Literal["always", "verified", "better_than_flat"] = Field(
+        "always",
+        description="Which fingers a job delivers without an operator: always (the verdict travels with every "
+        "message, the cell decides: a farm without an operator keeps running); verified (the design passed); "
+        "better_than_flat (it passed, or beat flat pads: no fewer successful trials in any scenario, more in one, "
+        "holding as well). A job whose finger misses it ends held, its finger not placed into build.3mf and its "
+        "grasps not published, until fcsod approve or fcsod reject. With a policy other than always a job of one "
+        "finger is verified before it is placed (with top_k 0 too); jobs of several finger sets are verified after "
+        "they are done and are not held",
+    )
+
     def verify_config(self) -> VerifyConfig:
         """fcso's ``[verify]`` of these settings: every one of its keys that was given (unset ones keep fcso's
         defaults, so the part density still follows the design's print profile)."""

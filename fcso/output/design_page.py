@@ -25,7 +25,7 @@ from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
 from ..sampler import REJECTION_REASONS
 from .grasp_scenes import GraspScene, chosen_grasp_scenes, reseat_grasps
-from .html import closing_sections, html_page, image, key_value_table, text
+from .html import closing_sections, html_page, image, key_value_table, text, unverified_verdict
 from .read import read_design_folder
 from .sets_page import finger_sets_section, pad_sizes_section
 from .table import SCENARIO_GROUPS, quality_columns, scenario_labels
@@ -159,6 +159,7 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
             ),
         ),
     ]
+    reported = chosen_candidate(report).per_scenario
     for m, grasp in enumerate(inputs.grasps):
         jobs += [
             (
@@ -169,8 +170,8 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
             ),
             (
                 f"normals {m}",
-                lambda g=grasp, t=labels[m]: normals_picture(
-                    g.normals, g.rles, g.cap_centre, f"{t}: RLES = {g.rles:.4f}"
+                lambda g=grasp, t=labels[m], q=reported[m].rles: normals_picture(
+                    g.normals, g.rles, g.cap_centre, normals_title(t, q, g.rles)
                 ),
             ),
             (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
@@ -215,6 +216,8 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
     titles = _scenario_titles(report)
     body = [
         "<h1>FCSO design report</h1>",
+        # the verdict first (METHOD §12b): a verification puts its own here
+        unverified_verdict(),
         _summary(report, chosen),
         *viewer_section(viewer_scene(inputs, titles)),
         image(images["gripper"], "gripper", "both fingers closed on the first part"),
@@ -248,19 +251,12 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
         + "".join(image(images[f"pose {m}"], "pose", titles[m]) for m in range(len(inputs.grasps)))
         + "</div>",
         "<h2>Quality of all evaluated candidates</h2>",
-        "<p>Best first (Q, then mean E, then index); the chosen candidate is marked &#9733;. "
-        "RLES: radius of the largest empty sphere of contact normals (smaller is better); "
-        "A: contact area of both pads (mm&sup2;); E = A / RLES (mm&sup2;); Q = min E over scenarios.</p>",
-        quality_table_html(report, ranked_candidates(report), "sorted"),
+        f"<p>{quality_legend(report.settings.quality.measure)}</p>",
+        _folded(quality_table_html(report, ranked_candidates(report), "sorted"), len(report.candidates)),
     ]
     if len(report.scenarios) == 2:
         table = quality_table_html(report, report.candidates, "table-i")
-        body += [
-            "<h3>The paper's Table I layout (index order)</h3>",
-            f"<details><summary>{len(report.candidates)} candidates</summary>{table}</details>"
-            if len(report.candidates) > FOLDED_ROWS
-            else table,
-        ]
+        body += ["<h3>The paper's Table I layout (index order)</h3>", _folded(table, len(report.candidates))]
     body += pad_sizes_section(report.pad_sizes)
     if report.print_fit is not None:
         body += _print_fit_section(report)
@@ -274,6 +270,35 @@ def render_html(inputs: ReportInputs, progress: Progress | None = None, draw: Dr
         *closing_sections(report.warnings, report.settings.model_dump_json(indent=2), report.timings_s),
     ]
     return html_page(f"FCSO report: {', '.join(p.name for p in report.parts)}", body)
+
+
+def _folded(table: str, rows: int) -> str:
+    """A table of ``rows`` candidates, folded (``<details>``) beyond :data:`FOLDED_ROWS` rows."""
+    return f"<details><summary>{rows} candidates</summary>{table}</details>" if rows > FOLDED_ROWS else table
+
+
+def quality_legend(measure: str) -> str:
+    """The quality table's legend (HTML) under the design's ``[quality] measure``: each column named as what it is."""
+    common = (
+        "the chosen candidate is marked &#9733;. RLES: radius of the largest empty sphere of contact normals (chord, "
+        "smaller is better); A: contact area of both pads (mm&sup2;); E = A / RLES (mm&sup2;)"
+    )
+    if measure == "paper":
+        return f"Best first (Q, then mean E, then index); {common}; Q = min E over scenarios (the paper's measure)."
+    return (
+        f"Best first (the capture measure, then its mean, then index); {common}; quality: the capture measure "
+        "(METHOD §7b, no unit): the worst scenario's capture x min(1, holding / hold force) in bands of 1/20, then E "
+        "within a band. It is not min E."
+    )
+
+
+def normals_title(label: str, reported_rles: float, drawn_rles: float) -> str:
+    """The contact-normals picture's title: the RLES of report.json, and the drawn normals' own when they differ (the
+    page draws the printed pad's contacts, the report measures the design's)."""
+    title = f"{label}: RLES = {reported_rles:.4f}"
+    if abs(reported_rles - drawn_rles) > 5e-5:
+        title += f" (drawn contacts: {drawn_rles:.4f})"
+    return title
 
 
 def viewer_scene(inputs: ReportInputs, titles: list[str]) -> dict:
@@ -351,7 +376,10 @@ def _print_fit_section(report: DesignReport) -> list[str]:
         ("lead-in", f"{fit.lead_in_deg:g}°"),
         ("minimum wall", f"{fit.min_wall_mm:g} mm"),
         ("material density", f"{fit.density_g_cm3:g} g/cm³"),
-        ("thinnest pad wall", "none" if fit.thinnest_wall_mm is None else f"{fit.thinnest_wall_mm:.2f} mm"),
+        (
+            "thinnest free pad wall (printed, fused side excluded)",
+            "none" if fit.thinnest_wall_mm is None else f"{fit.thinnest_wall_mm:.2f} mm",
+        ),
     ]
     titles = _scenario_titles(report)
     header = (
@@ -406,8 +434,9 @@ def _summary(report: DesignReport, chosen) -> str:
         ),
         (
             "finger",
-            f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section "
-            f"{report.finger.min_pad_thickness_mm:.2f} mm, watertight: {report.finger.watertight}",
+            f"{report.finger.source}, {report.finger.volume_mm3:.0f} mm³, thinnest pad section behind the pocket "
+            f"(along the closing axis, to the fused back) {report.finger.min_pad_thickness_mm:.2f} mm, watertight: "
+            f"{report.finger.watertight}",
         ),
         ("fcso", report.fcso_version),
     ]

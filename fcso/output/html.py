@@ -27,6 +27,33 @@ def html_page(title: str, body: list[str]) -> str:
     )
 
 
+#: Markers around the verdict that opens a design's page (METHOD §12b), so a verification replaces it.
+VERDICT_BEGIN, VERDICT_END = "<!-- fcso verdict -->", "<!-- /fcso verdict -->"
+
+
+def unverified_verdict() -> str:
+    """The verdict block of a design not verified in simulation (``fcso verify`` replaces it)."""
+    return (
+        f'{VERDICT_BEGIN}<div class="verdict unverified"><b>Not verified in simulation.</b> '
+        "<code>fcso verify DIR</code> (or <code>fcso design --verify</code>) tests the finger against flat fingers: "
+        "designed k/10, flat k/10, the weakest hold.</div>"
+        f"{VERDICT_END}"
+    )
+
+
+def insert_verdict(page: str, verdict: str) -> str:
+    """``page`` with its verdict block replaced by ``verdict``, or ``verdict`` put first: after the page's heading, or
+    at the start of its body."""
+    if VERDICT_BEGIN in page and VERDICT_END in page:
+        head, _, rest = page.partition(VERDICT_BEGIN)
+        return head + verdict + rest.partition(VERDICT_END)[2]
+    for anchor in ("</h1>", "<body>"):
+        head, marker, tail = page.partition(anchor)
+        if marker:
+            return head + marker + "\n" + verdict + tail
+    return verdict + page
+
+
 #: The report pages' style sheet.
 STYLE = """
 body { font-family: sans-serif; max-width: 1240px; margin: 1em auto; color: #222; }
@@ -40,6 +67,10 @@ tr.chosen td { background: #ffe4a8; font-weight: bold; }
 #fcso-3d canvas { display: block; max-width: 100%; border: 1px solid #bbb; margin: 0.5em 0; cursor: grab; }
 #fcso-3d .controls { font-size: 0.9em; }
 pre { background: #f6f6f6; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
+.verdict { border: 2px solid #bbb; padding: 0.4em 0.8em; margin: 0.5em 0; }
+.verdict.passed { border-color: #2a8a3a; background: #eef8ef; }
+.verdict.failed { border-color: #c0392b; background: #fbeeee; }
+.verdict table { font-size: 1em; }
 """
 
 

@@ -16,10 +16,20 @@ from matplotlib.figure import Figure
 from ..geometry import transform_points
 from ..layout import REPORT_HTML, VERIFICATION_JSON, write_atomic
 from ..report.models import DesignReport
-from ..sim.report import RankedCandidate, ScenarioVerification, VerificationReport, reused_note
+from ..sim.report import (
+    RankedCandidate,
+    ScenarioVerification,
+    VerificationReport,
+    better_than_flat,
+    not_held,
+    reused_note,
+    verdict_text,
+    weakest_hold_n,
+)
 from ..sim.scene import pad_in_world
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
 from .decimate import decimate
+from .html import VERDICT_BEGIN, VERDICT_END, insert_verdict
 from .read import read_design_folder
 from .render import FINGER_COLOUR, PAD_COLOUR, PART_COLOUR, Layer, Panel, View, draw_layers, png_bytes
 
@@ -141,8 +151,48 @@ def _holding_text(value: float | None) -> str:
     return "held" if value is None else f"{value:.1f}"
 
 
+def verdict_html(verification: VerificationReport) -> str:
+    """The verdict that opens the page (METHOD §12b), between :data:`VERDICT_BEGIN` and :data:`VERDICT_END`: verified
+    or not, then per scenario the designed finger's successful trials against flat fingers' and the weakest hold."""
+    settings = verification.settings
+    state = "passed" if verification.passed else "failed"
+    flags = []
+    if not verification.passed:
+        flags.append("better than flat pads" if better_than_flat(verification) else "not better than flat pads")
+    if missed := not_held(verification):
+        flags.append("does NOT hold its part in " + ", ".join(missed))
+    rows = []
+    for s in verification.scenarios:
+        planned = max(settings.trials, len(s.fcso.trials))
+        weakest = weakest_hold_n(s.fcso, settings.hold_force_n)
+        hold = (
+            "not tested"
+            if weakest is None
+            else f"{weakest:g} N" + (" (held)" if weakest >= settings.hold_force_n else "")
+        )
+        rows.append(
+            f'<tr><td class="text">{html.escape(s.part)} pose {s.pose_index}</td>'
+            f"<td>designed {successes(s.fcso.trials)}/{planned}</td><td>flat {successes(s.flat.trials)}/{planned}</td>"
+            f'<td>{hold}</td><td class="text">{"passed" if s.passed else "did not pass"}</td></tr>'
+        )
+    rows += [
+        f'<tr><td class="text">{html.escape(name)}</td><td class="text" colspan="4">not simulated</td></tr>'
+        for name in verification.unverified_scenarios
+    ]
+    return (
+        f'{VERDICT_BEGIN}<div class="verdict {state}" title="{html.escape(verdict_text(verification))}">'
+        f"<b>{'Verified' if verification.passed else 'Not verified'} in simulation</b>"
+        + (f" ({html.escape('; '.join(flags))})" if flags else "")
+        + f": {settings.trials} trials per scenario against flat fingers, holding up to {settings.hold_force_n:g} N "
+        '(<a href="#verification">details below</a>)'
+        '<table><tr><th class="text">scenario</th><th>designed finger</th><th>flat fingers</th>'
+        '<th>weakest hold</th><th class="text">verdict</th></tr>' + "".join(rows) + f"</table></div>{VERDICT_END}"
+    )
+
+
 def section_html(verification: VerificationReport, pictures: dict[str, bytes], extra: str = "") -> str:
-    """The ``Verification in simulation`` section, between :data:`BEGIN` and :data:`END`.
+    """The verdict (:func:`verdict_html`) then the ``Verification in simulation`` section, between :data:`BEGIN` and
+    :data:`END` (:func:`insert_section` puts the verdict first on the page).
 
     Parameters
     ----------
@@ -155,8 +205,10 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
     settings = verification.settings
     verdict = "passed" if verification.passed else "did not pass"
     lines = [
+        verdict_html(verification),
         BEGIN,
-        "<h2>Verification in simulation (METHOD §12)</h2>",
+        '<h2 id="verification">Verification in simulation (METHOD §12)</h2>',
+        f"<p><b>{html.escape(verdict_text(verification))}</b></p>",
         f"<p>MuJoCo {html.escape(verification.mujoco_version)}: {settings.trials} trials per scenario with the part "
         f"placed "
         f"±{settings.position_error_mm:g} mm and ±{settings.yaw_error_deg:g}° off, closing at "
@@ -237,7 +289,12 @@ def _number(value: float | None) -> str:
 
 
 def insert_section(page: str, section: str) -> str:
-    """``page`` with the verification section replaced, or added before ``</body>``."""
+    """``page`` with the verification section replaced, or added before ``</body>``; the section's verdict block first
+    on the page (:func:`fcso.output.html.insert_verdict`)."""
+    if VERDICT_BEGIN in section:
+        before, _, rest = section.partition(VERDICT_BEGIN)
+        verdict, _, after = rest.partition(VERDICT_END)
+        page, section = insert_verdict(page, VERDICT_BEGIN + verdict + VERDICT_END), before + after
     if BEGIN in page and END in page:
         head, _, rest = page.partition(BEGIN)
         _, _, tail = rest.partition(END)

@@ -13,7 +13,7 @@ from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
-from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, successes, verify
+from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, successes, verify, verify_delivered
 
 
 def candidate_designs(
@@ -72,6 +72,9 @@ def verify_top(
     worst-scenario success count over the planned trials
     (:func:`worst_success_share`), then the measure's order; but flat pads the
     design chose (``report.finger.flat_pads``) are kept unless a carving passes.
+    The delivered candidate's verification is complete whatever stopped
+    early in the choice (:func:`fcso.sim.verify.verify_delivered`, METHOD
+    §12b): every trial and the holding test, designed and flat.
 
     Parameters
     ----------
@@ -130,6 +133,22 @@ def verify_top(
     ]
     rank, candidate, built, verification = chosen
     design = built[0]
+    if not verification.passed and config.stop_early:
+        # the delivered candidate is told in full (METHOD §12b): every trial and the holding test, designed and flat;
+        # the trials its choice ran come from the simulation cache
+        verification = verify_delivered(design, config, progress)
+        ranking = [
+            r.model_copy(
+                update={
+                    "success_rates": [s.fcso.success_rate for s in verification.scenarios],
+                    "flat_success_rates": [s.flat.success_rate for s in verification.scenarios],
+                    "trials_run": [len(s.fcso.trials) for s in verification.scenarios],
+                }
+            )
+            if r.chosen
+            else r
+            for r in ranking
+        ]
     why = choice_text(
         rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s, kept_flat
     )

@@ -166,3 +166,70 @@ def reused_note(verification: VerificationReport) -> str:
         f"{reused} grasps and holding pushes were read from the cache: simulated before with the same geometry, "
         "start, settings and code (--simulate-again runs them again)"
     )
+
+
+def weakest_hold_n(finger: FingerResult, hold_force_n: float) -> float | None:
+    """The smallest push at which the finger let its part slip, over the six directions, N: ``hold_force_n`` when it
+    held every push, 0 when it did not hold the part at all; None when the holding test did not run."""
+    if not finger.holding_n:
+        return None
+    return min(hold_force_n if force is None else force for force in finger.holding_n.values())
+
+
+def scenario_verdict(scenario: ScenarioVerification, settings: VerifyConfig) -> str:
+    """One scenario's figures as METHOD §12b words them: "designed 9/10, flat 1/10, holds 30 N"."""
+    planned = max(settings.trials, len(scenario.fcso.trials))
+    designed = sum(t.success for t in scenario.fcso.trials)
+    flat = sum(t.success for t in scenario.flat.trials)
+    weakest = weakest_hold_n(scenario.fcso, settings.hold_force_n)
+    if weakest is None:
+        hold = "holding not tested"
+    elif weakest <= 0.0:
+        hold = "does not hold the part"
+    elif weakest >= settings.hold_force_n:
+        hold = f"holds {weakest:g} N"
+    else:
+        hold = f"weakest hold {weakest:.1f} N"
+    ran = len(scenario.fcso.trials)
+    stopped = f" ({ran} of {planned} run)" if ran < planned else ""
+    return f"designed {designed}/{planned}, flat {flat}/{planned}{stopped}, {hold}"
+
+
+def verdict_text(verification: VerificationReport) -> str:
+    """The verification's verdict, what every report and message leads with (METHOD §12b): whether it passed, then
+    each scenario's figures, e.g. "verified: cube pose 0 designed 10/10, flat 1/10, holds 30 N"."""
+    head = "verified" if verification.passed else "not verified"
+    figures = [
+        f"{s.part} pose {s.pose_index} {scenario_verdict(s, verification.settings)}" for s in verification.scenarios
+    ]
+    figures += [f"{name} not simulated" for name in verification.unverified_scenarios]
+    if better_than_flat(verification) and not verification.passed:
+        head += ", better than flat pads"
+    if not_held(verification):
+        head += ", NOT HELD in " + ", ".join(not_held(verification))
+    return f"{head}: " + "; ".join(figures or ["no scenario"])
+
+
+def better_than_flat(verification: VerificationReport) -> bool:
+    """The designed finger does at least as well as flat pads in every scenario and better in one: no fewer successful
+    precision trials and holding as well (``holds_as_flat``), and more successful trials somewhere; a verification
+    that passed is better than flat (or as good, where flat pads pass too)."""
+    if verification.passed:
+        return True
+    if verification.unverified_scenarios or not verification.scenarios:
+        return False
+    counts = [
+        (sum(t.success for t in s.fcso.trials), sum(t.success for t in s.flat.trials)) for s in verification.scenarios
+    ]
+    holds = all(s.holds_as_flat is not False for s in verification.scenarios)
+    return holds and all(mine >= theirs for mine, theirs in counts) and any(mine > theirs for mine, theirs in counts)
+
+
+def not_held(verification: VerificationReport) -> list[str]:
+    """Scenarios whose designed grasp does not hold its part at all (0 N in every push direction): a finger near zero
+    quality, flagged wherever the verdict is shown."""
+    return [
+        f"{s.part} pose {s.pose_index}"
+        for s in verification.scenarios
+        if s.fcso.holding_n and all(force is not None and force <= 0.0 for force in s.fcso.holding_n.values())
+    ]

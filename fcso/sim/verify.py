@@ -195,6 +195,17 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     )
 
 
+def verify_delivered(
+    design: DesignUnderTest, config: VerifyConfig, progress: Progress | None = None
+) -> VerificationReport:
+    """The verification of a design that is delivered: every trial and the holding test of every scenario, designed
+    and flat (METHOD §12b), whatever ``config.stop_early`` says (the choice among candidates may stop; what is
+    delivered is told in full). Trials a stopped verification of the same design ran are read from the simulation
+    cache (``reuse_simulations``), so completing one costs only the trials it had not run.
+    """
+    return verify(design, config.model_copy(update={"stop_early": False}), progress)
+
+
 def fitted_pieces(
     case: GraspCase, design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[ConvexPieces, ConvexPieces, Scene]:

@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from fcso.report.models import CandidateReport, GraspReport, NotServedPart, PickPart, ScenarioQuality
 
 #: States of a job in the journal and on the bus.
-JobState = Literal["queued", "running", "done", "failed"]
+JobState = Literal["queued", "running", "done", "failed", "held"]
 
 
 def utc_now() -> str:
@@ -42,7 +42,11 @@ class StatusMessage(_Message):
     queued_at: str | None = None
     started_at: str | None = None
     finished_at: str | None = None
-    error: str | None = Field(None, description="Why the job failed, naming the file and the defect")
+    error: str | None = Field(
+        None,
+        description="Why the job failed, naming the file and the defect; held: why its finger waits for an operator "
+        "(fcsod approve / reject), its finger not placed into build.3mf and its grasps not published meanwhile",
+    )
     outputs: list[str] = Field(default_factory=list, description="Files in <output_root>/<job_id>/ when done")
     warnings: list[str] = Field(
         default_factory=list,
@@ -69,7 +73,10 @@ class QualityMessage(_Message):
         "'capture' (METHOD §7b)"
     )
     quality_measure: Literal["capture", "paper"] = Field(description="[quality] measure of the design")
-    mean_effective_area_mm2: float
+    mean_quality: float = Field(
+        description="Mean over the scenarios of the quality_measure (the first tie-break): E in mm² under 'paper', no "
+        "unit under 'capture'"
+    )
     pad_case: str = Field(description="good, bad or mixed")
     candidates_evaluated: int
     candidates_total: int
@@ -82,11 +89,31 @@ class QualityMessage(_Message):
     timings_s: dict[str, float]
 
 
+class CellGrasp(GraspReport):
+    """One grasp as the cell runs it: the design's grasp and what to check before the robot moves."""
+
+    job_id: str
+    finger_set: int = Field(description="The finger set making this grasp: mount it (1: a job of one finger)")
+    approach_opening_mm: float = Field(
+        description="Open the gripper at least this wide (between the flat fingers' contact faces) before it comes "
+        "down over the part: closing_width_mm + 2 (D + [verify] open_margin_mm), at most the gripper's full opening; "
+        "narrower, a pocket's rim lands on the part, mm"
+    )
+    verified: bool | None = Field(
+        description="The finger passed verification in simulation; false: it did not (see verdict); null: not "
+        "verified before this message (its verification message follows on .../verification, or verification is off)"
+    )
+    verdict: str = Field(
+        description='This grasp\'s scenario in the verification: "verified: designed 9/10, flat 1/10, holds 30 N", '
+        "or why there is none"
+    )
+
+
 class GraspsMessage(_Message):
     """``<prefix>/<cell>/jobs/<job_id>/grasps``: what the robot runs, per part and pose."""
 
     job_id: str
-    grasps: list[GraspReport]
+    grasps: list[CellGrasp]
 
 
 class MessageSignature(_Message):
@@ -396,6 +423,14 @@ class ScenarioOutcome(BaseModel):
 
     part: str
     pose_index: int
+    verdict: str = Field(
+        description='The scenario\'s figures, what to read first: "designed 9/10, flat 1/10, holds 30 N" (successful '
+        "precision trials of the designed and of flat fingers, the weakest push the designed grasp held, N)"
+    )
+    weakest_holding_n: float | None = Field(
+        description="The smallest push at which the designed grasp let the part slip, over the six directions, N "
+        "(hold_force_n: held every push; 0: does not hold the part at all; null: not tested)"
+    )
     success_rate: float = Field(
         description="Designed finger's precision trials within the success limits, of those run, 0..1"
     )
@@ -426,7 +461,22 @@ class VerificationMessage(BaseModel):
         "error); skipped: nothing to verify (see error)",
     )
     error: str | None = Field(None, description="Why the verification failed or was skipped")
+    verdict: str = Field(
+        "",
+        description='What to read first (METHOD §12b): "verified" or "not verified", then per scenario "designed '
+        '9/10, flat 1/10, holds 30 N"; empty unless state is done',
+    )
     passed: bool = Field(description="Every scenario reached the success threshold (false unless state is done)")
+    better_than_flat: bool = Field(
+        False,
+        description="The designed finger passed, or did at least as well as flat pads in every scenario (successful "
+        "trials, holding) and better in one (false unless state is done)",
+    )
+    not_held: list[str] = Field(
+        default_factory=list,
+        description="Scenarios ('<part> pose <index>') the designed grasp does not hold at all (0 N in every push "
+        "direction): a finger near zero quality; never move the robot on these",
+    )
     file: str | None = Field(description="The full result, relative to the job's output folder (none unless done)")
     finger_set: int | None = Field(
         None, description="The finger set verified when the job has several (key .../verification/<set>)"

@@ -1,14 +1,19 @@
 """ROS 2 topics over zenoh in rmw_zenoh's wire format, and the same messages in ``job.mcap``.
 
 A ROS 2 cell that runs ``rmw_zenoh_cpp`` sees the daemon as the node
-``<namespace>/<node_name>`` with four publishers, without any ROS 2
+``<namespace>/<node_name>`` with these publishers, without any ROS 2
 installation on the print server:
 
 - ``~/grasps``: ``geometry_msgs/msg/PoseArray``, one per job, part and resting
   pose; ``header.frame_id`` is the part's resting frame (:func:`rest_frame_id`),
   each pose the TCP of the chosen grasp in that frame, in metres;
-- ``~/plan``, ``~/quality``, ``~/status``: ``std_msgs/msg/String`` holding the
-  JSON body of the native ``placement``, ``quality`` and ``status`` keys.
+- ``~/grasp_details``: ``std_msgs/msg/String``, the native ``grasps`` body:
+  what a PoseArray cannot carry and the cell reads before it moves (the job
+  id, the approach opening, the finger set, the verdict);
+- ``~/placement``, ``~/plan``, ``~/quality``, ``~/status``, ``~/verification``:
+  ``std_msgs/msg/String`` holding the JSON body of the native key of the same
+  name (``plan``: the pick plan; ``placement``: the build placement;
+  ``verification``: every finger set's, ``verification/<set>`` natively).
 
 The wire format follows rmw_zenoh's sources (``liveliness_utils.cpp``,
 ``attachment_helpers.cpp``, ``rmw_publisher_data.cpp``, ``qos.cpp``) after
@@ -57,12 +62,15 @@ if TYPE_CHECKING:
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 STRING = "std_msgs/msg/String"
 
-#: Native job topic -> (ROS 2 topic relative to the node's private namespace, ROS 2 type).
-ROS2_TOPICS: dict[str, tuple[str, str]] = {
-    "grasps": ("grasps", POSE_ARRAY),
-    "placement": ("plan", STRING),
-    "quality": ("quality", STRING),
-    "status": ("status", STRING),
+#: Native job topic (its first level: ``verification/<set>`` is ``verification``) -> its ROS 2 topics: (topic relative
+#: to the node's private namespace, ROS 2 type); each ROS 2 topic has the meaning of the native key it is named after.
+ROS2_TOPICS: dict[str, list[tuple[str, str]]] = {
+    "grasps": [("grasps", POSE_ARRAY), ("grasp_details", STRING)],
+    "placement": [("placement", STRING)],
+    "plan": [("plan", STRING)],
+    "quality": [("quality", STRING)],
+    "status": [("status", STRING)],
+    "verification": [("verification", STRING)],
 }
 
 #: rmw_zenoh's stand-in for ``/`` inside one key chunk (names, namespaces, enclaves).
@@ -242,14 +250,17 @@ def ros2_messages(message: BusMessage, stamp_ns: int) -> list[tuple[str, str, by
     -------
     list of (relative topic, ROS 2 type, CDR bytes)
     """
-    if message.topic not in ROS2_TOPICS or message.encoding != ENCODING_JSON:
+    topic = message.topic.partition("/")[0]
+    if topic not in ROS2_TOPICS or message.encoding != ENCODING_JSON:
         return []
-    relative, type_name = ROS2_TOPICS[message.topic]
-    if type_name == POSE_ARRAY:
-        bodies = grasp_pose_arrays(json.loads(message.payload)["grasps"], stamp_ns)
-    else:
-        bodies = [TYPESTORE.types[STRING](data=message.payload.decode())]
-    return [(relative, type_name, bytes(TYPESTORE.serialize_cdr(body, type_name))) for body in bodies]
+    forms = []
+    for relative, type_name in ROS2_TOPICS[topic]:
+        if type_name == POSE_ARRAY:
+            bodies = grasp_pose_arrays(json.loads(message.payload)["grasps"], stamp_ns)
+        else:
+            bodies = [TYPESTORE.types[STRING](data=message.payload.decode())]
+        forms.extend((relative, type_name, bytes(TYPESTORE.serialize_cdr(body, type_name))) for body in bodies)
+    return forms
 
 
 def record_ros2(recorder: Recorder, message: BusMessage, config: Ros2Config, log_time_ns: int | None = None) -> None:
@@ -313,7 +324,8 @@ class Ros2Node:
         self.node_liveliness_key = liveliness_key_expr(config.domain_id, zid, self.NODE_ID, self.NODE_ID, config)
         self._node_token = session.liveliness().declare_token(self.node_liveliness_key)
         self.publishers: dict[str, _Publisher] = {}
-        for entity_id, (relative, type_name) in enumerate(ROS2_TOPICS.values(), start=self.NODE_ID + 1):
+        topics = [pair for pairs in ROS2_TOPICS.values() for pair in pairs]
+        for entity_id, (relative, type_name) in enumerate(topics, start=self.NODE_ID + 1):
             name = topic_name(config, relative)
             key_expr = topic_key_expr(config.domain_id, name, type_name)
             token_key = liveliness_key_expr(config.domain_id, zid, self.NODE_ID, entity_id, config, name, type_name)

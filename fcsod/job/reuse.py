@@ -38,6 +38,7 @@ from ..bus.messages import BusMessage, GraspsMessage, PlacementMessage, PlanMess
 from ..plate.build3mf import export_build_3mf
 from ..plate.placement import place_fingers
 from ..record.recorder import TOPIC_GRASPS, TOPIC_PLACEMENT
+from .cell_grasps import cell_grasps, verification_note
 from .fingers import (
     DeliveredFinger,
     DeliveredPart,
@@ -243,7 +244,15 @@ def step_reused_outputs(run: JobRun) -> None:
             finger_set=FINGER_SET,
         )
     }
-    grasps = [g for p in run.loaded for g in served[p.name].grasps]
+    # the reused finger's pads count as carved (D inside the outline): the wider, safe approach opening
+    grasps = cell_grasps(
+        job_id,
+        [g for p in run.loaded for g in served[p.name].grasps],
+        run.settings,
+        False,
+        None,
+        verification_note(run.verify_settings.enabled, False),
+    )
     run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
     min_retained = run.settings.finger_sets.min_retained
     # a part of a delivered geometry keeps what it kept in the delivering job; another, what it keeps on the finger

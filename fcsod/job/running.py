@@ -82,10 +82,12 @@ def run_job(task: JobTask, emit: Emit) -> None:
     if error is None:
         try:
             outputs = sorted([*run.files, JOB_RECORD_NAME])
-            final = run.status("done", finished_at=utc_now(), outputs=outputs, warnings=run.warnings)
+            state = "done" if run.held is None else "held"
+            final = run.status(state, finished_at=utc_now(), error=run.held, outputs=outputs, warnings=run.warnings)
             recorder.finish()
             _fsync_files(work_dir)
-            publish = [*run.outgoing, final, *run.after_done]
+            # a held job's design messages are in its record, published when an operator approves it
+            publish = [*(run.outgoing if run.held is None else []), final, *run.after_done]
         except OSError as exc:
             # the disk filled up at the very end: the job fails like any other write failure
             error = io_failure(exc, run.folder, output_root) or f"internal error: {type(exc).__name__}: {exc}"
@@ -98,7 +100,7 @@ def run_job(task: JobTask, emit: Emit) -> None:
     verification = verification_after_done(run) if error is None else None
     emit(
         JobFinished(
-            "done" if error is None else "failed",
+            ("done" if run.held is None else "held") if error is None else "failed",
             error,
             publish,
             None if verification is None else verification.time_limit_seconds,

@@ -49,12 +49,14 @@ from ..record.recorder import (
     TOPIC_SPEC,
 )
 from ..record.scene import base64_text, build_scene_update, scene_update
+from .cell_grasps import cell_grasps, verification_note
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
 from .reuse import step_add_to_library, step_reuse, step_reused_outputs
 from .task import (
     BUILD_NAME,
     FINGER_SET,
+    HELD_BUILD_NAME,
     PROGRESS_INTERVAL_S,
     JobFolderDeleted,
     JobInputs,
@@ -63,6 +65,9 @@ from .task import (
     StepResult,
 )
 from .verification import choose_by_verification, job_settings, write_chosen_verification
+
+#: Retained quality (E / E*) below which a finger set's part is flagged: a finger near zero quality for it.
+NEAR_ZERO_RETAINED = 0.05
 
 
 def step_inputs(run: JobRun) -> JobInputs:
@@ -76,7 +81,8 @@ def step_inputs(run: JobRun) -> JobInputs:
         manifest, manifest_text = read_manifest(run.folder, config.design, config.limits, config.build)
         # the daemon's [compute] says where every job runs; a manifest cannot send work elsewhere. The design's
         # measure predicts the verification the job's [verify] sets up, under its conditions
-        verify = job_settings(config.verify, manifest.verify).verify_config()
+        verify_settings = job_settings(config.verify, manifest.verify)
+        verify = verify_settings.verify_config()
         settings = manifest.design_config(config.design).updated(
             {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
         )
@@ -96,7 +102,7 @@ def step_inputs(run: JobRun) -> JobInputs:
                 fcso_version=fcso.__version__,
             ),
         )
-    return JobInputs(files, manifest, manifest_text, settings, build_settings, parts)
+    return JobInputs(files, manifest, manifest_text, settings, verify_settings, build_settings, parts)
 
 
 def step_load(run: JobRun) -> LoadedParts:
@@ -177,6 +183,14 @@ def step_design(run: JobRun) -> SetsResult:
     for entry in sets.report.ungraspable if sets.report else sets.designs[0].report.ungraspable:
         run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
     if sets.report is not None:
+        for entry in sets.report.sets:
+            if entry.worst_retained < NEAR_ZERO_RETAINED:
+                note = (
+                    f"finger set {entry.set} keeps {entry.worst_retained:.3f} of a part's quality (below "
+                    f"{NEAR_ZERO_RETAINED}): near zero, route its parts elsewhere or approve them knowingly"
+                )
+                run.warnings.append(note)
+                run.log("warning", note)
         for line in (
             sets.report.search.description,
             *(
@@ -212,9 +226,27 @@ def step_record_design(run: JobRun) -> None:
     run.files = {}
     for number, result in enumerate(designs, start=1):
         _record_one_design(run, result, number)
-    recorder.write(
-        TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=[g for d in designs for g in d.report.grasps])
-    )
+    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=job_grasps(run)))
+
+
+def job_grasps(run: JobRun) -> list:
+    """Every finger set's grasps as the cell runs them (:func:`fcsod.job.cell_grasps.cell_grasps`): the verdict of a
+    verification made before the job is done, or where it follows."""
+    several = run.sets.several
+    unverified = verification_note(run.verify_settings.enabled, several)
+    verification = run.verified[0] if run.verified is not None and not several else None
+    return [
+        grasp
+        for design in run.sets.designs
+        for grasp in cell_grasps(
+            run.task.job_id,
+            design.report.grasps,
+            design.report.settings,
+            design.report.finger.flat_pads,
+            verification,
+            unverified,
+        )
+    ]
 
 
 def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
@@ -279,13 +311,23 @@ def step_placement(run: JobRun) -> None:
     report = placements[-1].report
     for placed in placements:
         run.recorder.write(TOPIC_PLACEMENT, placed.report)
-    run.files[BUILD_NAME] = export_build_3mf(
-        placements[-1].items,
-        job_id=run.task.job_id,
-        application=f"fcsod {__version__}",
-        creation_date=utc_now(),
-        finger_set=FINGER_SET,
-    )
+
+    def build_3mf(items) -> bytes:
+        return export_build_3mf(
+            items,
+            job_id=run.task.job_id,
+            application=f"fcsod {__version__}",
+            creation_date=utc_now(),
+            finger_set=FINGER_SET,
+        )
+
+    if run.held is None:
+        run.files[BUILD_NAME] = build_3mf(placements[-1].items)
+    else:
+        # the finger waits for an operator: the build holds the parts, placed as they would be; the build with the
+        # finger placed waits beside it for fcsod approve
+        run.files[BUILD_NAME] = build_3mf([item for item in placements[-1].items if item.kind != "finger"])
+        run.files[HELD_BUILD_NAME] = build_3mf(placements[-1].items)
     # the job's report: the job report with several sets, the design's with one (the one verification may have chosen)
     job = run.sets.job_report if several else run.result.report
     placement = report.model_dump(mode="json")
@@ -349,7 +391,7 @@ def step_outputs(run: JobRun) -> None:
         ] or [report.placement["finger_copies_placed"]]
         plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files, copies)
     if run.sets.several:
-        grasps = [g for d in run.sets.designs for g in d.report.grasps]
+        grasps = job_grasps(run)
         run.outgoing = [
             BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=grasps)),
             *design_messages(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files),
@@ -364,7 +406,7 @@ def step_outputs(run: JobRun) -> None:
         job_id=run.task.job_id,
         quality=best.quality,
         quality_measure=run.settings.quality.measure,
-        mean_effective_area_mm2=best.mean_effective_area,
+        mean_quality=best.mean_effective_area,
         pad_case=best.pad_case,
         candidates_evaluated=report.search.evaluated,
         candidates_total=report.search.candidates_total,
@@ -392,7 +434,7 @@ def step_outputs(run: JobRun) -> None:
     run.outgoing = [
         BusMessage.json_body(bus.prefix, bus.cell, "quality", quality),
         BusMessage.json_body(
-            bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=report.grasps)
+            bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=job_grasps(run))
         ),
         BusMessage(
             run.task.job_id,

@@ -33,7 +33,7 @@ from ..bus.messages import (
     utc_now,
 )
 from ..bus.ros2 import record_ros2
-from ..config import DaemonConfig, JobManifest
+from ..config import DaemonConfig, JobManifest, VerifySettings
 from ..plate.build3mf import Build
 from ..plate.models import BuildConfig
 from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
@@ -45,6 +45,10 @@ PROGRESS_INTERVAL_S = 1.0
 
 #: The placed build in every done job's output folder.
 BUILD_NAME = "build.3mf"
+
+#: A held job's build with its finger placed, beside ``build.3mf`` (the parts alone): ``fcsod approve`` puts it in
+#: ``build.3mf``'s place.
+HELD_BUILD_NAME = "build.held.3mf"
 
 #: Number of the finger set of a job served by one finger, in ``build.3mf``.
 FINGER_SET = 1
@@ -160,6 +164,8 @@ class JobInputs:
     manifest_text: str | None
     #: the job's fcso settings: the daemon's, the manifest's overrides, the daemon's [compute] and the job's [verify]
     settings: DesignConfig
+    #: the job's [verify] (its manifest's, else the daemon's)
+    verify_settings: VerifySettings
     build_settings: BuildConfig
     #: the part files, checked against the limits
     parts: list[PartInput]
@@ -204,6 +210,8 @@ class JobRun:
     after_done: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     verified: tuple | None = None
+    #: why the finger misses the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject)
+    held: str | None = None
     reuse: dict | None = None
 
     def take(self, made: StepResult) -> None:
@@ -223,6 +231,10 @@ class JobRun:
     @property
     def settings(self) -> DesignConfig | None:
         return self.job_inputs.settings if self.job_inputs is not None else None
+
+    @property
+    def verify_settings(self) -> VerifySettings | None:
+        return self.job_inputs.verify_settings if self.job_inputs is not None else None
 
     @property
     def build_settings(self) -> BuildConfig | None:

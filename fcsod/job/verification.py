@@ -37,8 +37,16 @@ from fcso.output.read import read_report, read_stl, reload_parts
 from fcso.output.verification_page import load_design, ranking_html, write_verification
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig, with_print_density
-from fcso.sim.report import VerificationReport, reused_note
-from fcso.sim.verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify
+from fcso.sim.report import (
+    VerificationReport,
+    better_than_flat,
+    not_held,
+    reused_note,
+    scenario_verdict,
+    verdict_text,
+    weakest_hold_n,
+)
+from fcso.sim.verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify_delivered
 
 from ..bus.messages import BusMessage, ScenarioOutcome, VerificationMessage
 from ..config import VerifySettings
@@ -62,19 +70,47 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
 
 
 def choose_by_verification(run) -> None:
-    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes."""
+    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes;
+    with a delivery policy other than ``always`` (and ``top_k`` 0), verify the design's own choice. Either way the
+    job is held (``run.held``) when its finger misses the policy (:func:`held_reason`)."""
     settings = _settings(run)
-    if not settings.enabled or settings.top_k <= 0:
+    if not settings.enabled:
         return
-    chosen, verification, design, ranking = verify_top(
-        run.result,
-        settings.top_k,
-        _verify_config(settings, run.result.report.settings, run.task.config.state.dir),
-        _progress(run.log),
+    config = _verify_config(settings, run.result.report.settings, run.task.config.state.dir)
+    if settings.top_k > 0:
+        chosen, verification, design, ranking = verify_top(run.result, settings.top_k, config, _progress(run.log))
+        run.sets.designs[0] = chosen
+        run.verified = (verification, design, ranking_html(ranking, verification.choice))
+        run.log("info", f"verification delivered {verification.choice}")
+    elif settings.deliver != "always":
+        design = design_under_test(run.result)
+        verification = verify_delivered(design, config, _progress(run.log))
+        run.verified = (verification, design, "")
+    else:
+        return
+    run.log("info" if verification.passed else "warning", f"verification: {verdict_text(verification)}")
+    if missed := not_held(verification):
+        # a finger near zero quality: said on the done status too, whatever the policy
+        run.warnings.append(f"the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)")
+    run.held = held_reason(verification, settings.deliver)
+    if run.held is not None:
+        run.log("warning", f"held for an operator: {run.held}")
+
+
+def held_reason(verification: VerificationReport, deliver: str) -> str | None:
+    """Why a finger with this verification misses the delivery policy ``deliver`` (``[verify] deliver``), or None
+    when it is delivered."""
+    verdict = verdict_text(verification)
+    if deliver == "verified" and not verification.passed:
+        missed = "did not pass verification"
+    elif deliver == "better_than_flat" and not better_than_flat(verification):
+        missed = "is not better than flat pads"
+    else:
+        return None
+    return (
+        f"the finger {missed} ([verify] deliver = {deliver!r}; {verdict}): fcsod approve places and publishes it, "
+        "fcsod reject fails the job"
     )
-    run.sets.designs[0] = chosen
-    run.verified = (verification, design, ranking_html(ranking, verification.choice))
-    run.log("info", f"verification delivered {verification.choice}")
 
 
 #: The page of a verification made after the job is done: ``report.html`` stays as ``job.mcap`` vouches for it.
@@ -238,7 +274,8 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             name = "verification" if number is None else f"verification of finger set {number}"
             log("info", f"{name}: started")
             design, design_settings = build()
-            verification = verify(design, _verify_config(settings, design_settings, config.state.dir), _progress(log))
+            config_of_design = _verify_config(settings, design_settings, config.state.dir)
+            verification = verify_delivered(design, config_of_design, _progress(log))
             results.append((out, number, name, design, verification))
         messages = []
         for out, number, name, design, verification in results:
@@ -250,7 +287,9 @@ def _verify_designs(config, job_id: str, designs, settings: VerifySettings, emit
             log(
                 "info" if verification.passed else "warning",
                 f"{name}: design {'passed' if verification.passed else 'did not pass'} in "
-                f"{time.perf_counter() - started:.1f} s" + (f" ({reused})" if reused else ""),
+                f"{time.perf_counter() - started:.1f} s"
+                + (f" ({reused})" if reused else "")
+                + f": {verdict_text(verification)}",
             )
             for warning in verification.warnings:
                 log("warning", f"{name}: {warning}")
@@ -349,15 +388,21 @@ def _bus_message(
 
 def _message(job_id: str, verification: VerificationReport, file: str, finger_set: int | None) -> VerificationMessage:
     chosen = next((r.index for r in verification.ranking or [] if r.chosen), None)
+    settings = verification.settings
     return VerificationMessage(
         job_id=job_id,
+        verdict=verdict_text(verification),
         passed=verification.passed,
+        better_than_flat=better_than_flat(verification),
+        not_held=not_held(verification),
         file=file,
         finger_set=finger_set,
         scenarios=[
             ScenarioOutcome(
                 part=s.part,
                 pose_index=s.pose_index,
+                verdict=scenario_verdict(s, settings),
+                weakest_holding_n=weakest_hold_n(s.fcso, settings.hold_force_n),
                 success_rate=s.fcso.success_rate,
                 flat_success_rate=s.flat.success_rate,
                 trials_run=len(s.fcso.trials),

@@ -42,6 +42,8 @@ from ..job.events import (
 from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import WORKER_PRELOAD, worker_main
 from ..job.task import (
+    BUILD_NAME,
+    HELD_BUILD_NAME,
     SIGNAL_TIME_LIMIT,
     SIGNAL_WITHDRAWN,
     JobFolderDeleted,
@@ -65,6 +67,9 @@ TICK_S = 0.2
 
 #: The error of a job an operator cancelled (``fcsod cancel``).
 CANCELLED_ERROR = "cancelled by the operator (fcsod cancel)"
+
+#: The error of a held job an operator rejected (``fcsod reject``), before the reason it was held.
+REJECTED_ERROR = "rejected by the operator (fcsod reject)"
 
 #: Folder of ``[output] root`` where ``fcsod retry`` keeps the records of the failed runs it replaces:
 #: ``attempts/<job_id>/<n>/job.mcap``.
@@ -340,14 +345,15 @@ class Daemon:
         content = read_record(self.output_root / row.job_id / JOB_RECORD_NAME)
         states = content.of(TOPIC_STATE)
         final = states[-1] if states else {"state": "failed", "error": "record holds no state"}
-        state = final["state"] if final["state"] in ("done", "failed") else "failed"
+        state = final["state"] if final["state"] in ("done", "failed", "held") else "failed"
         self.journal.mark_running(row.job_id, row.started_at or utc_now())
         self.journal.mark_finished(row.job_id, state, final.get("at") or utc_now(), final.get("error"))
         log.info(
             "job output already complete: journal updated from its record", extra={"job_id": row.job_id, "state": state}
         )
-        for body in content.of(TOPIC_BUS):
-            self._publish(BusMessage.from_record(BusRecord.model_validate(body)))
+        recorded = [BusMessage.from_record(BusRecord.model_validate(body)) for body in content.of(TOPIC_BUS)]
+        for message in recorded if state != "held" else [m for m in recorded if not _withheld(m)]:
+            self._publish(message)
 
     # ---------------------------------------------------------------- workers
 
@@ -417,8 +423,6 @@ class Daemon:
             case Log(level, message, fields):
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             case Publish(message):
-                if message.topic.partition("/")[0] == "verification":
-                    self.metrics.verified(VerificationMessage.model_validate_json(message.payload).passed)
                 self._publish(message)
             case Scene(_, data, log_time_ns):
                 if self.foxglove is not None:
@@ -440,12 +444,17 @@ class Daemon:
         row = self.journal.mark_finished(
             slot.job.job_id, state, status.finished_at, error, verifying=verify_limit_s is not None
         )
-        self.metrics.jobs_finished.labels(state).inc()
+        self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else state).inc()
+        self.metrics.job_seconds.labels(state).observe(time.monotonic() - slot.started)
+        if state == "done":
+            self.metrics.last_success.set_to_current_time()
         slot.finished = True
         if verify_limit_s is not None:
             _start_verification_clock(slot, verify_limit_s)
         extra = {"job_id": row.job_id, "state": state, "seconds": round(time.monotonic() - slot.started, 3)}
-        if error:
+        if state == "held":
+            log.warning(f"job held: {error}", extra=extra)
+        elif error:
             log.error(f"job failed: {error}", extra=extra)
         else:
             log.info("job done", extra={**extra, "output": str(self.output_root / row.job_id)})
@@ -465,6 +474,7 @@ class Daemon:
             extra={"job_id": slot.job.job_id, "state": state},
         )
         for message in signed:
+            self._count_verification(message)
             self.bus.publish(message)
             if self.ros2 is not None:
                 self.ros2.publish(message)
@@ -504,7 +514,7 @@ class Daemon:
         work_dir = self.output_root / f".tmp-{row.job_id}"
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
-        self.metrics.jobs_finished.labels("failed").inc()
+        self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else "failed").inc()
         status = self._status(row)
         try:
             work_dir.mkdir(parents=True, exist_ok=True)
@@ -556,9 +566,10 @@ class Daemon:
     # ---------------------------------------------------------------- operator requests
 
     def _handle_requests(self) -> None:
-        """Act on the operators' ``fcsod retry | cancel`` requests and answer each in the journal."""
+        """Act on the operators' ``fcsod retry | cancel | approve | reject`` requests and answer each in the journal."""
+        actions = {"retry": self._retry, "cancel": self._cancel, "approve": self._approve, "reject": self._reject}
         for request in self.journal.pending_requests():
-            act = self._retry if request.action == "retry" else self._cancel
+            act = actions[request.action]
             accepted, outcome = act(request)
             self.journal.answer_request(request.request_id, utc_now(), accepted, outcome)
             log.info(
@@ -613,6 +624,42 @@ class Daemon:
             return False, f"{row.job_id} ended {ended.state} before it could be cancelled"
         return True, f"{row.job_id} cancelled while running"
 
+    def _approve(self, request: OperatorRequest) -> tuple[bool, str]:
+        """Release a held job: its build with the finger placed becomes ``build.3mf``, its design messages (in its
+        record) are published, and it is done."""
+        row = self.journal.get(request.job_id)
+        if row is None:
+            return False, f"{request.job_id}: no such job"
+        if row.state != "held":
+            return False, f"{row.job_id} is {row.state}: only a held job can be approved"
+        out = self.output_root / row.job_id
+        recorded = [
+            BusMessage.from_record(BusRecord.model_validate(body))
+            for body in read_record(out / JOB_RECORD_NAME).of(TOPIC_BUS)
+        ]
+        held = next(StatusMessage.model_validate_json(m.payload) for m in reversed(recorded) if m.topic == "status")
+        os.replace(out / HELD_BUILD_NAME, out / BUILD_NAME)
+        self.journal.mark_finished(row.job_id, "done", row.finished_at or utc_now(), None)
+        for message in recorded:
+            if _withheld(message):
+                self._publish(message)
+        outputs = [name for name in held.outputs if name != HELD_BUILD_NAME]
+        done = held.model_copy(update={"state": "done", "error": None, "outputs": outputs})
+        self._publish(BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", done))
+        return True, f"{row.job_id} approved: its finger is placed into {out / BUILD_NAME} and its grasps published"
+
+    def _reject(self, request: OperatorRequest) -> tuple[bool, str]:
+        """Fail a held job with :data:`REJECTED_ERROR` and why it was held; its build with the finger is removed."""
+        row = self.journal.get(request.job_id)
+        if row is None:
+            return False, f"{request.job_id}: no such job"
+        if row.state != "held":
+            return False, f"{row.job_id} is {row.state}: only a held job can be rejected"
+        (self.output_root / row.job_id / HELD_BUILD_NAME).unlink(missing_ok=True)
+        self.journal.mark_finished(row.job_id, "failed", utc_now(), f"{REJECTED_ERROR}: {row.error}")
+        self._publish(self._status(self.journal.get(row.job_id)))
+        return True, f"{row.job_id} rejected: it is failed, its finger is not delivered"
+
     # ---------------------------------------------------------------- bus
 
     def _status(self, row: JobRow) -> BusMessage:
@@ -628,8 +675,18 @@ class Daemon:
         )
         return BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", body)
 
+    def _count_verification(self, message: BusMessage) -> None:
+        """Count a verification's result, wherever it ran (the design step's choice, after the job, again after a
+        crash): a verification message that finished (``state`` done)."""
+        if message.topic.partition("/")[0] != "verification":
+            return
+        body = VerificationMessage.model_validate_json(message.payload)
+        if body.state == "done":
+            self.metrics.verified(body.passed)
+
     def _publish(self, message: BusMessage) -> None:
-        """Sign the message, keep it for the queryable, then publish it."""
+        """Sign the message, keep it for the queryable, count a verification, then publish it."""
+        self._count_verification(message)
         message = self.signer.sign(message)
         self.journal.store_message(stored_message(message, self.output_root))
         transports = [("zenoh", self.bus), ("ros2", self.ros2), ("foxglove", self.foxglove)]
@@ -644,3 +701,8 @@ class Daemon:
                     f"cannot publish on {transport}: {type(exc).__name__}: {exc}",
                     extra={"job_id": message.job_id, "key": message.key_expr},
                 )
+
+
+def _withheld(message: BusMessage) -> bool:
+    """A message of a held job that waits for ``fcsod approve``: everything but its status and its verification."""
+    return message.topic != "status" and message.topic.partition("/")[0] != "verification"

@@ -1,6 +1,8 @@
 """The job journal (SQLite): job states with times and errors, and the latest bus messages of each job.
 
-queued -> running -> done | failed. The job id is the primary key, so a
+queued -> running -> done | failed | held; held -> done (``fcsod approve``) | failed (``fcsod reject``): a job
+whose finger misses the delivery policy (``[verify] deliver``) waits, its finger not placed, for an operator.
+The job id is the primary key, so a
 job (same folder, same content) is recorded, and therefore run, once (an
 operator's ``fcsod retry`` runs a failed one again).
 A done job whose design is verified after it is done has a verification
@@ -12,7 +14,7 @@ Writes commit at once (WAL, synchronous=FULL): after ``kill -9`` the
 journal holds every state change made before it.
 
 Only the daemon writes the ``jobs`` and ``messages`` tables. The operator
-commands (``fcsod retry | cancel``) only add a row to ``requests``, each in
+commands (``fcsod retry | cancel | approve | reject``) only add a row to ``requests``, each in
 a transaction of its own (SQLite's locks order it with the daemon's): the
 daemon takes the requests in its loop, acts on them between its own state
 changes, and writes the outcome back into the row, which the command reads.
@@ -34,7 +36,7 @@ _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
     job_id      TEXT PRIMARY KEY,
     folder      TEXT NOT NULL,
-    state       TEXT NOT NULL CHECK (state IN ('queued', 'running', 'done', 'failed')),
+    state       TEXT NOT NULL CHECK (state IN ('queued', 'running', 'done', 'failed', 'held')),
     attempt     INTEGER NOT NULL DEFAULT 0,
     queued_at   TEXT,
     started_at  TEXT,
@@ -62,7 +64,7 @@ CREATE TABLE IF NOT EXISTS messages (
 CREATE TABLE IF NOT EXISTS requests (
     request_id   INTEGER PRIMARY KEY AUTOINCREMENT,
     job_id       TEXT NOT NULL,
-    action       TEXT NOT NULL CHECK (action IN ('retry', 'cancel')),
+    action       TEXT NOT NULL CHECK (action IN ('retry', 'cancel', 'approve', 'reject')),
     requested_at TEXT NOT NULL,
     handled_at   TEXT,
     accepted     INTEGER,
@@ -71,7 +73,36 @@ CREATE TABLE IF NOT EXISTS requests (
 """
 
 #: What an operator can ask of the daemon about a job.
-RequestAction = Literal["retry", "cancel"]
+RequestAction = Literal["retry", "cancel", "approve", "reject"]
+
+#: Tables whose CHECK constraints grew since a journal was made (the held state, approve and reject), with the value
+#: whose absence from the stored table's definition says it is the older one.
+_GROWN_CHECKS = {"jobs": "'held'", "requests": "'approve'"}
+
+
+def _upgrade(db: sqlite3.Connection) -> None:
+    """Rebuild the tables of a journal made before their CHECK constraints grew (:data:`_GROWN_CHECKS`), keeping
+    every row: SQLite cannot alter a constraint, so each is created anew, filled, and renamed into place (the other
+    tables' references name the table, which keeps its name)."""
+    stale = [
+        name
+        for name, value in _GROWN_CHECKS.items()
+        if value not in (db.execute("SELECT sql FROM sqlite_master WHERE name = ?", (name,)).fetchone() or [value])[0]
+    ]
+    if not stale:
+        return
+    statements = {part.split("(")[0].split()[-1]: part for part in _SCHEMA.split(";") if "CREATE TABLE" in part}
+    foreign_keys = db.execute("PRAGMA foreign_keys").fetchone()[0]
+    db.execute("PRAGMA foreign_keys = OFF")
+    try:
+        with db:
+            for name in stale:
+                db.execute(statements[name].replace(f"EXISTS {name} ", f"EXISTS {name}_upgraded "))
+                db.execute(f"INSERT INTO {name}_upgraded SELECT * FROM {name}")
+                db.execute(f"DROP TABLE {name}")
+                db.execute(f"ALTER TABLE {name}_upgraded RENAME TO {name}")
+    finally:
+        db.execute(f"PRAGMA foreign_keys = {int(foreign_keys)}")
 
 
 @dataclass
@@ -168,6 +199,7 @@ class Journal:
     def __init__(self, path: str | Path):
         self.path = Path(path)
         self._db = connect_database(self.path)
+        _upgrade(self._db)
         self._db.executescript(_SCHEMA)
 
     def close(self) -> None:

@@ -10,12 +10,24 @@ own, so they are the journal's state at that moment, every job it knows.
 
 from __future__ import annotations
 
+import platform
 from pathlib import Path
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, start_http_server
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    Info,
+    ProcessCollector,
+    start_http_server,
+)
 from prometheus_client.core import GaugeMetricFamily
 from prometheus_client.registry import Collector
 
+from fcso import __version__ as fcso_version
+
+from .. import __version__
 from ..config import MetricsConfig, split_host_port
 from .journal import read_jobs
 
@@ -23,7 +35,7 @@ from .journal import read_jobs
 STAGE_BUCKETS_S = (0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 120, 300, 600, 1800, float("inf"))
 
 #: The job states, each a label value of ``fcsod_jobs`` (a state without jobs reads 0, not absent).
-STATES = ("queued", "running", "done", "failed")
+STATES = ("queued", "running", "done", "failed", "held")
 
 
 class JournalCollector(Collector):
@@ -55,8 +67,28 @@ class DaemonMetrics:
     def __init__(self, journal_path: Path) -> None:
         self.registry = CollectorRegistry()
         self.registry.register(JournalCollector(journal_path))
+        # the daemon process's CPU, memory, open files and start time (process_*), as every exporter has them
+        ProcessCollector(registry=self.registry)
+        Info("fcsod_build", "The running daemon's versions", registry=self.registry).info(
+            {"version": __version__, "fcso_version": fcso_version, "python_version": platform.python_version()}
+        )
+        self.job_seconds = Histogram(
+            "fcsod_job_duration_seconds",
+            "Duration of a job from its start to its final state, by that state, s",
+            ["state"],
+            buckets=STAGE_BUCKETS_S,
+            registry=self.registry,
+        )
+        self.last_success = Gauge(
+            "fcsod_last_success_timestamp_seconds",
+            "When a job last ended done, s since the epoch (0 before any)",
+            registry=self.registry,
+        )
         self.jobs_finished = Counter(
-            "fcsod_jobs_finished", "Jobs this daemon run finished, by final state", ["state"], registry=self.registry
+            "fcsod_jobs_finished",
+            "Jobs this daemon run finished, by final state (done, failed, held, or cancelled by an operator)",
+            ["state"],
+            registry=self.registry,
         )
         self.stage_seconds = Histogram(
             "fcsod_stage_duration_seconds",
@@ -82,7 +114,8 @@ class DaemonMetrics:
             ["transport"],
             registry=self.registry,
         )
-        for state in ("done", "failed"):
+        # cancelled (fcsod cancel) apart from failed: an operator's decision, not a fault
+        for state in ("done", "failed", "held", "cancelled"):
             self.jobs_finished.labels(state)
         for result in ("passed", "failed"):
             self.verifications.labels(result)

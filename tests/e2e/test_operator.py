@@ -189,7 +189,9 @@ def test_cancel_retry_metrics_and_live_foxglove_on_a_running_daemon(tmp_path):
     assert during[("fcsod_queue_depth", ())] == 1
     assert after_cancel[("fcsod_jobs", (("state", "failed"),))] == 2
     assert after_cancel[("fcsod_queue_depth", ())] == 0
-    assert after_cancel[("fcsod_jobs_finished_total", (("state", "failed"),))] == 2
+    # cancelled is its own result, not a failure
+    assert after_cancel[("fcsod_jobs_finished_total", (("state", "cancelled"),))] == 2
+    assert after_cancel[("fcsod_jobs_finished_total", (("state", "failed"),))] == 0
     assert {k: v["error"] for k, v in cancelled.items()} == {running_id: CANCELLED_ERROR, queued_id: CANCELLED_ERROR}
     solar = read_record(out / running_id / "job.mcap")
     assert not solar.truncated

@@ -162,7 +162,14 @@ def test_attachments_carry_increasing_sequence_numbers_timestamps_and_the_publis
 
 def test_string_topics_hold_the_native_json_bodies(ros2_job):
     cell = ros2_job["cell"]
-    for native_topic, ros2_topic in (("quality", "quality"), ("placement", "plan"), ("status", "status")):
+    # each ROS 2 topic carries the native key of its name; the grasps' details beside their PoseArrays
+    for native_topic, ros2_topic in (
+        ("quality", "quality"),
+        ("placement", "placement"),
+        ("plan", "plan"),
+        ("status", "status"),
+        ("grasps", "grasp_details"),
+    ):
         ros2 = _samples(cell, "ros2", f"/cell1/fcsod/{ros2_topic}/")
         assert ros2 and {v["key_expr"] for v in ros2} == {
             f"{DOMAIN}/cell1/fcsod/{ros2_topic}/std_msgs::msg::dds_::String_/{STRING_HASH}"
@@ -172,6 +179,12 @@ def test_string_topics_hold_the_native_json_bodies(ros2_job):
             json.loads(TYPESTORE.deserialize_cdr(bytes.fromhex(v["payload"]), "std_msgs/msg/String").data) for v in ros2
         ]
         assert bodies == [json.loads(bytes.fromhex(v["payload"])) for v in native]
+        if native_topic == "grasps":
+            # what the cell reads before the robot moves: the job, the finger set, the approach opening, the verdict
+            for grasp in bodies[0]["grasps"]:
+                assert grasp["job_id"] == ros2_job["job_id"] and grasp["finger_set"] == 1
+                assert grasp["approach_opening_mm"] > grasp["closing_width_mm"]
+                assert grasp["verified"] is None and grasp["verdict"] == "not verified: [verify] enabled is false"
 
 
 def test_liveliness_tokens_show_the_node_and_its_publishers(ros2_job):
@@ -182,9 +195,12 @@ def test_liveliness_tokens_show_the_node_and_its_publishers(ros2_job):
     assert f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%cell1/fcsod" in tokens
     publishers = {
         "grasps": ("geometry_msgs::msg::dds_::PoseArray_", POSE_ARRAY_HASH),
+        "grasp_details": ("std_msgs::msg::dds_::String_", STRING_HASH),
+        "placement": ("std_msgs::msg::dds_::String_", STRING_HASH),
         "plan": ("std_msgs::msg::dds_::String_", STRING_HASH),
         "quality": ("std_msgs::msg::dds_::String_", STRING_HASH),
         "status": ("std_msgs::msg::dds_::String_", STRING_HASH),
+        "verification": ("std_msgs::msg::dds_::String_", STRING_HASH),
     }
     pattern = re.compile(
         rf"^@ros2_lv/{DOMAIN}/{zid}/0/(\d+)/MP/%/%cell1/fcsod/%cell1%fcsod%(\w+)/([\w:]+)/(RIHS01_[0-9a-f]{{64}})/(.*)$"
@@ -228,7 +244,8 @@ def test_job_mcap_carries_the_ros2_messages_for_ros2_bag_play(ros2_job, capsys):
             store.register(get_types_from_msg(schema.data.decode(), schema.name))
             channels.setdefault(channel.topic, []).append(store.deserialize_cdr(message.data, schema.name))
             assert channel.metadata["topic_type_hash"] == TYPESTORE.hash_rihs01(schema.name)
-    assert set(channels) == {"/cell1/fcsod/grasps", "/cell1/fcsod/plan", "/cell1/fcsod/quality", "/cell1/fcsod/status"}
+    topics = ("grasps", "grasp_details", "placement", "plan", "quality", "status")
+    assert set(channels) == {f"/cell1/fcsod/{topic}" for topic in topics}
     assert [json.loads(m.data)["state"] for m in channels["/cell1/fcsod/status"]] == ["running", "done"]
     arrays = channels["/cell1/fcsod/grasps"]
     assert len(arrays) == len(report["grasps"])

@@ -6,9 +6,13 @@ simulated; a time limit publishes it as failed.
 from __future__ import annotations
 
 import json
+import re
 import signal
 import sqlite3
 import time
+import urllib.request
+
+import pytest
 
 from examples.sim_parts import ridged_block
 from fcsod.cli import main as fcsod_main
@@ -170,6 +174,12 @@ def test_time_limit_publishes_failed_and_leaves_nothing_and_top_k_delivers_a_ver
     assert [v["topic"] for v in lines][-2:] == ["status", "verification"]
     body = chosen_message["body"]
     assert body["state"] == "done" and body["passed"] and body["file"] == "verification.json"
+    # the verdict leads the message: designed against flat, every trial run, the weakest hold
+    scenario = body["scenarios"][0]
+    flat = round(scenario["flat_success_rate"] * 2)
+    assert scenario["verdict"].startswith(f"designed 2/2, flat {flat}/2, ")
+    assert body["verdict"] == f"verified: {scenario['part']} pose {scenario['pose_index']} {scenario['verdict']}"
+    assert body["better_than_flat"] and body["not_held"] == []
     assert body["choice"].startswith(f"candidate {body['chosen_candidate']} (rank 1 by the measure")
     assert "the first whose every scenario passed, after 1 of 2 verified" in body["choice"]
     assert {"verification.json", "verification.mcap", "report.html"} <= set(chosen_done["body"]["outputs"])
@@ -241,3 +251,85 @@ def test_every_finger_set_of_a_job_is_verified_into_its_folder_and_on_its_key(tm
             for b in read_record(folder / VERIFICATION_RECORD_NAME).of(TOPIC_BUS)
         )
     assert "verification" not in messages
+
+
+def _object_names(build_3mf) -> list[str]:
+    """The names of the objects of ``build.3mf``'s build items, read back from the file."""
+    import zipfile
+
+    from lxml import etree
+
+    with zipfile.ZipFile(build_3mf) as archive:
+        root = etree.fromstring(archive.read("3D/3dmodel.model"))
+    ns = {"m": root.nsmap[None]}
+    names = {o.get("id"): o.get("name") for o in root.iterfind(".//m:resources/m:object", ns)}
+    return [names[item.get("objectid")] for item in root.iterfind(".//m:build/m:item", ns)]
+
+
+def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_operator_approves_it(tmp_path):
+    from examples.sim_parts import two_ridge_block, upright_grasp_settings
+
+    port = free_port()
+    # the paper's Q puts the pad on a horizontal ridge, where a displaced part slides (tests/fcso/test_sim_choose.py)
+    metrics_port = free_port()
+    config = write_config(
+        tmp_path,
+        port,
+        verify="enabled = true",
+        design='[design.quality]\nmeasure = "paper"\n',
+        extra=f'[metrics]\nenabled = true\nlisten = "127.0.0.1:{metrics_port}"\n',
+    )
+    mesh = two_ridge_block()
+    part = tmp_path / "two-ridge.stl"
+    mesh.export(part)
+    settings = upright_grasp_settings(mesh)
+    manifest = (
+        '[[parts]]\nfile = "two-ridge.stl"\n\n'
+        f"[poses]\ncount = 1\nselect = {settings['poses']['select']}\n\n"
+        f"[sampler]\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
+        '[verify]\ntop_k = 0\ntrials = 2\ndeliver = "verified"\n'
+    )
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config)
+    try:
+        drop_job(tmp_path / "watch" / "ridges", {"job.toml": manifest, "two-ridge.stl": part})
+        held = subscriber.wait_for(lambda v: _is("status")(v) and v["body"]["state"] in ("held", "done", "failed"))
+        assert held["body"]["state"] == "held", held
+        job_id = held["job_id"]
+        verification = subscriber.wait_for(_is("verification", job_id))
+        out = tmp_path / "out" / job_id
+        held_names = _object_names(out / "build.3mf")
+        with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
+            journalled = db.execute("SELECT state FROM jobs").fetchall()
+        with urllib.request.urlopen(f"http://127.0.0.1:{metrics_port}/metrics", timeout=HANG_GUARD_S) as reply:
+            metrics = reply.read().decode()
+        early = [v["topic"] for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
+        assert fcsod_main(["approve", job_id[:12], "--config", str(config)]) == 0
+        done = subscriber.wait_for(lambda v: _is("status", job_id)(v) and v["body"]["state"] == "done")
+        grasps = subscriber.wait_for(_is("grasps", job_id))
+    finally:
+        subscriber.stop()
+        assert daemon.stop() == 0
+    assert "did not pass verification" in held["body"]["error"] and "fcsod approve" in held["body"]["error"]
+    assert not verification["body"]["passed"] and verification["body"]["verdict"].startswith("not verified: ")
+    assert journalled == [("held",)]
+    # the verification made inside the design step is counted, and the held job is a state of its own
+    assert 'fcsod_verifications_total{result="failed"} 1.0' in metrics
+    assert 'fcsod_jobs{state="held"} 1.0' in metrics and 'fcsod_jobs_finished_total{state="held"} 1.0' in metrics
+    # held: the build has the part, no finger; the finger's grasps and design are not published
+    assert held_names == ["two-ridge"]
+    assert not {"grasps", "design", "quality", "placement"} & set(early)
+    # approved: the finger is in build.3mf, its grasps published, the job done
+    assert done["body"]["error"] is None and "build.held.3mf" not in done["body"]["outputs"]
+    # each grasp says how far the gripper opens before it comes down, which finger, the verdict and the job
+    settings = json.loads((out / "report.json").read_text())["settings"]
+    for grasp in grasps["body"]["grasps"]:
+        opening = grasp["closing_width_mm"] + 2 * (settings["sampler"]["penetration_mm"] + 5.0)
+        assert grasp["approach_opening_mm"] == pytest.approx(min(opening, settings["gripper"]["max_opening_mm"]))
+        assert grasp["job_id"] == job_id and grasp["finger_set"] == 1 and grasp["verified"] is False
+        assert re.match(r"not verified: designed [0-2]/2, flat [0-2]/2, ", grasp["verdict"]), grasp["verdict"]
+    names = _object_names(out / "build.3mf")
+    assert names[0] == "two-ridge" and names[1:] and all(n.startswith("fcso-finger") for n in names[1:])
+    assert not (out / "build.held.3mf").exists()
+    with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
+        assert db.execute("SELECT state, error FROM jobs").fetchall() == [("done", None)]

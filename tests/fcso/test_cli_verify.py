@@ -68,3 +68,42 @@ def test_verify_without_a_design_is_one_line(tmp_path):
     run = fcso("verify", tmp_path)
     assert run.returncode == 2
     assert len(run.stderr.strip().splitlines()) == 1 and "report.json" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_a_design_that_does_not_pass_is_told_in_full_and_exits_3(tmp_path):
+    from examples.sim_parts import two_ridge_block, upright_grasp_settings
+
+    mesh = two_ridge_block()
+    part = tmp_path / "two-ridge.stl"
+    mesh.export(part)
+    settings = upright_grasp_settings(mesh)
+    config = tmp_path / "design.toml"
+    # the paper's Q puts the pad on a horizontal ridge, where a displaced part slides (tests/fcso/test_sim_choose.py)
+    config.write_text(
+        f"[poses]\ncount = 1\nselect = {settings['poses']['select']}\n\n"
+        f"[sampler]\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
+        '[quality]\nmeasure = "paper"\n\n[verify]\ntrials = 3\n'
+    )
+    out = tmp_path / "out"
+    env = {**__import__("os").environ, "FCSO_CACHE_DIR": str(tmp_path / "cache")}
+    run = fcso("design", part, "--out", out, "--config", config, "--verify-top", "1", env=env)
+    assert run.returncode == 3, run.stderr
+    verification = VerificationReport.model_validate_json((out / "verification.json").read_text())
+    assert not verification.passed
+    # the choice stopped at the first failed trial; what is delivered ran every trial and the holding test
+    scenario = verification.scenarios[0]
+    assert len(scenario.fcso.trials) == len(scenario.flat.trials) == 3 and scenario.stopped_after_trials is None
+    assert len(scenario.fcso.holding_n) == len(scenario.flat.holding_n) == 6
+    assert verification.ranking[0].trials_run == [3]
+    designed = sum(t.success for t in scenario.fcso.trials)
+    flat = sum(t.success for t in scenario.flat.trials)
+    last = run.stdout.strip().splitlines()[-1]
+    assert last.startswith("not verified: two-ridge pose ") and f"designed {designed}/3, flat {flat}/3" in last
+    # the verification's summary leads with the same verdict
+    lines = run.stdout.splitlines()
+    assert lines.count(last) == 2 and lines[lines.index(last) + 1] == "two-ridge pose 4:".replace("4", last.split()[4])
+
+    # fcso verify runs every trial too (every one read from the cache) and exits 3 as well
+    run = fcso("verify", out, "--config", config, env=env)
+    assert run.returncode == 3, run.stderr
+    assert run.stdout.strip().splitlines()[-1] == last

@@ -200,6 +200,17 @@ def test_two_part_report_from_the_command_line(two_part_run):
     assert "report.html" in stdout and "* = chosen" in stdout
 
 
+def test_the_page_names_each_measure_as_what_it_is(two_part_run):
+    _, out, _, _ = two_part_run
+    page = (out / "report.html").read_text()
+    assert _report(out).settings.quality.measure == "capture"
+    # the capture measure is not Q = min E; the pad's section and its printed wall are told apart
+    assert "Q = min E" not in page and "quality: the capture measure" in page and "It is not min E" in page
+    assert "thinnest pad section behind the pocket" in page
+    # not verified: the page opens by saying so, before the 3D view
+    assert page.index("Not verified in simulation") < page.index('id="fcso-3d"')
+
+
 def test_fcso_report_rebuilds_the_page(bunny_dir, tmp_path, capsys):
     out = tmp_path / "copy"
     shutil.copytree(bunny_dir, out)
@@ -329,3 +340,87 @@ def test_3d_view_renders_offline_in_headless_chromium(bunny_dir, tmp_path):
     assert drawn.mean() > 0.03, "the canvas is blank"
     blue = (canvas[..., 2] > canvas[..., 0] + 30) & drawn
     assert blue.sum() > 500, "no finger drawn"
+
+
+#: Appended to a copy of a page: once it has loaded, write where each text matching "designed k/n" or "flat k/n"
+#: first appears (its box in CSS pixels from the page's top) into a <pre id="probe"> that --dump-dom prints.
+FIRST_SCREEN_PROBE = """
+<script>
+window.addEventListener("load", () => {
+  const found = {};
+  const walker = document.createTreeWalker(document.body, NodeFilter.SHOW_TEXT);
+  for (let node = walker.nextNode(); node; node = walker.nextNode()) {
+    for (const match of node.data.matchAll(/(designed|flat) \\d+\\/\\d+/g)) {
+      if (match[0] in found) continue;
+      const range = document.createRange();
+      range.setStart(node, match.index);
+      range.setEnd(node, match.index + match[0].length);
+      const box = range.getBoundingClientRect();
+      if (box.height > 0) found[match[0]] = box.bottom + window.scrollY;
+    }
+  }
+  const probe = document.createElement("pre");
+  probe.id = "probe";
+  probe.textContent = JSON.stringify(found);
+  document.body.appendChild(probe);
+});
+</script>
+"""
+
+
+@pytest.fixture(scope="module")
+def verified_dir(tmp_path_factory) -> Path:
+    """``fcso design --verify-top 1`` on the ridged block, two trials per scenario."""
+    from examples.sim_parts import ridged_block
+
+    folder = tmp_path_factory.mktemp("verified")
+    part = folder / "ridged.stl"
+    ridged_block().export(part)
+    config = folder / "design.toml"
+    config.write_text(
+        '[poses]\ncount = 1\nselect = "most_probable"\n\n[sampler]\nyaw_deg = [0]\nface_yaws = false\n\n'
+        f'[verify]\ntrials = 2\ncache_dir = "{folder / "cache"}"\n'
+    )
+    out = folder / "out"
+    code = main(["design", str(part), "--out", str(out), "--config", str(config), "--verify-top", "1", "--quiet"])
+    assert code in (0, 3)
+    return out
+
+
+def test_the_first_screen_of_a_verified_report_is_its_verdict_in_headless_chromium(verified_dir, tmp_path):
+    """What a quality engineer sees first, in a real browser at 1280 x 800: designed k/n against flat k/n, as in
+    verification.json."""
+    import json
+
+    verification = json.loads((verified_dir / "verification.json").read_text())
+    page = tmp_path / "report.html"
+    page.write_text((verified_dir / "report.html").read_text().replace("</body>", FIRST_SCREEN_PROBE + "</body>"))
+    run = subprocess.run(
+        [
+            chromium(),
+            "--headless=new",
+            "--no-sandbox",
+            "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--proxy-server=http://127.0.0.1:9",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=1280,800",
+            "--virtual-time-budget=20000",
+            "--dump-dom",
+            page.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+    )
+    probe = re.search(r'<pre id="probe">(.*?)</pre>', run.stdout, re.S)
+    assert probe, run.stderr[-3000:]
+    found = json.loads(probe.group(1).replace("&quot;", '"'))
+    scenario = verification["scenarios"][0]
+    planned = verification["settings"]["trials"]
+    designed = f"designed {sum(t['success'] for t in scenario['fcso']['trials'])}/{planned}"
+    flat = f"flat {sum(t['success'] for t in scenario['flat']['trials'])}/{planned}"
+    # both figures, as verification.json has them, within the first screen
+    assert designed in found and flat in found, found
+    assert found[designed] <= 800 and found[flat] <= 800, found

@@ -177,6 +177,41 @@ def test_journal_runs_a_job_once_and_requeues_after_a_crash(tmp_path):
     assert [m.payload for m in stored_messages(tmp_path / "j.sqlite3")] == [b'{"v":2}']
 
 
+def test_a_journal_made_before_the_held_state_is_upgraded_keeping_its_rows(tmp_path):
+    import sqlite3
+
+    path = tmp_path / "j.sqlite3"
+    old_schema = (
+        "CREATE TABLE jobs (job_id TEXT PRIMARY KEY, folder TEXT NOT NULL, state TEXT NOT NULL CHECK (state IN "
+        "('queued', 'running', 'done', 'failed')), attempt INTEGER NOT NULL DEFAULT 0, queued_at TEXT, started_at "
+        "TEXT, finished_at TEXT, error TEXT);"
+        "CREATE TABLE verifications (job_id TEXT PRIMARY KEY REFERENCES jobs (job_id), state TEXT NOT NULL, attempt "
+        "INTEGER NOT NULL DEFAULT 1, started_at TEXT, finished_at TEXT, error TEXT);"
+        "CREATE TABLE requests (request_id INTEGER PRIMARY KEY AUTOINCREMENT, job_id TEXT NOT NULL, action TEXT NOT "
+        "NULL CHECK (action IN ('retry', 'cancel')), requested_at TEXT NOT NULL, handled_at TEXT, accepted INTEGER, "
+        "outcome TEXT);"
+        "INSERT INTO jobs VALUES ('a-1', '/w/a', 'done', 1, 't0', 't1', 't2', NULL);"
+        "INSERT INTO verifications VALUES ('a-1', 'done', 1, 't2', 't3', NULL);"
+    )
+    with sqlite3.connect(path) as db:
+        db.executescript(old_schema)
+    journal = Journal(path)
+    assert journal.get("a-1").state == "done" and journal.verification("a-1").state == "done"
+    journal.add("b-2", "/w/b", "t4")
+    journal.mark_running("b-2", "t5")
+    assert journal.mark_finished("b-2", "held", "t6", "misses the policy").state == "held"
+    from fcsod.service.journal import submit_request
+
+    journal.close()
+    assert submit_request(path, "b-2", "approve", "t7") == 1
+    with sqlite3.connect(path) as db:
+        # the verifications table still refers to the jobs table
+        assert (
+            "REFERENCES jobs" in db.execute("SELECT sql FROM sqlite_master WHERE name = 'verifications'").fetchone()[0]
+        )
+        assert db.execute("PRAGMA foreign_key_check").fetchall() == []
+
+
 def test_cut_off_record_is_read_up_to_the_cut_and_salvaged(tmp_path):
     path = tmp_path / "job.mcap"
     recorder = Recorder(path, "lz4", 1024)
