@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -175,3 +176,23 @@ def subscribe(
     except KeyboardInterrupt:
         pass
     return all_done.is_set()
+
+
+def nothing_listens(endpoints: list[str] | None) -> bool:
+    """Whether no socket accepts a connection at any of zenoh ``endpoints`` (``proto/host:port``).
+
+    A session that cannot open because nothing listens yet is worth waiting for; one refused by a listener (TLS
+    without a certificate of its CA, an expired one, plain TCP to a TLS port) is not. False when the endpoints are
+    not known (they are in a zenoh configuration file).
+    """
+    if not endpoints:
+        return False
+    for endpoint in endpoints:
+        address = endpoint.split("/", 1)[-1].split("#", 1)[0]
+        host, _, port = address.rpartition(":")
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=2.0):
+                return False
+        except (OSError, ValueError):
+            continue
+    return True

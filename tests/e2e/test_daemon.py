@@ -125,8 +125,12 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
                 else ("json", "jsonschema")
             )
             assert (channel.message_encoding, schemas[channel.schema_id].encoding) == expected, channel.topic
+        # ROS 2 topics named as the zenoh keys: ~/plan the pick plan, ~/placement the build placement, and what a
+        # PoseArray cannot carry (job id, approach opening, verdict) on ~/grasp_details
         assert {t for t in channels if t.startswith("/fcsod/")} == {
             "/fcsod/grasps",
+            "/fcsod/grasp_details",
+            "/fcsod/placement",
             "/fcsod/plan",
             "/fcsod/quality",
             "/fcsod/status",
