@@ -217,7 +217,8 @@ def test_ros2_topics_pass_the_access_control_unsigned_to_listed_clients_only(sec
     ]
     tokens = {v["key_expr"] for v in listed.json_lines() if v.get("event") == "token"}
     assert any(t.startswith(f"@ros2_lv/{ROS2_DOMAIN}/") and "/0/0/NN/%/%cell1/fcsod" in t for t in tokens), tokens
-    assert len([t for t in tokens if "/MP/" in t]) == 4, tokens
+    # a publisher per topic: status, grasps, grasp_details, quality, plan, placement, verification
+    assert len([t for t in tokens if "/MP/" in t]) == 7, tokens
     seen_by_outsider = [v for v in outsider.json_lines() if v.get("event") in ("sample", "token")]
     assert seen_by_outsider == [], "a certificate outside the access control read ROS 2 data or tokens"
 
