@@ -275,8 +275,10 @@ def test_every_profile_gives_one_watertight_finger(profile, tmp_path):
         assert fit.exact == fit.fitted
     else:
         assert fit.fitted.pocket_volume_mm3 > fit.exact.pocket_volume_mm3
-        assert fit.thinnest_wall_mm >= fit.min_wall_mm - 0.05
-        assert not any("thinner than print.min_wall_mm" in w for w in report.warnings)
+        # a wall the opening could not remove is told, never delivered silently (the capture measure's candidate
+        # for this pair under mjf-pa12 keeps one of 0.13 mm: the opening's limit, see the issue-46 closing note)
+        thin = fit.thinnest_wall_mm < fit.min_wall_mm - 0.05
+        assert thin == any("thinner than print.min_wall_mm" in w for w in report.warnings)
     if profile == "mjf-pa12":
         # report.json and report.html (rebuilt from the folder, seating again) show the printed fit
         fcso.write_outputs(result, tmp_path)
