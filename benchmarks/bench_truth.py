@@ -79,6 +79,7 @@ class Row:
 class SplitFigures:
     rows: list[Row] = field(default_factory=list)
     correlation: list[tuple[float, float, float]] = field(default_factory=list)
+    failed: list[str] = field(default_factory=list)
 
 
 def suite_jobs() -> list[Job]:
@@ -138,6 +139,11 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         result = fcso.design(parts, fcso.DesignConfig())
     except fcso.NoGraspError as error:
         print(f"{job.name:<34} no grasp: {error}", flush=True)
+        return
+    except fcso.GeometryError as error:
+        # a design that delivers no finger is an outcome of the method on this part, counted as such
+        print(f"{job.name:<34} design failed: {error}", flush=True)
+        figures.failed.append(job.name)
         return
     delivered, _, _, ranking = verify_top(result, args.top_k, choose)
     report = delivered.report
@@ -207,6 +213,8 @@ def summary(split: str, figures: SplitFigures, config: VerifyConfig) -> None:
     good = [r for r in caging if r.designed.success_rate >= 0.9]
     several = [r for r in caging if len(r.job.parts) > 1]
     print(f"\n== {split}: {len(rows)} scenarios of {len({r.job.name for r in rows})} jobs")
+    if figures.failed:
+        print(f"designs that delivered no finger: {len(figures.failed)}: " + ", ".join(figures.failed))
     print(
         f"caging scenarios (a caging part, flat <= 3/10): designed >= 9/10 in {len(good)} of {len(caging)} "
         f"({len(good) / max(len(caging), 1):.0%}; target 80 %); of them in shared-finger jobs "

@@ -65,7 +65,8 @@ class GeometryError(FcsoError):
 
 
 class UnwritableSolidError(GeometryError):
-    """A solid that is not one watertight body once written to STL (its corners rounded to float32)."""
+    """A fused finger that is not one watertight body: as fused (a pad cut apart by its pockets) or once written to
+    STL (its corners rounded to float32)."""
 
 
 class NoGraspError(FcsoError):

@@ -423,7 +423,9 @@ def fuse(finger: FlatFinger, pad: manifold3d.Manifold, sampler: SamplerConfig, o
         raise GeometryError(f"{finger.source}: finger union failed: {fused.status()}")
     bodies = len(fused.decompose())
     if bodies != 1:
-        raise GeometryError(
+        # a pad whose pockets cut it apart is as undeliverable as one that falls apart as written: the next
+        # candidate is tried (fcso.pipeline.finish)
+        raise UnwritableSolidError(
             f"{finger.source}: fused finger is not one body (bodies: {bodies}); "
             "check the finger's contact_origin_mm and contact_normal"
         )
