@@ -375,7 +375,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _subscribe(args: argparse.Namespace) -> int:
     import zenoh
 
-    from .bus.client import Enough, nothing_listens, subscribe, subscriber_endpoints
+    from .bus.client import Enough, configured_endpoints, nothing_listens, subscribe, subscriber_endpoints
     from .bus.session import open_session
     from .bus.signing import load_verify_key, verify_key_path
     from .config import ZenohConfig
@@ -398,7 +398,7 @@ def _subscribe(args: argparse.Namespace) -> int:
             break
         except zenoh.ZError as exc:
             endpoints = ", ".join(connect or []) or f"the endpoints of {settings.config_file}"
-            if "Unable to connect" not in str(exc) or not nothing_listens(connect):
+            if "Unable to connect" not in str(exc) or not nothing_listens(connect or configured_endpoints(settings)):
                 # something listens and refused the session (a certificate, an access rule): waiting will not help
                 print(
                     f"fcsod: {settings.config_file or args.config}: zenoh session cannot open: {exc}", file=sys.stderr

@@ -22,7 +22,7 @@ from pathlib import Path
 import zenoh
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
-from ..config import DaemonConfig
+from ..config import DaemonConfig, ZenohConfig
 from .messages import ENCODING_JSON, daemon_key, jobs_key
 from .signing import SignatureError, verify_message
 
@@ -196,3 +196,15 @@ def nothing_listens(endpoints: list[str] | None) -> bool:
         except (OSError, ValueError):
             continue
     return True
+
+
+def configured_endpoints(settings: ZenohConfig) -> list[str] | None:
+    """The ``connect`` endpoints of a zenoh configuration file (``[zenoh] config_file`` or ``--zenoh-config``), None
+    without a file or when it names none."""
+    if settings.config_file is None:
+        return None
+    try:
+        endpoints = json.loads(zenoh.Config.from_file(str(settings.config_file)).get_json("connect/endpoints"))
+    except (zenoh.ZError, ValueError):
+        return None
+    return [str(e) for e in endpoints] or None
