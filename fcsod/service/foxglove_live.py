@@ -1,9 +1,17 @@
 """The live Foxglove server (``[foxglove] enabled``): the scenes and statuses of jobs as they run, to the Foxglove app.
 
-foxglove-sdk's WebSocket server (subprotocol ``foxglove.sdk.v1``) in the
-daemon's process, with a context of its own so nothing else of the process
-logs into it. Channels, advertised from the start so a client can subscribe
-before a job runs:
+foxglove-sdk's WebSocket server in the daemon's process, with a context of
+its own so nothing else of the process logs into it, behind a front that
+speaks both subprotocols of the one Foxglove WebSocket protocol (v1): the
+SDK's ``foxglove.sdk.v1`` (the Foxglove app) and ``foxglove.websocket.v1``
+(the reference client ``@foxglove/ws-protocol``, Lichtblick, older Foxglove
+Studio). The SDK's server accepts only the first and answers the others
+HTTP 400, in every release, with no option to change it; the messages of the
+two are the same, so the front (``websockets``) accepts either on
+``[foxglove] listen`` and relays each client's frames, unchanged, to and from
+a connection of its own to the SDK's server on a loopback port of its own.
+Channels, advertised from the start so a client can subscribe before a job
+runs:
 
 - ``/scene``: ``foxglove.SceneUpdate`` (protobuf, the SDK's schema), the
   same bytes the job's worker recorded in ``job.mcap``;
@@ -16,9 +24,13 @@ Clients only watch: the server offers no services, parameters or publishing.
 from __future__ import annotations
 
 import logging
+import threading
 
 import foxglove
 from foxglove.messages import SceneUpdate
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+from websockets.sync.server import ServerConnection, serve
 
 from fcso.schema import schema_text
 
@@ -28,6 +40,9 @@ from ..record.recorder import TOPIC_SCENE
 
 #: The status channel of the live server.
 TOPIC_LIVE_STATUS = "/fcsod/status"
+
+#: The subprotocols the live server accepts, the preferred first: foxglove-sdk's, then the protocol's first name.
+SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 
 log = logging.getLogger("fcsod")
 
@@ -40,6 +55,18 @@ class SubscriptionLog:
 
     def on_unsubscribe(self, client, channel) -> None:
         log.info("Foxglove client unsubscribed", extra={"client_id": client.id, "topic": channel.topic})
+
+
+def _pump(source, sink) -> None:
+    """Send every frame of the WebSocket ``source`` on to ``sink`` until either closes, then close both."""
+    try:
+        for frame in source:
+            sink.send(frame)
+    except ConnectionClosed:
+        pass
+    finally:
+        source.close()
+        sink.close()
 
 
 class FoxgloveLive:
@@ -66,8 +93,20 @@ class FoxgloveLive:
             context=self.context,
         )
         self.server = foxglove.start_server(
-            name="fcsod", host=host, port=port, context=self.context, server_listener=SubscriptionLog()
+            name="fcsod", host="127.0.0.1", port=0, context=self.context, server_listener=SubscriptionLog()
         )
+        self.front = serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS), max_size=None, compression=None)
+        threading.Thread(target=self.front.serve_forever, name="foxglove-front", daemon=True).start()
+
+    def _relay(self, client: ServerConnection) -> None:
+        """One client's connection: its frames to its own connection to the SDK's server and back (a front thread)."""
+        with connect(
+            f"ws://127.0.0.1:{self.server.port}", subprotocols=[SUBPROTOCOLS[0]], max_size=None, compression=None
+        ) as sdk:
+            back = threading.Thread(target=_pump, args=(sdk, client), daemon=True)
+            back.start()
+            _pump(client, sdk)
+            back.join()
 
     def publish(self, message: BusMessage) -> None:
         """Send a status message on; other bus messages are not the live view's."""
@@ -79,4 +118,6 @@ class FoxgloveLive:
         self.scene.log(data, log_time=log_time_ns)
 
     def close(self) -> None:
+        """Stop the front (its clients' connections close), then the SDK's server."""
+        self.front.shutdown()
         self.server.stop()
