@@ -1,7 +1,7 @@
 // A client of the live Foxglove server built on Foxglove's reference implementation, @foxglove/ws-protocol's
 // FoxgloveClient (the one Lichtblick uses), over the ws package, offering its one subprotocol foxglove.websocket.v1.
 // Usage: node foxglove_ws_client.js URL TOPIC COUNT. It subscribes to TOPIC when advertised, prints one JSON line per
-// event (open, serverInfo, subscribed, message with its bytes in base64, error, close) and closes after COUNT messages.
+// event (open, serverInfo, advertised, subscribed, message with its bytes in base64, error, close) and closes after COUNT messages.
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const { WebSocket } = require("ws");
 
@@ -14,6 +14,7 @@ let received = 0;
 client.on("open", () => say({ event: "open" }));
 client.on("serverInfo", (info) => say({ event: "serverInfo", name: info.name }));
 client.on("advertise", (channels) => {
+  say({ event: "advertised", topics: channels.map((c) => c.topic) });
   for (const channel of channels.filter((c) => c.topic === topic)) {
     subscriptions.set(client.subscribe(channel.id), channel);
     say({ event: "subscribed", topic: channel.topic, schemaName: channel.schemaName, encoding: channel.encoding });

@@ -48,7 +48,7 @@ from ..record.recorder import (
     TOPIC_SAMPLES,
     TOPIC_SPEC,
 )
-from ..record.scene import base64_text, build_scene_update, scene_update
+from ..record.scene import base64_text, build_scene_update, build_transforms, design_transforms, scene_update
 from .cell_grasps import cell_grasps, verification_note
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
@@ -295,7 +295,10 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
             finger_set=number,
         ),
     )
-    run.scene(scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""))
+    run.scene(
+        scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""),
+        design_transforms(result, time.time_ns()),
+    )
 
 
 def step_placement(run: JobRun) -> None:
@@ -358,7 +361,10 @@ def step_placement(run: JobRun) -> None:
         run.sets.job_report = job.model_copy(update=update)
     else:
         run.result.report = job.model_copy(update=update)
-    run.scene(build_scene_update(placements[-1].items, report, run.build_settings))
+    run.scene(
+        build_scene_update(placements[-1].items, report, run.build_settings),
+        build_transforms(placements[-1].items, run.build_settings, time.time_ns()),
+    )
     bus = run.task.config.bus
     summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
     summary.update(

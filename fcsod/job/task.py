@@ -36,7 +36,7 @@ from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest, VerifySettings
 from ..plate.build3mf import Build
 from ..plate.models import BuildConfig
-from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
+from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, TOPIC_TRANSFORMS, Recorder
 from .events import Emit, Log, Scene
 from .inputs import PartInput
 
@@ -282,9 +282,13 @@ class JobRun:
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(Log(level, message, fields))
 
-    def scene(self, update) -> None:
-        """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene`` and send it to the daemon's live server."""
+    def scene(self, update, transforms=None) -> None:
+        """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene``, after the ``FrameTransforms`` it is drawn
+        in on ``/tf`` if given, and send them to the daemon's live server.
+        """
         now = time.time_ns()
+        if transforms is not None:
+            self.emit(Scene(TOPIC_TRANSFORMS, self.recorder.write_foxglove(TOPIC_TRANSFORMS, transforms, now), now))
         self.emit(Scene(TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
 
     def record_published(self, message: BusMessage) -> None:

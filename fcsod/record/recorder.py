@@ -58,13 +58,15 @@ TOPIC_DESIGN = "/design/finger"
 TOPIC_GRASPS = "/design/grasps"
 TOPIC_BUS = "/zenoh/published"
 TOPIC_SCENE = "/scene"
+#: The frame tree of the scene (``foxglove.FrameTransforms``, :mod:`fcsod.record.scene`).
+TOPIC_TRANSFORMS = "/tf"
 TOPIC_PLACEMENT = "/build/placement"
 #: Channels of verification.mcap.
 TOPIC_VERIFICATION = "/verification"
 TOPIC_VERIFICATION_SCENE = "/verification/scene"
 
-#: Channel -> model of its JSON messages (the Foxglove scenes, ``TOPIC_SCENE`` and ``TOPIC_VERIFICATION_SCENE``,
-#: are foxglove-sdk's protobuf messages: :meth:`Recorder.write_foxglove`).
+#: Channel -> model of its JSON messages (the Foxglove scenes and frames, ``TOPIC_SCENE``, ``TOPIC_TRANSFORMS`` and
+#: ``TOPIC_VERIFICATION_SCENE``, are foxglove-sdk's protobuf messages: :meth:`Recorder.write_foxglove`).
 CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_SPEC: JobSpecRecord,
     TOPIC_INPUTS: InputHashesRecord,
@@ -92,6 +94,7 @@ DESIGN_RECORDED = (
     TOPIC_GRASPS,
     TOPIC_OUTPUTS,
     TOPIC_SCENE,
+    TOPIC_TRANSFORMS,
     TOPIC_PLACEMENT,
 )
 

@@ -424,9 +424,9 @@ class Daemon:
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             case Publish(message):
                 self._publish(message)
-            case Scene(_, data, log_time_ns):
+            case Scene(topic, data, log_time_ns):
                 if self.foxglove is not None:
-                    self.foxglove.log_scene(data, log_time_ns)
+                    self.foxglove.log_scene(topic, data, log_time_ns)
             case StepFinished(name, seconds):
                 self.metrics.stage_seconds.labels(name).observe(seconds)
             case JobFinished():

@@ -15,8 +15,15 @@ runs:
 
 - ``/scene``: ``foxglove.SceneUpdate`` (protobuf, the SDK's schema), the
   same bytes the job's worker recorded in ``job.mcap``;
+- ``/tf``: ``foxglove.FrameTransforms``, the frames the scene is drawn in,
+  likewise;
 - ``/fcsod/status``: the zenoh status messages (JSON, fcsod's
-  ``StatusMessage`` schema), every state change of every job.
+  ``StatusMessage`` schema), every state change of every job;
+- ``/fcsod/plan`` and ``/fcsod/verification``: the zenoh ``plan`` and
+  ``verification[/<set>]`` messages (JSON, ``PlanMessage`` and
+  ``VerificationMessage``), under the names their ROS 2 forms have in
+  ``job.mcap`` with the default ``[ros2]`` node, so one layout
+  (``deploy/foxglove-layout.json``) opens both.
 
 Clients only watch: the server offers no services, parameters or publishing.
 """
@@ -27,19 +34,23 @@ import logging
 import threading
 
 import foxglove
-from foxglove.messages import SceneUpdate
+from foxglove.messages import FrameTransforms, SceneUpdate
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 from websockets.sync.server import ServerConnection, serve
 
 from fcso.schema import schema_text
 
-from ..bus.messages import BusMessage, StatusMessage
+from ..bus.messages import BusMessage, PlanMessage, StatusMessage, VerificationMessage
 from ..config import FoxgloveConfig, split_host_port
-from ..record.recorder import TOPIC_SCENE
+from ..record.recorder import TOPIC_SCENE, TOPIC_TRANSFORMS
 
-#: The status channel of the live server.
-TOPIC_LIVE_STATUS = "/fcsod/status"
+#: The live server's JSON channels: native topic (its first level) -> channel and the model of its messages.
+LIVE_JSON_CHANNELS = {
+    "status": ("/fcsod/status", StatusMessage),
+    "plan": ("/fcsod/plan", PlanMessage),
+    "verification": ("/fcsod/verification", VerificationMessage),
+}
 
 #: The subprotocols the live server accepts, the preferred first: foxglove-sdk's, then the protocol's first name.
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
@@ -84,14 +95,20 @@ class FoxgloveLive:
         self.scene = foxglove.Channel(
             TOPIC_SCENE, schema=SceneUpdate.get_schema(), message_encoding="protobuf", context=self.context
         )
-        self.status = foxglove.Channel(
-            TOPIC_LIVE_STATUS,
-            schema=foxglove.Schema(
-                name="fcsod.StatusMessage", encoding="jsonschema", data=schema_text(StatusMessage).encode()
-            ),
-            message_encoding="json",
-            context=self.context,
+        self.transforms = foxglove.Channel(
+            TOPIC_TRANSFORMS, schema=FrameTransforms.get_schema(), message_encoding="protobuf", context=self.context
         )
+        self.json_channels = {
+            native: foxglove.Channel(
+                topic,
+                schema=foxglove.Schema(
+                    name=f"fcsod.{model.__name__}", encoding="jsonschema", data=schema_text(model).encode()
+                ),
+                message_encoding="json",
+                context=self.context,
+            )
+            for native, (topic, model) in LIVE_JSON_CHANNELS.items()
+        }
         self.server = foxglove.start_server(
             name="fcsod", host="127.0.0.1", port=0, context=self.context, server_listener=SubscriptionLog()
         )
@@ -109,13 +126,14 @@ class FoxgloveLive:
             back.join()
 
     def publish(self, message: BusMessage) -> None:
-        """Send a status message on; other bus messages are not the live view's."""
-        if message.topic == "status":
-            self.status.log(message.payload)
+        """Send a status, plan or verification message on; other bus messages are not the live view's."""
+        channel = self.json_channels.get(message.topic.partition("/")[0])
+        if channel is not None:
+            channel.log(message.payload)
 
-    def log_scene(self, data: bytes, log_time_ns: int) -> None:
-        """Send an encoded ``SceneUpdate`` a worker recorded on ``/scene``."""
-        self.scene.log(data, log_time=log_time_ns)
+    def log_scene(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """Send an encoded ``SceneUpdate`` or ``FrameTransforms`` a worker recorded on ``/scene`` or ``/tf``."""
+        (self.scene if topic == TOPIC_SCENE else self.transforms).log(data, log_time=log_time_ns)
 
     def close(self) -> None:
         """Stop the front (its clients' connections close), then the SDK's server."""
