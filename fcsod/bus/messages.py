@@ -261,6 +261,19 @@ class StateChangeRecord(_Message):
     error: str | None = None
 
 
+class DecisionRecord(_Message):
+    """``/job/decision``: an operator's decision on a held job (``fcsod approve | reject``) and the output files it
+    changed, which ``fcsod audit --verify`` checks instead of those the job recorded."""
+
+    job_id: str
+    decision: Literal["approved", "rejected"]
+    by: str = Field(description="The operator's login name, as the command ran")
+    requested_at: str = Field(description="When the operator asked, UTC ISO 8601")
+    at: str = Field(description="When the daemon carried it out, UTC ISO 8601")
+    files: list[InputFile] = Field(description="Output files it wrote (approve: build.3mf with the finger placed)")
+    removed: list[str] = Field(description="Output files it removed (build.held.3mf), relative to the output folder")
+
+
 class LogRecord(_Message):
     """``/job/log``: a log line of the job."""
 

@@ -29,6 +29,7 @@ from .. import __version__
 from ..bus.messages import (
     BusRecord,
     CandidateRecord,
+    DecisionRecord,
     DesignRecord,
     GraspsMessage,
     InputHashesRecord,
@@ -51,6 +52,7 @@ TOPIC_INPUTS = "/job/inputs"
 TOPIC_STATE = "/job/state"
 TOPIC_LOG = "/job/log"
 TOPIC_OUTPUTS = "/job/outputs"
+TOPIC_DECISION = "/job/decision"
 TOPIC_POSES = "/design/poses"
 TOPIC_SAMPLES = "/design/samples"
 TOPIC_CANDIDATES = "/design/candidates"
@@ -73,6 +75,7 @@ CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_STATE: StateChangeRecord,
     TOPIC_LOG: LogRecord,
     TOPIC_OUTPUTS: OutputFilesRecord,
+    TOPIC_DECISION: DecisionRecord,
     TOPIC_POSES: PoseRecord,
     TOPIC_SAMPLES: SamplesRecord,
     TOPIC_CANDIDATES: CandidateRecord,

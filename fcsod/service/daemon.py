@@ -21,7 +21,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from .. import __version__
-from ..bus.messages import BusMessage, BusRecord, StatusMessage, VerificationMessage, utc_now
+from ..bus.messages import BusMessage, BusRecord, DecisionRecord, InputFile, StatusMessage, VerificationMessage, utc_now
 from ..bus.pki import link_weaknesses
 from ..bus.ros2 import Ros2Node, node_fqn
 from ..bus.session import Bus, session_config
@@ -52,9 +52,10 @@ from ..job.task import (
     time_limit_error,
     unfinished_verification_message,
 )
+from ..record.decision import record_decision
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
-from ..storage import lock_state_dir
+from ..storage import file_sha256, lock_state_dir
 from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message, stored_messages
 from .metrics import DaemonMetrics
 from .systemd import notify, watchdog_interval
@@ -624,9 +625,25 @@ class Daemon:
             return False, f"{row.job_id} ended {ended.state} before it could be cancelled"
         return True, f"{row.job_id} cancelled while running"
 
+    def _decision(self, request: OperatorRequest, files: dict[str, Path], removed: list[str]) -> DecisionRecord:
+        """The record of an operator's ``request`` on a held job that writes the output ``files`` (name -> the file
+        that will have that name) and removes the outputs named ``removed``."""
+        return DecisionRecord(
+            job_id=request.job_id,
+            decision="approved" if request.action == "approve" else "rejected",
+            by=request.requested_by or "unknown (a request of an older fcsod)",
+            requested_at=request.requested_at,
+            at=utc_now(),
+            files=[
+                InputFile(path=name, size_bytes=path.stat().st_size, sha256=file_sha256(path))
+                for name, path in files.items()
+            ],
+            removed=removed,
+        )
+
     def _approve(self, request: OperatorRequest) -> tuple[bool, str]:
         """Release a held job: its build with the finger placed becomes ``build.3mf``, its design messages (in its
-        record) are published, and it is done."""
+        record) are published, and it is done; its record gets the approval, with the new build's hash."""
         row = self.journal.get(request.job_id)
         if row is None:
             return False, f"{request.job_id}: no such job"
@@ -638,6 +655,8 @@ class Daemon:
             for body in read_record(out / JOB_RECORD_NAME).of(TOPIC_BUS)
         ]
         held = next(StatusMessage.model_validate_json(m.payload) for m in reversed(recorded) if m.topic == "status")
+        approval = self._decision(request, {BUILD_NAME: out / HELD_BUILD_NAME}, [HELD_BUILD_NAME])
+        record_decision(out, approval, None, self.config.mcap)
         os.replace(out / HELD_BUILD_NAME, out / BUILD_NAME)
         self.journal.mark_finished(row.job_id, "done", row.finished_at or utc_now(), None)
         for message in recorded:
@@ -649,14 +668,18 @@ class Daemon:
         return True, f"{row.job_id} approved: its finger is placed into {out / BUILD_NAME} and its grasps published"
 
     def _reject(self, request: OperatorRequest) -> tuple[bool, str]:
-        """Fail a held job with :data:`REJECTED_ERROR` and why it was held; its build with the finger is removed."""
+        """Fail a held job with :data:`REJECTED_ERROR` and why it was held; its build with the finger is removed, and
+        its record gets the rejection."""
         row = self.journal.get(request.job_id)
         if row is None:
             return False, f"{request.job_id}: no such job"
         if row.state != "held":
             return False, f"{row.job_id} is {row.state}: only a held job can be rejected"
-        (self.output_root / row.job_id / HELD_BUILD_NAME).unlink(missing_ok=True)
-        self.journal.mark_finished(row.job_id, "failed", utc_now(), f"{REJECTED_ERROR}: {row.error}")
+        out = self.output_root / row.job_id
+        error = f"{REJECTED_ERROR}: {row.error}"
+        record_decision(out, self._decision(request, {}, [HELD_BUILD_NAME]), error, self.config.mcap)
+        (out / HELD_BUILD_NAME).unlink(missing_ok=True)
+        self.journal.mark_finished(row.job_id, "failed", utc_now(), error)
         self._publish(self._status(self.journal.get(row.job_id)))
         return True, f"{row.job_id} rejected: it is failed, its finger is not delivered"
 
