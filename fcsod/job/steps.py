@@ -204,18 +204,8 @@ def step_design(run: JobRun) -> SetsResult:
 
 
 def step_choose_by_verification(run: JobRun) -> None:
-    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is
-    verified when done).
-    """
-    if run.sets.several:
-        settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
-        if settings.enabled and settings.top_k > 0:
-            run.log(
-                "warning",
-                "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
-                "verified as it is",
-            )
-        return
+    """Verify every finger set's finger before it is placed, where the job's ``[verify]`` asks it (one set: choose
+    among the best candidates), and hold the job when one misses the delivery policy."""
     choose_by_verification(run)
 
 
@@ -234,10 +224,10 @@ def job_grasps(run: JobRun) -> list:
     verification made before the job is done, or where it follows."""
     several = run.sets.several
     unverified = verification_note(run.verify_settings.enabled, several)
-    verification = run.verified[0] if run.verified is not None and not several else None
+    verifications = [v for v, _, _ in run.verified] if run.verified is not None else [None] * len(run.sets.designs)
     return [
         grasp
-        for design in run.sets.designs
+        for design, verification in zip(run.sets.designs, verifications)
         for grasp in cell_grasps(
             run.task.job_id,
             design.report.grasps,

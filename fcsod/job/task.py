@@ -209,7 +209,9 @@ class JobRun:
     #: published after the done status (the verification of the delivered candidate)
     after_done: list[BusMessage] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    verified: tuple | None = None
+    #: the verification of each finger set's finger made before it is placed: (report, design under test, the
+    #: report's extra section), set order; None: none was made
+    verified: list[tuple] | None = None
     #: why the finger misses the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject)
     held: str | None = None
     reuse: dict | None = None
