@@ -49,7 +49,7 @@ from fcso.sim.report import VerificationReport
 from fcso.sim.scene import pad_in_world
 from fcso.sim.verify import DesignUnderTest
 
-from ..bus.ros2 import rest_frame_id
+from ..bus.messages import rest_frame_id
 from ..plate.build3mf import BuildItem
 from ..plate.models import BuildConfig, PlacementReport
 
