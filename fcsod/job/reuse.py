@@ -255,58 +255,7 @@ def step_reused_outputs(run: JobRun) -> None:
     )
     run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
     min_retained = run.settings.finger_sets.min_retained
-    # a part of a delivered geometry keeps what it kept in the delivering job; another, what it keeps on the finger
-    kept = {
-        p.name: served[p.name].finger.worst_retained
-        if served[p.name].worst_retained is None
-        else served[p.name].worst_retained
-        for p in run.loaded
-    }
-    set_worst = {i: min(kept[n] for n, s in served.items() if s.finger.finger_id == i) for i in fingers}
-    worst = min(set_worst.values())
-    reused = []
-    plan_sets = []
-    for number, entry in enumerate(fingers.values(), start=1):
-        parts = [p for p in run.loaded if served[p.name].finger.finger_id == entry.finger_id]
-        finger_file = f"../{entry.job_id}/{entry.finger_file}"
-        reused.append(
-            ReusedFingerReport(
-                finger_id=entry.finger_id,
-                sha256=entry.sha256,
-                delivered_by_job=entry.job_id,
-                finger_file=finger_file,
-                finger_key=entry.design_key,
-                jobs_served=entry.jobs,
-                reprint_after_jobs=config.reuse.reprint_after_jobs,
-                worst_retained=set_worst[entry.finger_id],
-                parts=[
-                    ReusedPartReport(
-                        part=p.name,
-                        library_part=served[p.name].library_part,
-                        worst_retained=served[p.name].worst_retained,
-                    )
-                    for p in parts
-                ],
-            )
-        )
-        plan_sets.append(
-            PlanSet(
-                set=number,
-                finger_key=entry.design_key,
-                finger_file=finger_file,
-                finger_sha256=entry.sha256,
-                finger_copies=0,
-                quality=entry.quality,
-                quality_measure=entry.quality_measure,
-                worst_retained=set_worst[entry.finger_id],
-                parts=[
-                    PickPart(part=p.name, copies=[p.name], quantity=len(p.instances), grasps=served[p.name].grasps)
-                    for p in parts
-                ],
-                finger_id=entry.finger_id,
-                reused_from_job=entry.job_id,
-            )
-        )
+    reused, plan_sets, worst = reused_finger_sets(run.loaded, served, fingers, config.reuse.reprint_after_jobs)
     message = (
         f"every part is served by {len(fingers)} finger set(s) delivered before (library finger "
         f"{', '.join(_served_words(served))}; worst retained {worst:.3f}): no finger designed, none in build.3mf"
@@ -351,6 +300,83 @@ def step_reused_outputs(run: JobRun) -> None:
     for published in run.outgoing:
         run.record_published(published)
     run.log("info", f"finger reuse: {message}")
+
+
+def reused_finger_sets(
+    loaded: list[fcso.Part], served: dict, fingers: dict[int, FingerEntry], reprint_after_jobs: int
+) -> tuple[list[ReusedFingerReport], list[PlanSet], float]:
+    """The report and the pick plan's set of each library finger that serves a job's parts.
+
+    Parameters
+    ----------
+    loaded : list of fcso.Part
+        The job's parts.
+    served : dict
+        Part name -> how the library serves it (:class:`~fcsod.job.fingers.ServedPart`).
+    fingers : dict
+        Finger id -> its library entry, in the order of the sets.
+    reprint_after_jobs : int
+        ``[reuse] reprint_after_jobs``.
+
+    Returns
+    -------
+    reused : list of ReusedFingerReport
+    plan_sets : list of PlanSet
+    worst : float
+        The worst retained fraction of any part on its finger.
+    """
+    # a part of a delivered geometry keeps what it kept in the delivering job; another, what it keeps on the finger
+    kept = {
+        p.name: served[p.name].finger.worst_retained
+        if served[p.name].worst_retained is None
+        else served[p.name].worst_retained
+        for p in loaded
+    }
+    set_worst = {i: min(kept[n] for n, s in served.items() if s.finger.finger_id == i) for i in fingers}
+    reused = []
+    plan_sets = []
+    for number, entry in enumerate(fingers.values(), start=1):
+        parts = [p for p in loaded if served[p.name].finger.finger_id == entry.finger_id]
+        finger_file = f"../{entry.job_id}/{entry.finger_file}"
+        reused.append(
+            ReusedFingerReport(
+                finger_id=entry.finger_id,
+                sha256=entry.sha256,
+                delivered_by_job=entry.job_id,
+                finger_file=finger_file,
+                finger_key=entry.design_key,
+                jobs_served=entry.jobs,
+                reprint_after_jobs=reprint_after_jobs,
+                worst_retained=set_worst[entry.finger_id],
+                parts=[
+                    ReusedPartReport(
+                        part=p.name,
+                        library_part=served[p.name].library_part,
+                        worst_retained=served[p.name].worst_retained,
+                    )
+                    for p in parts
+                ],
+            )
+        )
+        plan_sets.append(
+            PlanSet(
+                set=number,
+                finger_key=entry.design_key,
+                finger_file=finger_file,
+                finger_sha256=entry.sha256,
+                finger_copies=0,
+                quality=entry.quality,
+                quality_measure=entry.quality_measure,
+                worst_retained=set_worst[entry.finger_id],
+                parts=[
+                    PickPart(part=p.name, copies=[p.name], quantity=len(p.instances), grasps=served[p.name].grasps)
+                    for p in parts
+                ],
+                finger_id=entry.finger_id,
+                reused_from_job=entry.job_id,
+            )
+        )
+    return reused, plan_sets, min(set_worst.values())
 
 
 def step_add_to_library(run: JobRun) -> None:
