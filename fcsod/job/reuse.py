@@ -48,7 +48,7 @@ from .fingers import (
     ServedPart,
     library_path,
 )
-from .task import BUILD_NAME, FINGER_SET, JobRun
+from .task import BUILD_NAME, FINGER_SET, JobRun, Outputs, Reuse
 
 #: The settings sections that shape a finger, its pad's evaluation and its grasps: a finger serves a job only when the
 #: job's are the same (the gripper it opens in, the pad, the print, the measure, the poses planned for), and the
@@ -134,12 +134,12 @@ def _flat(settings: dict, prefix: str = "") -> dict[str, object]:
     return flat
 
 
-def step_reuse(run: JobRun) -> None:
+def step_reuse(run: JobRun) -> Reuse | None:
     """Serve the job from the finger library when every part has the geometry of a part of an active finger or keeps
     ``min_retained`` on one."""
     config = run.task.config
     if not config.reuse.enabled or not run.loaded:
-        return
+        return None
     meshes = {p.name: p.mesh for p in run.loaded}
     settings = finger_settings(run.settings)
     claim = (config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs, settings)
@@ -161,11 +161,11 @@ def step_reuse(run: JobRun) -> None:
                 f"{settings_difference(kept, settings)}",
             )
         run.log("info", "finger library: not every part is served by a delivered finger; designing")
-        return
-    run.reuse = served
+        return None
     run.log(
         "info", f"finger library: every part is served by finger {', '.join(_served_words(served))}: nothing to design"
     )
+    return Reuse(served)
 
 
 def _fitted_parts(run: JobRun, library: FingerLibrary) -> dict[str, FittedPart] | None:
@@ -219,7 +219,7 @@ def _served_words(served: dict[str, ServedPart]) -> list[str]:
     return [words[i] for i in sorted(words)]
 
 
-def step_reused_outputs(run: JobRun) -> None:
+def step_reused_outputs(run: JobRun) -> Outputs:
     """The outputs and messages of a job the library serves: build with the parts alone, report, grasps, plan."""
     config, job_id, served = run.task.config, run.task.job_id, run.reuse
     fingers: dict[int, FingerEntry] = {}
@@ -235,7 +235,7 @@ def step_reused_outputs(run: JobRun) -> None:
     placed = place_fingers(run.build, finger, no_fingers)
     run.recorder.write(TOPIC_PLACEMENT, placed.report)
     run.log("info", f"placement: {placed.report.message}")
-    run.files = {
+    files = {
         BUILD_NAME: export_build_3mf(
             placed.items,
             job_id=job_id,
@@ -272,8 +272,7 @@ def step_reused_outputs(run: JobRun) -> None:
         placement=placed.report.model_dump(mode="json"),
         warnings=warnings,
     )
-    run.files[REPORT_JSON] = report.model_dump_json(indent=2).encode()
-    run.warnings.extend(placed.report.warnings)
+    files[REPORT_JSON] = report.model_dump_json(indent=2).encode()
     bus = config.bus
     plan = PlanMessage(
         job_id=job_id,
@@ -288,18 +287,19 @@ def step_reused_outputs(run: JobRun) -> None:
         partition=f"reused: {message}",
     )
     summary = placed.report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
-    run.outgoing = [
+    outgoing = (
         BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=job_id, grasps=grasps)),
         BusMessage.json_body(bus.prefix, bus.cell, "plan", plan),
         BusMessage.json_body(
             bus.prefix, bus.cell, "placement", PlacementMessage(job_id=job_id, file=BUILD_NAME, **summary)
         ),
-    ]
-    run.write_files()
-    run.record_files()
-    for published in run.outgoing:
+    )
+    run.write_files(files)
+    run.record_files(files)
+    for published in outgoing:
         run.record_published(published)
     run.log("info", f"finger reuse: {message}")
+    return Outputs(files, outgoing, warnings=tuple(placed.report.warnings))
 
 
 def reused_finger_sets(
