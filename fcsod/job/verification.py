@@ -25,6 +25,7 @@ false`` turns all of it off, the choice among ``top_k`` candidates included.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -61,7 +62,7 @@ from ..record.scene import scene_updates
 from .events import Emit, Log, VerificationFinished, VerificationStarted
 from .inputs import read_manifest
 from .reuse import ReuseReport
-from .task import TimeLimitExceeded, VerificationTask, time_limit_error, unfinished_verification_message
+from .task import TimeLimitExceeded, VerificationTask, Verified, time_limit_error, unfinished_verification_message
 
 
 def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> VerifySettings:
@@ -69,32 +70,36 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
     return manifest if manifest is not None else daemon
 
 
-def choose_by_verification(run) -> None:
+def choose_by_verification(run) -> Verified | None:
     """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes;
     with a delivery policy other than ``always`` (and ``top_k`` 0), verify the design's own choice. Either way the
-    job is held (``run.held``) when its finger misses the policy (:func:`held_reason`)."""
+    job is held (:attr:`Verified.held`) when its finger misses the policy (:func:`held_reason`). None when nothing
+    is verified before the job is done."""
     settings = _settings(run)
     if not settings.enabled:
-        return
+        return None
     config = _verify_config(settings, run.result.report.settings, run.task.config.state.dir)
+    sets = run.sets
     if settings.top_k > 0:
         chosen, verification, design, ranking = verify_top(run.result, settings.top_k, config, _progress(run.log))
-        run.sets.designs[0] = chosen
-        run.verified = (verification, design, ranking_html(ranking, verification.choice))
+        sets = dataclasses.replace(sets, designs=[chosen, *sets.designs[1:]])
+        extra = ranking_html(ranking, verification.choice)
         run.log("info", f"verification delivered {verification.choice}")
     elif settings.deliver != "always":
         design = design_under_test(run.result)
         verification = verify_delivered(design, config, _progress(run.log))
-        run.verified = (verification, design, "")
+        extra = ""
     else:
-        return
+        return None
     run.log("info" if verification.passed else "warning", f"verification: {verdict_text(verification)}")
+    warnings = ()
     if missed := not_held(verification):
         # a finger near zero quality: said on the done status too, whatever the policy
-        run.warnings.append(f"the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)")
-    run.held = held_reason(verification, settings.deliver)
-    if run.held is not None:
-        run.log("warning", f"held for an operator: {run.held}")
+        warnings = (f"the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)",)
+    held = held_reason(verification, settings.deliver)
+    if held is not None:
+        run.log("warning", f"held for an operator: {held}")
+    return Verified(sets, verification, design, extra, held, warnings)
 
 
 def held_reason(verification: VerificationReport, deliver: str) -> str | None:
@@ -117,23 +122,34 @@ def held_reason(verification: VerificationReport, deliver: str) -> str | None:
 VERIFICATION_HTML = "verification.html"
 
 
-def write_chosen_verification(run) -> None:
+def write_chosen_verification(run) -> tuple[dict[str, bytes], tuple[BusMessage, ...]]:
     """Output step: the verification of the candidate :func:`choose_by_verification` delivered, into the work folder
     (after the job's files are written, before they are hashed).
 
-    ``verification.json``, the report's section and ``verification.mcap``
-    join the job's files (hashed in ``job.mcap`` like the others); the
-    message is published after the ``done`` status.
+    Returns
+    -------
+    files : dict
+        ``verification.json``, the report's section and ``verification.mcap`` (path -> content), to join the job's
+        files (hashed in ``job.mcap`` like the others); empty when nothing was verified.
+    after_done : tuple of BusMessage
+        Its message, recorded, to publish after the ``done`` status.
     """
-    if run.verified is None:
-        return
-    verification, design, extra = run.verified
-    message = _bus_message(run.task.config, run.task.job_id, verification, VERIFICATION_JSON, None)
-    written = _write(run.work_dir, verification, design, extra, message, run.task.config.mcap, REPORT_HTML)
-    for path in written:
-        run.files[path.name] = path.read_bytes()
+    verified = run.verified
+    if verified is None:
+        return {}, ()
+    message = _bus_message(run.task.config, run.task.job_id, verified.verification, VERIFICATION_JSON, None)
+    written = _write(
+        run.work_dir,
+        verified.verification,
+        verified.design,
+        verified.ranking_html,
+        message,
+        run.task.config.mcap,
+        REPORT_HTML,
+    )
+    files = {path.name: path.read_bytes() for path in written}
     run.record_published(message)
-    run.after_done.append(message)
+    return files, (message,)
 
 
 def verification_after_done(run) -> VerifySettings | None:
