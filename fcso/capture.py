@@ -48,9 +48,6 @@ YAW_STEP_DEG = 0.5
 #: How far the landscape reaches beyond the start error box, mm and degrees:
 #: a descent may leave the box on its way to the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
-#: How far beyond the test's error box a start must still be captured for the box to count as captured, mm and
-#: degrees: the model's heights and quasi-static squeeze err by a few tenths of a millimetre at a basin's edge.
-ROBUSTNESS_MM, ROBUSTNESS_DEG = 0.0, 0.0
 #: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
 #: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
 #: 0.1-0.25 mm under 60 N), and which made a cylinder in its round pocket capture every start yaw.
@@ -129,11 +126,11 @@ def capture_landscape(
     -------
     CaptureLandscape
     """
-    error_mm = config.position_error_mm + ROBUSTNESS_MM
+    error_mm = config.position_error_mm
     axis = np.abs(np.asarray((0.0, 1.0) if sliding_axis is None else sliding_axis, dtype=np.float64)[:2])
     axis /= np.linalg.norm(axis)
     reach_mm = error_mm * float(axis.sum()) + MARGIN_MM
-    reach_deg = config.yaw_error_deg + ROBUSTNESS_DEG + MARGIN_DEG
+    reach_deg = config.yaw_error_deg + MARGIN_DEG
     steps = int(np.ceil(reach_mm / cell_mm))
     offsets = np.arange(-steps, steps + 1) * cell_mm
     turns = int(np.ceil(reach_deg / YAW_STEP_DEG))
@@ -179,7 +176,7 @@ def capture_landscape(
         np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
     )
     captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
-    in_yaw = np.abs(yaws_deg) <= config.yaw_error_deg + ROBUSTNESS_DEG + 1e-9
+    in_yaw = np.abs(yaws_deg) <= config.yaw_error_deg + 1e-9
     weights = np.outer(sliding_error_weights(offsets, error_mm, axis), in_yaw)
     return CaptureLandscape(
         offsets_mm=offsets,
