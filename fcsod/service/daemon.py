@@ -255,7 +255,7 @@ class Daemon(OperatorRequests):
             for ready in self.readiness.poll():
                 self._enqueue(ready.folder, ready.inputs, ready.signature)
             self._stop_overdue_and_withdrawn_jobs()
-            self._handle_requests()
+            self.handle_requests()
             self._dispatch()
             self._fill_workers()
             if ping_interval is not None and time.monotonic() >= next_ping:

@@ -40,7 +40,7 @@ class OperatorRequests:
     journal: Journal
     slots: list
 
-    def _handle_requests(self) -> None:
+    def handle_requests(self) -> None:
         """Act on the operators' ``fcsod retry | cancel | approve | reject`` requests and answer each in the journal."""
         actions = {"retry": self._retry, "cancel": self._cancel, "approve": self._approve, "reject": self._reject}
         for request in self.journal.pending_requests():
