@@ -244,7 +244,7 @@ class Daemon(OperatorRequests):
             waitables = [s.connection for s in self.slots if s.open] + [s.process.sentinel for s in self.slots]
             wait(waitables, timeout=TICK_S)
             for slot in list(self.slots):
-                self._collect(slot)
+                self.collect(slot)
             for folder in self.watcher.take_changed():
                 self.readiness.touch(folder)
             now = time.monotonic()
@@ -255,7 +255,7 @@ class Daemon(OperatorRequests):
             for ready in self.readiness.poll():
                 self._enqueue(ready.folder, ready.inputs, ready.signature)
             self._stop_overdue_and_withdrawn_jobs()
-            self._handle_requests()
+            self.handle_requests()
             self._dispatch()
             self._fill_workers()
             if ping_interval is not None and time.monotonic() >= next_ping:
@@ -286,12 +286,12 @@ class Daemon(OperatorRequests):
             return
         row = self.journal.get(identity)
         log.info("job queued", extra={"job_id": identity, "folder": str(folder), "inputs": len(hashed)})
-        self._publish(self._status(row))
+        self.publish(self.status(row))
 
     def _dispatch(self) -> None:
         if self.workers_broken is not None:
             for row in self.journal.jobs("queued"):
-                self._fail_dead_job(row, self.workers_broken)
+                self.fail_dead_job(row, self.workers_broken)
             return
         idle = [s for s in self.slots if s.ready and s.job is None and s.process.is_alive()]
         free = self.config.jobs.concurrency - sum(1 for s in self.slots if s.job is not None)
@@ -342,7 +342,7 @@ class Daemon(OperatorRequests):
         )
         recorded = [BusMessage.from_record(BusRecord.model_validate(body)) for body in content.of(TOPIC_BUS)]
         for message in recorded if state != "held" else [m for m in recorded if not withheld(m)]:
-            self._publish(message)
+            self.publish(message)
 
     # ---------------------------------------------------------------- workers
 
@@ -378,7 +378,7 @@ class Daemon(OperatorRequests):
         )
         log.error(self.workers_broken)
 
-    def _collect(self, slot: WorkerSlot) -> None:
+    def collect(self, slot: WorkerSlot) -> None:
         """Handle what the worker sent; remove it if it exited."""
         self._drain(slot)
         if not slot.process.is_alive():
@@ -412,7 +412,7 @@ class Daemon(OperatorRequests):
             case Log(level, message, fields):
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             case Publish(message):
-                self._publish(message)
+                self.publish(message)
             case Scene(topic, data, log_time_ns):
                 if self.foxglove is not None:
                     self.foxglove.log_scene(topic, data, log_time_ns)
@@ -448,7 +448,7 @@ class Daemon(OperatorRequests):
         else:
             log.info("job done", extra={**extra, "output": str(self.output_root / row.job_id)})
         for message in messages:
-            self._publish(message)
+            self.publish(message)
 
     def _verified(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
         """A done job's verification ended: journal its state with its messages, then publish them."""
@@ -492,9 +492,9 @@ class Daemon(OperatorRequests):
                 else f"exit code {code}"
             )
             error = f"worker process died while running the job ({how})"
-        self._fail_dead_job(slot.job, error)
+        self.fail_dead_job(slot.job, error)
 
-    def _fail_dead_job(self, row: JobRow, error: str) -> None:
+    def fail_dead_job(self, row: JobRow, error: str) -> None:
         """Record the failure of a job whose worker died: salvage its record, finish it, publish ``failed``."""
         final_dir = self.output_root / row.job_id
         if (final_dir / JOB_RECORD_NAME).is_file():
@@ -504,7 +504,7 @@ class Daemon(OperatorRequests):
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
         self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else "failed").inc()
-        status = self._status(row)
+        status = self.status(row)
         try:
             work_dir.mkdir(parents=True, exist_ok=True)
             for path in work_dir.iterdir():
@@ -519,7 +519,7 @@ class Daemon(OperatorRequests):
                 f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)}
             )
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
-        self._publish(status)
+        self.publish(status)
 
     def _stop_overdue_and_withdrawn_jobs(self) -> None:
         """Stop a job over its time limit or whose folder was deleted (the print job withdrawn).
@@ -554,7 +554,8 @@ class Daemon(OperatorRequests):
 
     # ---------------------------------------------------------------- bus
 
-    def _status(self, row: JobRow) -> BusMessage:
+    def status(self, row: JobRow) -> BusMessage:
+        """The status message of a job as the journal has it."""
         body = StatusMessage(
             job_id=row.job_id,
             state=row.state,
@@ -576,7 +577,7 @@ class Daemon(OperatorRequests):
         if body.state == "done":
             self.metrics.verified(body.passed)
 
-    def _publish(self, message: BusMessage) -> None:
+    def publish(self, message: BusMessage) -> None:
         """Sign the message, keep it for the queryable, count a verification, then publish it."""
         self._count_verification(message)
         message = self.signer.sign(message)

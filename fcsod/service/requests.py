@@ -34,7 +34,7 @@ class OperatorRequests:
     """The daemon's answers to its operators' requests (a part of :class:`fcsod.service.daemon.Daemon`).
 
     They act through the daemon's journal, worker slots and output root, and
-    its ``_publish``, ``_status``, ``_fail_dead_job`` and ``_collect``.
+    its ``publish``, ``status``, ``fail_dead_job`` and ``collect``.
     """
 
     config: DaemonConfig
@@ -42,7 +42,7 @@ class OperatorRequests:
     journal: Journal
     slots: list
 
-    def _handle_requests(self) -> None:
+    def handle_requests(self) -> None:
         """Act on the operators' ``fcsod retry | cancel | approve | reject`` requests and answer each in the journal."""
         actions = {"retry": self._retry, "cancel": self._cancel, "approve": self._approve, "reject": self._reject}
         for request in self.journal.pending_requests():
@@ -77,7 +77,7 @@ class OperatorRequests:
             kept = attempts / str(len(list(attempts.iterdir())) + 1)
             os.replace(previous, kept)
         self.journal.requeue_failed(row.job_id, utc_now())
-        self._publish(self._status(self.journal.get(row.job_id)))
+        self.publish(self.status(self.journal.get(row.job_id)))
         return True, f"{row.job_id} queued again" + (f"; the failed run's record is kept in {kept}" if kept else "")
 
     def _cancel(self, request: OperatorRequest) -> tuple[bool, str]:
@@ -86,7 +86,7 @@ class OperatorRequests:
         if row is None:
             return False, f"{request.job_id}: no such job"
         if row.state == "queued":
-            self._fail_dead_job(row, CANCELLED_ERROR)
+            self.fail_dead_job(row, CANCELLED_ERROR)
             return True, f"{row.job_id} cancelled before it started"
         running = next((s for s in self.slots if s.job is not None and s.job.job_id == row.job_id), None)
         if row.state != "running" or running is None or running.finished:
@@ -95,7 +95,7 @@ class OperatorRequests:
         running.stop_error = CANCELLED_ERROR
         running.process.kill()
         running.process.join()
-        self._collect(running)
+        self.collect(running)
         ended = self.journal.get(row.job_id)
         if ended.error != CANCELLED_ERROR:
             return False, f"{row.job_id} ended {ended.state} before it could be cancelled"
@@ -137,10 +137,10 @@ class OperatorRequests:
         self.journal.mark_finished(row.job_id, "done", row.finished_at or utc_now(), None)
         for message in recorded:
             if withheld(message):
-                self._publish(message)
+                self.publish(message)
         outputs = [name for name in held.outputs if name != HELD_BUILD_NAME]
         done = held.model_copy(update={"state": "done", "error": None, "outputs": outputs})
-        self._publish(BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", done))
+        self.publish(BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", done))
         return True, f"{row.job_id} approved: its finger is placed into {out / BUILD_NAME} and its grasps published"
 
     def _reject(self, request: OperatorRequest) -> tuple[bool, str]:
@@ -156,7 +156,7 @@ class OperatorRequests:
         record_decision(out, self._decision(request, {}, [HELD_BUILD_NAME]), error, self.config.mcap)
         (out / HELD_BUILD_NAME).unlink(missing_ok=True)
         self.journal.mark_finished(row.job_id, "failed", utc_now(), error)
-        self._publish(self._status(self.journal.get(row.job_id)))
+        self.publish(self.status(self.journal.get(row.job_id)))
         return True, f"{row.job_id} rejected: it is failed, its finger is not delivered"
 
 
