@@ -59,9 +59,25 @@ def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[f
 
 
 def sets_report(
-    prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
+    prepared,
+    loaded,
+    groups,
+    solos,
+    designs,
+    members,
+    outcome,
+    attempts,
+    graspable,
+    screened,
+    ungraspable,
+    config,
+    unserved_by_truth: dict[int, str] | None = None,
 ) -> FingerSetsReport:
-    """The report of the sets, their scenarios, identical parts and the pick plan."""
+    """The report of the sets, their scenarios, identical parts and the pick plan.
+
+    ``unserved_by_truth``: distinct part -> why its set's simulated finger does not serve it (it fails where the
+    part's own finger passes, issue 48): not served either."""
+    unserved_by_truth = unserved_by_truth or {}
     settings = config.finger_sets
     several = len(designs) > 1
     allowed = settings.sets_allowed(len(graspable))
@@ -73,6 +89,14 @@ def sets_report(
             u: min(r for m, r in zip(numbers, retained) if prepared.scenarios[m].part_index == u) for u in chosen
         }
         for u in chosen:
+            if part_retained[u] >= settings.min_retained and u in unserved_by_truth:
+                why = (
+                    f"{unserved_by_truth[u]} (set {label}); every set allowed is used ({len(designs)} of max = "
+                    f"{settings.max})"
+                )
+                not_served.append(
+                    _not_served(prepared.parts[u].name, loaded, groups[u], label, part_retained[u], why, settings)
+                )
             if part_retained[u] < settings.min_retained:
                 not_served.append(
                     _not_served_entry(
@@ -117,7 +141,7 @@ def sets_report(
                         grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
                     )
                     for u in chosen
-                    if part_retained[u] >= settings.min_retained
+                    if part_retained[u] >= settings.min_retained and u not in unserved_by_truth
                 ],
             )
         )
@@ -136,7 +160,7 @@ def sets_report(
     return FingerSetsReport(
         max_sets=settings.max,
         sets_allowed=allowed,
-        sets_needed=len(designs) if reached else None,
+        sets_needed=len(designs) if reached and not unserved_by_truth else None,
         min_retained=settings.min_retained,
         sets=sets,
         scenarios=scenarios,
@@ -191,13 +215,17 @@ def _not_served_entry(
             f"{used} of {allowed} sets used: the partitions designed with more sets (search.attempts) kept less in "
             f"their worst scenario"
         )
+    return _not_served(name, loaded, group, label, kept, "; ".join(why), settings)
+
+
+def _not_served(name, loaded, group, label, kept, reason, settings) -> NotServedPart:
     return NotServedPart(
         part=name,
         copies=[loaded[i].name for i in group],
         quantity=sum(len(loaded[i].instances) for i in group),
         best_set=label,
         retained=round(kept, 6),
-        reason="; ".join(why),
+        reason=reason,
         fallback=settings.unserved_fallback,
     )
 

@@ -86,6 +86,9 @@ def step_inputs(run: JobRun) -> JobInputs:
         settings = manifest.design_config(config.design).updated(
             {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
         )
+        if not verify_settings.enabled:
+            # [verify] enabled = false turns every simulation off: the sets are judged by the measure alone
+            settings = settings.updated({"finger_sets": {"truth_budget_s": 0.0}})
         build_settings = manifest.build_config(config.build)
         parts = check_parts(run.folder, manifest, config.limits)
     finally:

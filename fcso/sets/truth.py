@@ -1,0 +1,151 @@
+"""Finger sets judged by truth (issue 48): a set's finger simulated (METHOD §12) against each part's own finger.
+
+A set whose verified finger fails a scenario that its part's solo finger
+would pass is not a serving set for that part. The delivered sets' fingers
+are simulated within ``[finger_sets] truth_budget_s``; where a set of two
+or more parts fails a scenario, the part's own finger (the set of that part
+alone, designed as any set is) is simulated in it, and a part it passes is
+named (:meth:`SetsTruth.unserved`) for the partition search to move
+(:func:`fcso.sets.judged.search_judged_exactly`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..config import VerifyConfig
+from ..pipeline import DesignResult
+from ..report.models import SetsTruthReport, VerifiedSet, VerifiedSetScenario
+
+#: ``made(set_of_parts)``: the set's finished design (its finger made), or None when it cannot be made.
+MadeSet = Callable[[frozenset[int]], DesignResult | None]
+
+
+@dataclass
+class SetsTruth:
+    """The simulated verdicts of a job's sets, within a time budget.
+
+    Attributes
+    ----------
+    made : callable
+        A set's finished design (:data:`MadeSet`); a part's own finger is its set alone.
+    budget_s : float
+        Simulation time allowed, s: no verification starts once it is spent.
+    verify_config : VerifyConfig
+        The ``[verify]`` settings of the simulation (the design's, with its print profile's density).
+    verified : dict
+        Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated.
+    spent_s : float
+        Simulation time spent so far, s.
+    """
+
+    made: MadeSet
+    budget_s: float
+    verify_config: VerifyConfig
+    verified: dict[frozenset[int], dict[tuple[str, int], VerifiedSetScenario]] = dataclasses.field(default_factory=dict)
+    solo_passes: dict[tuple[int, str, int], bool] = dataclasses.field(default_factory=dict)
+    spent_s: float = 0.0
+
+    def left(self) -> bool:
+        return self.spent_s < self.budget_s
+
+    def unserved(self, members: frozenset[int]) -> list[int]:
+        """Parts of set ``members`` its simulated finger fails in a scenario their own finger passes; empty for a set
+        of one part, and for whatever the budget leaves unsimulated."""
+        if len(members) < 2:
+            return []
+        verdicts = self._verified(members)
+        failing: dict[int, list[tuple[str, int]]] = {}
+        for part in sorted(members):
+            for key, scenario in (verdicts or {}).items():
+                if not scenario.passed and key in self._keys(part):
+                    failing.setdefault(part, []).append(key)
+        unserved = []
+        for part, keys in failing.items():
+            passes = self._solo_passes(part, keys)
+            for key in keys:
+                verdicts[key] = verdicts[key].model_copy(update={"solo_passed": passes.get(key)})
+            if any(passes.values()):
+                unserved.append(part)
+        return unserved
+
+    def report(self, delivered: list[frozenset[int]], moved: list[str], not_served: list[str]) -> SetsTruthReport:
+        """The report of the delivered sets (set order) as simulated, the rest of the budget spent on the sets not yet
+        simulated (a set of one part is simulated only for the report)."""
+        for members in delivered:
+            if members not in self.verified:
+                self._verified(members)
+        return SetsTruthReport(
+            budget_s=self.budget_s,
+            spent_s=round(self.spent_s, 3),
+            sets=[
+                VerifiedSet(set=label, scenarios=list(self.verified[members].values()))
+                for label, members in enumerate(delivered, start=1)
+                if members in self.verified
+            ],
+            unverified_sets=[label for label, m in enumerate(delivered, start=1) if m not in self.verified],
+            moved_parts=moved,
+            not_served_parts=not_served,
+        )
+
+    def _keys(self, part: int) -> set[tuple[str, int]]:
+        design = self.made(frozenset([part]))
+        return set() if design is None else {(s.part, s.pose_index) for s in design.report.scenarios}
+
+    def _verified(self, members: frozenset[int]) -> dict[tuple[str, int], VerifiedSetScenario] | None:
+        """Every scenario of set ``members`` simulated in full (every trial and the holding test, designed and flat:
+        what the verification after the job repeats from the simulation cache), once; None when the budget is
+        spent or its finger cannot be made."""
+        if members in self.verified:
+            return self.verified[members]
+        design = self.made(members)
+        if design is None or not self.left():
+            return None
+        from ..sim.verify import design_under_test, successes, verify_delivered
+
+        clock = time.perf_counter()
+        verification = verify_delivered(design_under_test(design), self.verify_config)
+        self.spent_s += time.perf_counter() - clock
+        self.verified[members] = {
+            (s.part, s.pose_index): VerifiedSetScenario(
+                part=s.part,
+                pose_index=s.pose_index,
+                trials=len(s.fcso.trials),
+                successes=successes(s.fcso.trials),
+                flat_trials=len(s.flat.trials),
+                flat_successes=successes(s.flat.trials),
+                passed=s.passed,
+            )
+            for s in verification.scenarios
+        }
+        return self.verified[members]
+
+    def _solo_passes(self, part: int, keys: list[tuple[str, int]]) -> dict[tuple[str, int], bool]:
+        """Whether ``part``'s own finger passes each of its scenarios ``keys``, each simulated until it can no longer
+        pass (``stop_early``); scenarios the budget leaves unsimulated are missing."""
+        design = self.made(frozenset([part]))
+        if design is not None:
+            from ..sim.verify import DesignUnderTest, design_under_test, verify
+
+            whole = design_under_test(design)
+            for case in whole.cases:
+                key = _case_key(case.name)
+                if key not in keys or (part, *key) in self.solo_passes or not self.left():
+                    continue
+                clock = time.perf_counter()
+                verification = verify(
+                    DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm),
+                    self.verify_config.model_copy(update={"stop_early": True}),
+                )
+                self.spent_s += time.perf_counter() - clock
+                self.solo_passes[(part, *key)] = verification.passed
+        return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
+
+
+def _case_key(name: str) -> tuple[str, int]:
+    """``(part, pose_index)`` of a simulation case named ``"<part> pose <k>"`` (:func:`fcso.sim.verify.grasp_case`)."""
+    part, _, pose = name.rpartition(" pose ")
+    return part, int(pose)
