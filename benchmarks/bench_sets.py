@@ -26,7 +26,11 @@ D = 4). Prints, medians over N runs (the machine is shared and noisy):
 - the same job with one finger (``max = 1``, the paper's method): its time
   and the worst and median ``E / E*`` (``E*`` from the sets run);
 - the checks of the issue: the sets' worst retained is at least the single
-  finger's, and reaches ``min_retained`` or the report says which pair blocks it.
+  finger's, and reaches ``min_retained`` or the report says which pair blocks it;
+- the verified success of each set's finger over its scenarios (issue 48):
+  successful precision trials of the set's finger and of flat pads per
+  scenario, from the report's ``truth`` with ``--truth SECONDS``
+  (``[finger_sets] truth_budget_s``), else simulated after the design.
 
 ``--baseline COMMIT`` times the 12-part job (``max = 4``) on this code and
 on that commit's code (git archive), whole fresh processes taking turns, wall
