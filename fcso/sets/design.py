@@ -151,7 +151,7 @@ def _design_sets_of_one_size(
 
     clock = time.perf_counter()
     sets = _ExactSets(prepared, config, solos, [part_scenarios[u] for u in graspable], progress, report_progress)
-    truth = _sets_truth(sets, config)
+    truth = _sets_truth(sets, [prepared.parts[u].name for u in graspable], config)
     # no more workers than sets to screen: one part has one partition
     with WorkerPool(
         (prepared, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config),
@@ -197,9 +197,10 @@ def _design_sets_of_one_size(
         delivered = [
             frozenset(p for p, a in enumerate(outcome.assignment) if a == label) for label in range(len(designs))
         ]
-        names = [prepared.parts[u].name for u in graspable]
         truth_report = truth.report(
-            delivered, [names[p] for p in outcome.moved_by_truth], [names[p] for p in outcome.unserved_by_truth]
+            delivered,
+            [truth.names[p] for p in outcome.moved_by_truth],
+            [truth.names[p] for p in outcome.unserved_by_truth],
         )
         finger_sets = finger_sets.model_copy(update={"truth": truth_report})
         timings["truth"] = time.perf_counter() - clock
@@ -232,13 +233,14 @@ def _design_sets_of_one_size(
 _TRUTH_REASON = "verified: fails where its own finger passes"
 
 
-def _sets_truth(sets: _ExactSets, config: DesignConfig) -> SetsTruth | None:
-    """The sets judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or None when it is 0."""
+def _sets_truth(sets: _ExactSets, names: list[str], config: DesignConfig) -> SetsTruth | None:
+    """The sets of parts ``names`` judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or
+    None when it is 0."""
     if config.finger_sets.truth_budget_s <= 0:
         return None
     from ..sim.config import with_print_density
 
-    return SetsTruth(sets.made, config.finger_sets.truth_budget_s, with_print_density(config.verify, config))
+    return SetsTruth(sets.made, names, config.finger_sets.truth_budget_s, with_print_density(config.verify, config))
 
 
 def _identical_warnings(loaded: list[Part], groups: list[list[int]]) -> list[str]:

@@ -32,6 +32,8 @@ class SetsTruth:
     ----------
     made : callable
         A set's finished design (:data:`MadeSet`); a part's own finger is its set alone.
+    names : list of str
+        Every part's name (a set's members are indices into it), as its scenarios name it.
     budget_s : float
         Simulation time allowed, s: no verification starts once it is spent.
     verify_config : VerifyConfig
@@ -43,6 +45,7 @@ class SetsTruth:
     """
 
     made: MadeSet
+    names: list[str]
     budget_s: float
     verify_config: VerifyConfig
     verified: dict[frozenset[int], dict[tuple[str, int], VerifiedSetScenario]] = dataclasses.field(default_factory=dict)
@@ -61,7 +64,7 @@ class SetsTruth:
         failing: dict[int, list[tuple[str, int]]] = {}
         for part in sorted(members):
             for key, scenario in (verdicts or {}).items():
-                if not scenario.passed and key in self._keys(part):
+                if not scenario.passed and key[0] == self.names[part]:
                     failing.setdefault(part, []).append(key)
         unserved = []
         for part, keys in failing.items():
@@ -90,10 +93,6 @@ class SetsTruth:
             moved_parts=moved,
             not_served_parts=not_served,
         )
-
-    def _keys(self, part: int) -> set[tuple[str, int]]:
-        design = self.made(frozenset([part]))
-        return set() if design is None else {(s.part, s.pose_index) for s in design.report.scenarios}
 
     def _verified(self, members: frozenset[int]) -> dict[tuple[str, int], VerifiedSetScenario] | None:
         """Every scenario of set ``members`` simulated in full (every trial and the holding test, designed and flat:

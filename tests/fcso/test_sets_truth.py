@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import fcso
 from examples.sim_parts import hex_prism, plain_cylinder
+from fcso.output.sets_page import pick_plan_text
 from fcso.parts import Part
 from fcso.sets import design_sets
 
@@ -47,3 +48,6 @@ def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(tm
     assert hex_set.part == "hex" and hex_set.passed and hex_set.successes == hex_set.trials == 6
     assert hex_set.flat_successes < hex_set.flat_trials
     assert 0 < truth.spent_s and sets.not_served == [] and sets.sets_needed == 2
+    # the terminal and the page tell it
+    told = pick_plan_text(sets)
+    assert "moved to a set of their own: hex" in told and "set 1 verified: hex pose 0 6/6" in told
