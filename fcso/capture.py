@@ -48,6 +48,9 @@ YAW_STEP_DEG = 0.5
 #: How far the landscape reaches beyond the start error box, mm and degrees:
 #: a descent may leave the box on its way to the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
+#: How far beyond the test's error box a start must still be captured for the box to count as captured, mm and
+#: degrees: the model's heights and quasi-static squeeze err by a few tenths of a millimetre at a basin's edge.
+ROBUSTNESS_MM, ROBUSTNESS_DEG = 0.0, 0.0
 #: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
 #: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
 #: 0.1-0.25 mm under 60 N), and which made a cylinder in its round pocket capture every start yaw.
@@ -152,6 +155,7 @@ def capture_landscape(
     depth_mm: float,
     width_mm: float,
     config: VerifyConfig,
+    sliding_axis: np.ndarray | None = None,
 ) -> CaptureLandscape:
     """Squeeze one part between two pads from every start error of a grid and tell which starts are captured.
 
@@ -173,13 +177,20 @@ def capture_landscape(
         inner faces (``u = 0``) lie ``width - 2 D`` apart at the nominal seat.
     config : VerifyConfig
         Start error box, success tolerance, friction.
+    sliding_axis : (2,) or (3,) float, optional
+        The sliding axis ``b`` in the table's frame. The precision test's start errors are drawn along the table's
+        axes, so a grasp closing obliquely sees them along ``b`` up to ``e (|b_x| + |b_y|)``, the likelier the
+        nearer the centre (:func:`sliding_error_weights`). None: ``b`` lies along a table axis.
 
     Returns
     -------
     CaptureLandscape
     """
-    reach_mm = config.position_error_mm + MARGIN_MM
-    reach_deg = config.yaw_error_deg + MARGIN_DEG
+    error_mm = config.position_error_mm + ROBUSTNESS_MM
+    axis = np.abs(np.asarray((0.0, 1.0) if sliding_axis is None else sliding_axis, dtype=np.float64)[:2])
+    axis /= np.linalg.norm(axis)
+    reach_mm = error_mm * float(axis.sum()) + MARGIN_MM
+    reach_deg = config.yaw_error_deg + ROBUSTNESS_DEG + MARGIN_DEG
     steps = int(np.ceil(reach_mm / cell_mm))
     offsets = np.arange(-steps, steps + 1) * cell_mm
     turns = int(np.ceil(reach_deg / YAW_STEP_DEG))
@@ -225,18 +236,46 @@ def capture_landscape(
         np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
     )
     captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
-    in_box = (np.abs(offsets)[:, None] <= config.position_error_mm + 1e-9) & (
-        np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + 1e-9
-    )
+    row_weights = sliding_error_weights(offsets, error_mm, axis)
+    in_box = (row_weights[:, None] > 0) & (np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + ROBUSTNESS_DEG + 1e-9)
+    weights = np.where(in_box, row_weights[:, None], 0.0)
     return CaptureLandscape(
         offsets_mm=offsets,
         yaws_deg=yaws_deg,
         separation_mm=separation,
         captured=captured,
         in_box=in_box,
-        fraction=float(captured[in_box].mean()) if pads_gap > 0 else 0.0,
+        fraction=float((weights * captured).sum() / weights.sum()) if pads_gap > 0 else 0.0,
         pads_gap_mm=pads_gap,
     )
+
+
+def sliding_error_weights(offsets_mm: np.ndarray, error_mm: float, sliding_axis: np.ndarray) -> np.ndarray:
+    """How likely each start error along the sliding axis is, for errors drawn uniformly along the table's axes.
+
+    ``t = b_x dx + b_y dy`` with ``dx, dy`` uniform in ``±error_mm``: a
+    trapezoid, uniform over ``±error_mm`` for an axis along the table's.
+
+    Parameters
+    ----------
+    offsets_mm : (n,) float
+        Start errors along ``b``, mm.
+    error_mm : float
+        Half-width of the start error box along each table axis, mm.
+    sliding_axis : (2,) float
+        ``(|b_x|, |b_y|)``, a unit vector.
+
+    Returns
+    -------
+    (n,) float
+        Relative weights (the density at each offset); 0 outside the reachable range.
+    """
+    a, b = sorted(error_mm * np.asarray(sliding_axis, dtype=np.float64))
+    t = np.abs(np.asarray(offsets_mm, dtype=np.float64))
+    if a < 1e-6 * max(b, 1e-9):
+        # along a table axis: uniform, the box's edge included
+        return (t <= b + 1e-9).astype(np.float64)
+    return np.clip(np.minimum(a + b - t, 2.0 * a), 0.0, None) / (4.0 * a * b)
 
 
 def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: float) -> np.ndarray:
@@ -399,6 +438,7 @@ def pad_landscapes(
     chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
     centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
     widths_mm: list[float],
+    sliding_axes: list[np.ndarray],
     grid: ScreenGrid,
     config: DesignConfig,
     flat: bool = False,
@@ -413,6 +453,8 @@ def pad_landscapes(
         Each scenario's centre of mass ``(u, v)`` in the "+" and "-" pad frames, mm.
     widths_mm : list of float
         Each scenario's part extent along the closing axis in the footprint (``a_max - a_min``), mm.
+    sliding_axes : list of (3,) float
+        Each scenario's sliding axis ``b`` in the resting frame (:attr:`fcso.sampler.GraspSample.sliding_axis`).
     grid : ScreenGrid
     config : DesignConfig
     flat : bool
@@ -442,6 +484,7 @@ def pad_landscapes(
             depth,
             width,
             config.verify,
+            axis,
         )
-        for pair, centres, width in zip(chosen, centres_uv_mm, widths_mm)
+        for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
     ]

@@ -172,7 +172,9 @@ def sample_geometry(
     )
     if config.quality.measure == "capture":
         # screening ranks by the capture of this sample's pads alone; the exact stage measures the whole pad
-        capture = printed_draft([screens], [centres], [sample.a_max_mm - sample.a_min_mm], config)[1][0]
+        capture = printed_draft(
+            [screens], [centres], [sample.a_max_mm - sample.a_min_mm], [sample.sliding_axis], config
+        )[1][0]
         screens = tuple(dataclasses.replace(g, capture=capture) for g in screens)
     return SampleGeometry(
         sample=sample,
@@ -261,6 +263,7 @@ def evaluate_candidate(
             [s.screen for s in chosen],
             [s.centres_uv_mm for s in chosen],
             [s.width_mm for s in chosen],
+            [s.sample.sliding_axis for s in chosen],
             ScreenGrid.for_config(config),
             config,
             flat=flat,
@@ -364,7 +367,13 @@ def screen_on_pad(
     if captures is None:
         # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
         # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
-        _, captures, _ = printed_draft(screens, [s.centres_uv_mm for s in chosen], [s.width_mm for s in chosen], config)
+        _, captures, _ = printed_draft(
+            screens,
+            [s.centres_uv_mm for s in chosen],
+            [s.width_mm for s in chosen],
+            [s.sample.sliding_axis for s in chosen],
+            config,
+        )
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
@@ -451,7 +460,15 @@ def versus_flat(
     for number, scenario in enumerate(scenarios):
         chosen = best.scenarios[number].capture
         sample = scenario.samples[best.choice[number]]
-        flat = pad_landscapes([sample.screen], [sample.centres_uv_mm], [sample.width_mm], grid, config, flat=True)[0]
+        flat = pad_landscapes(
+            [sample.screen],
+            [sample.centres_uv_mm],
+            [sample.width_mm],
+            [sample.sample.sliding_axis],
+            grid,
+            config,
+            flat=True,
+        )[0]
         tried = max(
             [chosen.fraction]
             + [e.scenarios[number].capture.fraction for e in finalists]
@@ -488,7 +505,11 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     """
     samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
     angle, _, why = printed_draft(
-        [s.screen for s in samples], [s.centres_uv_mm for s in samples], [s.width_mm for s in samples], config
+        [s.screen for s in samples],
+        [s.centres_uv_mm for s in samples],
+        [s.width_mm for s in samples],
+        [s.sample.sliding_axis for s in samples],
+        config,
     )
     return angle, why
 
@@ -497,14 +518,16 @@ def printed_draft(
     screens: list[tuple[ScreenGeometry, ScreenGeometry]],
     centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
     widths_mm: list[float],
+    sliding_axes: list[np.ndarray],
     config: DesignConfig,
 ) -> tuple[float, list[float], str | None]:
     """:func:`printed_lead_in_deg` of a candidate's samples, with every scenario's capture under that draft.
 
     Parameters
     ----------
-    screens, centres_uv_mm, widths_mm : list
-        Per scenario, its sample's two geometries, centres of mass and width, as :func:`fcso.capture.pad_landscapes`.
+    screens, centres_uv_mm, widths_mm, sliding_axes : list
+        Per scenario, its sample's two geometries, centres of mass, width and sliding axis, as
+        :func:`fcso.capture.pad_landscapes`.
     config : DesignConfig
 
     Returns
@@ -522,7 +545,10 @@ def printed_draft(
 
     def captures_at(angle: float) -> list[float]:
         drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
-        return [landscape.fraction for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, grid, drafted)]
+        return [
+            landscape.fraction
+            for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
+        ]
 
     captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
     worst = {angle: min(values) for angle, values in captures.items()}

@@ -236,6 +236,7 @@ def evaluate_on_pad(
                 config.sampler.penetration_mm,
                 sample.width_mm,
                 config.verify,
+                sample.sample.sliding_axis,
             )
             holding = holding_n(
                 scenario, sample, drawn[index], [c.contact for c in result.contacts], result.contact_normals, config

@@ -21,7 +21,7 @@ from examples.sim_parts import (
     two_ridge_block,
     upright_grasp_settings,
 )
-from fcso.capture import pad_landscapes
+from fcso.capture import pad_landscapes, sliding_error_weights
 from fcso.evaluate import printed_lead_in_deg
 from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n
@@ -47,7 +47,13 @@ def _sample_at(prepared, s_mm: float, h_mm: float):
 
 def _landscape(prepared, config, sample, flat: bool = False):
     return pad_landscapes(
-        [sample.screen], [sample.centres_uv_mm], [sample.width_mm], ScreenGrid.for_config(config), config, flat=flat
+        [sample.screen],
+        [sample.centres_uv_mm],
+        [sample.width_mm],
+        [sample.sample.sliding_axis],
+        ScreenGrid.for_config(config),
+        config,
+        flat=flat,
     )[0]
 
 
@@ -204,7 +210,26 @@ def test_a_cube_with_chamfered_edges_is_closed_on_square_to_its_chamfers_and_cap
     # the cube's bounding-box frame is its faces' frame (yaw 0 and 90)
     assert min(abs(chosen.yaw_deg - 45.0), abs(chosen.yaw_deg - 135.0)) < 0.5
     assert chosen.on_feature
-    assert scenario.capture >= 0.95 and scenario.flat_capture <= 0.2
+    # flat pads capture only the starts already within the success tolerance: at 45 degrees to the table's axes the
+    # start errors along the sliding axis pile up near the centre (a trapezoid reaching 2.83 mm), about a fifth
+    assert scenario.capture >= 0.95 and scenario.flat_capture <= 0.25
+
+
+def test_start_errors_along_an_oblique_sliding_axis_reach_the_box_corners_and_pile_up_at_the_centre():
+    offsets = np.arange(-12, 13) * 0.25
+    along_x = sliding_error_weights(offsets, 2.0, np.array([1.0, 0.0]))
+    # along a table axis: uniform over +-2 mm, the edge included
+    assert np.array_equal(along_x, (np.abs(offsets) <= 2.0).astype(float))
+    diagonal = sliding_error_weights(offsets, 2.0, np.array([np.sqrt(0.5), np.sqrt(0.5)]))
+    # dx / sqrt 2 + dy / sqrt 2 with dx, dy uniform in +-2: a triangle of half-width 2 sqrt 2 = 2.83 mm, peak
+    # 1 / 2.83 at the centre
+    assert diagonal[offsets == 0.0][0] == pytest.approx(1.0 / (2.0 * np.sqrt(2.0)))
+    assert diagonal[offsets == 2.5][0] == pytest.approx((2.0 * np.sqrt(2.0) - 2.5) / 8.0)
+    assert diagonal[offsets == 2.75][0] > 0.0 and diagonal[offsets == 3.0][0] == 0.0
+    # a 30-degree axis: a trapezoid, flat up to 2 (cos 30 - sin 30) = 0.73 mm
+    turned = sliding_error_weights(offsets, 2.0, np.array([np.cos(np.radians(30)), np.sin(np.radians(30))]))
+    assert turned[offsets == 0.0][0] == pytest.approx(turned[offsets == 0.5][0])
+    assert turned[offsets == 1.0][0] < turned[offsets == 0.5][0]
 
 
 def test_a_pad_longer_than_the_face_wraps_both_chamfers_and_is_chosen_from_the_size_list():
