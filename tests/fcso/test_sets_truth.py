@@ -25,6 +25,8 @@ def truth_config(tmp_path, **finger_sets) -> fcso.DesignConfig:
     return fcso.DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
+            # one pad size: the sets are designed, and simulated, once
+            "sampler": {"length_mm": 20.0},
             "finger_sets": {"min_retained": 0.0, "truth_budget_s": 600.0, **finger_sets},
             "verify": {"trials": 6, "cache_dir": str(tmp_path)},
         }
