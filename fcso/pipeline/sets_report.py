@@ -284,9 +284,9 @@ _JUDGED_EXACTLY = (
     "; every proposed partition was then judged by the exact evaluation of each of its sets' screened best candidate, "
     "and the search, seeing those exact retained qualities, went on while screening had promised min_retained, the "
     "exact figures missed it and max allowed more sets (at most max proposals); the best proposal was designed by "
-    "METHOD §1-9, and when its designed sets missed min_retained, one finger for every part was designed too and the "
-    "better of the two by the exact objective kept, so the sets never keep less in their worst scenario than that "
-    "one finger"
+    "METHOD §1-9, and when its designed sets missed min_retained with sets left, its losing parts were moved to a set "
+    "of their own and designed again, and one finger for every part was designed too; of the designed partitions, "
+    "the one serving the most parts (every scenario at min_retained) was kept, ties by the exact objective"
 )
 
 

@@ -35,7 +35,9 @@ class PartitionAttempt:
         ``"search"``: proposed by the partition search; ``"one_finger"``:
         every part in one set, designed to compare; ``"moved_losers"``: a
         designed partition that missed ``min_retained`` with its losing parts
-        moved to a set of their own (:func:`_moved_losers`).
+        moved to a set of their own (:func:`_moved_losers`); ``"moved_by_truth"``: the delivered partition with the
+        parts its simulated fingers fail where their own finger passes moved to sets of their own
+        (:func:`_judged_by_truth`).
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
     designed : bool
@@ -73,11 +75,14 @@ def search_judged_exactly(
     has fewer than ``max`` sets, and stops when the search proposes a partition already judged, or after
     ``[finger_sets] max`` proposals. The best proposal by the exact objective
     is then designed (``design_exactly`` on each of its sets: search and
-    exact re-evaluation, METHOD §6-8); if its designed sets miss
-    ``min_retained`` (or a set cannot be made), one finger for every part is
-    designed too, and the better of the two designed partitions by the exact
-    objective is chosen, so the sets never keep less in their worst scenario
-    than one finger does. Only the chosen partition's fingers are made
+    exact re-evaluation, METHOD §6-8); while its designed sets miss
+    ``min_retained`` with sets left, its losing parts are moved to a set of
+    their own and designed again (:func:`_delivered`); if they still miss it
+    (or a set cannot be made), one finger for every part is designed too, and
+    of the designed partitions the one serving the most parts is chosen, ties
+    by the exact objective (a deviation from METHOD §11's promise that the
+    sets never keep less in their worst scenario than one finger does:
+    docs/implementation.md). Only the chosen partition's fingers are made
     (``finish_exactly``, METHOD §9): the figures that judge a partition are
     its chosen candidates' exact ones, which making the finger does not change.
 
