@@ -35,13 +35,16 @@ class SetsTruth:
     names : list of str
         Every part's name (a set's members are indices into it), as its scenarios name it.
     budget_s : float
-        Simulation time allowed, s: no verification starts once it is spent.
+        Time allowed, s (simulations and the parts' own fingers designed for them): no verification starts once it
+        is spent.
     verify_config : VerifyConfig
         The ``[verify]`` settings of the simulation (the design's, with its print profile's density).
     verified : dict
         Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated.
+    solo_passes : dict
+        ``(part, part name, pose_index)`` -> whether the part's own finger passes that scenario.
     spent_s : float
-        Simulation time spent so far, s.
+        Time spent so far, s: the simulations and the parts' own fingers designed for them.
     """
 
     made: MadeSet
@@ -98,49 +101,49 @@ class SetsTruth:
         """Every scenario of set ``members`` simulated in full (every trial and the holding test, designed and flat:
         what the verification after the job repeats from the simulation cache), once; None when the budget is
         spent or its finger cannot be made."""
-        if members in self.verified:
-            return self.verified[members]
-        design = self.made(members)
-        if design is None or not self.left():
-            return None
+        if members in self.verified or not self.left():
+            return self.verified.get(members)
         from ..sim.verify import design_under_test, successes, verify_delivered
 
         clock = time.perf_counter()
-        verification = verify_delivered(design_under_test(design), self.verify_config)
+        design = self.made(members)
+        if design is not None:
+            verification = verify_delivered(design_under_test(design), self.verify_config)
+            self.verified[members] = {
+                (s.part, s.pose_index): VerifiedSetScenario(
+                    part=s.part,
+                    pose_index=s.pose_index,
+                    trials=len(s.fcso.trials),
+                    successes=successes(s.fcso.trials),
+                    flat_trials=len(s.flat.trials),
+                    flat_successes=successes(s.flat.trials),
+                    passed=s.passed,
+                )
+                for s in verification.scenarios
+            }
         self.spent_s += time.perf_counter() - clock
-        self.verified[members] = {
-            (s.part, s.pose_index): VerifiedSetScenario(
-                part=s.part,
-                pose_index=s.pose_index,
-                trials=len(s.fcso.trials),
-                successes=successes(s.fcso.trials),
-                flat_trials=len(s.flat.trials),
-                flat_successes=successes(s.flat.trials),
-                passed=s.passed,
-            )
-            for s in verification.scenarios
-        }
-        return self.verified[members]
+        return self.verified.get(members)
 
     def _solo_passes(self, part: int, keys: list[tuple[str, int]]) -> dict[tuple[str, int], bool]:
-        """Whether ``part``'s own finger passes each of its scenarios ``keys``, each simulated until it can no longer
-        pass (``stop_early``); scenarios the budget leaves unsimulated are missing."""
-        design = self.made(frozenset([part]))
-        if design is not None:
+        """Whether ``part``'s own finger (designed here when it was not) passes each of its scenarios ``keys``, each
+        simulated until it can no longer pass (``stop_early``); scenarios the budget leaves unsimulated are
+        missing."""
+        todo = [key for key in keys if (part, *key) not in self.solo_passes]
+        if todo and self.left():
             from ..sim.verify import DesignUnderTest, design_under_test, verify
 
-            whole = design_under_test(design)
-            for case in whole.cases:
+            clock = time.perf_counter()
+            design = self.made(frozenset([part]))
+            whole = None if design is None else design_under_test(design)
+            for case in [] if whole is None else whole.cases:
                 key = _case_key(case.name)
-                if key not in keys or (part, *key) in self.solo_passes or not self.left():
-                    continue
-                clock = time.perf_counter()
-                verification = verify(
-                    DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm),
-                    self.verify_config.model_copy(update={"stop_early": True}),
-                )
-                self.spent_s += time.perf_counter() - clock
-                self.solo_passes[(part, *key)] = verification.passed
+                if key in todo and self.spent_s + time.perf_counter() - clock < self.budget_s:
+                    verification = verify(
+                        DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm),
+                        self.verify_config.model_copy(update={"stop_early": True}),
+                    )
+                    self.solo_passes[(part, *key)] = verification.passed
+            self.spent_s += time.perf_counter() - clock
         return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
 
 
