@@ -452,9 +452,7 @@ class VerifiedSetScenario(ReportModel):
     flat_successes: int = Field(description="Of those, the successful ones")
     passed: bool = Field(description="The scenario passed ([verify] pass_success_rate, holding as flat pads)")
     solo_passed: bool | None = Field(
-        None,
-        description="Where the set's finger failed: whether the part's own finger (its set alone) passes it; null "
-        "when not simulated",
+        None, description="Where the set's finger failed: whether the part's own finger passes it; null: not simulated"
     )
 
 
@@ -469,15 +467,11 @@ class SetsTruthReport(ReportModel):
     """Sets judged by truth ([finger_sets] truth_budget_s): the delivered sets' fingers simulated, and what moved."""
 
     budget_s: float = Field(description="[finger_sets] truth_budget_s, s")
-    spent_s: float = Field(description="Simulation time spent, s (the sets' fingers and the parts' own fingers)")
+    spent_s: float = Field(description="Time spent, s: the simulations and the parts' own fingers designed for them")
     sets: list[VerifiedSet] = Field(description="Delivered sets verified within the budget, in set order")
     unverified_sets: list[int] = Field(description="Delivered sets left unverified when the budget ran out")
-    moved_parts: list[str] = Field(
-        description="Parts a set's verified finger failed where their own finger passed, given a set of their own"
-    )
-    not_served_parts: list[str] = Field(
-        description="Such parts left without a set of their own (every set allowed used): in not_served"
-    )
+    moved_parts: list[str] = Field(description="Parts a shared finger failed where their own passed, given own sets")
+    not_served_parts: list[str] = Field(description="Such parts left where no set was left for them: not_served")
 
 
 class FingerSetsReport(ReportModel):

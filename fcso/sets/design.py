@@ -194,15 +194,7 @@ def _design_sets_of_one_size(
     )
     if truth is not None:
         clock = time.perf_counter()
-        delivered = [
-            frozenset(p for p, a in enumerate(outcome.assignment) if a == label) for label in range(len(designs))
-        ]
-        truth_report = truth.report(
-            delivered,
-            [truth.names[p] for p in outcome.moved_by_truth],
-            [truth.names[p] for p in outcome.unserved_by_truth],
-        )
-        finger_sets = finger_sets.model_copy(update={"truth": truth_report})
+        finger_sets = finger_sets.model_copy(update={"truth": truth.report(outcome)})
         timings["truth"] = time.perf_counter() - clock
     timings = {k: round(v, 3) for k, v in timings.items()}
     if len(designs) == 1:

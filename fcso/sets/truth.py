@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from ..config import VerifyConfig
 from ..pipeline import DesignResult
 from ..report.models import SetsTruthReport, VerifiedSet, VerifiedSetScenario
+from .partition import PartitionOutcome
 
 #: ``made(set_of_parts)``: the set's finished design (its finger made), or None when it cannot be made.
 MadeSet = Callable[[frozenset[int]], DesignResult | None]
@@ -78,12 +79,16 @@ class SetsTruth:
                 unserved.append(part)
         return unserved
 
-    def report(self, delivered: list[frozenset[int]], moved: list[str], not_served: list[str]) -> SetsTruthReport:
-        """The report of the delivered sets (set order) as simulated, the rest of the budget spent on the sets not yet
-        simulated (a set of one part is simulated only for the report)."""
+    def report(self, outcome: PartitionOutcome) -> SetsTruthReport:
+        """The report of the delivered partition's sets (set order) as simulated, with what moved and what is left
+        unserved; the rest of the budget goes to the sets not yet simulated (a set of one part is simulated only for
+        the report)."""
+        delivered = [
+            frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
+            for label in range(max(outcome.assignment) + 1)
+        ]
         for members in delivered:
-            if members not in self.verified:
-                self._verified(members)
+            self._verified(members)
         return SetsTruthReport(
             budget_s=self.budget_s,
             spent_s=round(self.spent_s, 3),
@@ -93,8 +98,8 @@ class SetsTruth:
                 if members in self.verified
             ],
             unverified_sets=[label for label, m in enumerate(delivered, start=1) if m not in self.verified],
-            moved_parts=moved,
-            not_served_parts=not_served,
+            moved_parts=[self.names[p] for p in outcome.moved_by_truth],
+            not_served_parts=[self.names[p] for p in outcome.unserved_by_truth],
         )
 
     def _verified(self, members: frozenset[int]) -> dict[tuple[str, int], VerifiedSetScenario] | None:
