@@ -301,5 +301,5 @@ def _truth_lines(sets: FingerSetsReport) -> list[str]:
             )
         )
     if truth.unverified_sets:
-        lines.append(f"  not verified (budget spent): set {', '.join(map(str, truth.unverified_sets))}")
-    return lines
+        lines.append(f"  not verified (budget spent, or see below): set {', '.join(map(str, truth.unverified_sets))}")
+    return lines + [f"  {note}" for note in truth.notes]

@@ -472,6 +472,7 @@ class SetsTruthReport(ReportModel):
     unverified_sets: list[int] = Field(description="Delivered sets left unverified when the budget ran out")
     moved_parts: list[str] = Field(description="Parts a shared finger failed where their own passed, given own sets")
     not_served_parts: list[str] = Field(description="Such parts left where no set was left for them: not_served")
+    notes: list[str] = Field(default_factory=list, description="Fingers MuJoCo could not simulate, and why")
 
 
 class FingerSetsReport(ReportModel):

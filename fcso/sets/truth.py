@@ -43,7 +43,10 @@ class SetsTruth:
     verified : dict
         Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated.
     solo_passes : dict
-        ``(part, part name, pose_index)`` -> whether the part's own finger passes that scenario.
+        ``(part, part name, pose_index)`` -> whether the part's own finger passes that scenario (None: MuJoCo refused
+        its scene).
+    unsimulated : dict
+        Set of parts -> why MuJoCo could not simulate its finger (the set is judged by the measure).
     spent_s : float
         Time spent so far, s: the simulations and the parts' own fingers designed for them.
     """
@@ -53,7 +56,8 @@ class SetsTruth:
     budget_s: float
     verify_config: VerifyConfig
     verified: dict[frozenset[int], dict[tuple[str, int], VerifiedSetScenario]] = dataclasses.field(default_factory=dict)
-    solo_passes: dict[tuple[int, str, int], bool] = dataclasses.field(default_factory=dict)
+    solo_passes: dict[tuple[int, str, int], bool | None] = dataclasses.field(default_factory=dict)
+    unsimulated: dict[frozenset[int], str] = dataclasses.field(default_factory=dict)
     spent_s: float = 0.0
 
     def left(self) -> bool:
@@ -100,20 +104,24 @@ class SetsTruth:
             unverified_sets=[label for label, m in enumerate(delivered, start=1) if m not in self.verified],
             moved_parts=[self.names[p] for p in outcome.moved_by_truth],
             not_served_parts=[self.names[p] for p in outcome.unserved_by_truth],
+            notes=[
+                f"{' + '.join(self.names[p] for p in sorted(m))}: not simulated: {why}"
+                for m, why in self.unsimulated.items()
+            ],
         )
 
     def _verified(self, members: frozenset[int]) -> dict[tuple[str, int], VerifiedSetScenario] | None:
         """Every scenario of set ``members`` simulated in full (every trial and the holding test, designed and flat:
         what the verification after the job repeats from the simulation cache), once; None when the budget is
         spent or its finger cannot be made."""
-        if members in self.verified or not self.left():
+        if members in self.verified or members in self.unsimulated or not self.left():
             return self.verified.get(members)
         from ..sim.verify import design_under_test, successes, verify_delivered
 
         clock = time.perf_counter()
         design = self.made(members)
-        if design is not None:
-            verification = verify_delivered(design_under_test(design), self.verify_config)
+        verification = None if design is None else self._simulated(verify_delivered, design_under_test(design), members)
+        if verification is not None:
             self.verified[members] = {
                 (s.part, s.pose_index): VerifiedSetScenario(
                     part=s.part,
@@ -143,13 +151,20 @@ class SetsTruth:
             for case in [] if whole is None else whole.cases:
                 key = _case_key(case.name)
                 if key in todo and self.spent_s + time.perf_counter() - clock < self.budget_s:
-                    verification = verify(
-                        DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm),
-                        self.verify_config.model_copy(update={"stop_early": True}),
-                    )
-                    self.solo_passes[(part, *key)] = verification.passed
+                    one = DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm)
+                    verification = self._simulated(verify, one, frozenset([part]), stop_early=True)
+                    self.solo_passes[(part, *key)] = None if verification is None else verification.passed
             self.spent_s += time.perf_counter() - clock
         return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
+
+    def _simulated(self, run, design, members: frozenset[int], **settings):
+        """``run(design, [verify] settings)``, or None when MuJoCo refuses the scene (a compile error of its
+        collision pieces): the set is then judged by the measure, and the report says why (``notes``)."""
+        try:
+            return run(design, self.verify_config.model_copy(update=settings))
+        except ValueError as error:  # MuJoCo's model compiler: e.g. "mesh volume is too small"
+            self.unsimulated[members] = str(error).splitlines()[0]
+            return None
 
 
 def _case_key(name: str) -> tuple[str, int]:
