@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup lint browser promtool test demo paper bench schema clean
+.PHONY: setup lint browser promtool node test demo paper bench schema clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -32,10 +32,16 @@ promtool:
 	@command -v promtool >/dev/null || \
 		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends prometheus)
 
+# the live Foxglove server is tested with Foxglove's reference client (npm's @foxglove/ws-protocol, which the test
+# installs into build/npm): Node.js and npm from Debian, installed when missing
+node:
+	@command -v node >/dev/null && command -v npm >/dev/null || \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm)
+
 # pytest exits 5 when it collected no tests: that is a failure here. The test files run on every core
 # (at most 4 workers); a file's tests stay on one worker, which builds its module fixtures once.
 # The ten slowest tests are listed at the end: where a slow CI machine spends its time.
-test: setup lint browser promtool
+test: setup lint browser promtool node
 	$(PY) -m pytest -q --numprocesses=auto --maxprocesses=4 --dist loadfile --durations=10; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing"; exit 1; fi; \
 	exit $$rc

@@ -39,8 +39,9 @@ import pymeshfix
 import trimesh
 
 from fcso import MeshError, load_parts
-from fcso.parts import mesh_solids, read_mesh
+from fcso.parts import read_mesh
 from fcso.repair import repair_shells
+from fcso.solids import mesh_solids
 from tests.broken_meshes import KINDS, break_mesh, intact_mesh
 
 REPO = Path(__file__).resolve().parent.parent

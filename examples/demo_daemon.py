@@ -85,6 +85,8 @@ def _show(line: str) -> None:
                 for s in body["scenarios"]
             )
             print(f"  {message['key']}: {'passed' if body['passed'] else 'did not pass'}; success {rates}")
+            if body.get("verdict"):
+                print(f"  {message['key']}: {body['verdict']}")
     elif topic == "quality":
         print(
             f"  {message['key']}: {fcso.quality_words(body['quality'], body['quality_measure'])}, "
@@ -296,11 +298,10 @@ trials = 10
                 str(config),
                 "--save",
                 str(BASE / "received"),
-                # verification is on: the job's one finger (the design's choice of sets) is verified inside its
-                # design step, its message on .../verification follows the done status (it waited for a second
-                # one, of a second finger set the job no longer gets, until the time limit)
+                # verification is on: the job's two fingers (the design's choice of sets: the cube's and the
+                # tracker's) are each verified, their messages on .../verification follow the done status
                 "--exit-after-verifications",
-                "1",
+                "2",
                 # a guard against a hung daemon, not a speed guess: the demo ends at its verification
                 "--timeout",
                 "7200",

@@ -36,11 +36,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import maximum_filter
 
 from .config import DesignConfig, VerifyConfig
 from .grid import ScreenGrid
 from .jit import compiled
+from .printed_heights import carved_heights, fitted_pad_heights
 from .screen import ScreenGeometry, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
@@ -48,9 +48,6 @@ YAW_STEP_DEG = 0.5
 #: How far the landscape reaches beyond the start error box, mm and degrees:
 #: a descent may leave the box on its way to the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
-#: How far beyond the test's error box a start must still be captured for the box to count as captured, mm and
-#: degrees: the model's heights and quasi-static squeeze err by a few tenths of a millimetre at a basin's edge.
-ROBUSTNESS_MM, ROBUSTNESS_DEG = 0.0, 0.0
 #: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
 #: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
 #: 0.1-0.25 mm under 60 N), and which made a cylinder in its round pocket capture every start yaw.
@@ -91,62 +88,6 @@ class CaptureLandscape:
     pads_gap_mm: float
 
 
-def fitted_pad_heights(
-    carved_mm: np.ndarray, floor_mm: float, cell_mm: float, clearance_mm: float, lead_in_deg: float
-) -> np.ndarray:
-    """The pad's face heights ``P = {u >= H}`` as printed.
-
-    Parameters
-    ----------
-    carved_mm : (count_v, count_w) float
-        Largest column height of the carved (good) geometries, mm; ``-inf``
-        where none carves.
-    floor_mm : float
-        The pad face where nothing is carved (0, the block's ``D - d_B``, or
-        ``D`` for a flat pad), mm.
-    cell_mm : float
-        Grid cell, mm.
-    clearance_mm, lead_in_deg : float
-        ``[print]``'s fit; 0 and 0 give the exact pocket.
-
-    Returns
-    -------
-    (count_v, count_w) float
-    """
-    heights = np.asarray(carved_mm, dtype=np.float64).copy()
-    if clearance_mm > 0 and np.isfinite(heights).any():
-        # the part grown by a ball: grey dilation by a hemisphere, so pocket edges are rounded as carved
-        radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
-        padded = np.pad(heights, radius, constant_values=-np.inf)
-        grown = np.full_like(heights, -np.inf)
-        count_v, count_w = heights.shape
-        for dv in range(-radius, radius + 1):
-            for dw in range(-radius, radius + 1):
-                lateral = np.hypot(dv, dw) * cell_mm
-                if lateral <= clearance_mm + 1e-9:
-                    window = padded[radius + dv : radius + dv + count_v, radius + dw : radius + dw + count_w]
-                    np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
-        heights = grown
-    if lead_in_deg > 0 and np.isfinite(heights).any():
-        # raised to the floor first: the draft then stops where it meets the floor, a few cells
-        # out, instead of spreading below it over the whole grid (the same result, ~30x fewer passes)
-        heights = np.maximum(heights, floor_mm)
-        drop = cell_mm / np.tan(np.radians(lead_in_deg))
-        diagonal = drop * np.sqrt(2.0)
-        for _ in range(heights.shape[0] + heights.shape[1]):
-            straight = maximum_filter(
-                heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf
-            )
-            corner = maximum_filter(
-                heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf
-            )
-            grown = np.maximum(heights, np.maximum(straight - drop, corner - diagonal))
-            if np.array_equal(grown, heights):
-                break
-            heights = grown
-    return np.maximum(heights, floor_mm)
-
-
 def capture_landscape(
     pad_mm: np.ndarray,
     part_mm: tuple[np.ndarray, np.ndarray],
@@ -178,19 +119,18 @@ def capture_landscape(
     config : VerifyConfig
         Start error box, success tolerance, friction.
     sliding_axis : (2,) or (3,) float, optional
-        The sliding axis ``b`` in the table's frame. The precision test's start errors are drawn along the table's
-        axes, so a grasp closing obliquely sees them along ``b`` up to ``e (|b_x| + |b_y|)``, the likelier the
-        nearer the centre (:func:`sliding_error_weights`). None: ``b`` lies along a table axis.
+        ``b`` in the table's frame, whose start errors lie along its axes (:func:`sliding_error_weights`); None: a
+        table axis.
 
     Returns
     -------
     CaptureLandscape
     """
-    error_mm = config.position_error_mm + ROBUSTNESS_MM
+    error_mm = config.position_error_mm
     axis = np.abs(np.asarray((0.0, 1.0) if sliding_axis is None else sliding_axis, dtype=np.float64)[:2])
     axis /= np.linalg.norm(axis)
     reach_mm = error_mm * float(axis.sum()) + MARGIN_MM
-    reach_deg = config.yaw_error_deg + ROBUSTNESS_DEG + MARGIN_DEG
+    reach_deg = config.yaw_error_deg + MARGIN_DEG
     steps = int(np.ceil(reach_mm / cell_mm))
     offsets = np.arange(-steps, steps + 1) * cell_mm
     turns = int(np.ceil(reach_deg / YAW_STEP_DEG))
@@ -236,15 +176,14 @@ def capture_landscape(
         np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
     )
     captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
-    row_weights = sliding_error_weights(offsets, error_mm, axis)
-    in_box = (row_weights[:, None] > 0) & (np.abs(yaws_deg)[None, :] <= config.yaw_error_deg + ROBUSTNESS_DEG + 1e-9)
-    weights = np.where(in_box, row_weights[:, None], 0.0)
+    in_yaw = np.abs(yaws_deg) <= config.yaw_error_deg + 1e-9
+    weights = np.outer(sliding_error_weights(offsets, error_mm, axis), in_yaw)
     return CaptureLandscape(
         offsets_mm=offsets,
         yaws_deg=yaws_deg,
         separation_mm=separation,
         captured=captured,
-        in_box=in_box,
+        in_box=weights > 0,
         fraction=float((weights * captured).sum() / weights.sum()) if pads_gap > 0 else 0.0,
         pads_gap_mm=pads_gap,
     )
@@ -421,17 +360,6 @@ def _steepest_moves(separation, step_mm, turn_mm, friction):
                         best_slope[r, c] = slope
                         successor[r, c] = (r + dr) * columns + c + dc
     return successor
-
-
-def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.ndarray:
-    """Largest column height of the good geometries, ``(count_v, count_w)`` mm; ``-inf`` where none carves."""
-    carved = np.full((grid.count_v, grid.count_w), -np.inf)
-    for geometry in geometries:
-        if geometry.good:
-            # outside its window a geometry's heights are 0: it carves nothing there
-            heights = geometry.window_heights_mm
-            np.maximum(carved[geometry.cells], np.where(heights > 0, heights, -np.inf), out=carved[geometry.cells])
-    return carved
 
 
 def pad_landscapes(

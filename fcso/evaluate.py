@@ -20,6 +20,7 @@ from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
 from .holding import holding_forces_n
+from .lead_in import FLAT_MARGIN, printed_draft
 from .measure import scenario_measure
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
 from .parts import Part
@@ -428,10 +429,6 @@ def holding_n(
     )
 
 
-#: How much more of the start errors a pad must capture than flat pads to count as better (2 of 20 starts).
-FLAT_MARGIN = 0.1
-
-
 @dataclass
 class VersusFlat:
     """One scenario's chosen pad against flat pads on the same grasp (METHOD §7b, §12).
@@ -512,58 +509,6 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
         config,
     )
     return angle, why
-
-
-def printed_draft(
-    screens: list[tuple[ScreenGeometry, ScreenGeometry]],
-    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
-    widths_mm: list[float],
-    sliding_axes: list[np.ndarray],
-    config: DesignConfig,
-) -> tuple[float, list[float], str | None]:
-    """:func:`printed_lead_in_deg` of a candidate's samples, with every scenario's capture under that draft.
-
-    Parameters
-    ----------
-    screens, centres_uv_mm, widths_mm, sliding_axes : list
-        Per scenario, its sample's two geometries, centres of mass, width and sliding axis, as
-        :func:`fcso.capture.pad_landscapes`.
-    config : DesignConfig
-
-    Returns
-    -------
-    lead_in_deg : float
-    captures : list of float
-        Per scenario, its capture on the candidate's pad printed with that draft.
-    why : str or None
-    """
-    lead_in = config.print.resolved()["lead_in_deg"]
-    alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
-    if lead_in <= 0 or config.quality.measure != "capture":
-        alternatives = []
-    grid = ScreenGrid.for_config(config)
-
-    def captures_at(angle: float) -> list[float]:
-        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
-        return [
-            landscape.fraction
-            for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
-        ]
-
-    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
-    worst = {angle: min(values) for angle, values in captures.items()}
-    widest = max(worst.values())
-    if widest < worst[lead_in] + FLAT_MARGIN:
-        return lead_in, captures[lead_in], None
-    angle = min(a for a, capture in worst.items() if capture >= widest - 1e-9)
-    return (
-        angle,
-        captures[angle],
-        (
-            f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
-            f"the worst scenario's capture is {worst[angle]:.2f} against {worst[lead_in]:.2f}"
-        ),
-    )
 
 
 def fit_key(config: DesignConfig) -> tuple | None:

@@ -10,6 +10,7 @@ record, corrupt journal, a zenoh session that cannot open, an unknown job).
 from __future__ import annotations
 
 import argparse
+import getpass
 import json
 import logging
 import os
@@ -274,6 +275,14 @@ def _jobs(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _login() -> str:
+    """The login name of who runs the command (``uid <n>`` where the system knows no name for it)."""
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return f"uid {os.getuid()}"
+
+
 def _request(args: argparse.Namespace) -> int:
     """``fcsod retry | cancel | approve | reject JOB``: ask the daemon through the journal's request table and print
     its answer."""
@@ -291,7 +300,7 @@ def _request(args: argparse.Namespace) -> int:
         found = "no job" if not matches else f"{len(matches)} jobs ({', '.join(matches[:5])})"
         print(f"fcsod: {path}: {found} with the id or id prefix {args.job!r}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    request_id = submit_request(path, matches[0], args.command, utc_now())
+    request_id = submit_request(path, matches[0], args.command, utc_now(), _login())
     deadline = time.monotonic() + args.timeout
     while (request := read_request(path, request_id)).handled_at is None:
         if time.monotonic() > deadline:

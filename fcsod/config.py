@@ -240,9 +240,9 @@ class VerifySettings(VerifyConfig):
         "message, the cell decides: a farm without an operator keeps running); verified (the design passed); "
         "better_than_flat (it passed, or beat flat pads: no fewer successful trials in any scenario, more in one, "
         "holding as well). A job whose finger misses it ends held, its finger not placed into build.3mf and its "
-        "grasps not published, until fcsod approve or fcsod reject. With a policy other than always a job of one "
-        "finger is verified before it is placed (with top_k 0 too); jobs of several finger sets are verified after "
-        "they are done and are not held",
+        "grasps not published, until fcsod approve or fcsod reject. With a policy other than always every finger "
+        "set's finger is verified before it is placed, one set or several (with top_k 0 too), and any that misses "
+        "it holds the job",
     )
 
     def verify_config(self) -> VerifyConfig:

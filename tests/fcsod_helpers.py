@@ -160,13 +160,17 @@ class Process:
         Extra environment variables.
     module : str
         The module to run (``fcsod``, or a test helper such as ``tests.ros2_cell``).
+    program : list of str, optional
+        The program to run instead of ``python -m <module>`` (such as ``["node", "script.js"]``).
     """
 
-    def __init__(self, args: list[str], env: dict | None = None, module: str = "fcsod"):
+    def __init__(
+        self, args: list[str], env: dict | None = None, module: str = "fcsod", program: list[str] | None = None
+    ):
         self.lines: list[str] = []
         self._queue: queue.Queue[str] = queue.Queue()
         self.popen = subprocess.Popen(
-            [sys.executable, "-m", module, *args],
+            [*(program or [sys.executable, "-m", module]), *args],
             cwd=REPO,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,

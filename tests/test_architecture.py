@@ -31,6 +31,12 @@ HEAVY = ("numba", "mujoco", "matplotlib", "highspy", "dask", "distributed")
 #: Modules of fcso that are not the method: the command line, the schemas and presentation itself (and the facade
 #: ``fcso``).
 NOT_METHOD = ("fcso.cli", "fcso.schema", "fcso.verify_cli", "fcso.output")
+#: Longest module and longest function (its ``def`` to its last line, docstring included), lines: past them a module
+#: holds more than one concern, a function more than one step.
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_LINES = 100
+#: Functions allowed to be longer: tables and parsers, read line by line, not followed as steps.
+LONG_FUNCTIONS = {"fcsod.cli._parser": "the command line's parser: one add_argument a line"}
 
 
 def module_name(path: Path) -> str:
@@ -278,6 +284,39 @@ def test_no_private_name_is_used_outside_its_module():
         if private
     ]
     assert offending == []
+
+
+def long_definitions(packages=PACKAGES) -> list[str]:
+    """Modules over :data:`MAX_MODULE_LINES` and functions (methods and nested ones too) over
+    :data:`MAX_FUNCTION_LINES` lines of ``packages``, except :data:`LONG_FUNCTIONS`."""
+    found = []
+    for name, path in source_modules(packages).items():
+        source = path.read_text(encoding="utf-8")
+        if len(source.splitlines()) > MAX_MODULE_LINES:
+            found.append(f"{name}: {len(source.splitlines())} lines")
+        for node in ast.walk(ast.parse(source, str(path))):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                length = node.end_lineno - node.lineno + 1
+                if length > MAX_FUNCTION_LINES and f"{name}.{node.name}" not in LONG_FUNCTIONS:
+                    found.append(f"{name}.{node.name} (line {node.lineno}): {length} lines")
+    return found
+
+
+def test_no_long_module_nor_long_function():
+    assert long_definitions() == []
+
+
+def test_the_length_check_sees_a_long_module_and_a_long_function(tmp_path, monkeypatch):
+    package = tmp_path / "longpkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "long.py").write_text("def f():\n" + "    x = 1\n" * MAX_FUNCTION_LINES + "\n" * MAX_MODULE_LINES)
+    (package / "short.py").write_text("def g():\n" + "    x = 1\n" * (MAX_FUNCTION_LINES - 1))
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert long_definitions(("longpkg",)) == [
+        f"longpkg.long: {MAX_FUNCTION_LINES + 1 + MAX_MODULE_LINES} lines",
+        f"longpkg.long.f (line 1): {MAX_FUNCTION_LINES + 1} lines",
+    ]
 
 
 def test_the_daemon_and_its_small_commands_load_neither_mujoco_nor_matplotlib(tmp_path):

@@ -27,7 +27,8 @@ from ..sim.report import (
     weakest_hold_n,
 )
 from ..sim.scene import pad_in_world
-from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case, successes
+from ..sim.schedule import successes
+from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
 from .decimate import decimate
 from .html import VERDICT_BEGIN, VERDICT_END, insert_verdict
 from .read import read_design_folder

@@ -149,12 +149,6 @@ def sets_report(
     kept = [s.retained for s in scenarios if s.retained is not None]
     served = {prepared.parts[u].name for u in graspable}
     names = [prepared.parts[u].name for u in graspable]
-    pairs = sorted(outcome.pair_retained.items())
-    blocking = [
-        PairConflictReport(parts=[names[i], names[j]], retained=[round(a, 6), round(b, 6)])
-        for (i, j), (a, b) in pairs
-        if min(a, b) < settings.min_retained
-    ]
     reached = min(kept) >= settings.min_retained
     order = {prepared.parts[u].name: k for k, u in enumerate(graspable)}
     return FingerSetsReport(
@@ -180,22 +174,31 @@ def sets_report(
         ungraspable=ungraspable,
         pick_plan=pick_plan,
         not_served=sorted(not_served, key=lambda entry: order[entry.part]),
-        search=PartitionSearchReport(
-            method=outcome.method,
-            description=_search_description(outcome, len(graspable), settings),
-            proven=outcome.proven,
-            fewest_sets_proven=outcome.fewest_sets_proven,
-            sets_tried=outcome.sets_tried,
-            set_screenings=outcome.set_screenings,
-            lower_bound_sets=outcome.lower_bound_sets,
-            conflict_clique=[names[i] for i in outcome.conflict_clique],
-            worst_retained_bound=None
-            if outcome.worst_retained_bound is None
-            else round(outcome.worst_retained_bound, 6),
-            blocking_pairs=blocking,
-            explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
-            attempts=[_attempt_report(a, outcome, names) for a in attempts],
-        ),
+        search=search_report(outcome, names, scenarios, attempts, reached, settings),
+    )
+
+
+def search_report(outcome, names, scenarios, attempts, reached, settings) -> PartitionSearchReport:
+    """The partition search's report: how the sets were found, the pairs of parts (``names``: the graspable parts)
+    that no set can serve together, and why ``min_retained`` was not reached (unless ``reached``)."""
+    blocking = [
+        PairConflictReport(parts=[names[i], names[j]], retained=[round(a, 6), round(b, 6)])
+        for (i, j), (a, b) in sorted(outcome.pair_retained.items())
+        if min(a, b) < settings.min_retained
+    ]
+    return PartitionSearchReport(
+        method=outcome.method,
+        description=_search_description(outcome, len(names), settings),
+        proven=outcome.proven,
+        fewest_sets_proven=outcome.fewest_sets_proven,
+        sets_tried=outcome.sets_tried,
+        set_screenings=outcome.set_screenings,
+        lower_bound_sets=outcome.lower_bound_sets,
+        conflict_clique=[names[i] for i in outcome.conflict_clique],
+        worst_retained_bound=None if outcome.worst_retained_bound is None else round(outcome.worst_retained_bound, 6),
+        blocking_pairs=blocking,
+        explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
+        attempts=[_attempt_report(a, outcome, names) for a in attempts],
     )
 
 

@@ -13,7 +13,8 @@ from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport
-from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, successes, verify, verify_delivered
+from .schedule import successes
+from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify, verify_delivered
 
 
 def candidate_designs(
@@ -67,7 +68,7 @@ def verify_top(
     at the first whose every scenario passes; no further candidate is
     started once ``config.choice_budget_s`` went on verification. With
     ``config.stop_early`` a candidate's verification stops as soon as it can
-    no longer pass (:func:`fcso.sim.verify.scenario_simulations`). When none of
+    no longer pass (:func:`fcso.sim.schedule.scenario_simulations`). When none of
     those tried passes, the best of them by truth is delivered: the highest
     worst-scenario success count over the planned trials
     (:func:`worst_success_share`), then the measure's order; but flat pads the
@@ -123,11 +124,9 @@ def verify_top(
             rank_by_quality=rank + 1,
             index=candidate.index,
             quality=candidate.quality,
-            success_rates=[s.fcso.success_rate for s in verification.scenarios],
-            flat_success_rates=[s.flat.success_rate for s in verification.scenarios],
-            trials_run=[len(s.fcso.trials) for s in verification.scenarios],
             passed=verification.passed,
             chosen=candidate.index == chosen[1].index,
+            **trial_figures(verification),
         )
         for rank, candidate, _, verification in outcomes
     ]
@@ -137,18 +136,7 @@ def verify_top(
         # the delivered candidate is told in full (METHOD §12b): every trial and the holding test, designed and flat;
         # the trials its choice ran come from the simulation cache
         verification = verify_delivered(design, config, progress)
-        ranking = [
-            r.model_copy(
-                update={
-                    "success_rates": [s.fcso.success_rate for s in verification.scenarios],
-                    "flat_success_rates": [s.flat.success_rate for s in verification.scenarios],
-                    "trials_run": [len(s.fcso.trials) for s in verification.scenarios],
-                }
-            )
-            if r.chosen
-            else r
-            for r in ranking
-        ]
+        ranking = [r.model_copy(update=trial_figures(verification)) if r.chosen else r for r in ranking]
     why = choice_text(
         rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s, kept_flat
     )
@@ -158,6 +146,16 @@ def verify_top(
         verification.warnings.append(f"verification delivered {why}")
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def trial_figures(verification: VerificationReport) -> dict[str, list]:
+    """A :class:`RankedCandidate`'s figures of a verification: per scenario, the designed and the flat pads' success
+    rates and the designed pads' trials run."""
+    return {
+        "success_rates": [s.fcso.success_rate for s in verification.scenarios],
+        "flat_success_rates": [s.flat.success_rate for s in verification.scenarios],
+        "trials_run": [len(s.fcso.trials) for s in verification.scenarios],
+    }
 
 
 def worst_success_share(verification: VerificationReport) -> float:

@@ -175,16 +175,45 @@ def build_scene(
     -------
     Scene
     """
-    thickness, length, width = case.pad_size_mm
-    depth = case.penetration_mm
+    xml = scene_xml(case, part_pieces, pad_pieces, finger_hull_mm, config)
+    arena = scene_arena_bytes(len(part_pieces), len(pad_pieces or []), config)
+    model = _compiled(xml, arena)
+    part_body = model.body("part").id
+    pad_geoms = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("pad_")])
+    return Scene(
+        model=model,
+        part_body=part_body,
+        part_com_mm=np.asarray(case.part.center_mass, dtype=float),
+        lift_joint=model.joint("lift").id,
+        joints=(model.joint("plus").id, model.joint("minus").id),
+        actuators=(model.actuator("plus").id, model.actuator("minus").id),
+        part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
+        pad_geoms=pad_geoms,
+        lift_axis=-np.asarray(case.tcp, dtype=float)[:3, 2],
+        part_qpos=int(model.jnt_qposadr[model.joint("part").id]),
+        part_dof=int(model.jnt_dofadr[model.joint("part").id]),
+        model_sha256=hashlib.sha256(xml.encode()).hexdigest(),
+        pad_inset_mm=0.0 if pad_pieces is None else float(case.penetration_mm),
+        xml=xml,
+        arena_bytes=arena,
+    )
+
+
+def scene_xml(
+    case: GraspCase,
+    part_pieces: list[tuple[np.ndarray, np.ndarray]],
+    pad_pieces: list[tuple[np.ndarray, np.ndarray]] | None,
+    finger_hull_mm: np.ndarray,
+    config: VerifyConfig,
+) -> str:
+    """The MuJoCo model's source of one grasp case, without its arena size (:func:`build_scene`'s parameters)."""
     mass_kg = case.part.volume * config.density_g_cm3 * 1e-6
     com = np.asarray(case.part.center_mass, dtype=float)
     # trimesh's inertia is for unit density in mm^5: kg/mm^3 and mm^2 -> m^2
     inertia = np.asarray(case.part.moment_inertia) * config.density_g_cm3 * 1e-6 * 1e-6
     full_inertia = _vec([inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]])
-    q_min, q_max = case.joint_range_mm
     tcp = np.asarray(case.tcp, dtype=float)
-    assets, part_geoms, finger_geoms = [], [], {1: [], -1: []}
+    assets, part_geoms = [], []
     for k, (vertices, _) in enumerate(part_pieces):
         assets.append(f'<mesh name="part{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
         part_geoms.append(f'<geom name="part{k}" type="mesh" mesh="part{k}" class="contact" {COLLIDES["part"]}/>')
@@ -195,36 +224,10 @@ def build_scene(
         assets.append(f'<mesh name="finger_body" vertex="{_vec(np.asarray(finger_hull_mm) * M)}"/>')
     for k, (vertices, _) in enumerate(pad_pieces or []):
         assets.append(f'<mesh name="pad{k}" vertex="{_vec(np.asarray(vertices) * M)}"/>')
-    for side, name in ((1, "plus"), (-1, "minus")):
-        geoms = finger_geoms[side]
-        if pad_pieces is not None:
-            geoms.extend(
-                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact" {COLLIDES["finger"]}/>'
-                for k in range(len(pad_pieces))
-            )
-        else:
-            geoms.append(
-                f'<geom name="pad_{name}0" type="box" class="contact" {COLLIDES["finger"]} '
-                f'pos="{_vec(np.array([(thickness + depth) / 2, length / 2, width / 2]) * M)}" '
-                f'size="{_vec(np.array([(thickness - depth) / 2, length / 2, width / 2]) * M)}"/>'
-            )
-        if len(finger_hull_mm):
-            geoms.append(
-                f'<geom name="finger_{name}" type="mesh" mesh="finger_body" class="contact" {COLLIDES["finger"]}/>'
-            )
-    fingers = []
-    for side, name in ((1, "plus"), (-1, "minus")):
-        fingers.append(
-            f'<body name="finger_{name}" gravcomp="1" pos="{_vec(case.pad_origin(side) * M)}" '
-            f'quat="{_quat(PAD_AXES[side])}">'
-            f'<inertial pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" mass="{FINGER_MASS_KG}" '
-            f'diaginertia="1e-5 1e-5 1e-5"/>'
-            f'<joint name="{name}" type="slide" axis="1 0 0" range="{q_min * M:.9g} {q_max * M:.9g}" damping="100" '
-            f'armature="0.01"/>' + "".join(finger_geoms[side]) + "</body>"
-        )
+    fingers = finger_bodies_xml(case, pad_pieces, finger_hull_mm)
     kp = GAIN_N_PER_MM / M
     force = config.force_limit_n
-    xml = f"""<mujoco model="fcso-verify">
+    return f"""<mujoco model="fcso-verify">
   <compiler angle="radian" inertiafromgeom="false"/>
   <option timestep="{config.timestep_s}" gravity="0 0 -9.81" cone="elliptic" impratio="10" integrator="implicitfast">
     <flag multiccd="enable"/>
@@ -256,27 +259,43 @@ def build_scene(
     <position name="minus" joint="minus" kp="{kp:.9g}" forcelimited="true" forcerange="{-force} {force}"/>
   </actuator>
 </mujoco>"""
-    arena = scene_arena_bytes(len(part_pieces), len(pad_pieces or []), config)
-    model = _compiled(xml, arena)
-    part_body = model.body("part").id
-    pad_geoms = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("pad_")])
-    return Scene(
-        model=model,
-        part_body=part_body,
-        part_com_mm=com,
-        lift_joint=model.joint("lift").id,
-        joints=(model.joint("plus").id, model.joint("minus").id),
-        actuators=(model.actuator("plus").id, model.actuator("minus").id),
-        part_geoms=np.array([model.geom(f"part{k}").id for k in range(len(part_pieces))]),
-        pad_geoms=pad_geoms,
-        lift_axis=-tcp[:3, 2],
-        part_qpos=int(model.jnt_qposadr[model.joint("part").id]),
-        part_dof=int(model.jnt_dofadr[model.joint("part").id]),
-        model_sha256=hashlib.sha256(xml.encode()).hexdigest(),
-        pad_inset_mm=0.0 if pad_pieces is None else float(depth),
-        xml=xml,
-        arena_bytes=arena,
-    )
+
+
+def finger_bodies_xml(
+    case: GraspCase, pad_pieces: list[tuple[np.ndarray, np.ndarray]] | None, finger_hull_mm: np.ndarray
+) -> list[str]:
+    """The MuJoCo bodies of the "+" and "-" fingers, each on its slide joint with its pad's geoms (the carved pad's
+    meshes ``pad<k>``, or the flat control's box when ``pad_pieces`` is None) and the finger body behind it
+    (mesh ``finger_body``, when ``finger_hull_mm`` is not empty)."""
+    thickness, length, width = case.pad_size_mm
+    depth = case.penetration_mm
+    q_min, q_max = case.joint_range_mm
+    fingers = []
+    for side, name in ((1, "plus"), (-1, "minus")):
+        if pad_pieces is not None:
+            geoms = [
+                f'<geom name="pad_{name}{k}" type="mesh" mesh="pad{k}" class="contact" {COLLIDES["finger"]}/>'
+                for k in range(len(pad_pieces))
+            ]
+        else:
+            geoms = [
+                f'<geom name="pad_{name}0" type="box" class="contact" {COLLIDES["finger"]} '
+                f'pos="{_vec(np.array([(thickness + depth) / 2, length / 2, width / 2]) * M)}" '
+                f'size="{_vec(np.array([(thickness - depth) / 2, length / 2, width / 2]) * M)}"/>'
+            ]
+        if len(finger_hull_mm):
+            geoms.append(
+                f'<geom name="finger_{name}" type="mesh" mesh="finger_body" class="contact" {COLLIDES["finger"]}/>'
+            )
+        fingers.append(
+            f'<body name="finger_{name}" gravcomp="1" pos="{_vec(case.pad_origin(side) * M)}" '
+            f'quat="{_quat(PAD_AXES[side])}">'
+            f'<inertial pos="{_vec(np.array([thickness, length / 2, width / 2]) * M)}" mass="{FINGER_MASS_KG}" '
+            f'diaginertia="1e-5 1e-5 1e-5"/>'
+            f'<joint name="{name}" type="slide" axis="1 0 0" range="{q_min * M:.9g} {q_max * M:.9g}" damping="100" '
+            f'armature="0.01"/>' + "".join(geoms) + "</body>"
+        )
+    return fingers
 
 
 def scene_arena_bytes(part_pieces: int, pad_pieces: int, config: VerifyConfig) -> int:

@@ -8,6 +8,7 @@ Times are UTC ISO 8601 strings, lengths mm, areas mm².
 from __future__ import annotations
 
 import base64
+import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Literal
@@ -18,6 +19,14 @@ from fcso.report.models import CandidateReport, GraspReport, NotServedPart, Pick
 
 #: States of a job in the journal and on the bus.
 JobState = Literal["queued", "running", "done", "failed", "held"]
+
+
+def rest_frame_id(part: str, pose_index: int) -> str:
+    """The frame id of a part's resting frame: ``fcso_<part>_rest<pose_index>`` (characters other than letters, digits
+    and ``_`` become ``_``): the frame of its grasp's TCP pose in the grasps message, of its ROS 2 PoseArray and of
+    the Foxglove frame tree.
+    """
+    return re.sub(r"[^A-Za-z0-9_]", "_", f"fcso_{part}_rest{pose_index}")
 
 
 def utc_now() -> str:
@@ -93,6 +102,11 @@ class CellGrasp(GraspReport):
     """One grasp as the cell runs it: the design's grasp and what to check before the robot moves."""
 
     job_id: str
+    frame_id: str = Field(
+        description="The frame of position_mm and quaternion_wxyz, the part's resting frame fcso_<part>_rest<pose>: "
+        "the header.frame_id of this grasp's ROS 2 PoseArray on ~/grasps, whose header.stamp is the source timestamp "
+        "of this message's ROS 2 form on ~/grasp_details"
+    )
     finger_set: int = Field(description="The finger set making this grasp: mount it (1: a job of one finger)")
     approach_opening_mm: float = Field(
         description="Open the gripper at least this wide (between the flat fingers' contact faces) before it comes "
@@ -259,6 +273,19 @@ class StateChangeRecord(_Message):
     state: JobState
     at: str
     error: str | None = None
+
+
+class DecisionRecord(_Message):
+    """``/job/decision``: an operator's decision on a held job (``fcsod approve | reject``) and the output files it
+    changed, which ``fcsod audit --verify`` checks instead of those the job recorded."""
+
+    job_id: str
+    decision: Literal["approved", "rejected"]
+    by: str = Field(description="The operator's login name, as the command ran")
+    requested_at: str = Field(description="When the operator asked, UTC ISO 8601")
+    at: str = Field(description="When the daemon carried it out, UTC ISO 8601")
+    files: list[InputFile] = Field(description="Output files it wrote (approve: build.3mf with the finger placed)")
+    removed: list[str] = Field(description="Output files it removed (build.held.3mf), relative to the output folder")
 
 
 class LogRecord(_Message):

@@ -9,7 +9,12 @@ installation on the print server:
   each pose the TCP of the chosen grasp in that frame, in metres;
 - ``~/grasp_details``: ``std_msgs/msg/String``, the native ``grasps`` body:
   what a PoseArray cannot carry and the cell reads before it moves (the job
-  id, the approach opening, the finger set, the verdict);
+  id, the approach opening, the finger set, the verdict). Its companion
+  PoseArrays are published with one time: each PoseArray's ``header.stamp``
+  is the source timestamp (rmw's ``MessageInfo.source_timestamp``) of the
+  ``grasp_details`` message of its job, whose grasp with ``frame_id`` equal
+  to the PoseArray's ``header.frame_id`` is its grasp: the job id, with the
+  rest, of a PoseArray;
 - ``~/placement``, ``~/plan``, ``~/quality``, ``~/status``, ``~/verification``:
   ``std_msgs/msg/String`` holding the JSON body of the native key of the same
   name (``plan``: the pick plan; ``placement``: the build placement;
@@ -40,7 +45,6 @@ key-less attachment (#601):
 from __future__ import annotations
 
 import json
-import re
 import threading
 import time
 from dataclasses import dataclass
@@ -53,7 +57,7 @@ import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
 from ..config import LIVELINESS_ADMIN_SPACE, Ros2Config
-from .messages import ENCODING_JSON, BusMessage
+from .messages import ENCODING_JSON, BusMessage, rest_frame_id
 
 if TYPE_CHECKING:
     from ..record.recorder import Recorder
@@ -195,13 +199,6 @@ def encode_attachment(sequence_number: int, source_timestamp_ns: int, gid: bytes
 
 
 # ------------------------------------------------------------------ messages
-
-
-def rest_frame_id(part: str, pose_index: int) -> str:
-    """The frame id of a part's resting frame: ``fcso_<part>_rest<pose_index>`` (characters other than letters, digits
-    and ``_`` become ``_``).
-    """
-    return re.sub(r"[^A-Za-z0-9_]", "_", f"fcso_{part}_rest{pose_index}")
 
 
 def _stamp(time_ns: int):
@@ -349,9 +346,11 @@ class Ros2Node:
         """Publish the ROS 2 form of a native message; returns the key expressions put (none for other topics)."""
         published = []
         with self._lock:
-            for relative, _type_name, data in ros2_messages(message, time.time_ns()):
+            # one time for every form of the message: the PoseArrays' header stamp is their companion's source time
+            now = time.time_ns()
+            for relative, _type_name, data in ros2_messages(message, now):
                 target = self.publishers[relative]
-                attachment = encode_attachment(target.sequence_number, time.time_ns(), target.gid)
+                attachment = encode_attachment(target.sequence_number, now, target.gid)
                 target.publisher.put(data, attachment=attachment)
                 target.sequence_number += 1
                 published.append(target.key_expr)

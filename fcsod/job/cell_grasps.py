@@ -7,7 +7,7 @@ from fcso.grasps import approach_gripper_opening_mm
 from fcso.report.models import GraspReport
 from fcso.sim.report import VerificationReport, scenario_verdict
 
-from ..bus.messages import CellGrasp
+from ..bus.messages import CellGrasp, rest_frame_id
 from .task import FINGER_SET
 
 
@@ -53,6 +53,7 @@ def cell_grasps(
             CellGrasp(
                 **grasp.model_dump(exclude={"finger_set"}),
                 job_id=job_id,
+                frame_id=rest_frame_id(grasp.part, grasp.pose_index),
                 finger_set=grasp.finger_set or FINGER_SET,
                 approach_opening_mm=round(opening, 4),
                 verified=None if verification is None else verification.passed,

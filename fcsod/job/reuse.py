@@ -48,7 +48,7 @@ from .fingers import (
     ServedPart,
     library_path,
 )
-from .task import BUILD_NAME, FINGER_SET, JobRun
+from .task import BUILD_NAME, FINGER_SET, JobRun, Outputs, Reuse
 
 #: The settings sections that shape a finger, its pad's evaluation and its grasps: a finger serves a job only when the
 #: job's are the same (the gripper it opens in, the pad, the print, the measure, the poses planned for), and the
@@ -134,12 +134,12 @@ def _flat(settings: dict, prefix: str = "") -> dict[str, object]:
     return flat
 
 
-def step_reuse(run: JobRun) -> None:
+def step_reuse(run: JobRun) -> Reuse | None:
     """Serve the job from the finger library when every part has the geometry of a part of an active finger or keeps
     ``min_retained`` on one."""
     config = run.task.config
     if not config.reuse.enabled or not run.loaded:
-        return
+        return None
     meshes = {p.name: p.mesh for p in run.loaded}
     settings = finger_settings(run.settings)
     claim = (config.bus.cell, run.task.job_id, meshes, config.reuse.reprint_after_jobs, settings)
@@ -161,11 +161,11 @@ def step_reuse(run: JobRun) -> None:
                 f"{settings_difference(kept, settings)}",
             )
         run.log("info", "finger library: not every part is served by a delivered finger; designing")
-        return
-    run.reuse = served
+        return None
     run.log(
         "info", f"finger library: every part is served by finger {', '.join(_served_words(served))}: nothing to design"
     )
+    return Reuse(served)
 
 
 def _fitted_parts(run: JobRun, library: FingerLibrary) -> dict[str, FittedPart] | None:
@@ -219,7 +219,7 @@ def _served_words(served: dict[str, ServedPart]) -> list[str]:
     return [words[i] for i in sorted(words)]
 
 
-def step_reused_outputs(run: JobRun) -> None:
+def step_reused_outputs(run: JobRun) -> Outputs:
     """The outputs and messages of a job the library serves: build with the parts alone, report, grasps, plan."""
     config, job_id, served = run.task.config, run.task.job_id, run.reuse
     fingers: dict[int, FingerEntry] = {}
@@ -235,7 +235,7 @@ def step_reused_outputs(run: JobRun) -> None:
     placed = place_fingers(run.build, finger, no_fingers)
     run.recorder.write(TOPIC_PLACEMENT, placed.report)
     run.log("info", f"placement: {placed.report.message}")
-    run.files = {
+    files = {
         BUILD_NAME: export_build_3mf(
             placed.items,
             job_id=job_id,
@@ -255,19 +255,88 @@ def step_reused_outputs(run: JobRun) -> None:
     )
     run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=job_id, grasps=grasps))
     min_retained = run.settings.finger_sets.min_retained
+    reused, plan_sets, worst = reused_finger_sets(run.loaded, served, fingers, config.reuse.reprint_after_jobs)
+    message = (
+        f"every part is served by {len(fingers)} finger set(s) delivered before (library finger "
+        f"{', '.join(_served_words(served))}; worst retained {worst:.3f}): no finger designed, none in build.3mf"
+    )
+    warnings = list(dict.fromkeys(w for p in run.loaded for w in p.warnings)) + placed.report.warnings
+    report = ReuseReport(
+        job_id=job_id,
+        fcsod_version=__version__,
+        fcso_version=fcso.__version__,
+        message=message,
+        reused=reused,
+        parts=[part_report(p) for p in run.loaded],
+        grasps=grasps,
+        placement=placed.report.model_dump(mode="json"),
+        warnings=warnings,
+    )
+    files[REPORT_JSON] = report.model_dump_json(indent=2).encode()
+    bus = config.bus
+    plan = PlanMessage(
+        job_id=job_id,
+        sets=plan_sets,
+        min_retained=min_retained,
+        min_retained_reached=worst >= min_retained,
+        worst_retained=worst,
+        ungraspable_parts=[],
+        # reused only when every part keeps min_retained on a finger the cell has: all served by these sets
+        sets_allowed=len(plan_sets),
+        sets_needed=len(plan_sets),
+        partition=f"reused: {message}",
+    )
+    summary = placed.report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
+    outgoing = (
+        BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=job_id, grasps=grasps)),
+        BusMessage.json_body(bus.prefix, bus.cell, "plan", plan),
+        BusMessage.json_body(
+            bus.prefix, bus.cell, "placement", PlacementMessage(job_id=job_id, file=BUILD_NAME, **summary)
+        ),
+    )
+    run.write_files(files)
+    run.record_files(files)
+    for published in outgoing:
+        run.record_published(published)
+    run.log("info", f"finger reuse: {message}")
+    return Outputs(files, outgoing, warnings=tuple(placed.report.warnings))
+
+
+def reused_finger_sets(
+    loaded: list[fcso.Part], served: dict, fingers: dict[int, FingerEntry], reprint_after_jobs: int
+) -> tuple[list[ReusedFingerReport], list[PlanSet], float]:
+    """The report and the pick plan's set of each library finger that serves a job's parts.
+
+    Parameters
+    ----------
+    loaded : list of fcso.Part
+        The job's parts.
+    served : dict
+        Part name -> how the library serves it (:class:`~fcsod.job.fingers.ServedPart`).
+    fingers : dict
+        Finger id -> its library entry, in the order of the sets.
+    reprint_after_jobs : int
+        ``[reuse] reprint_after_jobs``.
+
+    Returns
+    -------
+    reused : list of ReusedFingerReport
+    plan_sets : list of PlanSet
+    worst : float
+        The worst retained fraction of any part on its finger.
+    """
     # a part of a delivered geometry keeps what it kept in the delivering job; another, what it keeps on the finger
     kept = {
         p.name: served[p.name].finger.worst_retained
         if served[p.name].worst_retained is None
         else served[p.name].worst_retained
-        for p in run.loaded
+        for p in loaded
     }
     set_worst = {i: min(kept[n] for n, s in served.items() if s.finger.finger_id == i) for i in fingers}
-    worst = min(set_worst.values())
     reused = []
     plan_sets = []
     for number, entry in enumerate(fingers.values(), start=1):
-        parts = [p for p in run.loaded if served[p.name].finger.finger_id == entry.finger_id]
+        parts = [p for p in loaded if served[p.name].finger.finger_id == entry.finger_id]
         finger_file = f"../{entry.job_id}/{entry.finger_file}"
         reused.append(
             ReusedFingerReport(
@@ -277,7 +346,7 @@ def step_reused_outputs(run: JobRun) -> None:
                 finger_file=finger_file,
                 finger_key=entry.design_key,
                 jobs_served=entry.jobs,
-                reprint_after_jobs=config.reuse.reprint_after_jobs,
+                reprint_after_jobs=reprint_after_jobs,
                 worst_retained=set_worst[entry.finger_id],
                 parts=[
                     ReusedPartReport(
@@ -307,50 +376,7 @@ def step_reused_outputs(run: JobRun) -> None:
                 reused_from_job=entry.job_id,
             )
         )
-    message = (
-        f"every part is served by {len(fingers)} finger set(s) delivered before (library finger "
-        f"{', '.join(_served_words(served))}; worst retained {worst:.3f}): no finger designed, none in build.3mf"
-    )
-    warnings = list(dict.fromkeys(w for p in run.loaded for w in p.warnings)) + placed.report.warnings
-    report = ReuseReport(
-        job_id=job_id,
-        fcsod_version=__version__,
-        fcso_version=fcso.__version__,
-        message=message,
-        reused=reused,
-        parts=[part_report(p) for p in run.loaded],
-        grasps=grasps,
-        placement=placed.report.model_dump(mode="json"),
-        warnings=warnings,
-    )
-    run.files[REPORT_JSON] = report.model_dump_json(indent=2).encode()
-    run.warnings.extend(placed.report.warnings)
-    bus = config.bus
-    plan = PlanMessage(
-        job_id=job_id,
-        sets=plan_sets,
-        min_retained=min_retained,
-        min_retained_reached=worst >= min_retained,
-        worst_retained=worst,
-        ungraspable_parts=[],
-        # reused only when every part keeps min_retained on a finger the cell has: all served by these sets
-        sets_allowed=len(plan_sets),
-        sets_needed=len(plan_sets),
-        partition=f"reused: {message}",
-    )
-    summary = placed.report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
-    run.outgoing = [
-        BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=job_id, grasps=grasps)),
-        BusMessage.json_body(bus.prefix, bus.cell, "plan", plan),
-        BusMessage.json_body(
-            bus.prefix, bus.cell, "placement", PlacementMessage(job_id=job_id, file=BUILD_NAME, **summary)
-        ),
-    ]
-    run.write_files()
-    run.record_files()
-    for published in run.outgoing:
-        run.record_published(published)
-    run.log("info", f"finger reuse: {message}")
+    return reused, plan_sets, min(set_worst.values())
 
 
 def step_add_to_library(run: JobRun) -> None:

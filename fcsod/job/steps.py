@@ -1,12 +1,13 @@
 """The job's steps in order (:data:`STEPS`): inputs, loading, design, its record, build placement, output files.
 
-Each step takes the :class:`~fcsod.job.task.JobRun` and records what it made; the first ones return it
-(:class:`~fcsod.job.task.JobInputs`, :class:`~fcsod.job.task.LoadedParts`, the finger sets), which the runner keeps in
-the run for the steps after them.
+Each step takes the :class:`~fcsod.job.task.JobRun`, records what it made and returns it, frozen
+(:class:`~fcsod.job.task.JobInputs`, :class:`~fcsod.job.task.LoadedParts`, :class:`~fcsod.job.task.DesignedSets`,
+...), which the runner keeps in the run for the steps after them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import time
 from collections.abc import Callable, Iterator
@@ -17,7 +18,7 @@ import fcso
 from fcso import DesignResult, MeshError, load_parts
 from fcso.layout import FINGER_STL, FINGERPAD_STL, set_folder
 from fcso.output.files import sets_output_files
-from fcso.sets import SetsResult, design_sets
+from fcso.sets import design_sets
 
 from .. import __version__
 from ..bus.messages import (
@@ -48,7 +49,7 @@ from ..record.recorder import (
     TOPIC_SAMPLES,
     TOPIC_SPEC,
 )
-from ..record.scene import base64_text, build_scene_update, scene_update
+from ..record.scene import base64_text, build_scene_update, build_transforms, design_transforms, scene_update
 from .cell_grasps import cell_grasps, verification_note
 from .finger_sets import design_messages, place_sets, plan_message
 from .inputs import check_parts, hash_inputs, job_inputs, read_manifest
@@ -58,11 +59,16 @@ from .task import (
     FINGER_SET,
     HELD_BUILD_NAME,
     PROGRESS_INTERVAL_S,
+    DesignedSets,
     JobFolderDeleted,
     JobInputs,
     JobRun,
     LoadedParts,
+    Outputs,
+    Placed,
+    RecordedDesign,
     StepResult,
+    Verified,
 )
 from .verification import (
     VERIFICATION_CACHE_NAME,
@@ -176,7 +182,7 @@ def step_load(run: JobRun) -> LoadedParts:
     return LoadedParts(distinct, Build(items=items, source=str(run.folder)))
 
 
-def step_design(run: JobRun) -> SetsResult:
+def step_design(run: JobRun) -> DesignedSets:
     """Run fcso's design of the job's finger sets (one or several), logging progress per stage."""
     last: dict[str, float] = {}
 
@@ -191,7 +197,7 @@ def step_design(run: JobRun) -> SetsResult:
     job = sets.job_report or sets.designs[0].report
     # what the design warns of (parts left out as ungraspable, files split into
     # several solids) travels with the job's done status
-    run.warnings.extend(job.warnings)
+    warnings = list(job.warnings)
     for entry in sets.report.ungraspable if sets.report else sets.designs[0].report.ungraspable:
         run.log("warning", f"{entry.part} (pose {entry.pose_index}) cannot be grasped: {entry.reason}")
     if sets.report is not None:
@@ -201,7 +207,7 @@ def step_design(run: JobRun) -> SetsResult:
                     f"finger set {entry.set} keeps {entry.worst_retained:.3f} of a part's quality (below "
                     f"{NEAR_ZERO_RETAINED}): near zero, route its parts elsewhere or approve them knowingly"
                 )
-                run.warnings.append(note)
+                warnings.append(note)
                 run.log("warning", note)
         for line in (
             sets.report.search.description,
@@ -212,33 +218,22 @@ def step_design(run: JobRun) -> SetsResult:
             ),
         ):
             run.log("info", f"finger sets: {line}")
-    return sets
+    return DesignedSets(sets, tuple(warnings))
 
 
-def step_choose_by_verification(run: JobRun) -> None:
-    """Choose among the best candidates by verification; a job of several finger sets keeps its designs (each is
-    verified when done).
-    """
-    if run.sets.several:
-        settings = job_settings(run.task.config.verify, run.manifest.verify if run.manifest is not None else None)
-        if settings.enabled and settings.top_k > 0:
-            run.log(
-                "warning",
-                "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
-                "verified as it is",
-            )
-        return
-    choose_by_verification(run)
+def step_choose_by_verification(run: JobRun) -> Verified | None:
+    """Verify every finger set's finger before it is placed, where the job's ``[verify]`` asks it (one set: choose
+    among the best candidates), and hold the job when one misses the delivery policy."""
+    return choose_by_verification(run)
 
 
-def step_record_design(run: JobRun) -> None:
+def step_record_design(run: JobRun) -> RecordedDesign:
     """Record poses, samples with rejections, every candidate row, the design, the grasps and the 3D scene."""
-    recorder = run.recorder
-    designs = run.sets.designs
-    run.files = {}
-    for number, result in enumerate(designs, start=1):
-        _record_one_design(run, result, number)
-    recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=job_grasps(run)))
+    files: dict[str, bytes] = {}
+    for number, result in enumerate(run.sets.designs, start=1):
+        files.update(_record_one_design(run, result, number))
+    run.recorder.write(TOPIC_GRASPS, GraspsMessage(job_id=run.task.job_id, grasps=job_grasps(run)))
+    return RecordedDesign(files)
 
 
 def job_grasps(run: JobRun) -> list:
@@ -246,10 +241,14 @@ def job_grasps(run: JobRun) -> list:
     verification made before the job is done, or where it follows."""
     several = run.sets.several
     unverified = verification_note(run.verify_settings.enabled, several)
-    verification = run.verified[0] if run.verified is not None and not several else None
+    verifications = (
+        [finger.verification for finger in run.verified.fingers]
+        if run.verified is not None
+        else [None] * len(run.sets.designs)
+    )
     return [
         grasp
-        for design in run.sets.designs
+        for design, verification in zip(run.sets.designs, verifications)
         for grasp in cell_grasps(
             run.task.job_id,
             design.report.grasps,
@@ -261,8 +260,9 @@ def job_grasps(run: JobRun) -> list:
     ]
 
 
-def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
-    """Record one finger set's poses, samples, candidates, design and scene; keep its meshes for the outputs."""
+def _record_one_design(run: JobRun, result: DesignResult, number: int) -> dict[str, bytes]:
+    """Record one finger set's poses, samples, candidates, design and scene; its meshes for the outputs (path ->
+    STL)."""
     recorder, report = run.recorder, result.report
     for scenario in report.scenarios:
         recorder.write(
@@ -294,8 +294,8 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
         )
     # report.json and report.html wait for the placement section (step_outputs)
     folder = f"{set_folder(number)}/" if run.sets.several else ""
-    finger = run.files[f"{folder}{FINGER_STL}"] = result.finger.export(file_type="stl")
-    pad = run.files[f"{folder}{FINGERPAD_STL}"] = result.fingerpad.export(file_type="stl")
+    finger = result.finger.export(file_type="stl")
+    pad = result.fingerpad.export(file_type="stl")
     recorder.write(
         TOPIC_DESIGN,
         DesignRecord(
@@ -307,10 +307,14 @@ def _record_one_design(run: JobRun, result: DesignResult, number: int) -> None:
             finger_set=number,
         ),
     )
-    run.scene(scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""))
+    run.scene(
+        scene_update(result, prefix=f"{set_folder(number)}-" if run.sets.several else ""),
+        design_transforms(result, time.time_ns()),
+    )
+    return {f"{folder}{FINGER_STL}": finger, f"{folder}{FINGERPAD_STL}": pad}
 
 
-def step_placement(run: JobRun) -> None:
+def step_placement(run: JobRun) -> Placed:
     """Place every finger set's copies into the job's build volume (:func:`fcsod.job.finger_sets.place_sets`, one set or
     several):
     ``build.3mf``, the report's placement section, record, scene, bus message.
@@ -334,21 +338,23 @@ def step_placement(run: JobRun) -> None:
         )
 
     if run.held is None:
-        run.files[BUILD_NAME] = build_3mf(placements[-1].items)
+        files = {BUILD_NAME: build_3mf(placements[-1].items)}
     else:
         # the finger waits for an operator: the build holds the parts, placed as they would be; the build with the
         # finger placed waits beside it for fcsod approve
-        run.files[BUILD_NAME] = build_3mf([item for item in placements[-1].items if item.kind != "finger"])
-        run.files[HELD_BUILD_NAME] = build_3mf(placements[-1].items)
+        files = {
+            BUILD_NAME: build_3mf([item for item in placements[-1].items if item.kind != "finger"]),
+            HELD_BUILD_NAME: build_3mf(placements[-1].items),
+        }
     # the job's report: the job report with several sets, the design's with one (the one verification may have chosen)
     job = run.sets.job_report if several else run.result.report
     placement = report.model_dump(mode="json")
-    warnings = list(job.warnings)
+    warnings, not_fitted = list(job.warnings), []
     for number, placed in enumerate(placements, start=1):
         label, prefix = (f"placement of set {number}", f"set {number}: ") if several else ("placement", "")
         run.log("info" if placed.report.fingers_fit else "warning", f"{label}: {placed.report.message}")
         if not placed.report.fingers_fit:
-            run.warnings.append(f"{prefix}{placed.report.message}")
+            not_fitted.append(f"{prefix}{placed.report.message}")
             warnings.append(f"{prefix}{placed.report.message}")
         if not several:
             for warning in placed.report.warnings:
@@ -367,10 +373,14 @@ def step_placement(run: JobRun) -> None:
     if len(warnings) > len(job.warnings):
         update["warnings"] = warnings
     if several:
-        run.sets.job_report = job.model_copy(update=update)
+        sets = dataclasses.replace(run.sets, job_report=job.model_copy(update=update))
     else:
-        run.result.report = job.model_copy(update=update)
-    run.scene(build_scene_update(placements[-1].items, report, run.build_settings))
+        placed_design = dataclasses.replace(run.result, report=job.model_copy(update=update))
+        sets = dataclasses.replace(run.sets, designs=[placed_design, *run.sets.designs[1:]])
+    run.scene(
+        build_scene_update(placements[-1].items, report, run.build_settings),
+        build_transforms(placements[-1].items, run.build_settings, time.time_ns()),
+    )
     bus = run.task.config.bus
     summary = report.model_dump(include=set(PlacementMessage.model_fields) - {"job_id", "file"})
     summary.update(
@@ -380,39 +390,41 @@ def step_placement(run: JobRun) -> None:
     )
     body = PlacementMessage(job_id=run.task.job_id, file=BUILD_NAME, **summary)
     # published after the design's messages (step_outputs puts them first)
-    run.outgoing.append(BusMessage.json_body(bus.prefix, bus.cell, "placement", body))
+    message = BusMessage.json_body(bus.prefix, bus.cell, "placement", body)
+    return Placed(sets, files, message, tuple(not_fitted))
 
 
-def step_outputs(run: JobRun) -> None:
+def step_outputs(run: JobRun) -> Outputs:
     """Write every output file into the work folder and record their hashes; record the bus messages.
 
     ``report.json`` and ``report.html`` are made here, after every step that
     adds to the report; the meshes are those the design record holds. The
     delivered candidate's verification (``top_k``) is written here too.
     """
-    run.files = {**sets_output_files(run.sets), **run.files}
-    run.write_files()
+    files = {**sets_output_files(run.sets), **run.recorded.files, **run.placed.files}
+    run.write_files(files)
     # the delivered candidate's verification (top_k) joins the files before they are hashed
-    write_chosen_verification(run)
-    run.record_files()
+    verification_files, after_done = write_chosen_verification(run)
+    files.update(verification_files)
+    run.record_files(files)
     bus, report = run.task.config.bus, run.result.report
     if run.sets is not None and run.sets.report is not None:
         copies = [
             int(p.get("finger_copies_placed", 0))
             for p in (run.sets.job_report or report).placement.get("finger_sets", [])
         ] or [report.placement["finger_copies_placed"]]
-        plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files, copies)
+        plan = plan_message(bus.prefix, bus.cell, run.task.job_id, run.sets, files, copies)
     if run.sets.several:
         grasps = job_grasps(run)
-        run.outgoing = [
+        outgoing = [
             BusMessage.json_body(bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=grasps)),
-            *design_messages(bus.prefix, bus.cell, run.task.job_id, run.sets, run.files),
+            *design_messages(bus.prefix, bus.cell, run.task.job_id, run.sets, files),
             plan,
-            *run.outgoing,
+            run.placed.message,
         ]
-        for message in run.outgoing:
+        for message in outgoing:
             run.record_published(message)
-        return
+        return Outputs(files, tuple(outgoing), after_done)
     best = next(c for c in report.candidates if c.index == report.best)
     quality = QualityMessage(
         job_id=run.task.job_id,
@@ -439,11 +451,11 @@ def step_outputs(run: JobRun) -> None:
         warnings=report.warnings,
         timings_s=report.timings_s,
     )
-    finger = run.files[FINGER_STL]
+    finger = files[FINGER_STL]
     attachment = DesignAttachment(
         job_id=run.task.job_id, sha256=hashlib.sha256(finger).hexdigest(), size_bytes=len(finger)
     )
-    run.outgoing = [
+    outgoing = [
         BusMessage.json_body(bus.prefix, bus.cell, "quality", quality),
         BusMessage.json_body(
             bus.prefix, bus.cell, "grasps", GraspsMessage(job_id=run.task.job_id, grasps=job_grasps(run))
@@ -457,10 +469,11 @@ def step_outputs(run: JobRun) -> None:
             attachment.model_dump_json().encode(),
         ),
         *([plan] if run.sets is not None and run.sets.report is not None else []),
-        *run.outgoing,
+        run.placed.message,
     ]
-    for message in run.outgoing:
+    for message in outgoing:
         run.record_published(message)
+    return Outputs(files, tuple(outgoing), after_done)
 
 
 def step_folder_kept(run: JobRun) -> None:

@@ -7,7 +7,7 @@ after every stage), then renames the folder to ``<output_root>/<job_id>/``.
 A failed job's folder holds ``job.mcap`` only. The worker never touches
 zenoh: the messages to publish go back to the daemon over a pipe, after they
 are in the record. The job runs as a list of steps (:mod:`fcsod.job.steps`);
-each takes the :class:`JobRun`, records what it made and returns it or keeps it there.
+each takes the :class:`JobRun`, records what it made and returns it, frozen, for the steps after it.
 """
 
 from __future__ import annotations
@@ -15,8 +15,9 @@ from __future__ import annotations
 import hashlib
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import fcso
 from fcso import DesignConfig, DesignResult
@@ -36,9 +37,13 @@ from ..bus.ros2 import record_ros2
 from ..config import DaemonConfig, JobManifest, VerifySettings
 from ..plate.build3mf import Build
 from ..plate.models import BuildConfig
-from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, Recorder
+from ..record.recorder import TOPIC_BUS, TOPIC_LOG, TOPIC_OUTPUTS, TOPIC_SCENE, TOPIC_STATE, TOPIC_TRANSFORMS, Recorder
 from .events import Emit, Log, Scene
 from .inputs import PartInput
+
+if TYPE_CHECKING:
+    from fcso.sim.report import VerificationReport
+    from fcso.sim.verify import DesignUnderTest
 
 #: Shortest interval between two progress lines of the same stage, s.
 PROGRESS_INTERVAL_S = 1.0
@@ -181,19 +186,99 @@ class LoadedParts:
     build: Build
 
 
+@dataclass(frozen=True)
+class Reuse:
+    """What :func:`~fcsod.job.reuse.step_reuse` found: the finger library serves every part of the job."""
+
+    #: part name -> how the library serves it (:class:`~fcsod.job.fingers.ServedPart`)
+    served: dict
+
+
+@dataclass(frozen=True)
+class DesignedSets:
+    """What :func:`~fcsod.job.steps.step_design` made."""
+
+    sets: SetsResult
+    #: what the design warns of (parts left out, sets near zero quality), for the job's done status
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class SetVerified:
+    """One finger set's delivered design, verified before it is placed."""
+
+    verification: VerificationReport
+    #: the delivered design's simulation inputs (the report's pictures)
+    design: DesignUnderTest
+    #: the verified candidates' ranking for the report, HTML ('' when the design's own choice alone was verified)
+    ranking_html: str
+
+
+@dataclass(frozen=True)
+class Verified:
+    """What :func:`~fcsod.job.verification.choose_by_verification` made: every finger set's delivered design,
+    verified (one set or several alike)."""
+
+    #: the finger sets with the delivered candidates
+    sets: SetsResult
+    #: per finger set, in set order
+    fingers: tuple[SetVerified, ...]
+    #: why fingers miss the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject);
+    #: None: they are delivered
+    held: str | None
+    #: for the job's done status
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class RecordedDesign:
+    """What :func:`~fcsod.job.steps.step_record_design` made: every finger set's meshes (STL) by output path."""
+
+    files: dict[str, bytes]
+
+
+@dataclass(frozen=True)
+class Placed:
+    """What :func:`~fcsod.job.steps.step_placement` made."""
+
+    #: the finger sets whose reports hold the placement section
+    sets: SetsResult
+    #: ``build.3mf`` (and a held job's ``build.held.3mf``)
+    files: dict[str, bytes]
+    #: the placement message, published after the design's
+    message: BusMessage
+    #: fingers that did not fit, for the job's done status
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What :func:`~fcsod.job.steps.step_outputs` (or :func:`~fcsod.job.reuse.step_reused_outputs`) made: the job's
+    output files, written and recorded, and its messages, recorded."""
+
+    #: every output file by path in the output folder
+    files: dict[str, bytes]
+    #: published with the done status (a held job's when an operator approves it)
+    outgoing: tuple[BusMessage, ...]
+    #: published after the done status (the verification of the delivered candidate)
+    after_done: tuple[BusMessage, ...] = ()
+    #: for the job's done status
+    warnings: tuple[str, ...] = ()
+
+
 #: What a step may return: the runner keeps it in the :class:`JobRun` for the steps after it.
-StepResult = JobInputs | LoadedParts | SetsResult | None
+StepResult = JobInputs | LoadedParts | Reuse | DesignedSets | Verified | RecordedDesign | Placed | Outputs | None
 
 
 @dataclass
 class JobRun:
-    """A running job: what its steps share, and what each step made (``reuse``: part name -> how the finger library
-    serves it, :class:`~fcsod.job.fingers.ServedPart`, when it serves the whole job).
+    """A running job: what its steps share, and what each step made.
 
-    The first steps return what they made (:data:`StepResult`) and the runner
-    keeps it (:meth:`take`); the steps after them read it by name
-    (``run.settings``, ``run.loaded``, ...), which is empty (None, no items)
-    before the step that makes it has run.
+    Every step returns what it made (:data:`StepResult`, frozen) and the
+    runner keeps it (:meth:`take`); the steps after it read it by name
+    (``run.settings``, ``run.loaded``, ``run.sets``, ...), which is empty
+    (None, no items) before the step that makes it has run. The types say
+    the order: a step reads only what the steps before it returned.
     """
 
     task: JobTask
@@ -203,16 +288,12 @@ class JobRun:
     emit: Emit
     job_inputs: JobInputs | None = None
     loaded_parts: LoadedParts | None = None
-    sets: SetsResult | None = None
-    files: dict[str, bytes] = field(default_factory=dict)
-    outgoing: list[BusMessage] = field(default_factory=list)
-    #: published after the done status (the verification of the delivered candidate)
-    after_done: list[BusMessage] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    verified: tuple | None = None
-    #: why the finger misses the delivery policy ([verify] deliver): the job ends held (fcsod approve / reject)
-    held: str | None = None
-    reuse: dict | None = None
+    reused: Reuse | None = None
+    designed: DesignedSets | None = None
+    verified: Verified | None = None
+    recorded: RecordedDesign | None = None
+    placed: Placed | None = None
+    outputs: Outputs | None = None
 
     def take(self, made: StepResult) -> None:
         """Keep what a step made for the steps after it."""
@@ -221,8 +302,18 @@ class JobRun:
                 self.job_inputs = made
             case LoadedParts():
                 self.loaded_parts = made
-            case SetsResult():
-                self.sets = made
+            case Reuse():
+                self.reused = made
+            case DesignedSets():
+                self.designed = made
+            case Verified():
+                self.verified = made
+            case RecordedDesign():
+                self.recorded = made
+            case Placed():
+                self.placed = made
+            case Outputs():
+                self.outputs = made
 
     @property
     def manifest(self) -> JobManifest | None:
@@ -249,13 +340,48 @@ class JobRun:
         return self.loaded_parts.build if self.loaded_parts is not None else Build()
 
     @property
+    def reuse(self) -> dict | None:
+        """Part name -> how the finger library serves it, when it serves the whole job; else None."""
+        return self.reused.served if self.reused is not None else None
+
+    @property
+    def sets(self) -> SetsResult | None:
+        """The finger sets as the latest step left them: placed, else verified, else designed."""
+        return next((made.sets for made in (self.placed, self.verified, self.designed) if made is not None), None)
+
+    @property
     def result(self) -> DesignResult:
         """The first finger set's design: the job's design when one set serves it."""
         return self.sets.designs[0]
 
-    def write_files(self) -> None:
-        """Write every output file into the work folder (:meth:`record_files` then records their hashes)."""
-        for name, data in self.files.items():
+    @property
+    def held(self) -> str | None:
+        """Why the finger waits for an operator ([verify] deliver); None when it is delivered."""
+        return self.verified.held if self.verified is not None else None
+
+    @property
+    def files(self) -> dict[str, bytes]:
+        """Every output file, once the outputs are written."""
+        return self.outputs.files if self.outputs is not None else {}
+
+    @property
+    def outgoing(self) -> tuple[BusMessage, ...]:
+        return self.outputs.outgoing if self.outputs is not None else ()
+
+    @property
+    def after_done(self) -> tuple[BusMessage, ...]:
+        return self.outputs.after_done if self.outputs is not None else ()
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the steps warn of, in their order, for the job's done status."""
+        made = (self.designed, self.verified, self.placed, self.outputs)
+        return [warning for step in made if step is not None for warning in step.warnings]
+
+    def write_files(self, files: dict[str, bytes]) -> None:
+        """Write output ``files`` (path -> content) into the work folder (:meth:`record_files` then records their
+        hashes)."""
+        for name, data in files.items():
             path = self.work_dir / name
             try:
                 path.parent.mkdir(exist_ok=True)
@@ -264,15 +390,14 @@ class JobRun:
                 # a failed write() does not say which file it was writing
                 raise OSError(exc.errno, exc.strerror, str(path)) from exc
 
-    def record_files(self) -> None:
-        """Record the hashes of every output file in ``job.mcap``."""
+    def record_files(self, files: dict[str, bytes]) -> None:
+        """Record the hashes of every output file (``files``: path -> content) in ``job.mcap``."""
         self.recorder.write(
             TOPIC_OUTPUTS,
             OutputFilesRecord(
                 job_id=self.task.job_id,
                 files=[
-                    InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest())
-                    for n, d in self.files.items()
+                    InputFile(path=n, size_bytes=len(d), sha256=hashlib.sha256(d).hexdigest()) for n, d in files.items()
                 ],
             ),
         )
@@ -282,9 +407,13 @@ class JobRun:
         self.recorder.write(TOPIC_LOG, LogRecord(level=level, message=message, **fields))
         self.emit(Log(level, message, fields))
 
-    def scene(self, update) -> None:
-        """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene`` and send it to the daemon's live server."""
+    def scene(self, update, transforms=None) -> None:
+        """Record a Foxglove ``SceneUpdate`` (foxglove-sdk's) on ``/scene``, after the ``FrameTransforms`` it is drawn
+        in on ``/tf`` if given, and send them to the daemon's live server.
+        """
         now = time.time_ns()
+        if transforms is not None:
+            self.emit(Scene(TOPIC_TRANSFORMS, self.recorder.write_foxglove(TOPIC_TRANSFORMS, transforms, now), now))
         self.emit(Scene(TOPIC_SCENE, self.recorder.write_foxglove(TOPIC_SCENE, update, now), now))
 
     def record_published(self, message: BusMessage) -> None:

@@ -1,14 +1,18 @@
 """Grasp verification of a job's design in simulation (fcso.sim, METHOD §12).
 
-With ``[verify] top_k > 0`` (a job of one finger), the design step verifies
+With a delivery policy other than ``always``, the design step verifies
+every finger set's finger before it is placed, one set or several alike
+(:func:`choose_by_verification`), and a finger that misses the policy holds
+the job; with ``[verify] top_k > 0`` a job of one finger verifies
 candidates in the order of the design's measure and delivers the first that
-passes every scenario (:func:`choose_by_verification`); its verification
-is then part of the job's output (``verification.json``, the report's
-section, ``verification.mcap``, recorded in ``job.mcap``) and its message
-follows the ``done`` status. Otherwise, with ``[verify] enabled``, the
-worker verifies the design after the job is ``done`` and its design
-published (:func:`verify_done_job`); a job of several finger sets verifies
-every set's finger, each on ``.../verification/<set>``. Its section goes
+passes every scenario (several sets keep their designs). These
+verifications are then part of the job's output (``verification.json``,
+the report's section, ``verification.mcap``, in each set's folder with
+several, recorded in ``job.mcap``) and their messages follow the ``done``
+status. Otherwise, with ``[verify] enabled``, the worker verifies the
+designs after the job is ``done`` and its design published
+(:func:`verify_done_job`). A job of several finger sets publishes each
+set's on ``.../verification/<set>``. Its section goes
 into ``verification.html`` beside ``report.html``, which stays as
 ``job.mcap`` vouches for it. The daemon
 journals that verification as running from the moment the job is done, so
@@ -25,6 +29,7 @@ false`` turns all of it off, the choice among ``top_k`` candidates included.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -61,7 +66,14 @@ from ..record.scene import scene_updates
 from .events import Emit, Log, VerificationFinished, VerificationStarted
 from .inputs import read_manifest
 from .reuse import ReuseReport
-from .task import TimeLimitExceeded, VerificationTask, time_limit_error, unfinished_verification_message
+from .task import (
+    SetVerified,
+    TimeLimitExceeded,
+    VerificationTask,
+    Verified,
+    time_limit_error,
+    unfinished_verification_message,
+)
 
 
 def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> VerifySettings:
@@ -69,32 +81,48 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
     return manifest if manifest is not None else daemon
 
 
-def choose_by_verification(run) -> None:
-    """Design step: with ``top_k > 0``, verify candidates in the measure's order and deliver the first that passes;
-    with a delivery policy other than ``always`` (and ``top_k`` 0), verify the design's own choice. Either way the
-    job is held (``run.held``) when its finger misses the policy (:func:`held_reason`)."""
+def choose_by_verification(run) -> Verified | None:
+    """Design step, for every finger set alike (one or several): with a delivery policy other than ``always``,
+    verify each set's finger before it is placed; with ``top_k > 0`` a job of one finger verifies candidates in the
+    measure's order and delivers the first that passes (several sets keep their designs, verified after the job is
+    done under ``always``). The job is held (:attr:`Verified.held`) when a finger misses the policy
+    (:func:`held_reason`). None when nothing is verified before the job is done."""
     settings = _settings(run)
-    if not settings.enabled:
-        return
-    config = _verify_config(settings, run.result.report.settings, run.task.config.state.dir)
-    if settings.top_k > 0:
-        chosen, verification, design, ranking = verify_top(run.result, settings.top_k, config, _progress(run.log))
-        run.sets.designs[0] = chosen
-        run.verified = (verification, design, ranking_html(ranking, verification.choice))
-        run.log("info", f"verification delivered {verification.choice}")
-    elif settings.deliver != "always":
-        design = design_under_test(run.result)
-        verification = verify_delivered(design, config, _progress(run.log))
-        run.verified = (verification, design, "")
-    else:
-        return
-    run.log("info" if verification.passed else "warning", f"verification: {verdict_text(verification)}")
-    if missed := not_held(verification):
-        # a finger near zero quality: said on the done status too, whatever the policy
-        run.warnings.append(f"the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)")
-    run.held = held_reason(verification, settings.deliver)
-    if run.held is not None:
-        run.log("warning", f"held for an operator: {run.held}")
+    several = run.sets.several
+    if settings.enabled and several and settings.top_k > 0:
+        run.log(
+            "warning",
+            "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
+            "verified as it is",
+        )
+    choosing = settings.top_k > 0 and not several
+    if not settings.enabled or not (choosing or settings.deliver != "always"):
+        return None
+    designs, fingers, held, warnings = list(run.sets.designs), [], [], []
+    for number, result in enumerate(run.sets.designs, start=1):
+        label = f"finger set {number}: " if several else ""
+        config = _verify_config(settings, result.report.settings, run.task.config.state.dir)
+        if choosing:
+            chosen, verification, design, ranking = verify_top(result, settings.top_k, config, _progress(run.log))
+            designs[number - 1] = chosen
+            fingers.append(SetVerified(verification, design, ranking_html(ranking, verification.choice)))
+            run.log("info", f"verification delivered {verification.choice}")
+        else:
+            design = design_under_test(result)
+            verification = verify_delivered(design, config, _progress(run.log))
+            fingers.append(SetVerified(verification, design, ""))
+        run.log("info" if verification.passed else "warning", f"{label}verification: {verdict_text(verification)}")
+        if missed := not_held(verification):
+            # a finger near zero quality: said on the done status too, whatever the policy
+            warnings.append(
+                f"{label}the finger does not hold its part at all in {', '.join(missed)} (0 N in every push)"
+            )
+        if (reason := held_reason(verification, settings.deliver)) is not None:
+            held.append(f"{label}{reason}")
+    if held:
+        run.log("warning", f"held for an operator: {'; '.join(held)}")
+    sets = dataclasses.replace(run.sets, designs=designs)
+    return Verified(sets, tuple(fingers), "; ".join(held) or None, tuple(warnings))
 
 
 def held_reason(verification: VerificationReport, deliver: str) -> str | None:
@@ -117,34 +145,55 @@ def held_reason(verification: VerificationReport, deliver: str) -> str | None:
 VERIFICATION_HTML = "verification.html"
 
 
-def write_chosen_verification(run) -> None:
-    """Output step: the verification of the candidate :func:`choose_by_verification` delivered, into the work folder
-    (after the job's files are written, before they are hashed).
+def write_chosen_verification(run) -> tuple[dict[str, bytes], tuple[BusMessage, ...]]:
+    """Output step: the verifications :func:`choose_by_verification` made, into the work folder (each set's into its
+    folder with several; after the job's files are written, before they are hashed).
 
-    ``verification.json``, the report's section and ``verification.mcap``
-    join the job's files (hashed in ``job.mcap`` like the others); the
-    message is published after the ``done`` status.
+    Returns
+    -------
+    files : dict
+        ``verification.json``, the report's section and ``verification.mcap`` of each (path -> content), to join the
+        job's files (hashed in ``job.mcap`` like the others); empty when nothing was verified.
+    after_done : tuple of BusMessage
+        Their messages, recorded, to publish after the ``done`` status.
     """
     if run.verified is None:
-        return
-    verification, design, extra = run.verified
-    message = _bus_message(run.task.config, run.task.job_id, verification, VERIFICATION_JSON, None)
-    written = _write(run.work_dir, verification, design, extra, message, run.task.config.mcap, REPORT_HTML)
-    for path in written:
-        run.files[path.name] = path.read_bytes()
-    run.record_published(message)
-    run.after_done.append(message)
+        return {}, ()
+    several = run.sets.several
+    files, messages = {}, []
+    for number, finger in enumerate(run.verified.fingers, start=1):
+        folder = f"{set_folder(number)}/" if several else ""
+        message = _bus_message(
+            run.task.config,
+            run.task.job_id,
+            finger.verification,
+            f"{folder}{VERIFICATION_JSON}",
+            number if several else None,
+        )
+        written = _write(
+            run.work_dir / folder,
+            finger.verification,
+            finger.design,
+            finger.ranking_html,
+            message,
+            run.task.config.mcap,
+            REPORT_HTML,
+        )
+        files.update({f"{folder}{path.name}": path.read_bytes() for path in written})
+        run.record_published(message)
+        messages.append(message)
+    return files, tuple(messages)
 
 
 def verification_after_done(run) -> VerifySettings | None:
     """The job's ``[verify]`` when its design is to be verified after it is done, else None.
 
-    Not when verification is off, nor when the design step's choice by
-    verification already verified the one delivered design; a job the finger
-    library serves has its reused fingers verified on its own parts.
+    Not when verification is off, nor when the design step already verified
+    the delivered designs; a job the finger library serves has its reused
+    fingers verified on its own parts.
     """
     settings = _settings(run)
-    if not settings.enabled or (run.verified is not None and not run.sets.several):
+    if not settings.enabled or run.verified is not None:
         return None
     return settings
 

@@ -37,12 +37,9 @@ import scipy.fft
 import trimesh
 
 from .build3mf import Build, BuildItem
-from .models import BuildConfig, PlacedItemReport, PlacementReport
+from .gaps import clear_of, placed_item_reports, placed_solid, placed_vertices, solid_manifold, vertex_bounds
+from .models import BuildConfig, PlacementReport
 from .voxels import grow, mark_pad, solid_voxels
-
-#: Exact gaps are taken this much smaller when checked against the spacing:
-#: the rounding of the meshes' vertices in manifold3d.
-GAP_TOLERANCE_MM = 1e-3
 
 
 @dataclass
@@ -139,32 +136,6 @@ def finger_rotations(pad_normal: np.ndarray, mode: str) -> tuple[np.ndarray, np.
         rotations, penalties = rotations[keep], penalties[keep]
     order = np.argsort(penalties, kind="stable")
     return rotations[order], penalties[order]
-
-
-def solid_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
-    """The mesh as a manifold3d solid, for exact gaps; the mesh must be closed."""
-    return manifold3d.Manifold(
-        manifold3d.Mesh64(
-            vert_properties=np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-            tri_verts=np.ascontiguousarray(mesh.faces, dtype=np.uint64),
-        )
-    )
-
-
-def mesh_gap(a: manifold3d.Manifold, b: manifold3d.Manifold, limit_mm: float) -> float:
-    """Exact gap between two solids, 0 when they touch, overlap or nest; at most ``limit_mm``."""
-    return float(a.min_gap(b, float(limit_mm)))
-
-
-def _bounds_gap(a: np.ndarray, b: np.ndarray) -> float:
-    """Gap between two axis-aligned boxes ((2, 3) each); 0 when they overlap."""
-    separation = np.maximum(0.0, np.maximum(a[0] - b[1], b[0] - a[1]))
-    return float(np.linalg.norm(separation))
-
-
-def _bounds_span(a: np.ndarray, b: np.ndarray) -> float:
-    """Largest distance between a point of box ``a`` and one of box ``b``."""
-    return float(np.linalg.norm(np.maximum(a[1], b[1]) - np.minimum(a[0], b[0])))
 
 
 def _poses(
@@ -384,8 +355,8 @@ def _place_movables(
     neighbours: list[tuple[np.ndarray, manifold3d.Manifold]] = []
     build_height = 0.0
     for item in fixed:
-        vertices = _placed_vertices(item)
-        neighbours.append((_vertex_bounds(vertices), _placed_solid(solids[id(item.mesh)], item.transform)))
+        vertices = placed_vertices(item)
+        neighbours.append((vertex_bounds(vertices), placed_solid(solids[id(item.mesh)], item.transform)))
         pad = mark_pad(voxel, config.spacing_mm)
         start = np.floor((vertices.min(axis=0) - origin) / voxel).astype(int) - pad
         stop = np.ceil((vertices.max(axis=0) - origin) / voxel).astype(int) + pad
@@ -406,9 +377,9 @@ def _place_movables(
             transform[:3, :3] = pose.rotation
             transform[:3, 3] = origin + np.array(choice[1]) * voxel + pose.offset
             candidate = dataclasses.replace(item, transform=transform)
-            bounds = _vertex_bounds(_placed_vertices(candidate))
-            solid = _placed_solid(solids[id(item.mesh)], transform)
-            if not _clear_of(bounds, solid, neighbours, config.spacing_mm):
+            bounds = vertex_bounds(placed_vertices(candidate))
+            solid = placed_solid(solids[id(item.mesh)], transform)
+            if not clear_of(bounds, solid, neighbours, config.spacing_mm):
                 rejected.add(choice)
                 continue
             placed.append(candidate)
@@ -417,21 +388,6 @@ def _place_movables(
             build_height = max(build_height, float(bounds[1, 2] - origin[2]))
             break
     return placed, unplaced
-
-
-def _placed_vertices(item: BuildItem) -> np.ndarray:
-    """An item's vertices moved by its transform, (n, 3) mm."""
-    return item.mesh.vertices @ item.transform[:3, :3].T + item.transform[:3, 3]
-
-
-def _vertex_bounds(vertices: np.ndarray) -> np.ndarray:
-    """[[xmin, ymin, zmin], [xmax, ymax, zmax]] of points (n, 3)."""
-    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
-
-
-def _placed_solid(solid: manifold3d.Manifold, transform: np.ndarray) -> manifold3d.Manifold:
-    """A manifold3d solid moved by a 4x4 transform."""
-    return solid.transform(np.ascontiguousarray(transform[:3, :4], dtype=np.float64))
 
 
 def _mark(forbidden: np.ndarray, start: np.ndarray, block: np.ndarray) -> None:
@@ -445,61 +401,6 @@ def _mark(forbidden: np.ndarray, start: np.ndarray, block: np.ndarray) -> None:
     forbidden[tuple(slice(a, b) for a, b in zip(low, high))] |= block[
         tuple(slice(a, b) for a, b in zip(low - start, high - start))
     ]
-
-
-def _clear_of(
-    bounds: np.ndarray,
-    solid: manifold3d.Manifold,
-    others: Sequence[tuple[np.ndarray, manifold3d.Manifold]],
-    spacing: float,
-) -> bool:
-    """True when ``solid`` is at least ``spacing`` from every solid of ``others`` (exact check; boxes skip the far
-    ones).
-    """
-    for other_bounds, other in others:
-        if _bounds_gap(bounds, other_bounds) >= spacing:
-            continue
-        if mesh_gap(solid, other, spacing + 1.0) < spacing + GAP_TOLERANCE_MM:
-            return False
-    return True
-
-
-def _nearest_neighbours(
-    bounds: Sequence[np.ndarray], solids: Sequence[manifold3d.Manifold]
-) -> list[tuple[float | None, int | None]]:
-    """Each solid's gap to its nearest other solid and that solid's index.
-
-    Candidates go by bounding-box gap; each exact gap is searched no further
-    than the nearest gap found so far, and the search stops at the first box
-    farther than that.
-    """
-    gaps: dict[tuple[int, int], float] = {}
-    nearest = []
-    for i in range(len(solids)):
-        order = sorted((_bounds_gap(bounds[i], bounds[j]), j) for j in range(len(solids)) if j != i)
-        best, best_index = np.inf, None
-        for box_gap, j in order:
-            if box_gap >= best:
-                break
-            pair = (min(i, j), max(i, j))
-            if pair in gaps:
-                gap = gaps[pair]
-            else:
-                # min_gap slows down with its search length: search just past
-                # the boxes' gap first, widening until found or beyond best
-                limit = min(best, _bounds_span(bounds[i], bounds[j]) + 1.0)
-                search = min(box_gap + 1.0, limit)
-                gap = mesh_gap(solids[i], solids[j], search)
-                while gap >= search and search < limit:
-                    search = min(2.0 * search, limit)
-                    gap = mesh_gap(solids[i], solids[j], search)
-                # a gap at the limit is only a lower bound, not worth keeping
-                if gap < limit:
-                    gaps[pair] = gap
-            if gap < best:
-                best, best_index = gap, j
-        nearest.append((None, None) if best_index is None else (float(best), best_index))
-    return nearest
 
 
 def place_fingers(
@@ -563,47 +464,13 @@ def place_fingers(
     movables += spares
 
     placed, missing = _place_movables(fixed, movables, pose_sets, solids, config, config_volume[2])
-    warnings = []
-    extra_height = None
-    if missing:
-        # the same placement in a volume tall enough for everything gives the
-        # build height that was missing
-        tall = config_volume[2] + sum(float(item.mesh.extents.max()) + config.spacing_mm for item in movables)
-        tall_placed, tall_missing = _place_movables(fixed, movables, pose_sets, solids, config, tall)
-        if not tall_missing:
-            needed = max(float(_placed_vertices(item)[:, 2].max() - config.origin_mm[2]) for item in tall_placed)
-            extra_height = round(needed + config.wall_margin_mm - config_volume[2], 3)
-
+    extra_height = extra_height_needed(fixed, movables, pose_sets, solids, config) if missing else None
     items = (
         fixed + [item for item in placed if item.kind == "part"] + [item for item in placed if item.kind == "finger"]
     )
-    bounds_list = [_vertex_bounds(_placed_vertices(item)) for item in items]
-    fixed_ids = {id(item) for item in fixed}
-    nearest = _nearest_neighbours(bounds_list, [_placed_solid(solids[id(item.mesh)], item.transform) for item in items])
-    lower, upper = np.array(config.origin_mm), np.array(config.origin_mm) + config_volume
-    item_reports = []
-    for item, bounds, (distance, neighbour) in zip(items, bounds_list, nearest):
-        if np.any(bounds[0] < lower + config.wall_margin_mm - 1e-6) or np.any(
-            bounds[1] > upper - config.wall_margin_mm + 1e-6
-        ):
-            warnings.append(f"{item.name} lies outside the build volume minus the wall margin")
-        if distance is not None and distance < config.spacing_mm - GAP_TOLERANCE_MM and id(item) in fixed_ids:
-            warnings.append(
-                f"{item.name} is {distance:.2f} mm from {items[neighbour].name}, closer than spacing_mm in the job's "
-                f"build"
-            )
-        item_reports.append(
-            PlacedItemReport(
-                name=item.name,
-                kind=item.kind,
-                placed_by="build" if id(item) in fixed_ids else "placer",
-                transform=np.asarray(item.transform).tolist(),
-                bounds_mm=bounds.tolist(),
-                nearest_distance_mm=None if distance is None else round(distance, 3),
-                nearest_item=None if neighbour is None else items[neighbour].name,
-            )
-        )
-    build_height = max((float(bounds[1, 2] - lower[2]) for bounds in bounds_list), default=0.0)
+    item_reports, warnings = placed_item_reports(items, {id(item) for item in fixed}, solids, config)
+    lower = np.array(config.origin_mm)
+    build_height = max((float(report.bounds_mm[1][2] - lower[2]) for report in item_reports), default=0.0)
     solid_volume = sum(abs(float(item.mesh.volume) * np.linalg.det(item.transform[:3, :3])) for item in items)
     density = solid_volume / (config_volume[0] * config_volume[1] * build_height) if build_height > 0 else 0.0
     fingers_placed = sum(1 for item in placed if item.kind == "finger")
@@ -632,6 +499,24 @@ def place_fingers(
         placement_seconds=round(time.perf_counter() - started, 3),
     )
     return PlacementResult(items=items, report=report)
+
+
+def extra_height_needed(
+    fixed: list[BuildItem],
+    movables: list[BuildItem],
+    pose_sets: dict[int, list[_Pose]],
+    solids: dict[int, manifold3d.Manifold],
+    config: BuildConfig,
+) -> float | None:
+    """The free build height missing for ``movables`` that did not all fit, mm: the same placement in a volume tall
+    enough for everything; None when even that leaves some out."""
+    volume_z = config.volume_mm[2]
+    tall = volume_z + sum(float(item.mesh.extents.max()) + config.spacing_mm for item in movables)
+    tall_placed, tall_missing = _place_movables(fixed, movables, pose_sets, solids, config, tall)
+    if tall_missing:
+        return None
+    needed = max(float(placed_vertices(item)[:, 2].max() - config.origin_mm[2]) for item in tall_placed)
+    return round(needed + config.wall_margin_mm - volume_z, 3)
 
 
 def _message(

@@ -15,6 +15,7 @@ from ..storage import file_sha256
 from .recorder import (
     TOPIC_BUS,
     TOPIC_CANDIDATES,
+    TOPIC_DECISION,
     TOPIC_DESIGN,
     TOPIC_INPUTS,
     TOPIC_LOG,
@@ -76,6 +77,7 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
     result.lines += _ros2_lines(content)
     outputs = [f for o in content.of(TOPIC_OUTPUTS) for f in o["files"]]
     result.lines += [f"  output {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']}" for item in outputs]
+    outputs = _decided(result, content, outputs)
     if verify_dir is not None:
         _verify(result, Path(verify_dir), outputs, "output")
         if content.truncated:
@@ -83,6 +85,22 @@ def audit(path: str | Path, verify_dir: str | Path | None = None, inputs_dir: st
     if inputs_dir is not None:
         _verify(result, Path(inputs_dir), [f for i in content.of(TOPIC_INPUTS) for f in i["files"]], "input")
     return result
+
+
+def _decided(result: AuditResult, content: RecordContent, outputs: list[dict]) -> list[dict]:
+    """The output files as the operators' decisions on a held job left them (``fcsod approve | reject``), each decision
+    told: what they removed is no longer expected, what they wrote is expected with its new hash."""
+    for decision in content.of(TOPIC_DECISION):
+        result.lines.append(f"{decision['decision']} by {decision['by']} at {decision['at']}")
+        written = {item["path"]: item for item in decision["files"]}
+        result.lines += [
+            f"  output {item['path']} {item['size_bytes']} bytes sha256 {item['sha256']} (written at the decision)"
+            for item in written.values()
+        ]
+        result.lines += [f"  output {name} removed at the decision" for name in decision["removed"]]
+        gone = set(decision["removed"]) | set(written)
+        outputs = [item for item in outputs if item["path"] not in gone] + list(written.values())
+    return outputs
 
 
 def _spec_lines(content: RecordContent) -> list[str]:

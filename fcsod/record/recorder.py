@@ -29,6 +29,7 @@ from .. import __version__
 from ..bus.messages import (
     BusRecord,
     CandidateRecord,
+    DecisionRecord,
     DesignRecord,
     GraspsMessage,
     InputHashesRecord,
@@ -51,6 +52,7 @@ TOPIC_INPUTS = "/job/inputs"
 TOPIC_STATE = "/job/state"
 TOPIC_LOG = "/job/log"
 TOPIC_OUTPUTS = "/job/outputs"
+TOPIC_DECISION = "/job/decision"
 TOPIC_POSES = "/design/poses"
 TOPIC_SAMPLES = "/design/samples"
 TOPIC_CANDIDATES = "/design/candidates"
@@ -58,19 +60,22 @@ TOPIC_DESIGN = "/design/finger"
 TOPIC_GRASPS = "/design/grasps"
 TOPIC_BUS = "/zenoh/published"
 TOPIC_SCENE = "/scene"
+#: The frame tree of the scene (``foxglove.FrameTransforms``, :mod:`fcsod.record.scene`).
+TOPIC_TRANSFORMS = "/tf"
 TOPIC_PLACEMENT = "/build/placement"
 #: Channels of verification.mcap.
 TOPIC_VERIFICATION = "/verification"
 TOPIC_VERIFICATION_SCENE = "/verification/scene"
 
-#: Channel -> model of its JSON messages (the Foxglove scenes, ``TOPIC_SCENE`` and ``TOPIC_VERIFICATION_SCENE``,
-#: are foxglove-sdk's protobuf messages: :meth:`Recorder.write_foxglove`).
+#: Channel -> model of its JSON messages (the Foxglove scenes and frames, ``TOPIC_SCENE``, ``TOPIC_TRANSFORMS`` and
+#: ``TOPIC_VERIFICATION_SCENE``, are foxglove-sdk's protobuf messages: :meth:`Recorder.write_foxglove`).
 CHANNELS: dict[str, type[BaseModel]] = {
     TOPIC_SPEC: JobSpecRecord,
     TOPIC_INPUTS: InputHashesRecord,
     TOPIC_STATE: StateChangeRecord,
     TOPIC_LOG: LogRecord,
     TOPIC_OUTPUTS: OutputFilesRecord,
+    TOPIC_DECISION: DecisionRecord,
     TOPIC_POSES: PoseRecord,
     TOPIC_SAMPLES: SamplesRecord,
     TOPIC_CANDIDATES: CandidateRecord,
@@ -92,6 +97,7 @@ DESIGN_RECORDED = (
     TOPIC_GRASPS,
     TOPIC_OUTPUTS,
     TOPIC_SCENE,
+    TOPIC_TRANSFORMS,
     TOPIC_PLACEMENT,
 )
 

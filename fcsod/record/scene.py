@@ -1,9 +1,20 @@
-"""Foxglove scenes (``foxglove.SceneUpdate``, metres) of a job: its grasps, its placed build, a verification trial.
+"""Foxglove scenes (``foxglove.SceneUpdate``, metres) of a job: its grasps, its placed build, a verification trial;
+and its frames (``foxglove.FrameTransforms``) in one tree.
 
 The messages are foxglove-sdk's own (``foxglove.messages``), protobuf-encoded
 by the SDK under its schema: what the Foxglove app reads natively, recorded
 into the job's MCAP by :meth:`Recorder.write_foxglove` and published live by
 the daemon's Foxglove server (:mod:`fcsod.service.foxglove_live`).
+
+The frame tree (:func:`design_transforms`, :func:`build_transforms`)::
+
+    world
+    ├── fcso_<part>_rest<k>          a part in resting pose k (the ROS 2 PoseArrays' frame), laid side by side
+    │   └── <rest>_grasp             the TCP of its grasp (z: approach, y: closing axis)
+    │       ├── <rest>_finger_plus   the finger mesh's frame, seated on the "+" side
+    │       └── <rest>_finger_minus  and on the "-" side
+    └── fcso_build                   the build volume's frame, beside the parts
+        └── fcso_build_<item>        each placed part and finger copy (its mesh frame)
 """
 
 from __future__ import annotations
@@ -14,15 +25,19 @@ import time
 import numpy as np
 import trimesh
 from foxglove.messages import (
+    ArrowPrimitive,
     Color,
     CubePrimitive,
     Duration,
+    FrameTransform,
+    FrameTransforms,
     KeyValuePair,
     Point3,
     Pose,
     Quaternion,
     SceneEntity,
     SceneUpdate,
+    TextPrimitive,
     Timestamp,
     TriangleListPrimitive,
     Vector3,
@@ -34,6 +49,7 @@ from fcso.sim.report import VerificationReport
 from fcso.sim.scene import pad_in_world
 from fcso.sim.verify import DesignUnderTest
 
+from ..bus.messages import rest_frame_id
 from ..plate.build3mf import BuildItem
 from ..plate.models import BuildConfig, PlacementReport
 
@@ -45,6 +61,18 @@ IDENTITY = Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=UNROTATED)
 
 #: An entity that stays until replaced.
 FOREVER = Duration(sec=0, nsec=0)
+
+#: The root of the frame tree.
+WORLD_FRAME = "world"
+
+#: The build volume's frame.
+BUILD_FRAME = "fcso_build"
+
+#: An arrow along +z: the rotation taking a Foxglove arrow's +x onto +z (-90 degrees about y).
+ALONG_Z = Quaternion(x=0.0, y=-(0.5**0.5), z=0.0, w=0.5**0.5)
+
+#: Length of a grasp's approach arrow, m.
+ARROW_M = 0.04
 
 
 def stamp(time_ns: int) -> Timestamp:
@@ -61,6 +89,87 @@ def base64_text(data: bytes) -> str:
     return base64.b64encode(data).decode()
 
 
+def frame_transform(parent: str, child: str, matrix: np.ndarray, time_ns: int) -> FrameTransform:
+    """The Foxglove transform of frame ``child`` in ``parent``: ``matrix`` (4x4, rigid, mm) maps child to parent."""
+    w, x, y, z = trimesh.transformations.quaternion_from_matrix(matrix)
+    return FrameTransform(
+        timestamp=stamp(time_ns),
+        parent_frame_id=parent,
+        child_frame_id=child,
+        translation=Vector3(**dict(zip("xyz", (np.asarray(matrix)[:3, 3] / 1000.0).tolist()))),
+        rotation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
+    )
+
+
+def grasp_frames(rest: str) -> tuple[str, str, str]:
+    """The frames below a part's resting frame ``rest``: its grasp's TCP, the "+" finger's and the "-" finger's."""
+    return f"{rest}_grasp", f"{rest}_finger_plus", f"{rest}_finger_minus"
+
+
+def tcp_matrix(position_mm, quaternion_wxyz) -> np.ndarray:
+    """4x4 of a grasp's TCP in its resting frame (mm) from a grasp report's position and orientation."""
+    matrix = trimesh.transformations.quaternion_matrix(quaternion_wxyz)
+    matrix[:3, 3] = position_mm
+    return matrix
+
+
+def _layout(result: DesignResult):
+    """Per scenario (in order): the scenario, its evaluation, its sample and its shift along x in the side-by-side
+    layout (4x4, mm).
+    """
+    offset_x = 0.0
+    for scenario, sample_index, evaluation in zip(result.scenarios, result.best.choice, result.best.scenarios):
+        bounds = scenario.mesh.bounds
+        shift = np.eye(4)
+        shift[0, 3] = offset_x - bounds[0, 0]
+        yield scenario, evaluation, scenario.samples[sample_index], shift
+        offset_x += 1.5 * float(np.ptp(bounds[:, 0])) + 60.0
+
+
+def _finger_matrices(result: DesignResult, sample, evaluation) -> list[np.ndarray]:
+    """The "+" and "-" fingers' mesh frames in the resting frame (4x4, mm), seated as evaluated."""
+    to_pad = np.linalg.inv(result.pad_to_finger)
+    fingers = []
+    for frame, contact in zip(sample.frames, evaluation.contacts):
+        seated = np.eye(4)
+        seated[0, 3] = contact.offset_mm
+        fingers.append(np.linalg.inv(frame) @ seated @ to_pad)
+    return fingers
+
+
+def design_transforms(result: DesignResult, time_ns: int) -> FrameTransforms:
+    """The frames of a design (module docstring): each part's resting frame in ``world`` as :func:`scene_update` lays
+    them out, its grasp's TCP in it (the grasp report's pose) and both fingers' frames in the TCP's.
+    """
+    grasps = {(g.part, g.pose_index): g for g in result.report.grasps}
+    transforms = []
+    for scenario, evaluation, sample, shift in _layout(result):
+        rest = rest_frame_id(scenario.part.name, scenario.pose_index)
+        grasp = grasps[(scenario.part.name, scenario.pose_index)]
+        tcp = tcp_matrix(grasp.position_mm, grasp.quaternion_wxyz)
+        tcp_frame, *finger_frames = grasp_frames(rest)
+        transforms.append(frame_transform(WORLD_FRAME, rest, shift, time_ns))
+        transforms.append(frame_transform(rest, tcp_frame, tcp, time_ns))
+        for frame, finger in zip(finger_frames, _finger_matrices(result, sample, evaluation)):
+            transforms.append(frame_transform(tcp_frame, frame, np.linalg.inv(tcp) @ finger, time_ns))
+    return FrameTransforms(transforms=transforms)
+
+
+def build_transforms(items: list[BuildItem], config: BuildConfig, time_ns: int) -> FrameTransforms:
+    """The build's frames (module docstring): the build volume beside the parts (its depth and 100 mm along -y) and each
+    placed item's mesh frame in it.
+    """
+    beside = np.eye(4)
+    beside[1, 3] = -(float(config.volume_mm[1]) + 100.0)
+    transforms = [frame_transform(WORLD_FRAME, BUILD_FRAME, beside, time_ns)]
+    transforms += [
+        frame_transform(BUILD_FRAME, f"{BUILD_FRAME}_{item.name}", item.transform, time_ns)
+        for item in items
+        if item.transform is not None
+    ]
+    return FrameTransforms(transforms=transforms)
+
+
 def triangles(
     mesh: trimesh.Trimesh, transform: np.ndarray, color: tuple[float, float, float, float]
 ) -> TriangleListPrimitive:
@@ -75,41 +184,66 @@ def triangles(
 
 
 def scene_update(result: DesignResult, prefix: str = "") -> SceneUpdate:
-    """Foxglove SceneUpdate: per scenario the rested part, both seated pads and both fingers, in metres.
+    """Foxglove SceneUpdate: per scenario the rested part, both seated pads and both fingers, and its grasp: an arrow
+    along the approach onto the TCP and a label; in metres.
 
-    Scenarios are laid side by side along x so they do not overlap; entity ids
-    are ``<prefix>scenario-<n>`` (the prefix names a finger set).
+    Each scenario is drawn in its part's resting frame, the grasp in its TCP frame (:func:`design_transforms` places
+    them); entity ids are ``<prefix>scenario-<n>`` and ``<prefix>grasp-<n>`` (the prefix names a finger set).
     """
     now = stamp(time.time_ns())
-    to_pad = np.linalg.inv(result.pad_to_finger)
-    entities, offset_x = [], 0.0
-    for number, (scenario, sample_index, evaluation) in enumerate(
-        zip(result.scenarios, result.best.choice, result.best.scenarios)
-    ):
-        sample = scenario.samples[sample_index]
-        bounds = scenario.mesh.bounds
-        gap = 0.5 * float(np.ptp(bounds[:, 0])) + 60.0
-        shift = np.eye(4)
-        shift[0, 3] = offset_x - bounds[0, 0]
-        drawn = [triangles(scenario.mesh, shift, (0.6, 0.6, 0.65, 1.0))]
-        for frame, contact in zip(sample.frames, evaluation.contacts):
+    grasps = {(g.part, g.pose_index): g for g in result.report.grasps}
+    entities = []
+    for number, (scenario, evaluation, sample, _) in enumerate(_layout(result)):
+        rest = rest_frame_id(scenario.part.name, scenario.pose_index)
+        grasp = grasps[(scenario.part.name, scenario.pose_index)]
+        drawn = [triangles(scenario.mesh, np.eye(4), (0.6, 0.6, 0.65, 1.0))]
+        for frame, contact, finger in zip(
+            sample.frames, evaluation.contacts, _finger_matrices(result, sample, evaluation)
+        ):
             seated = np.eye(4)
             seated[0, 3] = contact.offset_mm
-            pad_to_rest = shift @ np.linalg.inv(frame) @ seated
-            drawn.append(triangles(result.fingerpad, pad_to_rest, (0.9, 0.45, 0.1, 1.0)))
-            drawn.append(triangles(result.finger, pad_to_rest @ to_pad, (0.2, 0.4, 0.8, 0.35)))
+            drawn.append(triangles(result.fingerpad, np.linalg.inv(frame) @ seated, (0.9, 0.45, 0.1, 1.0)))
+            drawn.append(triangles(result.finger, finger, (0.2, 0.4, 0.8, 0.35)))
+        about = {"part": scenario.part.name, "pose_index": str(scenario.pose_index)}
         entities.append(
             SceneEntity(
                 timestamp=now,
-                frame_id="fcso_rest",
+                frame_id=rest,
                 id=f"{prefix}scenario-{number}",
                 lifetime=FOREVER,
-                frame_locked=False,
-                metadata=metadata({"part": scenario.part.name, "pose_index": str(scenario.pose_index)}),
+                frame_locked=True,
+                metadata=metadata(about),
                 triangles=drawn,
             )
         )
-        offset_x += float(np.ptp(bounds[:, 0])) + gap
+        arrow = ArrowPrimitive(
+            pose=Pose(position=Vector3(x=0.0, y=0.0, z=-ARROW_M), orientation=ALONG_Z),
+            shaft_length=0.8 * ARROW_M,
+            shaft_diameter=0.002,
+            head_length=0.2 * ARROW_M,
+            head_diameter=0.005,
+            color=Color(r=0.1, g=0.7, b=0.2, a=1.0),
+        )
+        label = TextPrimitive(
+            pose=Pose(position=Vector3(x=0.0, y=0.0, z=-1.2 * ARROW_M), orientation=UNROTATED),
+            billboard=True,
+            font_size=14.0,
+            scale_invariant=True,
+            color=Color(r=1.0, g=1.0, b=1.0, a=1.0),
+            text=f"{scenario.part.name} pose {scenario.pose_index}: closing width {grasp.closing_width_mm:g} mm",
+        )
+        entities.append(
+            SceneEntity(
+                timestamp=now,
+                frame_id=grasp_frames(rest)[0],
+                id=f"{prefix}grasp-{number}",
+                lifetime=FOREVER,
+                frame_locked=True,
+                metadata=metadata({**about, "sample": str(grasp.sample)}),
+                arrows=[arrow],
+                texts=[label],
+            )
+        )
     return SceneUpdate(entities=entities)
 
 

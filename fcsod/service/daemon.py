@@ -42,8 +42,6 @@ from ..job.events import (
 from ..job.inputs import hash_inputs, job_id, job_inputs
 from ..job.process import WORKER_PRELOAD, worker_main
 from ..job.task import (
-    BUILD_NAME,
-    HELD_BUILD_NAME,
     SIGNAL_TIME_LIMIT,
     SIGNAL_WITHDRAWN,
     JobFolderDeleted,
@@ -55,8 +53,9 @@ from ..job.task import (
 from ..record.failure import record_failure
 from ..record.recorder import JOB_RECORD_NAME, TOPIC_BUS, TOPIC_STATE, read_record
 from ..storage import lock_state_dir
-from .journal import JobRow, Journal, JournalCorrupt, OperatorRequest, journal_problem, stored_message, stored_messages
+from .journal import JobRow, Journal, JournalCorrupt, journal_problem, stored_message, stored_messages
 from .metrics import DaemonMetrics
+from .requests import CANCELLED_ERROR, OperatorRequests, withheld
 from .systemd import notify, watchdog_interval
 from .watcher import FolderWatcher, Readiness, signature_of
 
@@ -64,16 +63,6 @@ log = logging.getLogger("fcsod")
 
 #: Longest wait of the main loop for an event, s.
 TICK_S = 0.2
-
-#: The error of a job an operator cancelled (``fcsod cancel``).
-CANCELLED_ERROR = "cancelled by the operator (fcsod cancel)"
-
-#: The error of a held job an operator rejected (``fcsod reject``), before the reason it was held.
-REJECTED_ERROR = "rejected by the operator (fcsod reject)"
-
-#: Folder of ``[output] root`` where ``fcsod retry`` keeps the records of the failed runs it replaces:
-#: ``attempts/<job_id>/<n>/job.mcap``.
-ATTEMPTS_DIR = "attempts"
 
 
 @dataclass
@@ -102,7 +91,7 @@ def _start_verification_clock(slot: WorkerSlot, limit_s: float) -> None:
     slot.verify_deadline, slot.verify_limit_s = time.monotonic() + limit_s, limit_s
 
 
-class Daemon:
+class Daemon(OperatorRequests):
     """``fcsod run``.
 
     Parameters
@@ -255,7 +244,7 @@ class Daemon:
             waitables = [s.connection for s in self.slots if s.open] + [s.process.sentinel for s in self.slots]
             wait(waitables, timeout=TICK_S)
             for slot in list(self.slots):
-                self._collect(slot)
+                self.collect(slot)
             for folder in self.watcher.take_changed():
                 self.readiness.touch(folder)
             now = time.monotonic()
@@ -266,7 +255,7 @@ class Daemon:
             for ready in self.readiness.poll():
                 self._enqueue(ready.folder, ready.inputs, ready.signature)
             self._stop_overdue_and_withdrawn_jobs()
-            self._handle_requests()
+            self.handle_requests()
             self._dispatch()
             self._fill_workers()
             if ping_interval is not None and time.monotonic() >= next_ping:
@@ -297,12 +286,12 @@ class Daemon:
             return
         row = self.journal.get(identity)
         log.info("job queued", extra={"job_id": identity, "folder": str(folder), "inputs": len(hashed)})
-        self._publish(self._status(row))
+        self.publish(self.status(row))
 
     def _dispatch(self) -> None:
         if self.workers_broken is not None:
             for row in self.journal.jobs("queued"):
-                self._fail_dead_job(row, self.workers_broken)
+                self.fail_dead_job(row, self.workers_broken)
             return
         idle = [s for s in self.slots if s.ready and s.job is None and s.process.is_alive()]
         free = self.config.jobs.concurrency - sum(1 for s in self.slots if s.job is not None)
@@ -352,8 +341,8 @@ class Daemon:
             "job output already complete: journal updated from its record", extra={"job_id": row.job_id, "state": state}
         )
         recorded = [BusMessage.from_record(BusRecord.model_validate(body)) for body in content.of(TOPIC_BUS)]
-        for message in recorded if state != "held" else [m for m in recorded if not _withheld(m)]:
-            self._publish(message)
+        for message in recorded if state != "held" else [m for m in recorded if not withheld(m)]:
+            self.publish(message)
 
     # ---------------------------------------------------------------- workers
 
@@ -389,7 +378,7 @@ class Daemon:
         )
         log.error(self.workers_broken)
 
-    def _collect(self, slot: WorkerSlot) -> None:
+    def collect(self, slot: WorkerSlot) -> None:
         """Handle what the worker sent; remove it if it exited."""
         self._drain(slot)
         if not slot.process.is_alive():
@@ -423,10 +412,10 @@ class Daemon:
             case Log(level, message, fields):
                 log.log(logging.getLevelName(level.upper()), message, extra={"job_id": slot.job.job_id, **fields})
             case Publish(message):
-                self._publish(message)
-            case Scene(_, data, log_time_ns):
+                self.publish(message)
+            case Scene(topic, data, log_time_ns):
                 if self.foxglove is not None:
-                    self.foxglove.log_scene(data, log_time_ns)
+                    self.foxglove.log_scene(topic, data, log_time_ns)
             case StepFinished(name, seconds):
                 self.metrics.stage_seconds.labels(name).observe(seconds)
             case JobFinished():
@@ -459,7 +448,7 @@ class Daemon:
         else:
             log.info("job done", extra={**extra, "output": str(self.output_root / row.job_id)})
         for message in messages:
-            self._publish(message)
+            self.publish(message)
 
     def _verified(self, slot: WorkerSlot, state: str, error: str | None, messages: list[BusMessage]) -> None:
         """A done job's verification ended: journal its state with its messages, then publish them."""
@@ -503,9 +492,9 @@ class Daemon:
                 else f"exit code {code}"
             )
             error = f"worker process died while running the job ({how})"
-        self._fail_dead_job(slot.job, error)
+        self.fail_dead_job(slot.job, error)
 
-    def _fail_dead_job(self, row: JobRow, error: str) -> None:
+    def fail_dead_job(self, row: JobRow, error: str) -> None:
         """Record the failure of a job whose worker died: salvage its record, finish it, publish ``failed``."""
         final_dir = self.output_root / row.job_id
         if (final_dir / JOB_RECORD_NAME).is_file():
@@ -515,7 +504,7 @@ class Daemon:
         finished_at = utc_now()
         row = self.journal.mark_finished(row.job_id, "failed", finished_at, error)
         self.metrics.jobs_finished.labels("cancelled" if error == CANCELLED_ERROR else "failed").inc()
-        status = self._status(row)
+        status = self.status(row)
         try:
             work_dir.mkdir(parents=True, exist_ok=True)
             for path in work_dir.iterdir():
@@ -530,7 +519,7 @@ class Daemon:
                 f"cannot write the failed job's record: {exc}", extra={"job_id": row.job_id, "path": str(work_dir)}
             )
         log.error(f"job failed: {error}", extra={"job_id": row.job_id, "state": "failed"})
-        self._publish(status)
+        self.publish(status)
 
     def _stop_overdue_and_withdrawn_jobs(self) -> None:
         """Stop a job over its time limit or whose folder was deleted (the print job withdrawn).
@@ -563,106 +552,10 @@ class Daemon:
             elif now - slot.stop_signalled_at > jobs.stop_grace_seconds:
                 slot.process.kill()
 
-    # ---------------------------------------------------------------- operator requests
-
-    def _handle_requests(self) -> None:
-        """Act on the operators' ``fcsod retry | cancel | approve | reject`` requests and answer each in the journal."""
-        actions = {"retry": self._retry, "cancel": self._cancel, "approve": self._approve, "reject": self._reject}
-        for request in self.journal.pending_requests():
-            act = actions[request.action]
-            accepted, outcome = act(request)
-            self.journal.answer_request(request.request_id, utc_now(), accepted, outcome)
-            log.info(
-                f"operator request: {outcome}",
-                extra={"job_id": request.job_id, "action": request.action, "accepted": accepted},
-            )
-
-    def _retry(self, request: OperatorRequest) -> tuple[bool, str]:
-        """Queue a failed job again; the failed run's output folder moves to ``attempts/<job_id>/<n>/``."""
-        row = self.journal.get(request.job_id)
-        if row is None:
-            return False, f"{request.job_id}: no such job"
-        if row.state != "failed":
-            return False, f"{row.job_id} is {row.state}: only a failed job can be retried"
-        folder = Path(row.folder)
-        if not folder.is_dir():
-            return False, f"{row.job_id}: its job folder {folder} no longer exists"
-        hashed = hash_inputs(folder, job_inputs(folder), self.config.limits.max_file_bytes)
-        current = job_id(folder.name, hashed)
-        if current != row.job_id:
-            # the content is the job's identity: changed inputs are another job, which the watcher queues itself
-            return False, f"{row.job_id}: the inputs in {folder} changed since: they are job {current}"
-        previous = self.output_root / row.job_id
-        kept = None
-        if previous.exists():
-            attempts = self.output_root / ATTEMPTS_DIR / row.job_id
-            attempts.mkdir(parents=True, exist_ok=True)
-            kept = attempts / str(len(list(attempts.iterdir())) + 1)
-            os.replace(previous, kept)
-        self.journal.requeue_failed(row.job_id, utc_now())
-        self._publish(self._status(self.journal.get(row.job_id)))
-        return True, f"{row.job_id} queued again" + (f"; the failed run's record is kept in {kept}" if kept else "")
-
-    def _cancel(self, request: OperatorRequest) -> tuple[bool, str]:
-        """End a queued or running job ``failed`` with :data:`CANCELLED_ERROR`; a running job's worker is killed."""
-        row = self.journal.get(request.job_id)
-        if row is None:
-            return False, f"{request.job_id}: no such job"
-        if row.state == "queued":
-            self._fail_dead_job(row, CANCELLED_ERROR)
-            return True, f"{row.job_id} cancelled before it started"
-        running = next((s for s in self.slots if s.job is not None and s.job.job_id == row.job_id), None)
-        if row.state != "running" or running is None or running.finished:
-            return False, f"{row.job_id} is {row.state}: only a queued or running job can be cancelled"
-        # the worker is killed at once and the job failed with this error, keeping its record so far
-        running.stop_error = CANCELLED_ERROR
-        running.process.kill()
-        running.process.join()
-        self._collect(running)
-        ended = self.journal.get(row.job_id)
-        if ended.error != CANCELLED_ERROR:
-            return False, f"{row.job_id} ended {ended.state} before it could be cancelled"
-        return True, f"{row.job_id} cancelled while running"
-
-    def _approve(self, request: OperatorRequest) -> tuple[bool, str]:
-        """Release a held job: its build with the finger placed becomes ``build.3mf``, its design messages (in its
-        record) are published, and it is done."""
-        row = self.journal.get(request.job_id)
-        if row is None:
-            return False, f"{request.job_id}: no such job"
-        if row.state != "held":
-            return False, f"{row.job_id} is {row.state}: only a held job can be approved"
-        out = self.output_root / row.job_id
-        recorded = [
-            BusMessage.from_record(BusRecord.model_validate(body))
-            for body in read_record(out / JOB_RECORD_NAME).of(TOPIC_BUS)
-        ]
-        held = next(StatusMessage.model_validate_json(m.payload) for m in reversed(recorded) if m.topic == "status")
-        os.replace(out / HELD_BUILD_NAME, out / BUILD_NAME)
-        self.journal.mark_finished(row.job_id, "done", row.finished_at or utc_now(), None)
-        for message in recorded:
-            if _withheld(message):
-                self._publish(message)
-        outputs = [name for name in held.outputs if name != HELD_BUILD_NAME]
-        done = held.model_copy(update={"state": "done", "error": None, "outputs": outputs})
-        self._publish(BusMessage.json_body(self.config.bus.prefix, self.config.bus.cell, "status", done))
-        return True, f"{row.job_id} approved: its finger is placed into {out / BUILD_NAME} and its grasps published"
-
-    def _reject(self, request: OperatorRequest) -> tuple[bool, str]:
-        """Fail a held job with :data:`REJECTED_ERROR` and why it was held; its build with the finger is removed."""
-        row = self.journal.get(request.job_id)
-        if row is None:
-            return False, f"{request.job_id}: no such job"
-        if row.state != "held":
-            return False, f"{row.job_id} is {row.state}: only a held job can be rejected"
-        (self.output_root / row.job_id / HELD_BUILD_NAME).unlink(missing_ok=True)
-        self.journal.mark_finished(row.job_id, "failed", utc_now(), f"{REJECTED_ERROR}: {row.error}")
-        self._publish(self._status(self.journal.get(row.job_id)))
-        return True, f"{row.job_id} rejected: it is failed, its finger is not delivered"
-
     # ---------------------------------------------------------------- bus
 
-    def _status(self, row: JobRow) -> BusMessage:
+    def status(self, row: JobRow) -> BusMessage:
+        """The status message of a job as the journal has it."""
         body = StatusMessage(
             job_id=row.job_id,
             state=row.state,
@@ -684,7 +577,7 @@ class Daemon:
         if body.state == "done":
             self.metrics.verified(body.passed)
 
-    def _publish(self, message: BusMessage) -> None:
+    def publish(self, message: BusMessage) -> None:
         """Sign the message, keep it for the queryable, count a verification, then publish it."""
         self._count_verification(message)
         message = self.signer.sign(message)
@@ -701,8 +594,3 @@ class Daemon:
                     f"cannot publish on {transport}: {type(exc).__name__}: {exc}",
                     extra={"job_id": message.job_id, "key": message.key_expr},
                 )
-
-
-def _withheld(message: BusMessage) -> bool:
-    """A message of a held job that waits for ``fcsod approve``: everything but its status and its verification."""
-    return message.topic != "status" and message.topic.partition("/")[0] != "verification"

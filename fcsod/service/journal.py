@@ -68,7 +68,8 @@ CREATE TABLE IF NOT EXISTS requests (
     requested_at TEXT NOT NULL,
     handled_at   TEXT,
     accepted     INTEGER,
-    outcome      TEXT
+    outcome      TEXT,
+    requested_by TEXT
 );
 """
 
@@ -80,10 +81,25 @@ RequestAction = Literal["retry", "cancel", "approve", "reject"]
 _GROWN_CHECKS = {"jobs": "'held'", "requests": "'approve'"}
 
 
+#: Columns added since a journal was made: table -> (column, its SQL type), each last in its table.
+_GROWN_COLUMNS = {"requests": ("requested_by", "TEXT")}
+
+
+def _add_grown_columns(db: sqlite3.Connection) -> None:
+    """Add the columns of :data:`_GROWN_COLUMNS` a journal's existing tables lack (null in the rows they have)."""
+    with db:
+        for table, (column, kind) in _GROWN_COLUMNS.items():
+            present = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+            if present and column not in present:
+                db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
+
+
 def _upgrade(db: sqlite3.Connection) -> None:
-    """Rebuild the tables of a journal made before their CHECK constraints grew (:data:`_GROWN_CHECKS`), keeping
-    every row: SQLite cannot alter a constraint, so each is created anew, filled, and renamed into place (the other
-    tables' references name the table, which keeps its name)."""
+    """Bring a journal made by an older fcsod to today's tables, keeping every row: the columns added since
+    (:data:`_GROWN_COLUMNS`), then the tables whose CHECK constraints grew (:data:`_GROWN_CHECKS`) rebuilt: SQLite
+    cannot alter a constraint, so each is created anew, filled, and renamed into place (the other tables' references
+    name the table, which keeps its name)."""
+    _add_grown_columns(db)
     stale = [
         name
         for name, value in _GROWN_CHECKS.items()
@@ -156,6 +172,7 @@ class OperatorRequest:
     handled_at: str | None
     accepted: bool | None
     outcome: str | None
+    requested_by: str | None = None
 
 
 class JournalCorrupt(Exception):
@@ -361,15 +378,20 @@ def stored_messages(path: str | Path) -> list[StoredMessage]:
     return [StoredMessage(*r) for r in rows]
 
 
-def submit_request(path: str | Path, job_id: str, action: RequestAction, requested_at: str) -> int:
-    """Add an operator request for the daemon (one insert in its own transaction); its id."""
+def submit_request(
+    path: str | Path, job_id: str, action: RequestAction, requested_at: str, requested_by: str | None = None
+) -> int:
+    """Add an operator request for the daemon (one insert in its own transaction), from the login ``requested_by``;
+    its id."""
     db = connect_database(Path(path))
     try:
+        _add_grown_columns(db)
         with db:
             db.executescript(_SCHEMA)
         with db:
             cursor = db.execute(
-                "INSERT INTO requests (job_id, action, requested_at) VALUES (?, ?, ?)", (job_id, action, requested_at)
+                "INSERT INTO requests (job_id, action, requested_at, requested_by) VALUES (?, ?, ?, ?)",
+                (job_id, action, requested_at, requested_by),
             )
         return cursor.lastrowid
     finally:
@@ -403,7 +425,14 @@ def _select_jobs(db: sqlite3.Connection, state: JobState | None) -> list[JobRow]
 
 
 def _request(row: tuple) -> OperatorRequest:
-    request_id, job_id, action, requested_at, handled_at, accepted, outcome = row
+    request_id, job_id, action, requested_at, handled_at, accepted, outcome, requested_by = row
     return OperatorRequest(
-        request_id, job_id, action, requested_at, handled_at, None if accepted is None else bool(accepted), outcome
+        request_id,
+        job_id,
+        action,
+        requested_at,
+        handled_at,
+        None if accepted is None else bool(accepted),
+        outcome,
+        requested_by,
     )

@@ -116,12 +116,12 @@ def test_job_written_slowly_is_designed_published_and_recorded(cell, capsys):
         assert set(ALWAYS_RECORDED) | set(DESIGN_RECORDED) <= set(channels)
         for channel in channels.values():
             # JSON channels, plus the ROS 2 form of the published messages for ros2 bag play
-            # ... and foxglove-sdk's protobuf scene
+            # ... and foxglove-sdk's protobuf scene and frames
             expected = (
                 ("cdr", "ros2msg")
                 if channel.topic.startswith("/fcsod/")
                 else ("protobuf", "protobuf")
-                if channel.topic == "/scene"
+                if channel.topic in ("/scene", "/tf")
                 else ("json", "jsonschema")
             )
             assert (channel.message_encoding, schemas[channel.schema_id].encoding) == expected, channel.topic

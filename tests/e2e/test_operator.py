@@ -18,7 +18,7 @@ from websockets.sync.client import connect
 
 from fcsod.cli import main
 from fcsod.record.recorder import TOPIC_STATE, read_record
-from fcsod.service.daemon import CANCELLED_ERROR
+from fcsod.service.requests import CANCELLED_ERROR
 from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import (
     DATA,

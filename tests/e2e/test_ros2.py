@@ -124,6 +124,26 @@ def test_grasps_arrive_on_the_rmw_zenoh_key_as_pose_arrays_equal_to_the_native_g
         )
 
 
+def test_a_pose_array_finds_its_job_in_its_grasp_details_companion(ros2_job):
+    """A PoseArray has no field for the job id: its header.stamp is the source timestamp (the attachment's) of the
+    ~/grasp_details message of its job, and that message's grasp whose frame_id is the PoseArray's header.frame_id
+    carries the job id, the approach opening and the verdict."""
+    cell = ros2_job["cell"]
+    details = {}
+    for sample in _samples(cell, "ros2", "/grasp_details/"):
+        message = TYPESTORE.deserialize_cdr(bytes.fromhex(sample["payload"]), "std_msgs/msg/String")
+        details[_attachment(sample["attachment"])[1]] = json.loads(message.data)
+    arrays = _samples(cell, "ros2", "/grasps/")
+    assert arrays and len(details) == 1
+    for sample in arrays:
+        array = TYPESTORE.deserialize_cdr(bytes.fromhex(sample["payload"]), "geometry_msgs/msg/PoseArray")
+        stamp = array.header.stamp.sec * 1_000_000_000 + array.header.stamp.nanosec
+        assert stamp == _attachment(sample["attachment"])[1], "the header stamp is the PoseArray's own source time"
+        (grasp,) = [g for g in details[stamp]["grasps"] if g["frame_id"] == array.header.frame_id]
+        assert grasp["job_id"] == details[stamp]["job_id"] == ros2_job["job_id"]
+        assert grasp["approach_opening_mm"] > grasp["closing_width_mm"]
+
+
 def _attachment(hex_text: str) -> tuple[int, int, bytes]:
     """rmw_zenoh's attachment: int64 LE sequence number, int64 LE source timestamp, 16-byte GID as a zenoh sequence
     (length 0x10).
@@ -249,9 +269,13 @@ def test_job_mcap_carries_the_ros2_messages_for_ros2_bag_play(ros2_job, capsys):
     assert [json.loads(m.data)["state"] for m in channels["/cell1/fcsod/status"]] == ["running", "done"]
     arrays = channels["/cell1/fcsod/grasps"]
     assert len(arrays) == len(report["grasps"])
+    (details,) = [json.loads(m.data) for m in channels["/cell1/fcsod/grasp_details"]]
     for array, grasp in zip(arrays, report["grasps"]):
         assert array.header.frame_id == f"fcso_{grasp['part']}_rest{grasp['pose_index']}"
         assert array.poses[0].position.x == pytest.approx(grasp["position_mm"][0] / 1000.0)
+        # the PoseArray's job: its grasp in the companion, by frame
+        (detail,) = [g for g in details["grasps"] if g["frame_id"] == array.header.frame_id]
+        assert detail["job_id"] == ros2_job["job_id"] and detail["part"] == grasp["part"]
     assert json.loads(channels["/cell1/fcsod/quality"][0].data)["job_id"] == ros2_job["job_id"]
     code = main(["audit", str(out / "job.mcap"), "--verify", str(out)])
     text = capsys.readouterr().out

@@ -159,3 +159,73 @@ def test_a_part_no_set_serves_is_not_served_in_the_report_the_plan_and_on_the_bu
     assert main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
     text = capsys.readouterr().out
     assert f"not served: 1 x {losing[0]} to flat fingers" in text
+
+
+def test_finger_sets_that_miss_the_delivery_policy_hold_the_job_as_one_finger_does(tmp_path, capsys):
+    """One code path for one finger set or several: every set's finger is verified before it is placed, and a job
+    whose fingers miss ``deliver = "verified"`` is held with no finger in build.3mf until an operator approves it."""
+    port = free_port()
+    config = write_config(tmp_path, port, verify="enabled = true")
+    # parts of 10 kg/cm³, too heavy for any grip to lift: no finger can pass, whatever the machine (the density is
+    # not among the conditions the design's capture measure predicts, so the job's two sets stay as they are)
+    manifest = MANIFEST + '\n[verify]\ntop_k = 0\ntrials = 1\ndensity_g_cm3 = 10000\ndeliver = "verified"\n'
+    daemon = start_daemon(config)
+    subscriber = start_subscriber(config)
+    try:
+        meshes = {}
+        for part in (NARROWING, WIDENING):
+            meshes[f"{part.name}.stl"] = tmp_path / f"{part.name}.stl"
+            part.mesh.export(meshes[f"{part.name}.stl"])
+        drop_job(tmp_path / "watch" / "two-sets", {"job.toml": manifest, **meshes})
+        held = subscriber.wait_for(
+            lambda v: (
+                isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] in ("held", "done", "failed")
+            )
+        )
+        assert held["body"]["state"] == "held", held["body"]
+        job_id = held["job_id"]
+        for number in (1, 2):
+            subscriber.wait_for(
+                lambda v, n=number: (
+                    isinstance(v, dict) and v.get("job_id") == job_id and v.get("topic") == f"verification/{n}"
+                )
+            )
+        out = tmp_path / "out" / job_id
+        with zipfile.ZipFile(out / "build.3mf") as archive:
+            held_model = archive.read("3D/3dmodel.model").decode()
+        early = [v["topic"] for v in subscriber.json_lines() if v.get("job_id") == job_id and v.get("source") == "live"]
+        assert main(["approve", job_id, "--config", str(config)]) == 0
+        done = subscriber.wait_for(
+            lambda v: (
+                isinstance(v, dict)
+                and v.get("job_id") == job_id
+                and v.get("topic") == "status"
+                and v["body"]["state"] == "done"
+            )
+        )
+        grasps = subscriber.wait_for(
+            lambda v: isinstance(v, dict) and v.get("job_id") == job_id and v.get("topic") == "grasps"
+        )
+    finally:
+        subscriber.stop()
+        assert daemon.stop() == 0
+    error = held["body"]["error"]
+    assert "finger set 1: the finger did not pass verification" in error, error
+    assert "finger set 2: the finger did not pass verification" in error, error
+    # held: the parts are placed, no finger; the designs, grasps and plan wait for the operator
+    assert "fcso-finger" not in held_model
+    assert not {"grasps", "design/1", "design/2", "plan", "placement"} & set(early), early
+    # each set's verification is in its folder, hashed in the record, before the job ended
+    for number in (1, 2):
+        verification = json.loads((out / f"set-{number}" / "verification.json").read_text())
+        assert verification["passed"] is False
+    # approved: both sets' fingers placed, their grasps published with each set's verdict
+    assert done["body"]["error"] is None
+    with zipfile.ZipFile(out / "build.3mf") as archive:
+        model = archive.read("3D/3dmodel.model").decode()
+    assert sorted(re.findall(r'name="fcso:finger_set"[^>]*>(\d+)<', model)) == ["1", "1", "2", "2"]
+    assert {(g["finger_set"], g["verified"]) for g in grasps["body"]["grasps"]} == {(1, False), (2, False)}
+    assert all(g["verdict"].startswith("not verified: ") for g in grasps["body"]["grasps"])
+    capsys.readouterr()
+    assert main(["audit", str(out / "job.mcap"), "--verify", str(out)]) == 0
+    assert "approved by" in capsys.readouterr().out

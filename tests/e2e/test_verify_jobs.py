@@ -5,6 +5,10 @@ simulated; a time limit publishes it as failed.
 
 from __future__ import annotations
 
+import contextlib
+import getpass
+import hashlib
+import io
 import json
 import re
 import signal
@@ -18,6 +22,8 @@ from examples.sim_parts import ridged_block
 from fcsod.cli import main as fcsod_main
 from fcsod.record.recorder import (
     TOPIC_BUS,
+    TOPIC_DECISION,
+    TOPIC_STATE,
     TOPIC_VERIFICATION,
     TOPIC_VERIFICATION_SCENE,
     VERIFICATION_RECORD_NAME,
@@ -299,6 +305,7 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
         verification = subscriber.wait_for(_is("verification", job_id))
         out = tmp_path / "out" / job_id
         held_names = _object_names(out / "build.3mf")
+        held_audit = _audit(out)
         with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
             journalled = db.execute("SELECT state FROM jobs").fetchall()
         with urllib.request.urlopen(f"http://127.0.0.1:{metrics_port}/metrics", timeout=HANG_GUARD_S) as reply:
@@ -333,3 +340,31 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
     assert not (out / "build.held.3mf").exists()
     with sqlite3.connect(tmp_path / "state" / "journal.sqlite3") as db:
         assert db.execute("SELECT state, error FROM jobs").fetchall() == [("done", None)]
+    # the record vouches for the files as they were held, and then as the approval left them: it holds who approved
+    # and the new build.3mf's hash; a build.3mf changed afterwards fails the check
+    assert held_audit[0] == 0, held_audit[1]
+    record = read_record(out / "job.mcap")
+    (approval,) = record.of(TOPIC_DECISION)
+    assert (approval["decision"], approval["by"], approval["removed"]) == (
+        "approved",
+        getpass.getuser(),
+        ["build.held.3mf"],
+    )
+    assert [(f["path"], f["sha256"]) for f in approval["files"]] == [
+        ("build.3mf", hashlib.sha256((out / "build.3mf").read_bytes()).hexdigest())
+    ]
+    assert [s["state"] for s in record.of(TOPIC_STATE)][-2:] == ["held", "done"]
+    approved_audit = _audit(out)
+    assert approved_audit[0] == 0 and f"approved by {getpass.getuser()}" in approved_audit[1], approved_audit[1]
+    with open(out / "build.3mf", "ab") as build:
+        build.write(b"\0")
+    tampered = _audit(out)
+    assert tampered[0] == 1 and "PROBLEM: output" in tampered[1] and "build.3mf: sha256" in tampered[1], tampered[1]
+
+
+def _audit(out) -> tuple[int, str]:
+    """``fcsod audit --verify`` of a job's output folder: exit code and printed text."""
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = fcsod_main(["audit", str(out / "job.mcap"), "--verify", str(out)])
+    return code, printed.getvalue()

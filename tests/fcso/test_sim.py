@@ -19,8 +19,8 @@ from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
 from fcso.output.verification_page import section_html
 from fcso.parts import Part
+from fcso.sim import schedule as schedule_module
 from fcso.sim import trials
-from fcso.sim import verify as verify_module
 from fcso.sim.collision import (
     MIN_PIECE_WIDTH_MM,
     ConvexPieces,
@@ -32,6 +32,7 @@ from fcso.sim.config import VerifyConfig
 from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
 from fcso.sim.report import Fidelity, VerificationReport
 from fcso.sim.scene import GraspCase, build_scene
+from fcso.sim.schedule import scenario_simulations
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
     DesignUnderTest,
@@ -42,7 +43,6 @@ from fcso.sim.verify import (
     grasp_case,
     is_flat_control,
     part_pieces,
-    scenario_simulations,
     seated_overlap_notes,
     verify,
     verify_case,
@@ -623,9 +623,9 @@ def test_grasps_after_the_deciding_failure_are_not_started(tmp_path, monkeypatch
     config = _config(tmp_path, jobs=1, lift_mm=10.0)
     scene = build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config)
     simulated = []
-    grasp = verify_module.run_grasp
+    grasp = schedule_module.run_grasp
     monkeypatch.setattr(
-        verify_module,
+        schedule_module,
         "run_grasp",
         lambda scene, case, pose, *args, **kw: simulated.append(pose) or grasp(scene, case, pose, *args, **kw),
     )

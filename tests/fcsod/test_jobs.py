@@ -14,16 +14,26 @@ import zipfile
 import pytest
 
 from fcso.errors import ConfigError, MeshError
-from fcsod.bus.messages import LogRecord, StateChangeRecord, StoredMessage
-from fcsod.config import JobManifest, LimitsConfig, PartEntry
+from fcsod.bus.messages import DecisionRecord, InputFile, LogRecord, OutputFilesRecord, StateChangeRecord, StoredMessage
+from fcsod.config import JobManifest, LimitsConfig, McapConfig, PartEntry
 from fcsod.job.events import WorkerReady
 from fcsod.job.inputs import check_parts, hash_inputs, job_id, job_inputs
 from fcsod.job.process import worker_main
 from fcsod.record.audit import audit
-from fcsod.record.recorder import TOPIC_LOG, TOPIC_STATE, Recorder, read_record, salvage
+from fcsod.record.decision import record_decision
+from fcsod.record.recorder import (
+    TOPIC_DECISION,
+    TOPIC_LOG,
+    TOPIC_OUTPUTS,
+    TOPIC_STATE,
+    Recorder,
+    read_record,
+    salvage,
+)
 from fcsod.service.journal import Journal, stored_messages
 from fcsod.service.systemd import notify, watchdog_interval
 from fcsod.service.watcher import FolderWatcher, Readiness
+from fcsod.storage import file_sha256
 from tests.conftest import HANG_GUARD_S
 from tests.fcsod_helpers import DATA
 
@@ -200,16 +210,56 @@ def test_a_journal_made_before_the_held_state_is_upgraded_keeping_its_rows(tmp_p
     journal.add("b-2", "/w/b", "t4")
     journal.mark_running("b-2", "t5")
     assert journal.mark_finished("b-2", "held", "t6", "misses the policy").state == "held"
-    from fcsod.service.journal import submit_request
+    from fcsod.service.journal import read_request, submit_request
 
     journal.close()
-    assert submit_request(path, "b-2", "approve", "t7") == 1
+    assert submit_request(path, "b-2", "approve", "t7", "ana") == 1
+    # the request says who asked: a column the old table did not have
+    assert read_request(path, 1).requested_by == "ana"
     with sqlite3.connect(path) as db:
         # the verifications table still refers to the jobs table
         assert (
             "REFERENCES jobs" in db.execute("SELECT sql FROM sqlite_master WHERE name = 'verifications'").fetchone()[0]
         )
         assert db.execute("PRAGMA foreign_key_check").fetchall() == []
+
+
+def test_an_operators_decision_is_recorded_and_the_audit_checks_the_files_it_left(tmp_path):
+    """A held job's record and files, then a rejection: the record holds every message it had plus the decision
+    and the failed state; the audit no longer asks for the removed build.held.3mf and still checks build.3mf."""
+    files = {"build.3mf": b"parts alone", "build.held.3mf": b"parts and fingers"}
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    recorder = Recorder(tmp_path / "job.mcap", "zstd", 4096)
+    recorder.write(TOPIC_STATE, StateChangeRecord(job_id="j", state="held", at="t1", error="missed the policy"))
+    recorder.write(
+        TOPIC_OUTPUTS,
+        OutputFilesRecord(
+            job_id="j",
+            files=[InputFile(path=n, size_bytes=len(d), sha256=file_sha256(tmp_path / n)) for n, d in files.items()],
+        ),
+    )
+    recorder.finish()
+    before = read_record(tmp_path / "job.mcap")
+    decision = DecisionRecord(
+        job_id="j", decision="rejected", by="ana", requested_at="t2", at="t3", files=[], removed=["build.held.3mf"]
+    )
+    record_decision(tmp_path, decision, "rejected by the operator", McapConfig())
+    (tmp_path / "build.held.3mf").unlink()
+    after = read_record(tmp_path / "job.mcap")
+    assert not after.truncated
+    assert [(m.topic, m.data) for m in after.messages[: len(before.messages)]] == [
+        (m.topic, m.data) for m in before.messages
+    ]
+    assert after.of(TOPIC_DECISION) == [decision.model_dump(mode="json")]
+    assert [(s["state"], s["error"]) for s in after.of(TOPIC_STATE)] == [
+        ("held", "missed the policy"),
+        ("failed", "rejected by the operator"),
+    ]
+    story = audit(tmp_path / "job.mcap", verify_dir=tmp_path)
+    assert story.problems == [] and "rejected by ana at t3" in story.lines
+    (tmp_path / "build.3mf").write_bytes(b"changed")
+    assert [p for p in audit(tmp_path / "job.mcap", verify_dir=tmp_path).problems if "build.3mf: sha256" in p]
 
 
 def test_cut_off_record_is_read_up_to_the_cut_and_salvaged(tmp_path):

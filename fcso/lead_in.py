@@ -1,0 +1,71 @@
+"""The draft a candidate's pockets are printed with (METHOD §5b, §7b, §9c).
+
+A pocket's lead-in bounds the start errors it guides in; a wider draft
+(``[print] lead_in_alternatives_deg``) is taken only when the candidate's
+worst scenario captures clearly more with it, since a wide draft also lets
+a part ride up and out more easily.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .capture import pad_landscapes
+from .config import DesignConfig
+from .grid import ScreenGrid
+from .screen import ScreenGeometry
+
+#: How much more of the start errors a pad must capture than flat pads to count as better (2 of 20 starts).
+FLAT_MARGIN = 0.1
+
+
+def printed_draft(
+    screens: list[tuple[ScreenGeometry, ScreenGeometry]],
+    centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+    widths_mm: list[float],
+    sliding_axes: list[np.ndarray],
+    config: DesignConfig,
+) -> tuple[float, list[float], str | None]:
+    """The draft of a candidate's samples (:func:`fcso.evaluate.printed_lead_in_deg`) and its scenarios' captures.
+
+    Parameters
+    ----------
+    screens, centres_uv_mm, widths_mm, sliding_axes : list
+        Per scenario, its sample's two geometries, centres of mass, width and sliding axis, as
+        :func:`fcso.capture.pad_landscapes`.
+    config : DesignConfig
+
+    Returns
+    -------
+    lead_in_deg : float
+    captures : list of float
+        Per scenario, its capture on the candidate's pad printed with that draft.
+    why : str or None
+    """
+    lead_in = config.print.resolved()["lead_in_deg"]
+    alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
+    if lead_in <= 0 or config.quality.measure != "capture":
+        alternatives = []
+    grid = ScreenGrid.for_config(config)
+
+    def captures_at(angle: float) -> list[float]:
+        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
+        return [
+            landscape.fraction
+            for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
+        ]
+
+    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
+    worst = {angle: min(values) for angle, values in captures.items()}
+    widest = max(worst.values())
+    if widest < worst[lead_in] + FLAT_MARGIN:
+        return lead_in, captures[lead_in], None
+    angle = min(a for a, capture in worst.items() if capture >= widest - 1e-9)
+    return (
+        angle,
+        captures[angle],
+        (
+            f"pocket walls drafted by {angle:g}° instead of {lead_in:g}° ([print] lead_in_alternatives_deg): "
+            f"the worst scenario's capture is {worst[angle]:.2f} against {worst[lead_in]:.2f}"
+        ),
+    )

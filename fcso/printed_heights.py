@@ -1,0 +1,84 @@
+"""The pad's face heights as printed, on the screening grid (METHOD §8b, §9b).
+
+:mod:`fcso.printfit` carves a pocket as the part grown by the clearance
+(a ball) with its walls drafted by the lead-in; this is the same on column
+heights: a grey dilation by a hemisphere, then every wall drafted,
+``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
+depth). The capture model (:mod:`fcso.capture`) squeezes parts between
+these heights.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import maximum_filter
+
+from .grid import ScreenGrid
+from .screen import ScreenGeometry
+
+
+def carved_heights(geometries: list[ScreenGeometry], grid: ScreenGrid) -> np.ndarray:
+    """Largest column height of the good geometries, ``(count_v, count_w)`` mm; ``-inf`` where none carves."""
+    carved = np.full((grid.count_v, grid.count_w), -np.inf)
+    for geometry in geometries:
+        if geometry.good:
+            # outside its window a geometry's heights are 0: it carves nothing there
+            heights = geometry.window_heights_mm
+            np.maximum(carved[geometry.cells], np.where(heights > 0, heights, -np.inf), out=carved[geometry.cells])
+    return carved
+
+
+def fitted_pad_heights(
+    carved_mm: np.ndarray, floor_mm: float, cell_mm: float, clearance_mm: float, lead_in_deg: float
+) -> np.ndarray:
+    """The pad's face heights ``P = {u >= H}`` as printed.
+
+    Parameters
+    ----------
+    carved_mm : (count_v, count_w) float
+        Largest column height of the carved (good) geometries, mm; ``-inf``
+        where none carves.
+    floor_mm : float
+        The pad face where nothing is carved (0, the block's ``D - d_B``, or
+        ``D`` for a flat pad), mm.
+    cell_mm : float
+        Grid cell, mm.
+    clearance_mm, lead_in_deg : float
+        ``[print]``'s fit; 0 and 0 give the exact pocket.
+
+    Returns
+    -------
+    (count_v, count_w) float
+    """
+    heights = np.asarray(carved_mm, dtype=np.float64).copy()
+    if clearance_mm > 0 and np.isfinite(heights).any():
+        # the part grown by a ball: grey dilation by a hemisphere, so pocket edges are rounded as carved
+        radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
+        padded = np.pad(heights, radius, constant_values=-np.inf)
+        grown = np.full_like(heights, -np.inf)
+        count_v, count_w = heights.shape
+        for dv in range(-radius, radius + 1):
+            for dw in range(-radius, radius + 1):
+                lateral = np.hypot(dv, dw) * cell_mm
+                if lateral <= clearance_mm + 1e-9:
+                    window = padded[radius + dv : radius + dv + count_v, radius + dw : radius + dw + count_w]
+                    np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
+        heights = grown
+    if lead_in_deg > 0 and np.isfinite(heights).any():
+        # raised to the floor first: the draft then stops where it meets the floor, a few cells
+        # out, instead of spreading below it over the whole grid (the same result, ~30x fewer passes)
+        heights = np.maximum(heights, floor_mm)
+        drop = cell_mm / np.tan(np.radians(lead_in_deg))
+        diagonal = drop * np.sqrt(2.0)
+        for _ in range(heights.shape[0] + heights.shape[1]):
+            straight = maximum_filter(
+                heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf
+            )
+            corner = maximum_filter(
+                heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf
+            )
+            grown = np.maximum(heights, np.maximum(straight - drop, corner - diagonal))
+            if np.array_equal(grown, heights):
+                break
+            heights = grown
+    return np.maximum(heights, floor_mm)
