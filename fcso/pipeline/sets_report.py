@@ -88,32 +88,18 @@ def sets_report(
         part_retained = {
             u: min(r for m, r in zip(numbers, retained) if prepared.scenarios[m].part_index == u) for u in chosen
         }
-        for u in chosen:
-            if part_retained[u] >= settings.min_retained and u in unserved_by_truth:
-                why = (
-                    f"{unserved_by_truth[u]} (set {label}); every set allowed is used ({len(designs)} of max = "
-                    f"{settings.max})"
-                )
-                not_served.append(
-                    _not_served(prepared.parts[u].name, loaded, groups[u], label, part_retained[u], why, settings)
-                )
-            if part_retained[u] < settings.min_retained:
-                not_served.append(
-                    _not_served_entry(
-                        prepared.parts[u].name,
-                        loaded,
-                        groups[u],
-                        label,
-                        part_retained[u],
-                        screened,
-                        numbers,
-                        u,
-                        prepared,
-                        len(designs),
-                        allowed,
-                        settings,
-                    )
-                )
+        not_served += _set_not_served(
+            prepared,
+            loaded,
+            groups,
+            label,
+            part_retained,
+            screened,
+            numbers,
+            (len(designs), allowed),
+            unserved_by_truth,
+            settings,
+        )
         for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
             exact[m] = (label, quality.measure)
         folder = set_folder(label, several)
@@ -128,23 +114,9 @@ def sets_report(
                 pad_case=design_result.best.case,
             )
         )
-        grasps = dict(zip(numbers, design_result.report.grasps))
-        pick_plan.append(
-            PickStep(
-                set=label,
-                finger=set_finger_path(label, several),
-                parts=[
-                    PickPart(
-                        part=prepared.parts[u].name,
-                        copies=[loaded[i].name for i in groups[u]],
-                        quantity=sum(len(loaded[i].instances) for i in groups[u]),
-                        grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
-                    )
-                    for u in chosen
-                    if part_retained[u] >= settings.min_retained and u not in unserved_by_truth
-                ],
-            )
-        )
+        unserved = {entry.part for entry in not_served}
+        served_parts = [u for u in chosen if prepared.parts[u].name not in unserved]
+        pick_plan.append(_pick_step(label, several, design_result, served_parts, numbers, prepared, loaded, groups))
     scenarios = _scenario_entries(prepared, solos, exact, screened)
     kept = [s.retained for s in scenarios if s.retained is not None]
     served = {prepared.parts[u].name for u in graspable}
@@ -200,6 +172,46 @@ def search_report(outcome, names, scenarios, attempts, reached, settings) -> Par
         explanation=None if reached else _explanation(scenarios, blocking, outcome, names, settings),
         attempts=[_attempt_report(a, outcome, names) for a in attempts],
     )
+
+
+def _pick_step(label, several, design_result, served_parts, numbers, prepared, loaded, groups) -> PickStep:
+    """Set ``label``'s step of the pick plan: mount its finger, pick the parts it serves (``served_parts``)."""
+    grasps = dict(zip(numbers, design_result.report.grasps))
+    return PickStep(
+        set=label,
+        finger=set_finger_path(label, several),
+        parts=[
+            PickPart(
+                part=prepared.parts[u].name,
+                copies=[loaded[i].name for i in groups[u]],
+                quantity=sum(len(loaded[i].instances) for i in groups[u]),
+                grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
+            )
+            for u in served_parts
+        ],
+    )
+
+
+def _set_not_served(
+    prepared, loaded, groups, label, part_retained, screened, numbers, used_allowed, unserved_by_truth, settings
+) -> list[NotServedPart]:
+    """The entries of set ``label``'s parts it does not serve: those keeping less than min_retained
+    (``part_retained``: distinct part -> its least retained in the set), and those its simulated finger fails where
+    their own finger passes (``unserved_by_truth``: distinct part -> why)."""
+    used, allowed = used_allowed
+    entries = []
+    for u, kept in part_retained.items():
+        name = prepared.parts[u].name
+        if kept < settings.min_retained:
+            entries.append(
+                _not_served_entry(
+                    name, loaded, groups[u], label, kept, screened, numbers, u, prepared, used, allowed, settings
+                )
+            )
+        elif u in unserved_by_truth:
+            why = f"{unserved_by_truth[u]} (set {label}); every set allowed is used ({used} of max = {settings.max})"
+            entries.append(_not_served(name, loaded, groups[u], label, kept, why, settings))
+    return entries
 
 
 def _not_served_entry(
