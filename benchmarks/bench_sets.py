@@ -26,7 +26,11 @@ D = 4). Prints, medians over N runs (the machine is shared and noisy):
 - the same job with one finger (``max = 1``, the paper's method): its time
   and the worst and median ``E / E*`` (``E*`` from the sets run);
 - the checks of the issue: the sets' worst retained is at least the single
-  finger's, and reaches ``min_retained`` or the report says which pair blocks it.
+  finger's, and reaches ``min_retained`` or the report says which pair blocks it;
+- the verified success of each set's finger over its scenarios (issue 48):
+  successful precision trials of the set's finger and of flat pads per
+  scenario, from the report's ``truth`` with ``--truth SECONDS``
+  (``[finger_sets] truth_budget_s``), else simulated after the design.
 
 ``--baseline COMMIT`` times the 12-part job (``max = 4``) on this code and
 on that commit's code (git archive), whole fresh processes taking turns, wall
@@ -192,9 +196,50 @@ def served_figures(report) -> str:
     )
 
 
-def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4) -> None:
+def verified_lines(result, config: fcso.DesignConfig) -> tuple[list[str], float]:
+    """The verified success of each set's finger over its scenarios (issue 48): per scenario the successful
+    precision trials of the set's finger and of flat pads, and whether it passed. From the report's ``truth`` where
+    the design simulated the set ([finger_sets] truth_budget_s), else simulated here in full
+    (:func:`fcso.sim.verify.verify_delivered`, [verify] as configured). Returns the lines and the seconds simulated
+    here."""
+    from fcso.sim.config import with_print_density
+    from fcso.sim.verify import design_under_test, successes, verify_delivered
+
+    truth = result.report.truth
+    known = {v.set: v.scenarios for v in truth.sets} if truth is not None else {}
+    lines, clock = [], time.perf_counter()
+    for number, design in enumerate(result.designs, start=1):
+        if number not in known:
+            verification = verify_delivered(design_under_test(design), with_print_density(config.verify, config))
+            known[number] = [
+                (
+                    s.part,
+                    successes(s.fcso.trials),
+                    len(s.fcso.trials),
+                    successes(s.flat.trials),
+                    len(s.flat.trials),
+                    s.passed,
+                )
+                for s in verification.scenarios
+            ]
+        else:
+            known[number] = [
+                (v.part, v.successes, v.trials, v.flat_successes, v.flat_trials, v.passed) for v in known[number]
+            ]
+        passed = sum(row[5] for row in known[number])
+        lines.append(
+            f"    set {number} verified: {passed} of {len(known[number])} scenarios pass; "
+            + ", ".join(f"{part} {k}/{n} (flat {fk}/{fn})" for part, k, n, fk, fn, _ in known[number])
+        )
+    return lines, time.perf_counter() - clock
+
+
+def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4, truth_s: float = 0.0) -> None:
     config = fcso.DesignConfig().updated(
-        {"poses": {"count": 1, "select": "most_probable"}, "finger_sets": {"max": max_sets}}
+        {
+            "poses": {"count": 1, "select": "most_probable"},
+            "finger_sets": {"max": max_sets, "truth_budget_s": truth_s},
+        }
     )
     single_config = config.updated({"finger_sets": {"max": 1}})
     loaded = job(parts)
@@ -234,6 +279,13 @@ def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4) ->
             f"    set {entry.set}: {len(entry.parts)} parts, Q {entry.quality:.1f} mm², worst retained "
             f"{entry.worst_retained:.3f}: {', '.join(entry.parts)}"
         )
+    if report.truth is not None:
+        print(
+            f"  judged by truth: {report.truth.spent_s:.0f} s of {report.truth.budget_s:g} s simulated, moved "
+            f"{report.truth.moved_parts or 'none'}, not served by truth {report.truth.not_served_parts or 'none'}"
+        )
+    lines, simulated_s = verified_lines(result, config)
+    print("\n".join(lines) + (f"\n    (simulated after the design: {simulated_s:.0f} s)" if simulated_s > 1 else ""))
     print(
         f"  one finger (--finger-sets 1): {statistics.median(single_seconds):.1f} s median of {runs}, Q "
         f"{single.best.quality:.1f} mm², "
@@ -473,6 +525,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--max", default="4", help="[finger_sets] max of the sets runs and the curve: a number or auto (default 4)"
     )
+    parser.add_argument(
+        "--truth",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="[finger_sets] truth_budget_s of the 12- and 30-part sets runs (default 0: judged by the measure alone; "
+        "the sets' fingers are then simulated after the design for the verified figures)",
+    )
     args = parser.parse_args(argv)
     max_sets = args.max if args.max == "auto" else int(args.max)
     if args.baseline:
@@ -483,7 +543,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     for parts, target in ((12, 60.0), (30, 180.0)):
         if args.only in (None, parts):
-            run_case(parts, args.runs, target, max_sets)
+            run_case(parts, args.runs, target, max_sets, args.truth)
 
 
 if __name__ == "__main__":

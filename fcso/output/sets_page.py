@@ -172,6 +172,13 @@ def finger_sets_section(sets: FingerSetsReport) -> list[str]:
             )
             + "</ul>"
         )
+    if sets.truth is not None:
+        section.append(
+            "<h3>Judged by truth</h3><p>The delivered sets' fingers simulated during the design ([finger_sets] "
+            "truth_budget_s): successful precision trials per scenario, the set's finger (flat pads).</p><pre>"
+            + text("\n".join(_truth_lines(sets)))
+            + "</pre>"
+        )
     section += pad_sizes_section(sets.pad_sizes)
     return section
 
@@ -269,4 +276,30 @@ def pick_plan_text(sets: FingerSetsReport) -> str:
         )
     if sets.search.explanation:
         lines.append(f"min_retained not reached: {sets.search.explanation}")
+    lines.extend(_truth_lines(sets))
     return "\n".join(lines)
+
+
+def _truth_lines(sets: FingerSetsReport) -> list[str]:
+    """The sets judged by truth (``finger_sets.truth``) as lines: each delivered set's verified success per scenario,
+    designed and flat, and what moved; none when the sets were judged by the measure alone."""
+    truth = sets.truth
+    if truth is None:
+        return []
+    lines = [
+        f"judged by truth: {truth.spent_s:.0f} s of {truth.budget_s:g} s simulated; moved to a set of their own: "
+        f"{', '.join(truth.moved_parts) or 'none'}"
+        + (f"; not served: {', '.join(truth.not_served_parts)}" if truth.not_served_parts else "")
+    ]
+    for verified in truth.sets:
+        lines.append(
+            f"  set {verified.set} verified: "
+            + ", ".join(
+                f"{s.part} pose {s.pose_index} {s.successes}/{s.trials} (flat {s.flat_successes}/{s.flat_trials})"
+                + ("" if s.passed else " failed")
+                for s in verified.scenarios
+            )
+        )
+    if truth.unverified_sets:
+        lines.append(f"  not verified (budget spent, or see below): set {', '.join(map(str, truth.unverified_sets))}")
+    return lines + [f"  {note}" for note in truth.notes]

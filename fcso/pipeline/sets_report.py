@@ -59,9 +59,25 @@ def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[f
 
 
 def sets_report(
-    prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
+    prepared,
+    loaded,
+    groups,
+    solos,
+    designs,
+    members,
+    outcome,
+    attempts,
+    graspable,
+    screened,
+    ungraspable,
+    config,
+    unserved_by_truth: dict[int, str] | None = None,
 ) -> FingerSetsReport:
-    """The report of the sets, their scenarios, identical parts and the pick plan."""
+    """The report of the sets, their scenarios, identical parts and the pick plan.
+
+    ``unserved_by_truth``: distinct part -> why its set's simulated finger does not serve it (it fails where the
+    part's own finger passes, issue 48): not served either."""
+    unserved_by_truth = unserved_by_truth or {}
     settings = config.finger_sets
     several = len(designs) > 1
     allowed = settings.sets_allowed(len(graspable))
@@ -72,24 +88,18 @@ def sets_report(
         part_retained = {
             u: min(r for m, r in zip(numbers, retained) if prepared.scenarios[m].part_index == u) for u in chosen
         }
-        for u in chosen:
-            if part_retained[u] < settings.min_retained:
-                not_served.append(
-                    _not_served_entry(
-                        prepared.parts[u].name,
-                        loaded,
-                        groups[u],
-                        label,
-                        part_retained[u],
-                        screened,
-                        numbers,
-                        u,
-                        prepared,
-                        len(designs),
-                        allowed,
-                        settings,
-                    )
-                )
+        not_served += _set_not_served(
+            prepared,
+            loaded,
+            groups,
+            label,
+            part_retained,
+            screened,
+            numbers,
+            (len(designs), allowed),
+            unserved_by_truth,
+            settings,
+        )
         for m, quality in zip(numbers, chosen_candidate(design_result.report).per_scenario):
             exact[m] = (label, quality.measure)
         folder = set_folder(label, several)
@@ -104,23 +114,9 @@ def sets_report(
                 pad_case=design_result.best.case,
             )
         )
-        grasps = dict(zip(numbers, design_result.report.grasps))
-        pick_plan.append(
-            PickStep(
-                set=label,
-                finger=set_finger_path(label, several),
-                parts=[
-                    PickPart(
-                        part=prepared.parts[u].name,
-                        copies=[loaded[i].name for i in groups[u]],
-                        quantity=sum(len(loaded[i].instances) for i in groups[u]),
-                        grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
-                    )
-                    for u in chosen
-                    if part_retained[u] >= settings.min_retained
-                ],
-            )
-        )
+        unserved = {entry.part for entry in not_served}
+        served_parts = [u for u in chosen if prepared.parts[u].name not in unserved]
+        pick_plan.append(_pick_step(label, several, design_result, served_parts, numbers, prepared, loaded, groups))
     scenarios = _scenario_entries(prepared, solos, exact, screened)
     kept = [s.retained for s in scenarios if s.retained is not None]
     served = {prepared.parts[u].name for u in graspable}
@@ -130,7 +126,7 @@ def sets_report(
     return FingerSetsReport(
         max_sets=settings.max,
         sets_allowed=allowed,
-        sets_needed=len(designs) if reached else None,
+        sets_needed=len(designs) if reached and not unserved_by_truth else None,
         min_retained=settings.min_retained,
         sets=sets,
         scenarios=scenarios,
@@ -178,6 +174,46 @@ def search_report(outcome, names, scenarios, attempts, reached, settings) -> Par
     )
 
 
+def _pick_step(label, several, design_result, served_parts, numbers, prepared, loaded, groups) -> PickStep:
+    """Set ``label``'s step of the pick plan: mount its finger, pick the parts it serves (``served_parts``)."""
+    grasps = dict(zip(numbers, design_result.report.grasps))
+    return PickStep(
+        set=label,
+        finger=set_finger_path(label, several),
+        parts=[
+            PickPart(
+                part=prepared.parts[u].name,
+                copies=[loaded[i].name for i in groups[u]],
+                quantity=sum(len(loaded[i].instances) for i in groups[u]),
+                grasps=[grasps[m] for m in numbers if prepared.scenarios[m].part_index == u],
+            )
+            for u in served_parts
+        ],
+    )
+
+
+def _set_not_served(
+    prepared, loaded, groups, label, part_retained, screened, numbers, used_allowed, unserved_by_truth, settings
+) -> list[NotServedPart]:
+    """The entries of set ``label``'s parts it does not serve: those keeping less than min_retained
+    (``part_retained``: distinct part -> its least retained in the set), and those its simulated finger fails where
+    their own finger passes (``unserved_by_truth``: distinct part -> why)."""
+    used, allowed = used_allowed
+    entries = []
+    for u, kept in part_retained.items():
+        name = prepared.parts[u].name
+        if kept < settings.min_retained:
+            entries.append(
+                _not_served_entry(
+                    name, loaded, groups[u], label, kept, screened, numbers, u, prepared, used, allowed, settings
+                )
+            )
+        elif u in unserved_by_truth:
+            why = f"{unserved_by_truth[u]} (set {label}); every set allowed is used ({used} of max = {settings.max})"
+            entries.append(_not_served(name, loaded, groups[u], label, kept, why, settings))
+    return entries
+
+
 def _not_served_entry(
     name, loaded, group, label, kept, screened, numbers, part, prepared, used, allowed, settings
 ) -> NotServedPart:
@@ -194,13 +230,17 @@ def _not_served_entry(
             f"{used} of {allowed} sets used: the partitions designed with more sets (search.attempts) kept less in "
             f"their worst scenario"
         )
+    return _not_served(name, loaded, group, label, kept, "; ".join(why), settings)
+
+
+def _not_served(name, loaded, group, label, kept, reason, settings) -> NotServedPart:
     return NotServedPart(
         part=name,
         copies=[loaded[i].name for i in group],
         quantity=sum(len(loaded[i].instances) for i in group),
         best_set=label,
         retained=round(kept, 6),
-        reason="; ".join(why),
+        reason=reason,
         fallback=settings.unserved_fallback,
     )
 
@@ -259,9 +299,9 @@ _JUDGED_EXACTLY = (
     "; every proposed partition was then judged by the exact evaluation of each of its sets' screened best candidate, "
     "and the search, seeing those exact retained qualities, went on while screening had promised min_retained, the "
     "exact figures missed it and max allowed more sets (at most max proposals); the best proposal was designed by "
-    "METHOD §1-9, and when its designed sets missed min_retained, one finger for every part was designed too and the "
-    "better of the two by the exact objective kept, so the sets never keep less in their worst scenario than that "
-    "one finger"
+    "METHOD §1-9, and when its designed sets missed min_retained with sets left, its losing parts were moved to a set "
+    "of their own and designed again, and one finger for every part was designed too; of the designed partitions, "
+    "the one serving the most parts (every scenario at min_retained) was kept, ties by the exact objective"
 )
 
 

@@ -341,10 +341,12 @@ class PartitionAttemptReport(ReportModel):
         description="Least exact E / E*: of its sets' designs when designed, else of the exact evaluation of each "
         "set's screened best candidate"
     )
-    source: Literal["search", "one_finger", "moved_losers"] = Field(
+    source: Literal["search", "one_finger", "moved_losers", "moved_by_truth"] = Field(
         description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
         "compare when min_retained was not reached; moved_losers: a designed partition that missed min_retained "
-        "with sets left, its parts below min_retained moved to a set of their own"
+        "with sets left, its parts below min_retained moved to a set of their own; moved_by_truth: a delivered "
+        "partition whose verified finger failed a scenario its part's own finger passed, that part moved to a set "
+        "of its own"
     )
     designed: bool = Field(
         False,
@@ -423,8 +425,9 @@ class PickStep(ReportModel):
 
 
 class NotServedPart(ReportModel):
-    """A part no finger set serves: the set that holds it best keeps less than ``min_retained`` of its solo quality.
-    The pick plan sends it to the cell's fallback, never to that set's finger."""
+    """A part no finger set serves: the set that holds it best keeps less than ``min_retained`` of its solo quality,
+    or its verified finger fails a scenario the part's own finger passes ([finger_sets] truth_budget_s). The pick
+    plan sends it to the cell's fallback, never to that set's finger."""
 
     part: str = Field(description="Part designed (its copies are listed in copies)")
     copies: list[str] = Field(description="Every job part with this geometry")
@@ -436,6 +439,40 @@ class NotServedPart(ReportModel):
         description="Where the pick plan sends it ([finger_sets] unserved_fallback): the cell's flat fingers, or by "
         "hand"
     )
+
+
+class VerifiedSetScenario(ReportModel):
+    """One scenario of a finger set as simulated (METHOD §12): the set's finger against flat pads."""
+
+    part: str
+    pose_index: int
+    trials: int = Field(description="Precision trials run with the set's finger")
+    successes: int = Field(description="Of those, the successful ones")
+    flat_trials: int = Field(description="Precision trials run with flat pads")
+    flat_successes: int = Field(description="Of those, the successful ones")
+    passed: bool = Field(description="The scenario passed ([verify] pass_success_rate, holding as flat pads)")
+    solo_passed: bool | None = Field(
+        None, description="Where the set's finger failed: whether the part's own finger passes it; null: not simulated"
+    )
+
+
+class VerifiedSet(ReportModel):
+    """A delivered finger set's finger as simulated during the design."""
+
+    set: int
+    scenarios: list[VerifiedSetScenario]
+
+
+class SetsTruthReport(ReportModel):
+    """Sets judged by truth ([finger_sets] truth_budget_s): the delivered sets' fingers simulated, and what moved."""
+
+    budget_s: float = Field(description="[finger_sets] truth_budget_s, s")
+    spent_s: float = Field(description="Time spent, s: the simulations and the parts' own fingers designed for them")
+    sets: list[VerifiedSet] = Field(description="Delivered sets verified within the budget, in set order")
+    unverified_sets: list[int] = Field(description="Delivered sets left unverified when the budget ran out")
+    moved_parts: list[str] = Field(description="Parts a shared finger failed where their own passed, given own sets")
+    not_served_parts: list[str] = Field(description="Such parts left where no set was left for them: not_served")
+    notes: list[str] = Field(default_factory=list, description="Fingers MuJoCo could not simulate, and why")
 
 
 class FingerSetsReport(ReportModel):
@@ -473,6 +510,9 @@ class FingerSetsReport(ReportModel):
         "with the fallback named, not with a set's finger",
     )
     search: PartitionSearchReport
+    truth: SetsTruthReport | None = Field(
+        None, description="The delivered sets judged by simulation ([finger_sets] truth_budget_s > 0), else null"
+    )
     pad_sizes: list[PadSizeReport] = Field(
         default_factory=list, description="Every pad size the sets were designed with and which was delivered"
     )

@@ -38,6 +38,7 @@ from .identity import identical_groups
 from .judged import PartitionAttempt, search_judged_exactly
 from .partition import PartitionOutcome
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality
+from .truth import SetsTruth
 
 
 @dataclass
@@ -150,6 +151,7 @@ def _design_sets_of_one_size(
 
     clock = time.perf_counter()
     sets = _ExactSets(prepared, config, solos, [part_scenarios[u] for u in graspable], progress, report_progress)
+    truth = _sets_truth(sets, [prepared.parts[u].name for u in graspable], config)
     # no more workers than sets to screen: one part has one partition
     with WorkerPool(
         (prepared, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config),
@@ -164,6 +166,7 @@ def _design_sets_of_one_size(
             lambda stage, done, total, note="": report_progress(stage, done, total, note),
             sets.design_exactly,
             sets.finish_exactly,
+            None if truth is None else truth.unserved,
         )
     # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
     timings["partition"] = time.perf_counter() - clock
@@ -173,9 +176,26 @@ def _design_sets_of_one_size(
     report_progress("finger sets", len(designs), len(designs), "")
     timings["finger_sets"] = time.perf_counter() - clock
     screened = _screened_retained(outcome, attempts, graspable, part_scenarios, sets.screener)
+    unserved = {graspable[p]: _TRUTH_REASON for p in outcome.unserved_by_truth}
     finger_sets = sets_report(
-        prepared, loaded, groups, solos, designs, members, outcome, attempts, graspable, screened, ungraspable, config
+        prepared,
+        loaded,
+        groups,
+        solos,
+        designs,
+        members,
+        outcome,
+        attempts,
+        graspable,
+        screened,
+        ungraspable,
+        config,
+        unserved,
     )
+    if truth is not None:
+        clock = time.perf_counter()
+        finger_sets = finger_sets.model_copy(update={"truth": truth.report(outcome)})
+        timings["truth"] = time.perf_counter() - clock
     timings = {k: round(v, 3) for k, v in timings.items()}
     if len(designs) == 1:
         design_report = designs[0].report
@@ -199,6 +219,20 @@ def _design_sets_of_one_size(
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)
+
+
+#: Why a part whose set's simulated finger fails where its own finger passes is not served (issue 48).
+_TRUTH_REASON = "verified: fails where its own finger passes"
+
+
+def _sets_truth(sets: _ExactSets, names: list[str], config: DesignConfig) -> SetsTruth | None:
+    """The sets of parts ``names`` judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or
+    None when it is 0."""
+    if config.finger_sets.truth_budget_s <= 0:
+        return None
+    from ..sim.config import with_print_density
+
+    return SetsTruth(sets.made, names, config.finger_sets.truth_budget_s, with_print_density(config.verify, config))
 
 
 def _identical_warnings(loaded: list[Part], groups: list[list[int]]) -> list[str]:
@@ -332,6 +366,13 @@ class _ExactSets:
             kept = dict(zip(numbers, exact_retained(chosen.candidate, numbers, solos)))
             screener.judge_exactly(members, np.array([kept[m] for p in sorted(members) for m in self.set_scenarios[p]]))
         return [failures.get(members) for members in sets]
+
+    def made(self, members: frozenset[int]) -> DesignResult | None:
+        """Set ``members`` designed and its finger made (each once), or None when it cannot be: what
+        :class:`SetsTruth` simulates (a part's own finger is its set alone)."""
+        if self.design_exactly([members])[0] is None:
+            self.finish_exactly([members])
+        return self.exact_designs.get(members)
 
     def finish_exactly(self, sets: list[frozenset[int]]) -> list[str | None]:
         """The fingers of sets designed by :meth:`design_exactly`, each made once, together

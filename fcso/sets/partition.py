@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -140,6 +141,11 @@ class PartitionOutcome:
         Parts every pair of which was quick-screened (all parts, or the scaled search's most dissimilar ones).
     screened_pairs : int
         Pairs of parts quick-screened (the scaled search).
+    unserved_by_truth : list of int
+        Parts whose set's verified finger fails a scenario their own finger passes, left in that set (no set was
+        left for them): not served (:func:`fcso.sets.judged.search_judged_exactly`'s ``truth``).
+    moved_by_truth : list of int
+        Parts such a verdict gave a set of their own.
     """
 
     assignment: tuple[int, ...]
@@ -155,6 +161,8 @@ class PartitionOutcome:
     fewest_sets_proven: bool = False
     probed_parts: int = 0
     screened_pairs: int = 0
+    unserved_by_truth: list[int] = dataclasses.field(default_factory=list)
+    moved_by_truth: list[int] = dataclasses.field(default_factory=list)
 
 
 def search_partition(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> PartitionOutcome:

@@ -70,7 +70,12 @@ from .task import (
     StepResult,
     Verified,
 )
-from .verification import choose_by_verification, job_settings, write_chosen_verification
+from .verification import (
+    VERIFICATION_CACHE_NAME,
+    choose_by_verification,
+    job_settings,
+    write_chosen_verification,
+)
 
 #: Retained quality (E / E*) below which a finger set's part is flagged: a finger near zero quality for it.
 NEAR_ZERO_RETAINED = 0.05
@@ -92,6 +97,13 @@ def step_inputs(run: JobRun) -> JobInputs:
         settings = manifest.design_config(config.design).updated(
             {"compute": config.compute.model_dump(), "verify": verify.model_dump()}
         )
+        if not verify_settings.enabled:
+            # [verify] enabled = false turns every simulation off: the sets are judged by the measure alone
+            settings = settings.updated({"finger_sets": {"truth_budget_s": 0.0}})
+        elif settings.finger_sets.truth_budget_s > 0 and "cache_dir" not in verify.model_fields_set:
+            # the sets' fingers simulated during the design go to the cache the verification after done reads (the
+            # daemon's state folder: the service may write nothing else), so it repeats none of them
+            settings = settings.updated({"verify": {"cache_dir": str(config.state.dir / VERIFICATION_CACHE_NAME)}})
         build_settings = manifest.build_config(config.build)
         parts = check_parts(run.folder, manifest, config.limits)
     finally:

@@ -1,0 +1,173 @@
+"""Finger sets judged by truth (issue 48): a set's finger simulated (METHOD §12) against each part's own finger.
+
+A set whose verified finger fails a scenario that its part's solo finger
+would pass is not a serving set for that part. The delivered sets' fingers
+are simulated within ``[finger_sets] truth_budget_s``; where a set of two
+or more parts fails a scenario, the part's own finger (the set of that part
+alone, designed as any set is) is simulated in it, and a part it passes is
+named (:meth:`SetsTruth.unserved`) for the partition search to move
+(:func:`fcso.sets.judged.search_judged_exactly`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..config import VerifyConfig
+from ..pipeline import DesignResult
+from ..report.models import SetsTruthReport, VerifiedSet, VerifiedSetScenario
+from .partition import PartitionOutcome
+
+#: ``made(set_of_parts)``: the set's finished design (its finger made), or None when it cannot be made.
+MadeSet = Callable[[frozenset[int]], DesignResult | None]
+
+
+@dataclass
+class SetsTruth:
+    """The simulated verdicts of a job's sets, within a time budget.
+
+    Attributes
+    ----------
+    made : callable
+        A set's finished design (:data:`MadeSet`); a part's own finger is its set alone.
+    names : list of str
+        Every part's name (a set's members are indices into it), as its scenarios name it.
+    budget_s : float
+        Time allowed, s (simulations and the parts' own fingers designed for them): no verification starts once it
+        is spent.
+    verify_config : VerifyConfig
+        The ``[verify]`` settings of the simulation (the design's, with its print profile's density).
+    verified : dict
+        Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated.
+    solo_passes : dict
+        ``(part, part name, pose_index)`` -> whether the part's own finger passes that scenario (None: MuJoCo refused
+        its scene).
+    unsimulated : dict
+        Set of parts -> why MuJoCo could not simulate its finger (the set is judged by the measure).
+    spent_s : float
+        Time spent so far, s: the simulations and the parts' own fingers designed for them.
+    """
+
+    made: MadeSet
+    names: list[str]
+    budget_s: float
+    verify_config: VerifyConfig
+    verified: dict[frozenset[int], dict[tuple[str, int], VerifiedSetScenario]] = dataclasses.field(default_factory=dict)
+    solo_passes: dict[tuple[int, str, int], bool | None] = dataclasses.field(default_factory=dict)
+    unsimulated: dict[frozenset[int], str] = dataclasses.field(default_factory=dict)
+    spent_s: float = 0.0
+
+    def left(self) -> bool:
+        return self.spent_s < self.budget_s
+
+    def unserved(self, members: frozenset[int]) -> list[int]:
+        """Parts of set ``members`` its simulated finger fails in a scenario their own finger passes; empty for a set
+        of one part, and for whatever the budget leaves unsimulated."""
+        if len(members) < 2:
+            return []
+        verdicts = self._verified(members)
+        failing: dict[int, list[tuple[str, int]]] = {}
+        for part in sorted(members):
+            for key, scenario in (verdicts or {}).items():
+                if not scenario.passed and key[0] == self.names[part]:
+                    failing.setdefault(part, []).append(key)
+        unserved = []
+        for part, keys in failing.items():
+            passes = self._solo_passes(part, keys)
+            for key in keys:
+                verdicts[key] = verdicts[key].model_copy(update={"solo_passed": passes.get(key)})
+            if any(passes.values()):
+                unserved.append(part)
+        return unserved
+
+    def report(self, outcome: PartitionOutcome) -> SetsTruthReport:
+        """The report of the delivered partition's sets (set order) as simulated, with what moved and what is left
+        unserved; the rest of the budget goes to the sets not yet simulated (a set of one part is simulated only for
+        the report)."""
+        delivered = [
+            frozenset(p for p, a in enumerate(outcome.assignment) if a == label)
+            for label in range(max(outcome.assignment) + 1)
+        ]
+        for members in delivered:
+            self._verified(members)
+        return SetsTruthReport(
+            budget_s=self.budget_s,
+            spent_s=round(self.spent_s, 3),
+            sets=[
+                VerifiedSet(set=label, scenarios=list(self.verified[members].values()))
+                for label, members in enumerate(delivered, start=1)
+                if members in self.verified
+            ],
+            unverified_sets=[label for label, m in enumerate(delivered, start=1) if m not in self.verified],
+            moved_parts=[self.names[p] for p in outcome.moved_by_truth],
+            not_served_parts=[self.names[p] for p in outcome.unserved_by_truth],
+            notes=[
+                f"{' + '.join(self.names[p] for p in sorted(m))}: not simulated: {why}"
+                for m, why in self.unsimulated.items()
+            ],
+        )
+
+    def _verified(self, members: frozenset[int]) -> dict[tuple[str, int], VerifiedSetScenario] | None:
+        """Every scenario of set ``members`` simulated in full (every trial and the holding test, designed and flat:
+        what the verification after the job repeats from the simulation cache), once; None when the budget is
+        spent or its finger cannot be made."""
+        if members in self.verified or members in self.unsimulated or not self.left():
+            return self.verified.get(members)
+        from ..sim.verify import design_under_test, successes, verify_delivered
+
+        clock = time.perf_counter()
+        design = self.made(members)
+        verification = None if design is None else self._simulated(verify_delivered, design_under_test(design), members)
+        if verification is not None:
+            self.verified[members] = {
+                (s.part, s.pose_index): VerifiedSetScenario(
+                    part=s.part,
+                    pose_index=s.pose_index,
+                    trials=len(s.fcso.trials),
+                    successes=successes(s.fcso.trials),
+                    flat_trials=len(s.flat.trials),
+                    flat_successes=successes(s.flat.trials),
+                    passed=s.passed,
+                )
+                for s in verification.scenarios
+            }
+        self.spent_s += time.perf_counter() - clock
+        return self.verified.get(members)
+
+    def _solo_passes(self, part: int, keys: list[tuple[str, int]]) -> dict[tuple[str, int], bool]:
+        """Whether ``part``'s own finger (designed here when it was not) passes each of its scenarios ``keys``, each
+        simulated until it can no longer pass (``stop_early``); scenarios the budget leaves unsimulated are
+        missing."""
+        todo = [key for key in keys if (part, *key) not in self.solo_passes]
+        if todo and self.left():
+            from ..sim.verify import DesignUnderTest, design_under_test, verify
+
+            clock = time.perf_counter()
+            design = self.made(frozenset([part]))
+            whole = None if design is None else design_under_test(design)
+            for case in [] if whole is None else whole.cases:
+                key = _case_key(case.name)
+                if key in todo and self.spent_s + time.perf_counter() - clock < self.budget_s:
+                    one = DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm)
+                    verification = self._simulated(verify, one, frozenset([part]), stop_early=True)
+                    self.solo_passes[(part, *key)] = None if verification is None else verification.passed
+            self.spent_s += time.perf_counter() - clock
+        return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
+
+    def _simulated(self, run, design, members: frozenset[int], **settings):
+        """``run(design, [verify] settings)``, or None when MuJoCo refuses the scene (a compile error of its
+        collision pieces): the set is then judged by the measure, and the report says why (``notes``)."""
+        try:
+            return run(design, self.verify_config.model_copy(update=settings))
+        except ValueError as error:  # MuJoCo's model compiler: e.g. "mesh volume is too small"
+            self.unsimulated[members] = str(error).splitlines()[0]
+            return None
+
+
+def _case_key(name: str) -> tuple[str, int]:
+    """``(part, pose_index)`` of a simulation case named ``"<part> pose <k>"`` (:func:`fcso.sim.verify.grasp_case`)."""
+    part, _, pose = name.rpartition(" pose ")
+    return part, int(pose)

@@ -1,0 +1,55 @@
+"""Finger sets judged by truth (issue 48): a set whose simulated finger fails a scenario that its part's own finger
+passes does not serve that part.
+
+The parts: a hexagonal prism and a plain cylinder standing on their bases
+(examples/sim_parts.py). Alone, the prism's finger seats it in every precision
+trial (6 of 6, flat pads 0 of 6, measured once); on the finger designed for
+both, the cylinder's round groove takes the prism off its V pocket's seat and
+it fails trials. With ``min_retained = 0`` the measure lets them share one
+finger; the simulation does not.
+"""
+
+from __future__ import annotations
+
+import fcso
+from examples.sim_parts import hex_prism, plain_cylinder
+from fcso.output.sets_page import pick_plan_text
+from fcso.parts import Part
+from fcso.sets import design_sets
+
+HEX = Part(name="hex", path="hex.stl", mesh=hex_prism())
+CYLINDER = Part(name="cylinder", path="cylinder.stl", mesh=plain_cylinder(12.0, 30.0))
+
+
+def truth_config(tmp_path, **finger_sets) -> fcso.DesignConfig:
+    return fcso.DesignConfig().updated(
+        {
+            "poses": {"count": 1, "select": "most_probable"},
+            # one pad size: the sets are designed, and simulated, once
+            "sampler": {"length_mm": 20.0},
+            "finger_sets": {"min_retained": 0.0, "truth_budget_s": 600.0, **finger_sets},
+            "verify": {"trials": 6, "cache_dir": str(tmp_path)},
+        }
+    )
+
+
+def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(tmp_path):
+    sets = design_sets([HEX, CYLINDER], truth_config(tmp_path, max=2)).report
+    attempts = sets.search.attempts
+    # the premise: by the measure alone one finger serves both (min_retained 0), and its simulated finger fails the
+    # prism where the prism's own finger passes
+    shared = next(a for a in attempts if a.source == "search")
+    assert shared.sets == 1 and shared.designed and not shared.chosen
+    moved = next(a for a in attempts if a.source == "moved_by_truth")
+    assert moved.chosen and moved.parts == [["hex"], ["cylinder"]]
+    truth = sets.truth
+    assert truth.moved_parts == ["hex"] and truth.not_served_parts == [] and truth.unverified_sets == []
+    assert [s.parts for s in sets.sets] == [["hex"], ["cylinder"]]
+    # the delivered sets as simulated: the prism on its own finger passes every trial, flat pads fail
+    hex_set = truth.sets[0].scenarios[0]
+    assert hex_set.part == "hex" and hex_set.passed and hex_set.successes == hex_set.trials == 6
+    assert hex_set.flat_successes < hex_set.flat_trials
+    assert 0 < truth.spent_s and sets.not_served == [] and sets.sets_needed == 2
+    # the terminal and the page tell it
+    told = pick_plan_text(sets)
+    assert "moved to a set of their own: hex" in told and "set 1 verified: hex pose 0 6/6" in told
