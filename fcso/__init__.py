@@ -13,24 +13,27 @@ not load the pipeline, its compiled kernels or the simulation.
 import importlib
 from typing import TYPE_CHECKING
 
-from .parallel import fork_safe_manifold
-from .version import __version__
+from .startup import collector_paused
 
-# before any Boolean of this process: workers are forked (fcso.parallel)
-fork_safe_manifold()
+with collector_paused():
+    from .parallel import fork_safe_manifold
+    from .version import __version__
 
-from .errors import (  # noqa: E402
-    ComputeError,
-    ConfigError,
-    FcsoError,
-    GeometryError,
-    MeshError,
-    NoGraspError,
-    RepairToleranceError,
-)
+    # before any Boolean of this process: workers are forked (fcso.parallel)
+    fork_safe_manifold()
 
-# a module of the same name: importing it would otherwise bind fcso.rles to the module
-from .rles import rles  # noqa: E402
+    from .errors import (
+        ComputeError,
+        ConfigError,
+        FcsoError,
+        GeometryError,
+        MeshError,
+        NoGraspError,
+        RepairToleranceError,
+    )
+
+    # a module of the same name: importing it would otherwise bind fcso.rles to the module
+    from .rles import rles
 
 if TYPE_CHECKING:  # what the names below are, for type checkers and editors
     from .config import DesignConfig, load_config

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import time
@@ -10,7 +11,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import FcsoError, GeometryError
-from .verify_cli import add_design_options, add_settings_options, add_verify_command
+from .startup import collector_paused
+
+with collector_paused():
+    from .verify_cli import add_design_options, add_settings_options, add_verify_command
 
 if TYPE_CHECKING:
     from .config import DesignConfig
@@ -228,11 +232,15 @@ def _config(args) -> DesignConfig:
 
 def _design(args) -> int:
     # the method's modules load before the picture process forks: it inherits them (fcso.output.picture_process)
-    from .errors import NoGraspError
-    from .output.files import write_set_outputs
-    from .output.picture_process import PictureProcess
-    from .parts import load_parts, units_hint
-    from .sets import design_sets
+    with collector_paused():
+        from .errors import NoGraspError
+        from .output.files import write_set_outputs
+        from .output.picture_process import PictureProcess
+        from .parts import load_parts, units_hint
+        from .sets import design_sets
+
+        # what is loaded lives until the command ends (run() ends the process at once): no collection walks it again
+        gc.freeze()
 
     # forked first, so the drawing code loads while the parts load and the design runs
     with PictureProcess() as draw_pictures:

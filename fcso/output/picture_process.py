@@ -11,6 +11,7 @@ and returns the PNG bytes. The pictures are the same as drawn in-process.
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import os
 from multiprocessing.connection import Connection
@@ -18,6 +19,7 @@ from multiprocessing.connection import Connection
 from ..errors import FcsoError
 from ..parallel import die_with_parent
 from ..progress import Progress
+from ..startup import collector_paused
 from .design_page import ReportInputs, picture_inputs
 
 
@@ -78,9 +80,12 @@ class PictureProcess:
 def _serve(connection: Connection, parent_pid: int) -> None:
     # the command's end of the pipe is open here too: without this a killed command would leave the process waiting
     die_with_parent(parent_pid)
-    # the drawing code loads now, while the design runs, not when the page arrives
-    from . import pictures as drawing  # noqa: F401
-    from .design_page import pictures
+    # the drawing code loads now, while the design runs, not when the page arrives; it lives as long as the process
+    with collector_paused():
+        from . import pictures as drawing  # noqa: F401
+        from .design_page import pictures
+
+        gc.freeze()
 
     def report_progress(stage: str, done: int, total: int) -> None:
         connection.send(("progress", (stage, done, total)))
