@@ -352,7 +352,8 @@ def _explanation(scenarios, blocking, outcome: PartitionOutcome, names, settings
         f"{worst.part} in stable pose {worst.pose_index} keeps {worst.retained:.2f} of its solo quality in set "
         f"{worst.set}"
     ]
-    if len(outcome.conflict_clique) > settings.max:
+    # with max = "auto" every part may have a set of its own: no clique needs more
+    if len(outcome.conflict_clique) > settings.sets_allowed(len(names)):
         group = ", ".join(names[i] for i in outcome.conflict_clique)
         words.append(
             f"parts {group} conflict pairwise: they need {len(outcome.conflict_clique)} sets, more than max = "

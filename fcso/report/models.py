@@ -341,12 +341,13 @@ class PartitionAttemptReport(ReportModel):
         description="Least exact E / E*: of its sets' designs when designed, else of the exact evaluation of each "
         "set's screened best candidate"
     )
-    source: Literal["search", "one_finger", "moved_losers", "moved_by_truth"] = Field(
+    source: Literal["search", "one_finger", "moved_losers", "moved_by_truth", "merged"] = Field(
         description="search: proposed by the partition search; one_finger: every part on one finger, designed to "
         "compare when min_retained was not reached; moved_losers: a designed partition that missed min_retained "
         "with sets left, its parts below min_retained moved to a set of their own; moved_by_truth: a delivered "
         "partition whose verified finger failed a scenario its part's own finger passed, that part moved to a set "
-        "of its own"
+        "of its own; merged: with max = 'auto', the delivered partition with single-part sets merged into others "
+        "where every part of the merged set keeps min_retained by its design"
     )
     designed: bool = Field(
         False,

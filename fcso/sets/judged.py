@@ -11,6 +11,10 @@ from ..progress import Progress
 from .partition import PartitionOutcome, canonical_assignment, partition_key, search_partition
 from .screening import SetScreener, sets_of
 
+#: Partners each single-part set tries in the merge pass of ``max = "auto"`` (:func:`_merged`), best joint figure
+#: first; each try is one exact design of the pair, so the pass costs at most this many designs per single-part set.
+MERGE_TRIES = 2
+
 #: A proposal whose exact worst r is below this share of its screened one is not proposed again by the search: its
 #: losing parts are moved (:func:`_moved_losers`). Screening's own error is tenths (a set screened at 0.61 kept 0.32),
 #: a share below a half is screening misjudging the set's carving.
@@ -37,7 +41,8 @@ class PartitionAttempt:
         designed partition that missed ``min_retained`` with its losing parts
         moved to a set of their own (:func:`_moved_losers`); ``"moved_by_truth"``: the delivered partition with the
         parts its simulated fingers fail where their own finger passes moved to sets of their own
-        (:func:`_judged_by_truth`).
+        (:func:`_judged_by_truth`); ``"merged"``: with ``max = "auto"``, the delivered partition with single-part
+        sets merged where every part of the merged set keeps ``min_retained`` by its design (:func:`_merged`).
     failure : str or None
         Why a set's finger could not be made (it then keeps nothing), or None.
     designed : bool
@@ -126,6 +131,8 @@ def search_judged_exactly(
     first = search_partition(screener, parts, config, progress)
     outcome = _proposals(judging, first, parts, config)
     chosen = _delivered(judging, parts, config.finger_sets.sets_allowed(parts), finish_exactly)
+    if config.finger_sets.max == "auto" and chosen.failure is None:
+        chosen = _merged(judging, chosen, finish_exactly)
     unserved: list[int] = []
     moved: list[int] = []
     if truth is not None and chosen.failure is None:
@@ -284,6 +291,68 @@ def _moved_losers(assignment: tuple[int, ...], retained, judging: _Judging, free
     first = max(assignment) + 1
     labels = {p: first + k if len(losers) <= free else first for k, p in enumerate(sorted(losers))}
     return canonical_assignment([labels.get(p, a) for p, a in enumerate(assignment)])
+
+
+def _merged(
+    judging: _Judging,
+    chosen: PartitionAttempt,
+    finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
+) -> PartitionAttempt:
+    """``max = "auto"``'s fewest sets (issue 48): the delivered partition with its single-part sets merged into
+    others, judged by the exact designs.
+
+    The losers moved to sets of their own (:func:`_moved_losers`) can often share a finger with another set. In
+    rounds, each single-part set is paired with the set, serving every part at ``min_retained``, whose merge with it
+    has the best joint figure known (:meth:`SetScreener.estimate`: quick screening for a set not yet judged), the
+    pairs disjoint; the merged sets are designed side by side and their fingers made, and a merge is kept when every
+    part of it keeps ``min_retained`` in every scenario by its design and its finger can be made. Each single-part set
+    tries at most :data:`MERGE_TRIES` partners. Returns ``chosen`` when nothing merges."""
+    screener, threshold = judging.screener, judging.threshold
+    sets = sets_of(chosen.assignment)
+    tries: dict[frozenset[int], int] = {}
+    tried: set[frozenset[int]] = set()
+
+    def serving(members: frozenset[int]) -> bool:
+        return members in screener.exact and float(screener.exact[members].min()) >= threshold
+
+    while True:
+        singles = [s for s in sets if len(s) == 1 and tries.get(s, 0) < MERGE_TRIES]
+        pairs = list(
+            dict.fromkeys(
+                (a, b) if min(a) < min(b) else (b, a)
+                for a in singles
+                for b in sets
+                if b != a and a | b not in tried and serving(b)
+            )
+        )
+        if not pairs:
+            break
+        joint = [min(float(v.min()) for v in e.values()) for e in screener.estimate([a | b for a, b in pairs])]
+        busy: set[frozenset[int]] = set()
+        trying = []
+        # best joint figure first, ties by the parts' numbers
+        for i in sorted(range(len(pairs)), key=lambda i: (-joint[i], sorted(pairs[i][0] | pairs[i][1]))):
+            a, b = pairs[i]
+            if a not in busy and b not in busy:
+                busy |= {a, b}
+                trying.append((a, b))
+        for a, b in trying:
+            tried.add(a | b)
+            for s in (a, b):
+                if len(s) == 1:
+                    tries[s] = tries.get(s, 0) + 1
+        judging.progress("exact sets", 0, 1, f"merging {len(trying)} pair(s) of sets")
+        failures = judging.design_exactly([a | b for a, b in trying], None)
+        designed = [(a, b) for (a, b), f in zip(trying, failures) if f is None and serving(a | b)]
+        made = finish_exactly([a | b for a, b in designed])
+        for (a, b), failure in zip(designed, made):
+            if failure is None:
+                sets = [s for s in sets if s not in (a, b)] + [a | b]
+    if len(sets) == max(chosen.assignment) + 1:
+        return chosen
+    labels = {p: k for k, members in enumerate(sets) for p in members}
+    merged = judging.design(canonical_assignment([labels[p] for p in range(len(chosen.assignment))]), "merged")
+    return merged
 
 
 def _judged_by_truth(

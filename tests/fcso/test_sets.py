@@ -442,3 +442,53 @@ def test_auto_gives_pairwise_conflicting_parts_one_set_each():
     assert [s.parts for s in sets.sets] == [["narrowing"], ["widening"], ["narrowing-wider"]]
     assert sets.max_sets == "auto" and sets.sets_allowed == 3 and sets.sets_needed == 3
     assert sets.min_retained_reached and sets.not_served == []
+
+
+#: Narrowing and widening knobs on plates of four sizes: knobs of one kind share a finger, the two kinds keep about
+#: half their contact together. Designed with one candidate evaluated (max_evaluations = 1) at min_retained 0.51,
+#: one set for all eight (probe 0.49, screened 0.52) loses three parts by its design: narrowing-big-plate,
+#: widening-80 and widening-65 (checked on each report).
+EIGHT_KNOBS = [
+    NARROWING,
+    WIDENING,
+    NARROWING_BIG_PLATE,
+    knob_part("widening-big-plate", 9.8, 1 / 0.7, plate_mm=70.0),
+    knob_part("narrowing-80", 14.0, 0.7, plate_mm=80.0),
+    knob_part("widening-80", 9.8, 1 / 0.7, plate_mm=80.0),
+    knob_part("narrowing-65", 14.0, 0.7, plate_mm=65.0),
+    knob_part("widening-65", 9.8, 1 / 0.7, plate_mm=65.0),
+]
+EIGHT_KNOBS_LOSERS = [["narrowing-big-plate"], ["widening-65"], ["widening-80"]]
+
+
+def eight_knobs_sets(max_sets: int | str):
+    return design_sets(
+        EIGHT_KNOBS,
+        config(
+            finger_sets={"min_retained": 0.51, "max": max_sets},
+            search={"max_exhaustive": 1, "max_evaluations": 1},
+        ),
+    ).report
+
+
+def test_each_losing_part_gets_its_own_set_while_sets_are_left():
+    sets = eight_knobs_sets(4)
+    one_set = next(a for a in sets.search.attempts if a.sets == 1)
+    assert one_set.designed and one_set.exact_worst_retained < 0.51 and not one_set.chosen
+    # three parts lose and three sets are left: each loser gets a set of its own, the others keep theirs
+    moved = next(a for a in sets.search.attempts if a.source == "moved_losers")
+    assert moved.sets == 4 and sorted(moved.parts[1:]) == EIGHT_KNOBS_LOSERS
+    assert len(moved.parts[0]) == 5
+
+
+def test_auto_merges_the_sets_of_moved_parts_that_can_share_a_finger():
+    sets = eight_knobs_sets("auto")
+    # the premise: the per-loser move gave the two widening knobs a set each
+    moved = next(a for a in sets.search.attempts if a.source == "moved_losers")
+    assert moved.sets == 4 and sorted(moved.parts[1:]) == EIGHT_KNOBS_LOSERS
+    # the merge pass puts them on one finger, which keeps min_retained for both by its design
+    merged = next(a for a in sets.search.attempts if a.source == "merged")
+    assert merged.chosen and merged.designed and merged.sets == 3
+    assert ["widening-65", "widening-80"] in [sorted(s.parts) for s in sets.sets]
+    assert sets.min_retained_reached and sets.not_served == [] and sets.sets_needed == 3
+    assert all(s.retained >= 0.51 for s in sets.scenarios)

@@ -54,3 +54,26 @@ def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(tm
     # the terminal and the page tell it
     told = pick_plan_text(sets)
     assert "moved to a set of their own: hex" in told and "set 1 verified: hex pose 0 6/6" in told
+
+
+#: A smaller hexagonal prism: on a finger shared with the cylinder it fails too (measured once, checked below).
+HEX_22 = Part(name="hex-22", path="hex-22.stl", mesh=hex_prism(22.0))
+
+
+def test_a_part_its_shared_finger_fails_with_no_set_left_is_not_served(tmp_path):
+    config = truth_config(tmp_path, max=2, unserved_fallback="manual")
+    sets = design_sets([HEX, HEX_22, CYLINDER], config).report
+    # the premise: by the measure one finger serves all three; truth moves the first part it fails (hex) to the one
+    # set left, and the smaller prism, failing on the finger it shares with the cylinder, has no set left
+    shared = next(a for a in sets.search.attempts if a.source == "search")
+    assert shared.sets == 1 and not shared.chosen
+    assert [s.parts for s in sets.sets] == [["hex"], ["hex-22", "cylinder"]]
+    truth = sets.truth
+    assert truth.moved_parts == ["hex"] and truth.not_served_parts == ["hex-22"]
+    # named in the report and routed to the fallback in the pick plan, never to the finger that fails it
+    [entry] = sets.not_served
+    assert entry.part == "hex-22" and entry.fallback == "manual" and entry.best_set == 2
+    assert entry.reason.startswith("verified: fails where its own finger passes")
+    assert sorted(p.part for step in sets.pick_plan for p in step.parts) == ["cylinder", "hex"]
+    assert sets.sets_needed is None
+    assert "not served: 1 x hex-22 to manual (verified: fails where its own finger passes" in pick_plan_text(sets)
