@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import time
 
+from ..errors import UnwritableSolidError
 from ..evaluate import CandidateEvaluation
-from ..finger import fuse
+from ..finger import FusedFinger, fuse
 from ..geometry import to_trimesh
 from ..parallel import resolve_jobs
 from ..pipeline import DesignResult, finish_candidates
@@ -116,9 +117,12 @@ def verify_top(
             break
     passing = [o for o in outcomes if o[3].passed]
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
-    kept_flat = result.report.finger.flat_pads and not passing
-    fallback = outcomes[:1] if kept_flat else outcomes
-    chosen = passing[0] if passing else max(fallback, key=lambda o: (worst_success_share(o[3]), -o[0]))
+    flat_design = result.report.finger.flat_pads
+    fallback = [o for o in outcomes if o[1].index == result.report.best] if flat_design else outcomes
+    preferred = passing + sorted(
+        (o for o in fallback if not o[3].passed), key=lambda o: (worst_success_share(o[3]), -o[0]), reverse=True
+    )
+    chosen, fused, unwritable = _deliverable(result, preferred, outcomes, config, progress)
     ranking = [
         RankedCandidate(
             rank_by_quality=rank + 1,
@@ -131,6 +135,7 @@ def verify_top(
         for rank, candidate, _, verification in outcomes
     ]
     rank, candidate, built, verification = chosen
+    kept_flat = flat_design and candidate.index == result.report.best and not verification.passed
     design = built[0]
     if not verification.passed and config.stop_early:
         # the delivered candidate is told in full (METHOD §12b): every trial and the holding test, designed and flat;
@@ -138,14 +143,63 @@ def verify_top(
         verification = verify_delivered(design, config, progress)
         ranking = [r.model_copy(update=trial_figures(verification)) if r.chosen else r for r in ranking]
     why = choice_text(
-        rank, candidate, len(outcomes), len(ranked), bool(passing), time.monotonic() - started, budget_s, kept_flat
+        rank,
+        candidate,
+        len(outcomes),
+        len(ranked),
+        verification.passed,
+        time.monotonic() - started,
+        budget_s,
+        kept_flat,
+        bool(passing),
     )
     if candidate.index != result.report.best:
-        result = _with_candidate(result, candidate, *built[1:], f"verification delivered {why}")
-    elif not passing:
-        verification.warnings.append(f"verification delivered {why}")
+        result = _with_candidate(result, candidate, fused, *built[1:], [*unwritable, f"verification delivered {why}"])
+    else:
+        verification.warnings.extend(unwritable)
+        if not verification.passed:
+            verification.warnings.append(f"verification delivered {why}")
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def _deliverable(result: DesignResult, preferred: list, outcomes: list, config: VerifyConfig, progress):
+    """The first of the ``preferred`` verified candidates whose finger is one watertight body as written to STL.
+
+    The design's own choice was written when it was designed; another candidate's pad is fused onto the finger here,
+    and one whose finger is refused (:class:`fcso.errors.UnwritableSolidError`) gives way to the next, as the design's
+    own finalists do (:mod:`fcso.pipeline.finish`). When none can be written the design's own choice is delivered,
+    verified here if the choice had not reached it.
+
+    Returns
+    -------
+    chosen : tuple
+        ``(rank, candidate, built, verification)`` of the delivered candidate.
+    fused : FusedFinger or None
+        Its fused finger; None for the design's own choice.
+    unwritable : list of str
+        One sentence per verified candidate passed over because its finger cannot be written.
+    """
+    unwritable = []
+    for chosen in preferred:
+        rank, candidate, built, _ = chosen
+        if candidate.index == result.report.best:
+            return chosen, None, unwritable
+        settings = result.report.settings
+        try:
+            return (
+                chosen,
+                fuse(result.flat_finger, built[1].fingerpad.pad, settings.sampler, settings.finger.overlap_mm),
+                unwritable,
+            )
+        except UnwritableSolidError as error:
+            unwritable.append(f"candidate {candidate.index} (rank {rank + 1} by the measure) is not delivered: {error}")
+    own = next((o for o in outcomes if o[1].index == result.report.best), None)
+    if own is None:
+        built = (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
+        candidate = next(c for c in result.report.candidates if c.index == result.report.best)
+        own = (len(outcomes), candidate, built, verify(built[0], config, progress))
+    return own, None, unwritable
 
 
 def trial_figures(verification: VerificationReport) -> dict[str, list]:
@@ -182,14 +236,18 @@ def choice_text(
     spent_s: float,
     budget_s: float,
     kept_flat: bool = False,
+    any_passed: bool | None = None,
 ) -> str:
     """Which candidate was delivered and why, in a sentence (``verification.json``'s ``choice``).
 
-    ``kept_flat``: the design's flat pads were kept because no carving passed.
+    ``passed``: the delivered candidate passed; ``kept_flat``: the design's flat pads were kept because no carving
+    passed; ``any_passed`` (default ``passed``): a verified candidate passed, though its finger may not be writable.
     """
     what = f"candidate {candidate.index} (rank {rank + 1} by the measure, {candidate.quality:.1f})"
     if passed:
         return f"{what}: the first whose every scenario passed, after {tried} of {ranked} verified"
+    if any_passed:
+        return f"{what}: the candidates that passed cannot be written as one watertight body; the best of the rest"
     stop = (
         f"the time budget of {budget_s:g} s ran out after {spent_s:.0f} s"
         if tried < ranked
@@ -206,17 +264,16 @@ def choice_text(
 def _with_candidate(
     result: DesignResult,
     candidate: CandidateReport,
+    fused: FusedFinger,
     evaluation: CandidateEvaluation,
     grasps,
     print_fit,
     fit_warnings,
-    why: str,
+    notes: list[str],
 ) -> DesignResult:
-    """The design result with another candidate chosen: its printed pad fused onto the finger, its grasps and print fit
-    in the report.
+    """The design result with another candidate chosen: its printed pad fused onto the finger (``fused``), its grasps
+    and print fit in the report, ``notes`` among its warnings.
     """
-    config = result.report.settings
-    fused = fuse(result.flat_finger, evaluation.fingerpad.pad, config.sampler, config.finger.overlap_mm)
     report: DesignReport = result.report.model_copy(
         update={
             "best": candidate.index,
@@ -231,7 +288,7 @@ def _with_candidate(
                 min_pad_thickness_mm=round(float(fused.min_pad_thickness_mm), 6),
                 flat_pads=False,
             ),
-            "warnings": result.report.warnings + fit_warnings + [why],
+            "warnings": result.report.warnings + fit_warnings + notes,
         }
     )
     return DesignResult(

@@ -8,11 +8,13 @@ import pytest
 
 import fcso
 from examples.sim_parts import plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
+from fcso.errors import UnwritableSolidError
 from fcso.finger import fuse
 from fcso.geometry import to_manifold
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate
 from fcso.report.models import chosen_candidate
+from fcso.sim import choose as choose_module
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
 from fcso.sim.verify import design_under_test, verify
@@ -63,6 +65,40 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     exact_finger = fuse(result.flat_finger, exact_pad, sampler, config.finger.overlap_mm).mesh
     assert exact_finger.volume - chosen.finger.volume >= 0.5 * clearance * contact_area
     assert chosen.report.finger.volume_mm3 == pytest.approx(chosen.finger.volume, rel=1e-4)
+
+
+def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_best_of_the_rest(tmp_path, monkeypatch):
+    # found on a drawn dovetail block with 35 mm pads: the choice delivered a candidate whose fused finger had a
+    # zero-area face as written, and verify_top raised; no small part is known that does it, so the written check
+    # refuses every finger the choice fuses (the design's own was written when it was designed)
+    mesh = two_ridge_block()
+    settings = upright_grasp_settings(mesh)
+    settings["print"] = {"profile": "mjf-pa12"}
+    settings["sampler"]["length_mm"] = 20.0
+    settings["quality"] = {"measure": "paper"}
+    config = fcso.DesignConfig().updated(settings)
+    result = fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
+    refused = []
+
+    def refuse(finger, pad, sampler, overlap_mm):
+        refused.append(pad.volume())
+        raise UnwritableSolidError(
+            "built-in: fused finger is not one watertight body as written to STL: 1 zero-area faces"
+        )
+
+    monkeypatch.setattr(choose_module, "fuse", refuse)
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=tmp_path))
+
+    # the third candidate passes as in the test above, but cannot be printed: the best of the other two by truth (both
+    # fail at their first trial, so the first by the measure, the design's own) is delivered, and the report says why
+    assert [r.passed for r in ranking] == [False, False, True] and len(refused) == 1
+    assert chosen.report.best == result.report.best == ranking[0].index and ranking[0].chosen
+    assert not verification.passed and chosen.finger is result.finger
+    assert "the candidates that passed cannot be written as one watertight body" in verification.choice
+    assert any(
+        w.startswith(f"candidate {ranking[2].index} (rank 3 by the measure) is not delivered: built-in: fused finger")
+        for w in verification.warnings
+    )
 
 
 def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_passes(tmp_path):
