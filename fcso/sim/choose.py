@@ -100,8 +100,7 @@ def verify_top(
     started, budget_s = time.monotonic(), config.choice_budget_s
     ranked = ranked_candidates(result.report, top)
     outcomes = []
-    # the design's own choice is already built as printed; the others are built when the first of them is to be
-    # verified, all at once, side by side on the workers (a candidate's pad is a few Booleans on one core)
+    # the design's own choice is built as printed; the others are built together, side by side on the workers
     others: dict[int, tuple] = {}
     for rank, candidate in enumerate(ranked):
         if candidate.index == result.report.best:
@@ -138,8 +137,7 @@ def verify_top(
     kept_flat = flat_design and candidate.index == result.report.best and not verification.passed
     design = built[0]
     if not verification.passed and config.stop_early:
-        # the delivered candidate is told in full (METHOD §12b): every trial and the holding test, designed and flat;
-        # the trials its choice ran come from the simulation cache
+        # told in full (METHOD §12b): every trial and the holding test; the choice's trials come from the cache
         verification = verify_delivered(design, config, progress)
         ranking = [r.model_copy(update=trial_figures(verification)) if r.chosen else r for r in ranking]
     why = choice_text(
@@ -156,9 +154,7 @@ def verify_top(
     if candidate.index != result.report.best:
         result = _with_candidate(result, candidate, fused, *built[1:], [*unwritable, f"verification delivered {why}"])
     else:
-        verification.warnings.extend(unwritable)
-        if not verification.passed:
-            verification.warnings.append(f"verification delivered {why}")
+        verification.warnings.extend(unwritable + ([] if verification.passed else [f"verification delivered {why}"]))
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
 
