@@ -20,16 +20,23 @@ from fcso.sim.config import VerifyConfig
 from fcso.sim.verify import design_under_test, verify
 
 
-def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):
+def _two_ridge_ranked_by_q():
+    """The two-ridge block designed with a printed fit, its candidates ranked by the paper's Q: ``(config, result)``.
+
+    Q is fooled here: the two best sit on the horizontal ridges, and verification is what corrects it (the capture
+    measure, the default, already chooses the vertical ridge: tests/fcso/test_capture.py).
+    """
     mesh = two_ridge_block()
     settings = upright_grasp_settings(mesh)
     settings["print"] = {"profile": "mjf-pa12"}
     settings["sampler"]["length_mm"] = 20.0
-    # ranked by the paper's Q, which is fooled here: verification is what corrects it (the capture measure,
-    # the default, already chooses the vertical ridge: tests/fcso/test_capture.py)
     settings["quality"] = {"measure": "paper"}
     config = fcso.DesignConfig().updated(settings)
-    result = fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
+    return config, fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
+
+
+def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):
+    config, result = _two_ridge_ranked_by_q()
     designed_best, designed_grasp = result.report.best, result.report.grasps[0]
 
     chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=tmp_path))
@@ -71,13 +78,7 @@ def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_bes
     # found on a drawn dovetail block with 35 mm pads: the choice delivered a candidate whose fused finger had a
     # zero-area face as written, and verify_top raised; no small part is known that does it, so the written check
     # refuses every finger the choice fuses (the design's own was written when it was designed)
-    mesh = two_ridge_block()
-    settings = upright_grasp_settings(mesh)
-    settings["print"] = {"profile": "mjf-pa12"}
-    settings["sampler"]["length_mm"] = 20.0
-    settings["quality"] = {"measure": "paper"}
-    config = fcso.DesignConfig().updated(settings)
-    result = fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
+    _, result = _two_ridge_ranked_by_q()
     refused = []
 
     def refuse(finger, pad, sampler, overlap_mm):
