@@ -31,10 +31,11 @@ class SamplerConfig(_Section):
     """Pad box size and the sliding-window grasp sampler (METHOD §3)."""
 
     # small features need small pads: a 20 mm pad over an 8 mm slot sees mostly flat face, which METHOD §5's filter
-    # labels bad, and the design stays flat (measured on development parts: a block with round slots, a bar with
-    # two V-notches); a 10 mm pad carves them. 20 mm stays for long rows of notches, where it captures more.
+    # labels bad, and the design stays flat; a 10 mm pad carves them. 20 mm stays for long rows of notches, where it
+    # captures more, and 35 mm for features that lie at both ends of a face (a dovetail's flanks, a prism's edges),
+    # which only a pad spanning the face reaches at once.
     length_mm: PadSize = Field(
-        [10.0, 20.0],
+        [10.0, 20.0, 35.0],
         description="Pad length L along the sliding axis b, mm; a short list: every length is designed and the best "
         "kept (METHOD §3b: small features need short pads, and a pad longer than the part's face wraps its edges)",
     )

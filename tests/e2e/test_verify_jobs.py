@@ -276,7 +276,8 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
     from examples.sim_parts import two_ridge_block, upright_grasp_settings
 
     port = free_port()
-    # the paper's Q puts the pad on a horizontal ridge, where a displaced part slides (tests/fcso/test_sim_choose.py)
+    # the paper's Q puts the paper's 20 mm pad on a horizontal ridge, where a displaced part slides
+    # (tests/fcso/test_sim_choose.py)
     metrics_port = free_port()
     config = write_config(
         tmp_path,
@@ -292,7 +293,7 @@ def test_a_finger_that_misses_the_delivery_policy_is_held_unplaced_until_an_oper
     manifest = (
         '[[parts]]\nfile = "two-ridge.stl"\n\n'
         f"[poses]\ncount = 1\nselect = {settings['poses']['select']}\n\n"
-        f"[sampler]\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
+        f"[sampler]\nlength_mm = 20.0\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
         '[verify]\ntop_k = 0\ntrials = 2\ndeliver = "verified"\n'
     )
     daemon = start_daemon(config)

@@ -78,10 +78,11 @@ def test_a_design_that_does_not_pass_is_told_in_full_and_exits_3(tmp_path):
     mesh.export(part)
     settings = upright_grasp_settings(mesh)
     config = tmp_path / "design.toml"
-    # the paper's Q puts the pad on a horizontal ridge, where a displaced part slides (tests/fcso/test_sim_choose.py)
+    # the paper's Q puts the paper's 20 mm pad on a horizontal ridge, where a displaced part slides
+    # (tests/fcso/test_sim_choose.py)
     config.write_text(
         f"[poses]\ncount = 1\nselect = {settings['poses']['select']}\n\n"
-        f"[sampler]\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
+        f"[sampler]\nlength_mm = 20.0\nyaw_deg = {settings['sampler']['yaw_deg']}\nface_yaws = false\n\n"
         '[quality]\nmeasure = "paper"\n\n[verify]\ntrials = 3\n'
     )
     out = tmp_path / "out"

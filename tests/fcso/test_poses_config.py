@@ -80,11 +80,11 @@ def test_config_from_toml_and_defaults(tmp_path):
     paper = load_config(REPO / "examples" / "paper.toml")
     assert paper.poses.select == [1, 3] and paper.sampler.stride == 4.0
     defaults = DesignConfig()
-    # the default pad sizes: 10 and 20 mm long, 20 mm wide, each with its own stride and least contact
+    # the default pad sizes: 10, 20 and 35 mm long, 20 mm wide, each with its own stride and least contact
     sized = [one.sampler for one in defaults.pad_size_configs()]
-    assert [(s.length_mm, s.width_mm) for s in sized] == [(10.0, 20.0), (20.0, 20.0)]
-    assert [s.stride for s in sized] == [2.0, 4.0]
-    assert [s.min_contact_area for s in sized] == pytest.approx([0.1 * 10 * 20, 0.1 * 20 * 20])
+    assert [(s.length_mm, s.width_mm) for s in sized] == [(10.0, 20.0), (20.0, 20.0), (35.0, 20.0)]
+    assert [s.stride for s in sized] == [2.0, 4.0, 7.0]
+    assert [s.min_contact_area for s in sized] == pytest.approx([0.1 * 10 * 20, 0.1 * 20 * 20, 0.1 * 35 * 20])
     bad = tmp_path / "bad.toml"
     bad.write_text("[gripper]\nmax_opening_mm = -3\n")
     with pytest.raises(ConfigError, match="gripper.max_opening_mm"):

@@ -718,9 +718,10 @@ def test_a_verification_run_again_reads_its_simulations_from_the_cache_and_repor
 
 
 def test_a_design_delivered_with_flat_pads_is_simulated_as_the_flat_control(tmp_path):
-    # a plain cube: nothing beats flat, so flat pads are delivered; the designed finger's trials are the control's
+    # a plain cube whose faces are longer than the longest default pad (35 mm), so no pad wraps its edges: nothing
+    # beats flat, so flat pads are delivered; the designed finger's trials are the control's
     result = design(
-        [Part(name="plain cube", path="plain cube", mesh=trimesh.creation.box(extents=(30.0, 30.0, 30.0)))],
+        [Part(name="plain cube", path="plain cube", mesh=trimesh.creation.box(extents=(36.0, 36.0, 36.0)))],
         DesignConfig().updated({"poses": {"count": 1}}),
     )
     assert result.report.finger.flat_pads
