@@ -145,11 +145,10 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         print(f"{job.name:<34} design failed: {error}", flush=True)
         figures.failed.append(job.name)
         return
-    delivered, _, _, ranking = verify_top(result, args.top_k, choose)
+    # the delivered finger's verification is complete (METHOD §12b): every trial and the holding test
+    delivered, verification, _, ranking = verify_top(result, args.top_k, choose)
     report = delivered.report
     best = next(c for c in report.candidates if c.index == report.best)
-    design, *_ = candidate_designs(delivered, [best])[0]
-    verification = verify(design, every)
     pad = "flat" if report.finger.flat_pads else best.pad_case
     for scenario, outcome in zip(report.scenarios, verification.scenarios):
         designed, flat = outcome.fcso, outcome.flat

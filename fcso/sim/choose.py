@@ -13,20 +13,21 @@ from ..pipeline import DesignResult, finish_candidates
 from ..progress import Progress
 from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
 from .config import VerifyConfig
-from .report import RankedCandidate, VerificationReport
+from .report import RankedCandidate, VerificationReport, flat_beats, verdict_text
 from .schedule import successes
 from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify, verify_delivered
 
 
 def candidate_designs(
-    result: DesignResult, candidates: list[CandidateReport], jobs: int = 1
+    result: DesignResult, candidates: list[CandidateReport], jobs: int = 1, flat: bool = False
 ) -> list[tuple[DesignUnderTest, CandidateEvaluation, list[GraspReport], PrintFitReport, list[str]]]:
     """The simulation's inputs for evaluated candidates of a design, built as the design builds its choice.
 
     Each pad is carved with the design's ``[print]`` clearance and lead-in
     (:func:`fcso.pipeline.finish_candidates`), so the verified pad is the one
     that would be printed; the candidates' pads are made side by side on
-    ``jobs`` workers (0: every available core).
+    ``jobs`` workers (0: every available core). ``flat`` builds flat pads on
+    the candidates' grasps instead.
 
     Parameters
     ----------
@@ -34,6 +35,7 @@ def candidate_designs(
     candidates : list of CandidateReport
         A pad that several of them carve is made once.
     jobs : int
+    flat : bool
 
     Returns
     -------
@@ -45,6 +47,7 @@ def candidate_designs(
     finished = finish_candidates(
         [(result.scenarios, tuple(c.samples)) for c in candidates],
         result.report.settings,
+        flat=flat,
         jobs=resolve_jobs(jobs),
     )
     parts = {scenario.part.name: scenario.part.mesh for scenario in result.scenarios}
@@ -76,7 +79,9 @@ def verify_top(
     design chose (``report.finger.flat_pads``) are kept unless a carving passes.
     The delivered candidate's verification is complete whatever stopped
     early in the choice (:func:`fcso.sim.verify.verify_delivered`, METHOD
-    §12b): every trial and the holding test, designed and flat.
+    §12b): every trial and the holding test, designed and flat. A carving
+    that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`)
+    is delivered as flat pads on its grasps: never worse than flat by the judge.
 
     Parameters
     ----------
@@ -122,17 +127,7 @@ def verify_top(
         (o for o in fallback if not o[3].passed), key=lambda o: (worst_success_share(o[3]), -o[0]), reverse=True
     )
     chosen, fused, unwritable = _deliverable(result, preferred, outcomes, config, progress)
-    ranking = [
-        RankedCandidate(
-            rank_by_quality=rank + 1,
-            index=candidate.index,
-            quality=candidate.quality,
-            passed=verification.passed,
-            chosen=candidate.index == chosen[1].index,
-            **trial_figures(verification),
-        )
-        for rank, candidate, _, verification in outcomes
-    ]
+    ranking = _ranking(outcomes, chosen[1].index)
     rank, candidate, built, verification = chosen
     kept_flat = flat_design and candidate.index == result.report.best and not verification.passed
     design = built[0]
@@ -151,12 +146,45 @@ def verify_top(
         kept_flat,
         bool(passing),
     )
-    if candidate.index != result.report.best:
+    if not kept_flat and flat_beats(verification):
+        why += f"; flat pads beat it ({verdict_text(verification)}): delivered with flat pads on its grasps"
+        result, design, verification = _flat_delivery(
+            result, candidate, [*unwritable, f"verification delivered {why}"], config, progress
+        )
+    elif candidate.index != result.report.best:
         result = _with_candidate(result, candidate, fused, *built[1:], [*unwritable, f"verification delivered {why}"])
     else:
         verification.warnings.extend(unwritable + ([] if verification.passed else [f"verification delivered {why}"]))
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def _ranking(outcomes: list, chosen_index: int) -> list[RankedCandidate]:
+    """The verified candidates' ``(rank, candidate, built, verification)`` as :class:`RankedCandidate` rows."""
+    return [
+        RankedCandidate(
+            rank_by_quality=rank + 1,
+            index=candidate.index,
+            quality=candidate.quality,
+            passed=verification.passed,
+            chosen=candidate.index == chosen_index,
+            **trial_figures(verification),
+        )
+        for rank, candidate, _, verification in outcomes
+    ]
+
+
+def _flat_delivery(
+    result: DesignResult, candidate: CandidateReport, notes: list[str], config: VerifyConfig, progress
+) -> tuple[DesignResult, DesignUnderTest, VerificationReport]:
+    """The design with flat pads on ``candidate``'s grasps, its simulation inputs and its full verification;
+    ``notes`` among its warnings."""
+    built = candidate_designs(result, [candidate], jobs=config.jobs, flat=True)[0]
+    settings = result.report.settings
+    fused = fuse(result.flat_finger, built[1].fingerpad.pad, settings.sampler, settings.finger.overlap_mm)
+    # the flat control's trials are in the simulation cache: flat pads verified on the same grasps read them back
+    verification = verify_delivered(built[0], config, progress)
+    return _with_candidate(result, candidate, fused, *built[1:], notes, flat_pads=True), built[0], verification
 
 
 def _deliverable(result: DesignResult, preferred: list, outcomes: list, config: VerifyConfig, progress):
@@ -266,9 +294,10 @@ def _with_candidate(
     print_fit,
     fit_warnings,
     notes: list[str],
+    flat_pads: bool = False,
 ) -> DesignResult:
     """The design result with another candidate chosen: its printed pad fused onto the finger (``fused``), its grasps
-    and print fit in the report, ``notes`` among its warnings.
+    and print fit in the report, ``notes`` among its warnings; ``flat_pads``: the pad is the candidate's flat one.
     """
     report: DesignReport = result.report.model_copy(
         update={
@@ -282,7 +311,7 @@ def _with_candidate(
                 bodies=fused.bodies,
                 watertight=bool(fused.mesh.is_watertight),
                 min_pad_thickness_mm=round(float(fused.min_pad_thickness_mm), 6),
-                flat_pads=False,
+                flat_pads=flat_pads,
             ),
             "warnings": result.report.warnings + fit_warnings + notes,
         }

@@ -218,11 +218,27 @@ def better_than_flat(verification: VerificationReport) -> bool:
         return True
     if verification.unverified_scenarios or not verification.scenarios:
         return False
-    counts = [
-        (sum(t.success for t in s.fcso.trials), sum(t.success for t in s.flat.trials)) for s in verification.scenarios
-    ]
+    counts = _success_counts(verification)
     holds = all(s.holds_as_flat is not False for s in verification.scenarios)
     return holds and all(mine >= theirs for mine, theirs in counts) and any(mine > theirs for mine, theirs in counts)
+
+
+def flat_beats(verification: VerificationReport) -> bool:
+    """The flat control does better than a designed finger that did not pass: at least as many successful precision
+    trials in every scenario, and more somewhere or a firmer hold somewhere (``holds_as_flat`` False). False for a
+    verification that passed or that left a scenario unsimulated: no evidence against the design."""
+    if verification.passed or verification.unverified_scenarios or not verification.scenarios:
+        return False
+    counts = _success_counts(verification)
+    weaker = any(s.holds_as_flat is False for s in verification.scenarios)
+    return all(theirs >= mine for mine, theirs in counts) and (weaker or any(theirs > mine for mine, theirs in counts))
+
+
+def _success_counts(verification: VerificationReport) -> list[tuple[int, int]]:
+    """Per scenario, the designed and the flat pads' successful precision trials."""
+    return [
+        (sum(t.success for t in s.fcso.trials), sum(t.success for t in s.flat.trials)) for s in verification.scenarios
+    ]
 
 
 def not_held(verification: VerificationReport) -> list[str]:

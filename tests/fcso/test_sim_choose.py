@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 import fcso
+from examples.part_families import draw
 from examples.sim_parts import plain_box, ribbed_block, two_ridge_block, upright_grasp_settings
 from fcso.errors import UnwritableSolidError
 from fcso.finger import fuse
@@ -17,7 +18,8 @@ from fcso.report.models import chosen_candidate
 from fcso.sim import choose as choose_module
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
-from fcso.sim.verify import design_under_test, verify
+from fcso.sim.report import FingerResult, ScenarioVerification, TrialResult, VerificationReport, flat_beats
+from fcso.sim.verify import design_under_test, is_flat_control, verify
 
 
 def _two_ridge_ranked_by_q():
@@ -135,3 +137,52 @@ def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_
         assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
         for trial in scenario.fcso.trials:
             assert trial.held and trial.error_mm <= 0.3, (scenario.pose_index, trial)
+
+
+def _verification(*scenarios, passed=False, unverified=()):
+    """A verification whose scenarios are ``(designed successes, flat successes, holds_as_flat)`` of 10 trials."""
+
+    def finger(successes):
+        trials = [TrialResult.model_construct(success=k < successes) for k in range(10)]
+        return FingerResult.model_construct(trials=trials)
+
+    return VerificationReport.model_construct(
+        passed=passed,
+        unverified_scenarios=list(unverified),
+        scenarios=[
+            ScenarioVerification.model_construct(fcso=finger(mine), flat=finger(theirs), holds_as_flat=holds)
+            for mine, theirs, holds in scenarios
+        ],
+    )
+
+
+def test_flat_pads_beat_a_carving_only_where_they_do_no_worse_anywhere():
+    assert flat_beats(_verification((0, 1, True), (0, 0, True)))
+    # as many successes, but the carving lets the part go under a push flat pads resist
+    assert flat_beats(_verification((2, 2, False)))
+    # better in one scenario, worse in the other: one finger serves both, the carving stays
+    assert not flat_beats(_verification((2, 0, True), (1, 3, True)))
+    assert not flat_beats(_verification((3, 3, True), (0, 0, None)))
+    # no evidence against the carving: it passed, or a scenario was not simulated
+    assert not flat_beats(_verification((10, 10, False), passed=True))
+    assert not flat_beats(_verification((0, 1, True), unverified=["part pose 1"]))
+
+
+def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(tmp_path):
+    # a block with holes near its grasp faces, of the test split (examples/part_families.py): every verified carving
+    # seats it 0/10 where flat pads seat it 1/10 in one pose, and neither does better in the other
+    drawn = draw("holed-block", 100)
+    result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    assert not result.report.finger.flat_pads
+
+    chosen, verification, design, _ = verify_top(result, 3, VerifyConfig(trials=10, cache_dir=tmp_path))
+
+    assert chosen.report.finger.flat_pads and chosen.report.best in [c.index for c in result.report.candidates]
+    assert "flat pads beat it (not verified: " in verification.choice
+    assert verification.choice.endswith("delivered with flat pads on its grasps")
+    # the delivered finger is its own flat control: never below flat, scenario by scenario
+    for scenario in verification.scenarios:
+        assert [t.model_dump() for t in scenario.fcso.trials] == [t.model_dump() for t in scenario.flat.trials]
+        assert len(scenario.fcso.trials) == 10
+    assert is_flat_control(design.fingerpad, design.cases[0].pad_size_mm, design.cases[0].penetration_mm)
+    assert chosen.finger.is_watertight and len(chosen.finger.split(only_watertight=False)) == 1
