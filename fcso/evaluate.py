@@ -281,8 +281,12 @@ def evaluate_candidate(
             continue
         holding = holding_n(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
-        # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores
-        holds = landscapes[number].pads_gap_mm > 0
+        # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores;
+        # and a good geometry seats at t = 0 (§5): a good pad that stops short of that on a side is blocked there by
+        # another geometry's pocket (each pad carries both sides' geometries, mirrored), so its nominal grasp leaves
+        # the part off the pose the design gives the cell (a slotted block: 0 and 2.3 mm, 1.8 mm and 5 deg off)
+        blocked = fingerpad.case == "good" and max(c.offset_mm for c in contacts) > config.verify.success_mm
+        holds = landscapes[number].pads_gap_mm > 0 and not blocked
         measure = scenario_measure(landscapes[number].fraction, holding_share, effective, config) if holds else 0.0
         results.append(
             ScenarioEvaluation(contacts, normals, radius, area, effective, measure, landscapes[number], holding)

@@ -186,3 +186,19 @@ def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(t
         assert len(scenario.fcso.trials) == 10
     assert is_flat_control(design.fingerpad, design.cases[0].pad_size_mm, design.cases[0].penetration_mm)
     assert chosen.finger.is_watertight and len(chosen.finger.split(only_watertight=False)) == 1
+
+
+def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(tmp_path):
+    # a block with a round slot in each of two opposite faces, of the development split: the best-scored pads carve
+    # both slots into each pad, mirrored, and with the pad off the block's centre one slot's rib stops the other pad
+    # 2.1-4.0 mm short of its seat; the nominal grasp then leaves the block 1.8 mm and 5 deg off the design's pose
+    drawn = draw("slotted-block", 0)
+    result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    best = next(c for c in result.report.candidates if c.index == result.report.best)
+    assert best.pad_case == "good"
+    assert all(t <= 0.3 for scenario in best.per_scenario for t in scenario.seat_offsets_mm)
+
+    verification = verify(design_under_test(result), VerifyConfig(trials=1, cache_dir=tmp_path, stop_early=False))
+    # the unperturbed grasp seats the block where the design says
+    for scenario in verification.scenarios:
+        assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
