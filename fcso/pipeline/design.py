@@ -81,8 +81,11 @@ def design(
     """
     config = config or DesignConfig()
 
+    made: list[DesignResult] = []
+
     def design_one_size(sized: DesignConfig) -> DesignResult:
-        return design_prepared(prepare(parts, sized, progress=progress, repair=repair), sized, progress)
+        made.append(design_prepared(prepare(parts, sized, progress=progress, repair=repair), sized, progress))
+        return made[-1]
 
     def score(result: DesignResult) -> SizeScore:
         chosen = chosen_candidate(result.report)
@@ -91,6 +94,7 @@ def design(
 
     result, sizes = best_pad_size(config, design_one_size, score, progress)
     result.report = result.report.model_copy(update={"pad_sizes": sizes})
+    result.other_sizes = sorted((r for r in made if r is not result), key=lambda r: score(r).rank, reverse=True)
     return result
 
 

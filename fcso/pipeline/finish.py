@@ -66,6 +66,9 @@ class DesignResult:
         The finger the pad was fused onto.
     pad_to_finger : (4, 4) float
         Pad frame to finger frame.
+    other_sizes : list of DesignResult
+        The designs of the other pad sizes of ``[sampler]`` (METHOD §3b), best by the size choice first, for the
+        choice by truth (:func:`fcso.sim.choose.verify_top`); empty with one size.
     """
 
     report: DesignReport
@@ -75,6 +78,7 @@ class DesignResult:
     best: CandidateEvaluation
     flat_finger: FlatFinger
     pad_to_finger: np.ndarray
+    other_sizes: list[DesignResult] = dataclasses.field(default_factory=list)
 
 
 def finish_design(

@@ -82,6 +82,7 @@ def verify_top(
     §12b): every trial and the holding test, designed and flat. A carving
     that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`)
     is delivered as flat pads on its grasps: never worse than flat by the judge.
+    None passing, the other pad sizes' designs are tried alike, best first.
 
     Parameters
     ----------
@@ -120,6 +121,8 @@ def verify_top(
         if verification.passed or time.monotonic() - started >= budget_s:
             break
     passing = [o for o in outcomes if o[3].passed]
+    if not passing and (elsewhere := _other_size(result, top, config, progress, budget_s - time.monotonic() + started)):
+        return elsewhere
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
     flat_design = result.report.finger.flat_pads
     fallback = [o for o in outcomes if o[1].index == result.report.best] if flat_design else outcomes
@@ -157,6 +160,35 @@ def verify_top(
         verification.warnings.extend(unwritable + ([] if verification.passed else [f"verification delivered {why}"]))
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def _other_size(
+    result: DesignResult, top: int, config: VerifyConfig, progress, budget_s: float
+) -> tuple[DesignResult, VerificationReport, DesignUnderTest, list[RankedCandidate]] | None:
+    """:func:`verify_top` of the first of ``result.other_sizes`` whose choice passes within ``budget_s``, its report
+    listing the pad sizes with that one chosen; None when none does."""
+    started = time.monotonic()
+    for other in result.other_sizes:
+        left = budget_s - (time.monotonic() - started)
+        if left <= 0:
+            return None
+        chosen, verification, design, ranking = verify_top(
+            other, top, config.model_copy(update={"choice_budget_s": left}), progress
+        )
+        if verification.passed:
+            size = other.report.settings.sampler
+            why = (
+                f"pad size {size.length_mm:g} x {size.width_mm:g} mm, {verification.choice}, after none of the "
+                f"{result.report.settings.sampler.length_mm:g} mm pads' candidates passed"
+            )
+            sizes = [
+                s.model_copy(update={"chosen": (s.length_mm, s.width_mm) == (size.length_mm, size.width_mm)})
+                for s in result.report.pad_sizes or []
+            ]
+            warnings = [*chosen.report.warnings, f"verification delivered {why}"]
+            chosen.report = chosen.report.model_copy(update={"pad_sizes": sizes, "warnings": warnings})
+            return chosen, verification.model_copy(update={"choice": why}), design, ranking
+    return None
 
 
 def _ranking(outcomes: list, chosen_index: int) -> list[RankedCandidate]:

@@ -202,3 +202,19 @@ def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(tmp_path):
     # the unperturbed grasp seats the block where the design says
     for scenario in verification.scenarios:
         assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
+
+
+def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tried(tmp_path):
+    # the slotted block of the development split: the measure prefers the 10 mm pads (0.456), whose best candidates
+    # seat the block 2/10; the 35 mm pads' best unblocked candidate (0.415) seats it 10/10 in both poses
+    drawn = draw("slotted-block", 0)
+    result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    assert [s.length_mm for s in result.report.pad_sizes if s.chosen] == [10.0]
+    assert [o.report.settings.sampler.length_mm for o in result.other_sizes] == [35.0, 20.0]
+
+    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=tmp_path))
+
+    assert verification.passed and chosen.report.settings.sampler.length_mm == 35.0
+    assert [s.length_mm for s in chosen.report.pad_sizes if s.chosen] == [35.0]
+    assert verification.choice.startswith("pad size 35 x 20 mm, candidate ")
+    assert all(len(s.fcso.trials) == 10 and s.fcso.success_rate == 1.0 for s in verification.scenarios)
