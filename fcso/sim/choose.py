@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from ..errors import UnwritableSolidError
@@ -82,7 +83,8 @@ def verify_top(
     §12b): every trial and the holding test, designed and flat. A carving
     that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`)
     is delivered as flat pads on its grasps: never worse than flat by the judge.
-    None passing, the other pad sizes' designs are tried alike, best first.
+    None passing, the other pad sizes' candidates are verified alike, best size first, and the first that passes
+    is delivered.
 
     Parameters
     ----------
@@ -104,25 +106,10 @@ def verify_top(
         The verified candidates in the measure's order with their outcome.
     """
     started, budget_s = time.monotonic(), config.choice_budget_s
-    ranked = ranked_candidates(result.report, top)
-    outcomes = []
-    # the design's own choice is built as printed; the others are built together, side by side on the workers
-    others: dict[int, tuple] = {}
-    for rank, candidate in enumerate(ranked):
-        if candidate.index == result.report.best:
-            built = (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
-        else:
-            if candidate.index not in others:
-                rest = [c for c in ranked[rank:] if c.index != result.report.best]
-                others = dict(zip([c.index for c in rest], candidate_designs(result, rest, jobs=config.jobs)))
-            built = others[candidate.index]
-        verification = verify(built[0], config, progress)
-        outcomes.append((rank, candidate, built, verification))
-        if verification.passed or time.monotonic() - started >= budget_s:
-            break
+    deadline = started + budget_s
+    first_size = result.report.settings.sampler
+    result, ranked, outcomes = _verified_by_size(result, top, config, progress, deadline)
     passing = [o for o in outcomes if o[3].passed]
-    if not passing and (elsewhere := _other_size(result, top, config, progress, budget_s - time.monotonic() + started)):
-        return elsewhere
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
     flat_design = result.report.finger.flat_pads
     fallback = [o for o in outcomes if o[1].index == result.report.best] if flat_design else outcomes
@@ -149,6 +136,12 @@ def verify_top(
         kept_flat,
         bool(passing),
     )
+    size = result.report.settings.sampler
+    if size is not first_size:
+        why = (
+            f"pad size {size.length_mm:g} x {size.width_mm:g} mm, {why}, after none of the "
+            f"{first_size.length_mm:g} mm pads' candidates passed"
+        )
     if not kept_flat and flat_beats(verification):
         why += f"; flat pads beat it ({verdict_text(verification)}): delivered with flat pads on its grasps"
         result, design, verification = _flat_delivery(
@@ -158,37 +151,73 @@ def verify_top(
         result = _with_candidate(result, candidate, fused, *built[1:], [*unwritable, f"verification delivered {why}"])
     else:
         verification.warnings.extend(unwritable + ([] if verification.passed else [f"verification delivered {why}"]))
+        if size is not first_size:
+            result.report = result.report.model_copy(
+                update={"warnings": [*result.report.warnings, f"verification delivered {why}"]}
+            )
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
 
 
-def _other_size(
-    result: DesignResult, top: int, config: VerifyConfig, progress, budget_s: float
-) -> tuple[DesignResult, VerificationReport, DesignUnderTest, list[RankedCandidate]] | None:
-    """:func:`verify_top` of the first of ``result.other_sizes`` whose choice passes within ``budget_s``, its report
-    listing the pad sizes with that one chosen; None when none does."""
-    started = time.monotonic()
-    for other in result.other_sizes:
-        left = budget_s - (time.monotonic() - started)
-        if left <= 0:
-            return None
-        chosen, verification, design, ranking = verify_top(
-            other, top, config.model_copy(update={"choice_budget_s": left}), progress
-        )
-        if verification.passed:
-            size = other.report.settings.sampler
-            why = (
-                f"pad size {size.length_mm:g} x {size.width_mm:g} mm, {verification.choice}, after none of the "
-                f"{result.report.settings.sampler.length_mm:g} mm pads' candidates passed"
-            )
-            sizes = [
-                s.model_copy(update={"chosen": (s.length_mm, s.width_mm) == (size.length_mm, size.width_mm)})
-                for s in result.report.pad_sizes or []
-            ]
-            warnings = [*chosen.report.warnings, f"verification delivered {why}"]
-            chosen.report = chosen.report.model_copy(update={"pad_sizes": sizes, "warnings": warnings})
-            return chosen, verification.model_copy(update={"choice": why}), design, ranking
-    return None
+def _verified_by_size(
+    result: DesignResult, top: int, config: VerifyConfig, progress, deadline: float
+) -> tuple[DesignResult, list[CandidateReport], list[tuple]]:
+    """:func:`_verified_in_order` of ``result``, then, none passing, of each of its other pad sizes (best first) until
+    one passes or ``deadline``; the design of the size that passed (:func:`_with_pad_size`), else ``result``, with its
+    ranked and verified candidates."""
+    ranked, outcomes = _verified_in_order(result, top, config, progress, deadline)
+    # the other sizes' candidates are verified alike (stopped early), and only the delivered one in full
+    # (verify_top): a size none of whose candidates passes costs its choice, not a delivery
+    for other in result.other_sizes if not any(o[3].passed for o in outcomes) else []:
+        if time.monotonic() >= deadline:
+            break
+        other_ranked, other_outcomes = _verified_in_order(other, top, config, progress, deadline)
+        if any(o[3].passed for o in other_outcomes):
+            return _with_pad_size(result, other), other_ranked, other_outcomes
+    return result, ranked, outcomes
+
+
+def _verified_in_order(
+    result: DesignResult, top: int, config: VerifyConfig, progress, deadline: float
+) -> tuple[list[CandidateReport], list[tuple]]:
+    """Verify ``result``'s best ``top`` candidates in the measure's order until one passes or ``deadline`` (a
+    :func:`time.monotonic` time) has passed; the first is always verified.
+
+    Returns
+    -------
+    ranked : list of CandidateReport
+        The best ``top`` candidates by the measure.
+    outcomes : list of (rank, candidate, built, verification)
+        The verified ones, ``built`` as :func:`candidate_designs` gives it.
+    """
+    ranked = ranked_candidates(result.report, top)
+    outcomes = []
+    # the design's own choice is built as printed; the others are built together, side by side on the workers
+    others: dict[int, tuple] = {}
+    for rank, candidate in enumerate(ranked):
+        if candidate.index == result.report.best:
+            built = (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
+        else:
+            if candidate.index not in others:
+                rest = [c for c in ranked[rank:] if c.index != result.report.best]
+                others = dict(zip([c.index for c in rest], candidate_designs(result, rest, jobs=config.jobs)))
+            built = others[candidate.index]
+        verification = verify(built[0], config, progress)
+        outcomes.append((rank, candidate, built, verification))
+        if verification.passed or time.monotonic() >= deadline:
+            break
+    return ranked, outcomes
+
+
+def _with_pad_size(result: DesignResult, other: DesignResult) -> DesignResult:
+    """``other``, a design of another of ``result``'s pad sizes, with ``result``'s list of pad sizes marking it
+    chosen."""
+    size = other.report.settings.sampler
+    sizes = [
+        s.model_copy(update={"chosen": (s.length_mm, s.width_mm) == (size.length_mm, size.width_mm)})
+        for s in result.report.pad_sizes or []
+    ]
+    return dataclasses.replace(other, report=other.report.model_copy(update={"pad_sizes": sizes}))
 
 
 def _ranking(outcomes: list, chosen_index: int) -> list[RankedCandidate]:
