@@ -250,6 +250,14 @@ def summary(split: str, figures: SplitFigures, config: VerifyConfig) -> None:
         )
 
 
+def passing_shares(figures: SplitFigures) -> tuple[float, float]:
+    """The share of caging scenarios (flat <= 3/10) the design seats >= 9/10: over all jobs, and over single-part
+    jobs only (0..1; 0 without such scenarios)."""
+    caging = [r for r in figures.rows if r.caging and r.flat.success_rate <= 0.3]
+    single = [r for r in caging if len(r.job.parts) == 1]
+    return tuple(sum(r.designed.success_rate >= 0.9 for r in rows) / max(len(rows), 1) for rows in (caging, single))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--splits", default="development,test,suite", help="comma-separated: development, test, suite")
@@ -270,6 +278,7 @@ def main() -> None:
         "60 N; success within 0.3 mm and 1 deg; choice by truth over "
         f"{args.top_k} candidates, the delivered finger verified with every trial"
     )
+    shares: dict[str, tuple[float, float]] = {}
     for split in args.splits.split(","):
         if split == "suite":
             jobs = suite_jobs()
@@ -289,6 +298,15 @@ def main() -> None:
         for job in jobs:
             run_job(job, args, choose, every, figures)
         summary(split, figures, every)
+        shares[split] = passing_shares(figures)
+    if {"development", "test"} <= shares.keys():
+        (dev_all, dev_single), (test_all, test_single) = shares["development"], shares["test"]
+        print(
+            f"\ndevelopment - test, caging scenarios at >= 9/10: all {dev_all - test_all:+.0%} "
+            f"({dev_all:.0%} - {test_all:.0%}; target within 10 points); single-part jobs only "
+            f"{dev_single - test_single:+.0%} ({dev_single:.0%} - {test_single:.0%}): the development split has no "
+            "shared-finger job"
+        )
 
 
 if __name__ == "__main__":
