@@ -34,8 +34,8 @@ from .viewer import VIEW_FACES, column_major, glb_base64, grasp_view, points_bas
 #: ``draw(inputs, progress)``: a page's pictures, name -> PNG bytes (:func:`pictures`).
 DrawPictures = Callable[["ReportInputs", "Progress | None"], dict[str, bytes]]
 
-#: A picture to draw: its name (its kind, then a scenario's number) and the arguments of its kind's function
-#: (:func:`fcso.output.pictures.draw_pictures`).
+#: A picture to draw: its name (its kind, then its scenario's number if it has one) and the arguments of its kind's
+#: function (:func:`fcso.output.pictures.draw_pictures`).
 Drawing = tuple[str, tuple]
 
 
