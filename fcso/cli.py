@@ -231,19 +231,21 @@ def _config(args) -> DesignConfig:
 
 
 def _design(args) -> int:
-    # the method's modules load before the picture process forks: it inherits them (fcso.output.picture_process)
     with collector_paused():
-        from .errors import NoGraspError
-        from .output.files import write_set_outputs
         from .output.picture_process import PictureProcess
-        from .parts import load_parts, units_hint
-        from .sets import design_sets
 
-        # what is loaded lives until the command ends (run() ends the process at once): no collection walks it again
-        gc.freeze()
-
-    # forked first, so the drawing code loads while the parts load and the design runs
+    # forked before the method's modules load: the drawing code loads on the other core while they load here
     with PictureProcess() as draw_pictures:
+        with collector_paused():
+            from .errors import NoGraspError
+            from .output.files import write_set_outputs
+            from .parts import load_parts, units_hint
+            from .sets import design_sets
+
+            # what is loaded lives until the command ends (run() ends the process at once): no collection walks it
+            # again
+            gc.freeze()
+
         config = _config(args)
         parts = [
             part

@@ -20,7 +20,7 @@ from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
 from .holding import holding_forces_n
-from .lead_in import FLAT_MARGIN, printed_draft
+from .lead_in import FLAT_MARGIN, printed_draft, wider_drafts
 from .measure import scenario_measure
 from .pad import Fingerpad, PadGeometry, build_fingerpad, pad_geometry
 from .parts import Part
@@ -504,6 +504,9 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
     why : str or None
         A sentence when a wider draft was taken.
     """
+    if not wider_drafts(config):
+        # nothing to choose among: the captures printed_draft would measure (a landscape per scenario) go unused
+        return config.print.resolved()["lead_in_deg"], None
     samples = [scenario.samples[number] for scenario, number in zip(scenarios, choice)]
     angle, _, why = printed_draft(
         [s.screen for s in samples],

@@ -19,6 +19,16 @@ from .screen import ScreenGeometry
 FLAT_MARGIN = 0.1
 
 
+def wider_drafts(config: DesignConfig) -> list[float]:
+    """The drafts :func:`printed_draft` may take instead of ``lead_in_deg``, ascending; none outside the capture
+    measure or without a lead-in.
+    """
+    lead_in = config.print.resolved()["lead_in_deg"]
+    if lead_in <= 0 or config.quality.measure != "capture":
+        return []
+    return sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
+
+
 def printed_draft(
     screens: list[tuple[ScreenGeometry, ScreenGeometry]],
     centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
@@ -43,9 +53,7 @@ def printed_draft(
     why : str or None
     """
     lead_in = config.print.resolved()["lead_in_deg"]
-    alternatives = sorted(a for a in config.print.lead_in_alternatives_deg if a > lead_in)
-    if lead_in <= 0 or config.quality.measure != "capture":
-        alternatives = []
+    alternatives = wider_drafts(config)
     grid = ScreenGrid.for_config(config)
 
     def captures_at(angle: float) -> list[float]:

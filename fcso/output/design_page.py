@@ -10,7 +10,7 @@ the same page without designing again.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,7 @@ import trimesh
 from ..finger import pad_to_finger
 from ..layout import REPORT_HTML, write_atomic
 from ..measure import quality_decimals, quality_title, quality_words
-from ..parallel import WorkerPool, resolve_jobs
+from ..parallel import resolve_jobs
 from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
 from ..report.models import DesignReport, chosen_candidate, ranked_candidates
@@ -33,6 +33,10 @@ from .viewer import VIEW_FACES, column_major, glb_base64, grasp_view, points_bas
 
 #: ``draw(inputs, progress)``: a page's pictures, name -> PNG bytes (:func:`pictures`).
 DrawPictures = Callable[["ReportInputs", "Progress | None"], dict[str, bytes]]
+
+#: A picture to draw: its name (its kind, then its scenario's number if it has one) and the arguments of its kind's
+#: function (:func:`fcso.output.pictures.draw_pictures`).
+Drawing = tuple[str, tuple]
 
 
 #: Headers of the quality table's column groups (keys: :data:`fcso.output.table.SCENARIO_GROUPS`).
@@ -69,6 +73,59 @@ class ReportInputs:
     fingerpad: trimesh.Trimesh
     pad_to_finger: np.ndarray
     grasps: list[GraspScene]
+
+    def drawings(self) -> list[Drawing]:
+        """The page's pictures as :func:`fcso.output.pictures.draw_pictures` draws them, longest to draw first.
+
+        The arguments are meshes, arrays, numbers, strings and report models,
+        so a picture process unpickles them without the method's modules.
+        """
+        report = self.report
+        settings = report.settings.sampler
+        pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
+        labels = _scenario_titles(report)
+        first = self.grasps[0]
+        drawings: list[Drawing] = [
+            (
+                "gripper",
+                (
+                    first.mesh,
+                    self.finger,
+                    self.pad_to_finger,
+                    first.placements,
+                    pad_size,
+                    first.sample.closing_axis,
+                    labels[0],
+                ),
+            ),
+            ("finger", (self.finger, self.pad_to_finger, pad_size, "finger with its fingerpad (orange)")),
+            ("fingerpad", (self.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)")),
+        ]
+        reported = chosen_candidate(report).per_scenario
+        for m, grasp in enumerate(self.grasps):
+            drawings += [
+                (
+                    f"grasp {m}",
+                    (grasp.mesh, self.fingerpad, grasp.placements, pad_size, grasp.sample.closing_axis, labels[m]),
+                ),
+                (
+                    f"normals {m}",
+                    (
+                        grasp.normals,
+                        grasp.rles,
+                        grasp.cap_centre,
+                        normals_title(labels[m], reported[m].rles, grasp.rles),
+                    ),
+                ),
+                (f"pose {m}", (grasp.mesh, labels[m])),
+            ]
+            scenario = report.scenarios[m]
+            if scenario.capture_landscape is not None:
+                title = f"{labels[m]}: capture {scenario.capture:.0%} (flat pads {scenario.flat_capture:.0%})"
+                drawings.append((f"capture {m}", (scenario.capture_landscape, title)))
+        # longest drawings first, so no worker is left with a long one at the end
+        drawings.sort(key=lambda drawing: _DRAWING_ORDER.index(drawing[0].split()[0]))
+        return drawings
 
 
 def report_inputs(result: DesignResult) -> ReportInputs:
@@ -124,84 +181,9 @@ def pictures(inputs: ReportInputs, progress: Progress | None = None) -> dict[str
     """
     # matplotlib loads only where pictures are drawn (0.4 s): a command that
     # has them drawn by a picture process (fcso.output.picture_process) never loads it
-    from .pictures import (
-        capture_picture,
-        finger_picture,
-        fingerpad_picture,
-        grasp_picture,
-        gripper_picture,
-        normals_picture,
-        pose_picture,
-    )
+    from .pictures import draw_pictures
 
-    report = inputs.report
-    settings = report.settings.sampler
-    pad_size = (settings.thickness_mm, settings.length_mm, settings.width_mm)
-    labels = _scenario_titles(report)
-    first = inputs.grasps[0]
-
-    def gripper() -> bytes:
-        closing = first.sample.closing_axis
-        return gripper_picture(
-            first.mesh, inputs.finger, inputs.pad_to_finger, first.placements, pad_size, closing, labels[0]
-        )
-
-    jobs: list[tuple[str, Callable[[], bytes]]] = [
-        ("gripper", gripper),
-        (
-            "finger",
-            lambda: finger_picture(inputs.finger, inputs.pad_to_finger, pad_size, "finger with its fingerpad (orange)"),
-        ),
-        (
-            "fingerpad",
-            lambda: fingerpad_picture(
-                inputs.fingerpad, pad_size, f"fingerpad ({chosen_candidate(report).pad_case} case)"
-            ),
-        ),
-    ]
-    reported = chosen_candidate(report).per_scenario
-    for m, grasp in enumerate(inputs.grasps):
-        jobs += [
-            (
-                f"grasp {m}",
-                lambda g=grasp, t=labels[m]: grasp_picture(
-                    g.mesh, inputs.fingerpad, g.placements, pad_size, g.sample.closing_axis, t
-                ),
-            ),
-            (
-                f"normals {m}",
-                lambda g=grasp, t=labels[m], q=reported[m].rles: normals_picture(
-                    g.normals, g.rles, g.cap_centre, normals_title(t, q, g.rles)
-                ),
-            ),
-            (f"pose {m}", lambda g=grasp, t=labels[m]: pose_picture(g.mesh, t)),
-        ]
-        scenario = report.scenarios[m]
-        if scenario.capture_landscape is not None:
-            title = f"{labels[m]}: capture {scenario.capture:.0%} (flat pads {scenario.flat_capture:.0%})"
-            jobs.append((f"capture {m}", lambda x=scenario.capture_landscape, t=title: capture_picture(x, t)))
-    # longest drawings first, so no worker is left with a long one at the end
-    jobs.sort(key=lambda job: _DRAWING_ORDER.index(job[0].split()[0]))
-    report_progress = progress or (lambda stage, done, total: None)
-    report_progress("pictures", 0, len(jobs))
-    # the drawings are closures: forked workers inherit them, only PNG bytes come back
-    with WorkerPool([draw for _, draw in jobs], resolve_jobs(report.settings.search.jobs)) as pool:
-        images = pool.map(_draw, list(range(len(jobs))))
-    report_progress("pictures", len(jobs), len(jobs))
-    return {name: image for (name, _), image in zip(jobs, images)}
-
-
-def picture_inputs(inputs: ReportInputs) -> ReportInputs:
-    """``inputs`` cut to what :func:`pictures` reads: the report keeps only its chosen candidate.
-
-    A report lists up to ``report_candidates`` candidates as pydantic models;
-    sending them to a picture process cost more than a picture.
-    """
-    return replace(inputs, report=inputs.report.model_copy(update={"candidates": [chosen_candidate(inputs.report)]}))
-
-
-def _draw(drawings: list[Callable[[], bytes]], index: int) -> bytes:
-    return drawings[index]()
+    return draw_pictures(inputs.drawings(), resolve_jobs(inputs.report.settings.search.jobs), progress)
 
 
 def _scenario_titles(report: DesignReport) -> list[str]:

@@ -2,11 +2,17 @@
 
 A one-shot ``fcso design`` would otherwise import matplotlib and the drawing
 code (0.4-0.5 s on one core) after the design, on the command's critical
-path. :class:`PictureProcess` forks as the command starts (the method's
-modules are loaded, matplotlib is not): the process imports the drawing code
-while this one loads the parts and designs, then draws every page it is sent
-with :func:`fcso.output.design_page.pictures` (itself spread over forked workers)
-and returns the PNG bytes. The pictures are the same as drawn in-process.
+path. :class:`PictureProcess` forks as the command starts, once the
+libraries the pictures share with the method are loaded (trimesh, scipy,
+manifold3d) but before the method's modules (numba's kernels): the process
+imports matplotlib and the drawing code (:mod:`fcso.output.pictures`) on
+the other core while this one imports the method, and sits idle while the
+design runs on both. It is sent a page's drawings
+(:meth:`fcso.output.design_page.ReportInputs.drawings`: meshes, arrays,
+strings and report models, which it unpickles without the method's
+modules), draws them with :func:`fcso.output.pictures.draw_pictures`
+(itself spread over forked workers) and returns the PNG bytes. The
+pictures are the same as drawn in-process.
 """
 
 from __future__ import annotations
@@ -15,12 +21,19 @@ import gc
 import multiprocessing
 import os
 from multiprocessing.connection import Connection
+from typing import TYPE_CHECKING
 
+# what the drawings are made of (meshes, pad placements, report models) the command loads anyway: loaded before the
+# process forks, it is inherited, and the process itself loads only matplotlib and the drawing code
+from .. import contact, geometry  # noqa: F401
 from ..errors import FcsoError
-from ..parallel import die_with_parent
+from ..parallel import die_with_parent, resolve_jobs
 from ..progress import Progress
+from ..report import models  # noqa: F401
 from ..startup import collector_paused
-from .design_page import ReportInputs, picture_inputs
+
+if TYPE_CHECKING:
+    from .design_page import ReportInputs
 
 
 class PictureProcessError(FcsoError):
@@ -50,7 +63,7 @@ class PictureProcess:
     def __call__(self, inputs: ReportInputs, progress: Progress | None = None) -> dict[str, bytes]:
         """A page's pictures, name -> PNG bytes, drawn in the process; its exceptions are raised here."""
         try:
-            self._connection.send(picture_inputs(inputs))
+            self._connection.send((inputs.drawings(), resolve_jobs(inputs.report.settings.search.jobs)))
             while True:
                 kind, payload = self._connection.recv()
                 if kind == "progress":
@@ -80,10 +93,10 @@ class PictureProcess:
 def _serve(connection: Connection, parent_pid: int) -> None:
     # the command's end of the pipe is open here too: without this a killed command would leave the process waiting
     die_with_parent(parent_pid)
-    # the drawing code loads now, while the design runs, not when the page arrives; it lives as long as the process
+    # the drawing code loads now, while the command loads the method, not when the page arrives; it lives as long as
+    # the process
     with collector_paused():
-        from . import pictures as drawing  # noqa: F401
-        from .design_page import pictures
+        from .pictures import draw_pictures
 
         gc.freeze()
 
@@ -92,13 +105,13 @@ def _serve(connection: Connection, parent_pid: int) -> None:
 
     while True:
         try:
-            inputs = connection.recv()
+            page = connection.recv()
         except EOFError:
             return
-        if inputs is None:
+        if page is None:
             return
         try:
-            connection.send(("pictures", pictures(inputs, report_progress)))
+            connection.send(("pictures", draw_pictures(*page, report_progress)))
         except Exception as exc:  # raised again in the command, which reports it
             try:
                 connection.send(("error", exc))

@@ -12,6 +12,8 @@ from scipy.spatial import cKDTree
 
 from ..contact import PadPlacement
 from ..geometry import clip_to_box, transform_points
+from ..parallel import WorkerPool
+from ..progress import Progress
 from .decimate import decimate
 from .render import (
     CAP_COLOUR,
@@ -445,3 +447,49 @@ def normals_picture(normals: np.ndarray, radius: float, centre: np.ndarray, titl
         fit_axes(axes, np.array([[-1.12, -1.12], [1.12, 1.12]]), margin=0.0)
         caption(axes, view.title)
     return png_bytes(figure)
+
+
+def draw_pictures(drawings: list[tuple[str, tuple]], jobs: int, progress: Progress | None = None) -> dict[str, bytes]:
+    """Draw pictures on ``jobs`` forked workers.
+
+    Parameters
+    ----------
+    drawings : list of (str, tuple)
+        Each picture's name, its kind first (``"grasp 0"``: a
+        :func:`grasp_picture`; the kinds are :data:`_DRAW`'s keys), and the
+        arguments of its kind's function
+        (:meth:`fcso.output.design_page.ReportInputs.drawings`).
+    jobs : int
+        Worker processes.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    dict
+        Name -> PNG bytes.
+    """
+    report_progress = progress or (lambda stage, done, total: None)
+    report_progress("pictures", 0, len(drawings))
+    # the workers inherit the drawings: only PNG bytes come back
+    with WorkerPool(drawings, jobs) as pool:
+        images = pool.map(_draw, list(range(len(drawings))))
+    report_progress("pictures", len(drawings), len(drawings))
+    return {name: image for (name, _), image in zip(drawings, images)}
+
+
+#: The function that draws each kind of picture.
+_DRAW = {
+    "gripper": gripper_picture,
+    "finger": finger_picture,
+    "fingerpad": fingerpad_picture,
+    "grasp": grasp_picture,
+    "normals": normals_picture,
+    "pose": pose_picture,
+    "capture": capture_picture,
+}
+
+
+def _draw(drawings: list[tuple[str, tuple]], index: int) -> bytes:
+    name, arguments = drawings[index]
+    return _DRAW[name.split()[0]](*arguments)
