@@ -23,11 +23,11 @@ from ..sim.report import (
     better_than_flat,
     not_held,
     reused_note,
+    successes,
     verdict_text,
     weakest_hold_n,
 )
 from ..sim.scene import pad_in_world
-from ..sim.schedule import successes
 from ..sim.verify import DesignUnderTest, finger_hull, flat_pad, grasp_case
 from .decimate import decimate
 from .html import VERDICT_BEGIN, VERDICT_END, insert_verdict

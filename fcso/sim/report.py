@@ -234,11 +234,14 @@ def flat_beats(verification: VerificationReport) -> bool:
     return all(theirs >= mine for mine, theirs in counts) and (weaker or any(theirs > mine for mine, theirs in counts))
 
 
+def successes(trials: list[TrialResult]) -> int:
+    """Successful trials."""
+    return sum(t.success for t in trials)
+
+
 def _success_counts(verification: VerificationReport) -> list[tuple[int, int]]:
     """Per scenario, the designed and the flat pads' successful precision trials."""
-    return [
-        (sum(t.success for t in s.fcso.trials), sum(t.success for t in s.flat.trials)) for s in verification.scenarios
-    ]
+    return [(successes(s.fcso.trials), successes(s.flat.trials)) for s in verification.scenarios]
 
 
 def not_held(verification: VerificationReport) -> list[str]:

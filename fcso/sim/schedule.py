@@ -42,7 +42,7 @@ from .outcomes import (
     saved_state,
     scene_key,
 )
-from .report import TrialResult
+from .report import TrialResult, successes
 from .scene import GraspCase, Scene
 from .trials import HOLD_DIRECTIONS, hold_force, pose_error, run_grasp, start_pose
 
@@ -50,11 +50,6 @@ from .trials import HOLD_DIRECTIONS, hold_force, pose_error, run_grasp, start_po
 def needed_successes(trials: int, config: VerifyConfig) -> int:
     """Fewest successful trials out of ``trials`` that reach ``config.pass_success_rate``."""
     return math.ceil((config.pass_success_rate - 1e-9) * trials)
-
-
-def successes(trials: list[TrialResult]) -> int:
-    """Successful trials."""
-    return sum(t.success for t in trials)
 
 
 def below_pass_rate(trials: list[TrialResult] | None, config: VerifyConfig) -> bool:

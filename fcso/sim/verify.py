@@ -18,9 +18,17 @@ from ..version import __version__
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .diskcache import evict
-from .report import Fidelity, FingerResult, PoseSnapshot, ScenarioVerification, TrialResult, VerificationReport
+from .report import (
+    Fidelity,
+    FingerResult,
+    PoseSnapshot,
+    ScenarioVerification,
+    TrialResult,
+    VerificationReport,
+    successes,
+)
 from .scene import GraspCase, Scene, build_scene, with_arena
-from .schedule import ScenarioSimulations, scenario_simulations, successes
+from .schedule import ScenarioSimulations, scenario_simulations
 from .trials import Frame, approach_opening_mm, perturbations, pose_error, seated_overlaps_mm
 
 
