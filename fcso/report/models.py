@@ -528,14 +528,14 @@ class PadSizeReport(ReportModel):
     width_mm: float = Field(description="Pad width W, mm")
     quality: float | None = Field(
         description="What chose among the sizes: the delivered design's quality (its worst scenario's measure), for "
-        "finger sets the worst over the sets; null when this size was not designed (note says why)"
+        "finger sets the worst over the sets; null when no part could be grasped with this size or it was screened out"
     )
     flat_pads: bool = Field(False, description="Its design delivered flat pads (nothing beat flat): ranked last")
     chosen: bool = Field(description="The size delivered")
-    designed: bool = Field(
-        True,
-        description="Designed in full; false when no part could be grasped with it, or (finger sets) when its "
-        "screened partition could not compete with another size's (note gives both screens)",
+    screened_out: bool = Field(
+        False,
+        description="Finger sets: not designed in full, its screened partition could not compete with another size's "
+        "(note gives both screens)",
     )
     note: str | None = Field(None, description="Why this size gave no design")
 

@@ -114,10 +114,16 @@ def design_sets(
             (result.report.min_retained_reached, -len(result.designs), min(qualities)), min(qualities), flat
         )
 
-    screened, skipped = _screened_sizes(parts, config, progress, repair)
-    result, sizes = best_pad_size(
-        config, lambda sized: _design_screened(screened.pop(_size_of(sized)), progress), score, progress, skipped
-    )
+    screened, screened_out = _screened_sizes(parts, config, progress, repair)
+
+    def design_one_size(sized: DesignConfig) -> SetsResult:
+        # popped: a size's screened job is freed once designed
+        one = screened.pop(_size_of(sized))
+        if isinstance(one, NoGraspError):
+            raise one
+        return _design_screened(one, progress)
+
+    result, sizes = best_pad_size(config, design_one_size, score, progress, screened_out)
     finger_sets = result.report.model_copy(update={"pad_sizes": sizes})
     if result.several:
         return SetsResult(
@@ -134,21 +140,20 @@ def _size_of(config: DesignConfig) -> tuple[float, float]:
 
 def _screened_sizes(
     parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None, repair: bool
-) -> tuple[dict[tuple[float, float], _ScreenedSize], list[str | None]]:
+) -> tuple[dict[tuple[float, float], _ScreenedSize | NoGraspError], list[str | None]]:
     """Every pad size of ``[sampler]`` taken to its screened partition (:func:`_screen_one_size`).
 
-    Returns the sizes to design in full (:func:`sizes_to_design`) by their length and width in mm, and per size of
-    :meth:`DesignConfig.pad_size_configs` why it is not designed (None for those designed).
-
-    Raises
-    ------
-    NoGraspError
-        With a single pad size, when it grasps no part.
+    Returns
+    -------
+    screened : dict
+        Length and width in mm -> the size's screened job, for the sizes to design in full
+        (:func:`sizes_to_design`), or why it grasps no part.
+    screened_out : list of str or None
+        Per size of :meth:`DesignConfig.pad_size_configs`, why it is not designed in full, or None.
     """
     report_progress = progress_with_note(progress)
     sized = config.pad_size_configs()
-    screened: list[_ScreenedSize | None] = []
-    notes: list[str | None] = []
+    screened: list[_ScreenedSize | NoGraspError] = []
     for number, one in enumerate(sized):
         if len(sized) > 1:
             report_progress(
@@ -156,22 +161,19 @@ def _screened_sizes(
             )
         try:
             screened.append(_screen_one_size(parts, one, progress, repair))
-            notes.append(None)
         except NoGraspError as error:
-            if len(sized) == 1:
-                raise
-            screened.append(None)
-            notes.append(f"no grasp: {error}")
-    screens = [s.screen if s is not None else None for s in screened]
-    chosen, best = sizes_to_design(screens), best_screened(screens)
-    for k, screen in enumerate(screens):
-        if screen is not None and k not in chosen:
-            notes[k] = screened_out_note(
-                screen, screens[best], f"{_size_of(sized[best])[0]:g} x {_size_of(sized[best])[1]:g} mm"
-            )
+            # designing the size raises it again (fcso.pipeline.best_pad_size notes it, or raises it for one size)
+            screened.append(error)
     if len(sized) > 1:
         report_progress("pad size screen", len(sized), len(sized), "")
-    return {_size_of(sized[k]): screened[k] for k in chosen}, notes
+    screens = [s.screen if isinstance(s, _ScreenedSize) else None for s in screened]
+    best = best_screened(screens)
+    kept = {k for k, s in enumerate(screens) if s is None} | set(sizes_to_design(screens))
+    best_size = None if best is None else f"{sized[best].sampler.length_mm:g} x {sized[best].sampler.width_mm:g} mm"
+    screened_out = [
+        None if k in kept else screened_out_note(screens[k], screens[best], best_size) for k in range(len(sized))
+    ]
+    return {_size_of(sized[k]): screened[k] for k in sorted(kept)}, screened_out
 
 
 @dataclass

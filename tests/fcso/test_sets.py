@@ -370,12 +370,29 @@ def test_finger_sets_are_designed_with_every_pad_size_and_keep_the_best(tmp_path
     job = design_sets([Part(name="cube", path="cube", mesh=holed_notched_cube())], config)
     sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
     assert set(sizes) == {20.0, 34.0} and sizes[34.0].chosen
+    # one part is one set with either size: the screen cannot tell them apart and both are designed in full
+    assert not sizes[20.0].screened_out and not sizes[34.0].screened_out
     assert sizes[34.0].quality > sizes[20.0].quality
     # the delivered design and the job's report carry the chosen size
     assert job.designs[0].report.settings.sampler.length_mm == 34.0
     assert job.job().finger_sets.pad_sizes == job.report.pad_sizes
     assert pad_sizes_line(job.report.pad_sizes).endswith(
         "34 x 20 mm quality " + f"{sizes[34.0].quality:.3g} (delivered)"
+    )
+
+
+def test_finger_sets_design_in_full_only_the_pad_sizes_their_screen_cannot_rule_out():
+    # the three knobs conflict pairwise on a 10 mm pad (3 sets screened, test_auto_gives_pairwise_conflicting_parts_
+    # one_set_each) and share a 35 mm pad (1 set screened): two sets apart, the 10 mm size's sets are not designed
+    job = design_sets(THREE_KNOBS, config(finger_sets={"max": "auto"}, sampler={"length_mm": [10.0, 35.0]}))
+    sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
+    assert sizes[10.0].quality is None and sizes[10.0].screened_out and not sizes[10.0].chosen
+    assert sizes[10.0].note.startswith("not designed in full: 3 set(s) screened, worst retained 1.000")
+    assert "; 35 x 10 mm pads 1 set(s) screened" in sizes[10.0].note
+    assert sizes[35.0].chosen and not sizes[35.0].screened_out and sizes[35.0].quality > 0
+    assert [d.report.settings.sampler.length_mm for d in job.designs] == [35.0]
+    assert pad_sizes_line(job.report.pad_sizes) == (
+        f"pad sizes: 10 x 10 mm screened out, 35 x 10 mm quality {sizes[35.0].quality:.3g} (delivered)"
     )
 
 
