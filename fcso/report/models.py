@@ -515,9 +515,7 @@ class FingerSetsReport(ReportModel):
         None, description="The delivered sets judged by simulation ([finger_sets] truth_budget_s > 0), else null"
     )
     pad_sizes: list[PadSizeReport] = Field(
-        default_factory=list,
-        description="Every pad size of [sampler], which were designed in full (the others left out by each size's "
-        "screened partition) and which was delivered",
+        default_factory=list, description="Every pad size of [sampler], those screened out and which was delivered"
     )
 
 
@@ -532,11 +530,7 @@ class PadSizeReport(ReportModel):
     )
     flat_pads: bool = Field(False, description="Its design delivered flat pads (nothing beat flat): ranked last")
     chosen: bool = Field(description="The size delivered")
-    screened_out: bool = Field(
-        False,
-        description="Finger sets: not designed in full, its screened partition could not compete with another size's "
-        "(note gives both screens)",
-    )
+    screened_out: bool = Field(False, description="Not designed in full: the sets' screen ruled it out (note says why)")
     note: str | None = Field(None, description="Why this size gave no design")
 
 
