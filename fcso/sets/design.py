@@ -239,10 +239,12 @@ def _screen_one_size(
     timings["partition"] = time.perf_counter() - clock
     numbers = [m for members in sets.set_scenarios for m in members]
     screen = SizeScreen.of(
-        max(first.assignment) + 1,
+        first.assignment,
         sets.screener.partition_retained(first.assignment),
+        [p for p, members in enumerate(sets.set_scenarios) for _ in members],
         np.array([solos[m].exact for m in numbers]),
         config.finger_sets.min_retained,
+        config.finger_sets.sets_allowed(len(graspable)),
     )
     return _ScreenedSize(
         config,

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Sets a size's screened partition may use beyond the best size's and still be designed in full. The full design
-#: moves a probe's losing parts to sets of their own and merges single-part sets, so its count can differ from the
-#: screened one by a few sets.
-SETS_MARGIN = 1
+#: Share of the best size's projected sets (:attr:`SizeScreen.projected_sets`) another size may use beyond them and
+#: still be designed in full, at least one set. The screened partition's count is an estimate: on the 60-part job of
+#: ``bench_sets`` the 20 mm pads screened 16 sets and their full design delivered 24 (its losing parts moved), the
+#: 10 mm pads 26 and 24 (single-part sets merged).
+SETS_MARGIN_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -27,8 +28,10 @@ class SizeScreen:
     ----------
     sets : int
         Sets of the screened partition.
-    reached : bool
-        Every graspable scenario keeps at least ``min_retained`` of its solo quality (probed ``r``).
+    losing_parts : int
+        Its parts with a graspable scenario below ``min_retained`` (probed ``r``).
+    sets_allowed : int
+        The most sets the job may use (``[finger_sets] max``, one per part with ``"auto"``).
     worst_retained : float
         Least probed ``r = E / E*`` over the graspable scenarios.
     worst_quality : float
@@ -36,31 +39,54 @@ class SizeScreen:
     """
 
     sets: int
-    reached: bool
+    losing_parts: int
+    sets_allowed: int
     worst_retained: float
     worst_quality: float
 
     @classmethod
-    def of(cls, sets: int, retained: np.ndarray, solo_qualities: np.ndarray, min_retained: float) -> SizeScreen:
-        """The screen of a partition into ``sets`` sets whose scenarios keep ``retained`` of ``solo_qualities``."""
+    def of(
+        cls,
+        assignment: Sequence[int],
+        retained: np.ndarray,
+        owners: Sequence[int],
+        solo_qualities: np.ndarray,
+        min_retained: float,
+        sets_allowed: int,
+    ) -> SizeScreen:
+        """The screen of partition ``assignment`` (set of every part) whose scenarios, of parts ``owners``, keep
+        ``retained`` of their solo qualities ``solo_qualities``."""
+        losing = {owner for owner, r in zip(owners, retained) if r < min_retained}
         return cls(
-            sets=sets,
-            reached=bool(retained.min() >= min_retained),
+            sets=max(assignment) + 1,
+            losing_parts=len(losing),
+            sets_allowed=sets_allowed,
             worst_retained=float(retained.min()),
             worst_quality=float((retained * solo_qualities).min()),
         )
 
     @property
+    def projected_sets(self) -> int:
+        """The sets once every losing part has a set of its own, as far as allowed: what the full design does with
+        a partition whose designs miss ``min_retained`` (:func:`fcso.sets.search_judged_exactly`)."""
+        return min(self.sets + self.losing_parts, self.sets_allowed)
+
+    @property
+    def reaches(self) -> bool:
+        """Every part keeps ``min_retained`` once the losing parts have sets of their own."""
+        return self.sets + self.losing_parts <= self.sets_allowed
+
+    @property
     def rank(self) -> tuple:
         """Compared as a tuple, as the full designs are (:func:`fcso.sets.design_sets`): reaching ``min_retained``,
         then fewer sets, then the worst quality."""
-        return (self.reached, -self.sets, self.worst_quality)
+        return (self.reaches, -self.projected_sets, self.worst_quality)
 
     def describe(self) -> str:
         """The screen's figures in words."""
         return (
-            f"{self.sets} set(s) screened, worst retained {self.worst_retained:.3f}, "
-            f"min_retained {'reached' if self.reached else 'missed'}"
+            f"{self.sets} set(s) screened, {self.losing_parts} part(s) below min_retained (worst retained "
+            f"{self.worst_retained:.3f}): {self.projected_sets} set(s) projected"
         )
 
 
@@ -73,8 +99,8 @@ def best_screened(screens: Sequence[SizeScreen | None]) -> int | None:
 
 def sizes_to_design(screens: Sequence[SizeScreen | None]) -> list[int]:
     """The sizes (indices of ``screens``) to design in full: the best screened (:func:`best_screened`), and every
-    other one the screen cannot separate from it: as far with ``min_retained`` and at most :data:`SETS_MARGIN` sets
-    more.
+    other one the screen cannot separate from it: as far with ``min_retained`` and within :data:`SETS_MARGIN_SHARE`
+    of its projected sets.
 
     Parameters
     ----------
@@ -89,8 +115,9 @@ def sizes_to_design(screens: Sequence[SizeScreen | None]) -> list[int]:
     best = best_screened(screens)
     if best is None:
         return []
-    reached, sets = screens[best].reached, screens[best].sets
-    return [k for k, s in enumerate(screens) if s is not None and s.reached == reached and s.sets <= sets + SETS_MARGIN]
+    reaches, sets = screens[best].reaches, screens[best].projected_sets
+    most = sets + max(1, round(SETS_MARGIN_SHARE * sets))
+    return [k for k, s in enumerate(screens) if s is not None and s.reaches == reaches and s.projected_sets <= most]
 
 
 def screened_out_note(screen: SizeScreen, best: SizeScreen, best_size: str) -> str:

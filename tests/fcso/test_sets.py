@@ -387,8 +387,11 @@ def test_finger_sets_design_in_full_only_the_pad_sizes_their_screen_cannot_rule_
     job = design_sets(THREE_KNOBS, config(finger_sets={"max": "auto"}, sampler={"length_mm": [10.0, 35.0]}))
     sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
     assert sizes[10.0].quality is None and sizes[10.0].screened_out and not sizes[10.0].chosen
-    assert sizes[10.0].note.startswith("not designed in full: 3 set(s) screened, worst retained 1.000")
-    assert "; 35 x 10 mm pads 1 set(s) screened" in sizes[10.0].note
+    assert sizes[10.0].note.startswith(
+        "not designed in full: 3 set(s) screened, 0 part(s) below min_retained (worst retained 1.000): 3 set(s) "
+        "projected; 35 x 10 mm pads 1 set(s) screened, 0 part(s) below min_retained"
+    )
+    assert sizes[10.0].note.endswith(": 1 set(s) projected")
     assert sizes[35.0].chosen and not sizes[35.0].screened_out and sizes[35.0].quality > 0
     assert [d.report.settings.sampler.length_mm for d in job.designs] == [35.0]
     assert pad_sizes_line(job.report.pad_sizes) == (
