@@ -132,7 +132,8 @@ def search_judged_exactly(
         Every partition judged, in the order judged.
     """
     judging = _Judging(screener, progress, design_exactly, config.finger_sets.min_retained)
-    first = first or search_partition(screener, parts, config, progress)
+    if first is None:
+        first = search_partition(screener, parts, config, progress)
     outcome = _proposals(judging, first, parts, config)
     chosen = _delivered(judging, parts, config.finger_sets.sets_allowed(parts), finish_exactly)
     if config.finger_sets.max == "auto" and chosen.failure is None:
