@@ -268,6 +268,7 @@ def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4, tr
         f"{result.designs[0].report.timings_s if result.job_report is None else result.job_report.timings_s}"
     )
     print(f"  {served_figures(report)}; partition: {report.search.method}")
+    print(f"  pad sizes: {pad_sizes_figures(report.pad_sizes)}")
     print(
         f"  lower bound {report.search.lower_bound_sets} sets (pairwise conflicting: "
         f"{', '.join(report.search.conflict_clique)}), "
@@ -473,8 +474,19 @@ def curve_run(parts: int, max_sets: int | str = 4) -> dict:
         f"{report.search.method}",
         "served": served_figures(report),
         "details": f"timings {result.job().timings_s}; sets tried {report.search.sets_tried}, lower bound "
-        f"{report.search.lower_bound_sets}, {report.search.set_screenings} set searches; attempts {attempts}",
+        f"{report.search.lower_bound_sets}, {report.search.set_screenings} set searches; attempts {attempts}; "
+        f"pad sizes {pad_sizes_figures(report.pad_sizes)}",
     }
+
+
+def pad_sizes_figures(sizes) -> str:
+    """Each pad size's length, its quality when designed (the delivered one marked), else why not (issue 48)."""
+    return "; ".join(
+        f"{e.length_mm:g} mm "
+        + (f"quality {e.quality:.3g}" if e.quality is not None else e.note or "")
+        + (" (delivered)" if e.chosen else "")
+        for e in sizes
+    )
 
 
 def run_curve(sizes: list[int], runs: int, max_sets: int | str = 4) -> None:

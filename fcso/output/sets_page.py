@@ -55,7 +55,8 @@ def job_html(report: JobReport, fingers: list[trimesh.Trimesh]) -> str:
 
 
 def pad_sizes_section(sizes: list[PadSizeReport]) -> list[str]:
-    """HTML of the pad sizes designed with (METHOD §3b), the delivered one marked; nothing for a single size."""
+    """HTML of the pad sizes (METHOD §3b), the delivered one marked, why a size gave no design; nothing for a single
+    size."""
     if len(sizes) < 2:
         return []
     rows = "".join(
@@ -70,19 +71,20 @@ def pad_sizes_section(sizes: list[PadSizeReport]) -> list[str]:
     )
     return [
         "<h2>Pad sizes</h2>",
-        "<p>Each size of <code>[sampler] length_mm</code> x <code>width_mm</code> was designed in full; the best by "
-        "the quality measure is delivered (&#9733;).</p>",
+        "<p>Each size of <code>[sampler] length_mm</code> x <code>width_mm</code> was designed in full, except for "
+        "finger sets the sizes whose screened partition could not compete with another's; the best by the quality "
+        "measure is delivered (&#9733;).</p>",
         f'<table><tr><th>L x W (mm)</th><th>quality</th><th class="text">pads</th></tr>{rows}</table>',
     ]
 
 
 def pad_sizes_line(sizes: list[PadSizeReport]) -> str | None:
-    """One line of text on the pad sizes designed with, or None for a single size."""
+    """One line of text on the pad sizes, or None for a single size."""
     if len(sizes) < 2:
         return None
     return "pad sizes: " + ", ".join(
         f"{e.length_mm:g} x {e.width_mm:g} mm "
-        + (f"quality {e.quality:.3g}" if e.quality is not None else "no grasp")
+        + (f"quality {e.quality:.3g}" if e.quality is not None else "screened out" if e.screened_out else "no grasp")
         + (" (delivered)" if e.chosen else "")
         for e in sizes
     )

@@ -103,11 +103,13 @@ def best_pad_size(
     run: Callable[[DesignConfig], Designed],
     score: Callable[[Designed], SizeScore],
     progress: Progress | None = None,
+    screened_out: Sequence[str | None] = (),
 ) -> tuple[Designed, list[PadSizeReport]]:
     """Design with every pad size of ``[sampler]`` and keep the best (METHOD §3b).
 
     The two fingers carry one pad box, so a size is a choice for the whole
-    design: each size is designed in full and they compete by ``score``.
+    design: each size is designed in full and they compete by ``score``,
+    except the sizes the caller's screen left out (``screened_out``).
 
     Parameters
     ----------
@@ -119,6 +121,9 @@ def best_pad_size(
         A result's :class:`SizeScore`: the largest rank is delivered, the first size on a tie.
     progress : callable, optional
         ``progress("pad size", done, total, note)`` when there are several sizes.
+    screened_out : sequence of str or None, optional
+        Per size of :meth:`DesignConfig.pad_size_configs`, why the caller's screen left it out (not designed: its
+        entry says so, with this ``note``), or None to design it; every size is designed when empty.
 
     Returns
     -------
@@ -135,6 +140,10 @@ def best_pad_size(
     results: list[Designed | None] = []
     notes: list[str | None] = []
     for number, one in enumerate(sized):
+        if screened_out and screened_out[number] is not None:
+            results.append(None)
+            notes.append(screened_out[number])
+            continue
         if len(sized) > 1:
             report_progress(
                 "pad size", number, len(sized), f"{one.sampler.length_mm:g} x {one.sampler.width_mm:g} mm pads"
@@ -160,6 +169,7 @@ def best_pad_size(
             quality=rounded(scores[k].quality) if scores[k] is not None else None,
             flat_pads=scores[k] is not None and scores[k].flat_pads,
             chosen=k == chosen,
+            screened_out=bool(screened_out) and screened_out[k] is not None,
             note=notes[k],
         )
         for k, one in enumerate(sized)

@@ -515,7 +515,7 @@ class FingerSetsReport(ReportModel):
         None, description="The delivered sets judged by simulation ([finger_sets] truth_budget_s > 0), else null"
     )
     pad_sizes: list[PadSizeReport] = Field(
-        default_factory=list, description="Every pad size the sets were designed with and which was delivered"
+        default_factory=list, description="Every pad size of [sampler], those screened out and which was delivered"
     )
 
 
@@ -526,10 +526,11 @@ class PadSizeReport(ReportModel):
     width_mm: float = Field(description="Pad width W, mm")
     quality: float | None = Field(
         description="What chose among the sizes: the delivered design's quality (its worst scenario's measure), for "
-        "finger sets the worst over the sets; null when no part could be grasped with this size"
+        "finger sets the worst over the sets; null when no part could be grasped with this size or it was screened out"
     )
     flat_pads: bool = Field(False, description="Its design delivered flat pads (nothing beat flat): ranked last")
     chosen: bool = Field(description="The size delivered")
+    screened_out: bool = Field(False, description="Not designed in full: the sets' screen ruled it out (note says why)")
     note: str | None = Field(None, description="Why this size gave no design")
 
 

@@ -31,13 +31,14 @@ from ..pipeline import (
 )
 from ..pipeline.report import part_report
 from ..pipeline.sets_report import exact_retained, sets_report, zero_quality_report
-from ..progress import Progress
+from ..progress import Progress, progress_with_note
 from ..report.models import DesignReport, FingerSetsReport, JobReport, UngraspableReport, chosen_candidate
 from ..version import __version__
 from .identity import identical_groups
 from .judged import PartitionAttempt, search_judged_exactly
-from .partition import PartitionOutcome
-from .screening import SetScreener, SoloQuality, keep_held, screening_pools, solo_picks, solo_quality
+from .partition import PartitionOutcome, search_partition
+from .screening import SetScreener, SoloQuality, keep_held, screening_pools, sets_of, solo_picks, solo_quality
+from .sizes import SizeScreen, best_screened, screened_out_note, sizes_to_design
 from .truth import SetsTruth
 
 
@@ -82,7 +83,9 @@ def design_sets(
     is found (:func:`solo_quality`), the distinct parts are partitioned
     (:func:`search_partition`, under screening), and every set's finger is
     designed exactly by METHOD §1-9 for that set alone
-    (:func:`fcso.pipeline.design_prepared`).
+    (:func:`fcso.pipeline.design_prepared`). With several pad sizes, each is
+    taken to its screened partition and only the sizes that screen can compete
+    (:func:`sizes_to_design`) are designed in full; the best of those is delivered.
 
     Parameters
     ----------
@@ -111,9 +114,16 @@ def design_sets(
             (result.report.min_retained_reached, -len(result.designs), min(qualities)), min(qualities), flat
         )
 
-    result, sizes = best_pad_size(
-        config, lambda sized: _design_sets_of_one_size(parts, sized, progress, repair), score, progress
-    )
+    screened, screened_out = _screened_sizes(parts, config, progress, repair)
+
+    def design_one_size(sized: DesignConfig) -> SetsResult:
+        # popped: a size's screened job is freed once designed
+        one = screened.pop(_size_of(sized))
+        if isinstance(one, NoGraspError):
+            raise one
+        return _design_screened(one, progress)
+
+    result, sizes = best_pad_size(config, design_one_size, score, progress, screened_out)
     finger_sets = result.report.model_copy(update={"pad_sizes": sizes})
     if result.several:
         return SetsResult(
@@ -123,10 +133,81 @@ def design_sets(
     return SetsResult(result.designs, finger_sets, None)
 
 
-def _design_sets_of_one_size(
+def _size_of(config: DesignConfig) -> tuple[float, float]:
+    """The pad size of settings of one size: length and width, mm."""
+    return config.sampler.length_mm, config.sampler.width_mm
+
+
+def _screened_sizes(
     parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None, repair: bool
-) -> SetsResult:
-    """:func:`design_sets` with one pad size and ``[finger_sets] max`` above 1."""
+) -> tuple[dict[tuple[float, float], _ScreenedSize | NoGraspError], list[str | None]]:
+    """Every pad size of ``[sampler]`` taken to its screened partition (:func:`_screen_one_size`).
+
+    Returns
+    -------
+    screened : dict
+        Length and width in mm -> the size's screened job, for the sizes to design in full
+        (:func:`sizes_to_design`), or why it grasps no part.
+    screened_out : list of str or None
+        Per size of :meth:`DesignConfig.pad_size_configs`, why it is not designed in full, or None.
+    """
+    report_progress = progress_with_note(progress)
+    sized = config.pad_size_configs()
+    screened: list[_ScreenedSize | NoGraspError] = []
+    for number, one in enumerate(sized):
+        if len(sized) > 1:
+            report_progress(
+                "pad size screen", number, len(sized), f"{one.sampler.length_mm:g} x {one.sampler.width_mm:g} mm pads"
+            )
+        try:
+            screened.append(_screen_one_size(parts, one, progress, repair))
+        except NoGraspError as error:
+            # designing the size raises it again (fcso.pipeline.best_pad_size notes it, or raises it for one size)
+            screened.append(error)
+    if len(sized) > 1:
+        report_progress("pad size screen", len(sized), len(sized), "")
+    screens = [s.screen if isinstance(s, _ScreenedSize) else None for s in screened]
+    best = best_screened(screens)
+    kept = {k for k, s in enumerate(screens) if s is None} | set(sizes_to_design(screens))
+    best_size = None if best is None else f"{sized[best].sampler.length_mm:g} x {sized[best].sampler.width_mm:g} mm"
+    screened_out = [
+        None if k in kept else screened_out_note(screens[k], screens[best], best_size) for k in range(len(sized))
+    ]
+    return {_size_of(sized[k]): screened[k] for k in sorted(kept)}, screened_out
+
+
+@dataclass
+class _ScreenedSize:
+    """A job with one pad size taken to its screened partition (:func:`_screen_one_size`): the size's screen, and
+    what its full design goes on from (:func:`_design_screened`)."""
+
+    config: DesignConfig
+    loaded: list[Part]
+    groups: list[list[int]]
+    prepared: Prepared
+    warnings: list[str]
+    timings_s: dict[str, float]
+    solos: list[SoloQuality]
+    ungraspable: list[UngraspableReport]
+    part_scenarios: list[list[int]]
+    graspable: list[int]
+    sets: _ExactSets
+    first: PartitionOutcome
+    screen: SizeScreen
+
+
+def _screen_one_size(
+    parts: Sequence[Part | str | Path], config: DesignConfig, progress: Progress | None, repair: bool
+) -> _ScreenedSize:
+    """A job with one pad size and ``[finger_sets] max`` above 1 up to its screened partition
+    (:func:`search_partition`), each set of which is judged by the exact evaluation of its screened best candidate
+    (:meth:`SetScreener.probe`, as the partition search's first proposal is).
+
+    Raises
+    ------
+    NoGraspError
+        No scenario keeps any contact.
+    """
     report_progress = progress or (lambda stage, done, total, note="": None)
     clock = time.perf_counter()
     loaded = load_batch(parts, config, repair)
@@ -151,14 +232,65 @@ def _design_sets_of_one_size(
 
     clock = time.perf_counter()
     sets = _ExactSets(prepared, config, solos, [part_scenarios[u] for u in graspable], progress, report_progress)
-    truth = _sets_truth(sets, [prepared.parts[u].name for u in graspable], config)
-    # no more workers than sets to screen: one part has one partition
-    with WorkerPool(
-        (prepared, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config),
-        prepared.jobs if len(graspable) > 1 else 1,
-        config.compute.scheduler,
-    ) as pool:
+    with _screening_pool(sets) as pool:
         sets.screener = SetScreener(prepared, sets.set_scenarios, solos, config, pool)
+        first = search_partition(sets.screener, len(graspable), config, report_progress)
+        sets.screener.probe(sets_of(first.assignment))
+    timings["partition"] = time.perf_counter() - clock
+    numbers = [m for members in sets.set_scenarios for m in members]
+    screen = SizeScreen.of(
+        first.assignment,
+        sets.screener.partition_retained(first.assignment),
+        [p for p, members in enumerate(sets.set_scenarios) for _ in members],
+        np.array([solos[m].exact for m in numbers]),
+        config.finger_sets.min_retained,
+        config.finger_sets.sets_allowed(len(graspable)),
+    )
+    return _ScreenedSize(
+        config,
+        loaded,
+        groups,
+        prepared,
+        warnings,
+        timings,
+        solos,
+        ungraspable,
+        part_scenarios,
+        graspable,
+        sets,
+        first,
+        screen,
+    )
+
+
+def _screening_pool(sets: _ExactSets) -> WorkerPool:
+    """The workers of a job's set screenings (:class:`SetScreener`)."""
+    prepared, config, solos = sets.prepared, sets.config, sets.solos
+    # no more workers than sets to screen: one part has one partition
+    return WorkerPool(
+        (prepared, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config),
+        prepared.jobs if len(sets.set_scenarios) > 1 else 1,
+        config.compute.scheduler,
+    )
+
+
+def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResult:
+    """The finger sets of a job with one pad size, designed in full from its screened partition
+    (:func:`search_judged_exactly`)."""
+    report_progress = progress or (lambda stage, done, total, note="": None)
+    config, prepared, sets, graspable, part_scenarios = (
+        size.config,
+        size.prepared,
+        size.sets,
+        size.graspable,
+        size.part_scenarios,
+    )
+    unique, timings = [size.loaded[g[0]] for g in size.groups], size.timings_s
+    clock = time.perf_counter()
+    truth = _sets_truth(sets, [prepared.parts[u].name for u in graspable], config)
+    with _screening_pool(sets) as pool:
+        # the screener keeps every set screened and probed for the size's screen: none is screened again
+        sets.screener.pool = pool
         outcome, attempts = search_judged_exactly(
             sets.screener,
             len(graspable),
@@ -167,9 +299,10 @@ def _design_sets_of_one_size(
             sets.design_exactly,
             sets.finish_exactly,
             None if truth is None else truth.unserved,
+            size.first,
         )
-    # the partition's time includes the exact designs of the sets it judged (the chosen ones among them)
-    timings["partition"] = time.perf_counter() - clock
+    # the partition's time includes the screened search and the exact designs of the sets it judged
+    timings["partition"] += time.perf_counter() - clock
 
     clock = time.perf_counter()
     designs, members = _delivered_designs(outcome, graspable, part_scenarios, sets)
@@ -179,16 +312,16 @@ def _design_sets_of_one_size(
     unserved = {graspable[p]: _TRUTH_REASON for p in outcome.unserved_by_truth}
     finger_sets = sets_report(
         prepared,
-        loaded,
-        groups,
-        solos,
+        size.loaded,
+        size.groups,
+        size.solos,
         designs,
         members,
         outcome,
         attempts,
         graspable,
         screened,
-        ungraspable,
+        size.ungraspable,
         config,
         unserved,
     )
@@ -202,8 +335,8 @@ def _design_sets_of_one_size(
         designs[0].report = design_report.model_copy(
             update={
                 "parts": [part_report(p) for p in unique],
-                "ungraspable": ungraspable,
-                "warnings": warnings + design_report.warnings,
+                "ungraspable": size.ungraspable,
+                "warnings": size.warnings + design_report.warnings,
                 "timings_s": dict(timings, **design_report.timings_s),
                 "finger_sets": finger_sets,
             }
@@ -215,7 +348,7 @@ def _design_sets_of_one_size(
         parts=[part_report(p) for p in unique],
         finger_sets=finger_sets,
         timings_s=timings,
-        warnings=warnings + set_warnings,
+        warnings=size.warnings + set_warnings,
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)

@@ -66,6 +66,7 @@ def search_judged_exactly(
     design_exactly: Callable[[list[frozenset[int]], frozenset[int] | None], list[str | None]],
     finish_exactly: Callable[[list[frozenset[int]]], list[str | None]],
     truth: Callable[[frozenset[int]], list[int]] | None = None,
+    first: PartitionOutcome | None = None,
 ) -> tuple[PartitionOutcome, list[PartitionAttempt]]:
     """The partition search of :func:`search_partition`, its proposals judged exactly (METHOD §11 rev. 3).
 
@@ -119,6 +120,9 @@ def search_judged_exactly(
         Each such part of the delivered partition gets a set of its own while
         ``max`` allows (:func:`_judged_by_truth`); the others are returned in
         ``unserved_by_truth``.
+    first : PartitionOutcome, optional
+        :func:`search_partition`'s outcome with this screener when already found (the pad sizes' screen of
+        :func:`fcso.sets.design.design_sets`); else searched here.
 
     Returns
     -------
@@ -128,7 +132,8 @@ def search_judged_exactly(
         Every partition judged, in the order judged.
     """
     judging = _Judging(screener, progress, design_exactly, config.finger_sets.min_retained)
-    first = search_partition(screener, parts, config, progress)
+    if first is None:
+        first = search_partition(screener, parts, config, progress)
     outcome = _proposals(judging, first, parts, config)
     chosen = _delivered(judging, parts, config.finger_sets.sets_allowed(parts), finish_exactly)
     if config.finger_sets.max == "auto" and chosen.failure is None:

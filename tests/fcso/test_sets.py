@@ -25,6 +25,7 @@ from fcso.parts import Part
 from fcso.pipeline import evaluate_exact, prepare, screen_choice
 from fcso.sets import canonical_assignment, design_sets, max_clique, partition_key, restricted_growth, same_geometry
 from fcso.sets.screening import quick_screen
+from fcso.sets.sizes import SizeScreen, best_screened, sizes_to_design
 from tests.conftest import HANG_GUARD_S, REPO, small_config
 
 MIN_RETAINED = 0.7
@@ -370,6 +371,8 @@ def test_finger_sets_are_designed_with_every_pad_size_and_keep_the_best(tmp_path
     job = design_sets([Part(name="cube", path="cube", mesh=holed_notched_cube())], config)
     sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
     assert set(sizes) == {20.0, 34.0} and sizes[34.0].chosen
+    # one part is one set with either size: the screen cannot tell them apart and both are designed in full
+    assert not sizes[20.0].screened_out and not sizes[34.0].screened_out
     assert sizes[34.0].quality > sizes[20.0].quality
     # the delivered design and the job's report carry the chosen size
     assert job.designs[0].report.settings.sampler.length_mm == 34.0
@@ -377,6 +380,38 @@ def test_finger_sets_are_designed_with_every_pad_size_and_keep_the_best(tmp_path
     assert pad_sizes_line(job.report.pad_sizes).endswith(
         "34 x 20 mm quality " + f"{sizes[34.0].quality:.3g} (delivered)"
     )
+
+
+def test_finger_sets_design_in_full_only_the_pad_sizes_their_screen_cannot_rule_out():
+    # the three knobs conflict pairwise on a 10 mm pad (3 sets screened, test_auto_gives_pairwise_conflicting_parts_
+    # one_set_each) and share a 35 mm pad (1 set screened): two sets apart, the 10 mm size's sets are not designed
+    job = design_sets(THREE_KNOBS, config(finger_sets={"max": "auto"}, sampler={"length_mm": [10.0, 35.0]}))
+    sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
+    assert sizes[10.0].quality is None and sizes[10.0].screened_out and not sizes[10.0].chosen
+    assert sizes[10.0].note.startswith(
+        "not designed in full: 3 set(s) screened, 0 part(s) below min_retained (worst retained 1.000): 3 set(s) "
+        "projected; 35 x 10 mm pads 1 set(s) screened, 0 part(s) below min_retained"
+    )
+    assert sizes[10.0].note.endswith(": 1 set(s) projected")
+    assert sizes[35.0].chosen and not sizes[35.0].screened_out and sizes[35.0].quality > 0
+    assert [d.report.settings.sampler.length_mm for d in job.designs] == [35.0]
+    assert pad_sizes_line(job.report.pad_sizes) == (
+        f"pad sizes: 10 x 10 mm screened out, 35 x 10 mm quality {sizes[35.0].quality:.3g} (delivered)"
+    )
+
+
+def test_the_pad_size_screen_keeps_every_size_it_cannot_separate_from_the_best():
+    # sets, losing parts, sets allowed, worst retained, worst quality: sets as the 60-part job of bench_sets screened
+    # them with 10, 20 and 35 mm pads (its full designs delivered 24, 24 and 9 sets), one losing part each
+    sixty = [SizeScreen(26, 1, 55, 0.0, 0.0), SizeScreen(16, 1, 55, 0.0, 0.0), SizeScreen(9, 1, 55, 0.068, 0.008)]
+    assert best_screened(sixty) == 2 and sizes_to_design(sixty) == [2]
+    # 12 sets projected against 10: within a quarter (2 sets), both designed; a size that grasps nothing is not
+    near = [SizeScreen(11, 1, 55, 0.2, 0.01), None, SizeScreen(9, 1, 55, 0.068, 0.008)]
+    assert sizes_to_design(near) == [0, 2]
+    # with max = 2 a size whose losing parts cannot all have a set misses min_retained: the other is designed alone
+    two = [SizeScreen(1, 0, 2, 0.9, 0.05), SizeScreen(1, 2, 2, 0.3, 0.2)]
+    assert [s.reaches for s in two] == [True, False] and sizes_to_design(two) == [0]
+    assert sizes_to_design([None, None]) == [] and best_screened([None]) is None
 
 
 def test_a_job_whose_exact_design_misses_min_retained_with_sets_left_gets_another_set():
