@@ -161,7 +161,14 @@ def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress:
             )
             return scored
 
-        outcome = search(counts, screened_bounds, evaluate, config.search.max_exhaustive, config.search.max_evaluations)
+        outcome = search(
+            counts,
+            screened_bounds,
+            evaluate,
+            config.search.max_exhaustive,
+            config.search.max_evaluations,
+            keep=config.search.exact_top_k,
+        )
         indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
         ranked = sorted(
             outcome.evaluated,

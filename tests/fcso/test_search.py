@@ -171,3 +171,20 @@ def test_same_design_for_one_and_two_workers():
     # the files too, byte for byte: the pad is carved from geometries made in workers or here
     for mesh in ("finger", "fingerpad"):
         assert getattr(designs[0], mesh).export(file_type="stl") == getattr(designs[1], mesh).export(file_type="stl")
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_branch_and_bound_ranks_the_best_it_is_asked_to_keep_as_exhaustive_search_does(seed):
+    # METHOD §8b re-evaluates the k best exactly and the choice by truth verifies the best few: a search that stops
+    # once its first candidate reaches the bound ranks one
+    counts, bounds, effective_areas = _instance(seed)
+    everything = list(itertools.product(*(range(c) for c in counts)))
+    evaluate = batch(lambda c: (float(effective_areas(c).min()), float(effective_areas(c).mean())))
+    keep = min(8, len(everything))
+    outcome = search(counts, bounds, evaluate, max_exhaustive=1, max_evaluations=10**6, keep=keep)
+    assert outcome.proven_optimal
+
+    def top(choices):
+        return sorted((float(effective_areas(c).min()) for c in choices), reverse=True)[:keep]
+
+    assert top(outcome.evaluated) == top(everything)
