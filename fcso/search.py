@@ -129,9 +129,9 @@ def search(
     are evaluated in non-increasing bound order, each exactly once, and the
     search stops as soon as the next bound falls below the ``keep``-th best Q
     found: whatever is left cannot beat it (nor tie it, which the tie-break
-    needs). A search that stopped at the best alone listed one candidate
-    where its first reached the bound (a slotted block: 1 of 63 504), and
-    the choice by truth had no second to verify.
+    needs). Stopping at the best alone would list one candidate wherever
+    the first reaches the bound, leaving the exact re-evaluation and the
+    choice by truth nothing else to compare.
 
     When the budget runs out first, coordinate ascent improves candidates
     one scenario at a time (every sample of that scenario is tried, the

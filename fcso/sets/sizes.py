@@ -14,9 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 #: Share of the best size's projected sets (:attr:`SizeScreen.projected_sets`) another size may use beyond them and
-#: still be designed in full, at least one set. The screened partition's count is an estimate: on the 60-part job of
-#: ``bench_sets`` the 20 mm pads screened 16 sets and their full design delivered 24 (its losing parts moved), the
-#: 10 mm pads 26 and 24 (single-part sets merged).
+#: still be designed in full, at least one set: the screened partition's count is an estimate, which the full design
+#: changes both ways (losing parts moved to sets of their own, single-part sets merged; docs/benchmarks.md).
 SETS_MARGIN_SHARE = 0.25
 
 

@@ -106,7 +106,7 @@ def verify_top(
     """
     started, budget_s = time.monotonic(), config.choice_budget_s
     deadline = started + budget_s
-    first_size = result.report.settings.sampler
+    first_size = _pad_size(result)
     result, ranked, outcomes = _verified_by_size(result, top, config, progress, deadline)
     passing = [o for o in outcomes if o[3].passed]
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
@@ -135,11 +135,11 @@ def verify_top(
         kept_flat,
         bool(passing),
     )
-    size = result.report.settings.sampler
-    if size is not first_size:
+    size = _pad_size(result)
+    if size != first_size:
         why = (
-            f"pad size {size.length_mm:g} x {size.width_mm:g} mm, {why}, after none of the "
-            f"{first_size.length_mm:g} mm pads' candidates passed"
+            f"pad size {size[0]:g} x {size[1]:g} mm, {why}, after none of the {first_size[0]:g} mm pads' "
+            "candidates passed"
         )
     if not kept_flat and flat_beats(verification):
         why += f"; flat pads beat it ({verdict_text(verification)}): delivered with flat pads on its grasps"
@@ -150,7 +150,7 @@ def verify_top(
         result = _with_candidate(result, candidate, fused, *built[1:], [*unwritable, f"verification delivered {why}"])
     else:
         verification.warnings.extend(unwritable + ([] if verification.passed else [f"verification delivered {why}"]))
-        if size is not first_size:
+        if size != first_size:
             result.report = result.report.model_copy(
                 update={"warnings": [*result.report.warnings, f"verification delivered {why}"]}
             )
@@ -208,12 +208,16 @@ def _verified_in_order(
     return ranked, outcomes
 
 
+def _pad_size(result: DesignResult) -> tuple[float, float]:
+    """A design's pad length and width, mm."""
+    return result.report.settings.sampler.length_mm, result.report.settings.sampler.width_mm
+
+
 def _with_pad_size(result: DesignResult, other: DesignResult) -> DesignResult:
     """``other``, a design of another of ``result``'s pad sizes, with ``result``'s list of pad sizes marking it
     chosen."""
-    size = other.report.settings.sampler
     sizes = [
-        s.model_copy(update={"chosen": (s.length_mm, s.width_mm) == (size.length_mm, size.width_mm)})
+        s.model_copy(update={"chosen": (s.length_mm, s.width_mm) == _pad_size(other)})
         for s in result.report.pad_sizes or []
     ]
     return dataclasses.replace(other, report=other.report.model_copy(update={"pad_sizes": sizes}))
