@@ -64,7 +64,7 @@ import numpy as np
 
 import fcso
 from fcso.geometry import to_trimesh
-from fcso.report.models import chosen_candidate
+from fcso.report import chosen_candidate
 from fcso.sets import design_sets
 
 from .bench_design import baseline_tree

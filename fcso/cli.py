@@ -295,10 +295,9 @@ def _print_parts(parts, scenarios, ungraspable) -> None:
 
 def _report_sets(job: SetsResult, args) -> int:
     """Print what a job's finger sets (one or several) made, and verify each set's finger when asked."""
-    from .layout import set_folder
     from .output.sets_page import pad_sizes_line, pick_plan_text
     from .output.table import quality_table
-    from .verify_cli import verify_design_outputs
+    from .verify_cli import verify_job_outputs
 
     report, sets = job.job(), job.report
     if not args.quiet:
@@ -316,19 +315,11 @@ def _report_sets(job: SetsResult, args) -> int:
             print(f"wrote {args.out}/report.json, report.html and " + ", ".join(f"{s.folder}/" for s in sets.sets))
         else:
             print(f"wrote {args.out}/finger.stl, fingerpad.stl, report.json, report.html")
-    codes = [0]
     if args.verify or args.verify_top is not None:
-        # every set is verified; the exit code is the worst of theirs (3: one did not pass)
-        for number, result in enumerate(job.designs, start=1):
-            out = args.out / set_folder(number, job.several)
-            codes.append(
-                verify_design_outputs(
-                    result,
-                    argparse.Namespace(**{**vars(args), "out": out}),
-                    ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty()),
-                )
-            )
-    return max(codes)
+        return verify_job_outputs(
+            job, args, lambda: ProgressLine(sys.stderr, enabled=not args.quiet and sys.stderr.isatty())
+        )
+    return 0
 
 
 def _report(args) -> int:

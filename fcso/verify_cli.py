@@ -123,37 +123,63 @@ def summary(verification: VerificationReport) -> str:
     return "\n".join(lines)
 
 
-def verify_design_outputs(result, args, progress) -> int:
-    """``fcso design --verify`` / ``--verify-top K``: verify (choosing among the K best), then write into ``--out``."""
-    from .output.design_page import rebuild_report
-    from .output.files import write_outputs
+def verify_job_outputs(job, args, progress_line) -> int:
+    """``fcso design --verify`` / ``--verify-top K``: verify every finger set's finger (one or several), each choosing
+    among its K best candidates and its other pad sizes' (:func:`fcso.sim.choose.verify_top`); when a choice delivers
+    another finger, the job is written into ``--out`` again with the sets' report and pick plan following it; then each
+    verification into its set's folder.
+
+    Parameters
+    ----------
+    job : SetsResult
+        The job as designed and written into ``args.out``.
+    args : argparse.Namespace
+    progress_line : callable
+        A new progress display per set.
+
+    Returns
+    -------
+    int
+        The exit code: the worst of the sets' (:data:`EXIT_NOT_VERIFIED` when one did not pass).
+    """
+    from .layout import set_folder
+    from .output.files import write_set_outputs
     from .output.verification_page import ranking_html, write_verification
     from .sim.choose import verify_top
     from .sim.config import with_print_density
     from .sim.verify import design_under_test, verify_delivered
 
-    config = with_print_density(settings(args), result.report.settings)
-    try:
-        top = DEFAULT_TOP_K if args.verify_top is None else args.verify_top
-        if top > 0:
-            chosen, verification, design, ranking = verify_top(result, top, config, progress)
-            if chosen is not result:
-                # report.html is rebuilt from report.json: the pictures follow the newly chosen candidate
-                write_outputs(chosen, args.out)
-                rebuild_report(args.out)
-            extra = ranking_html(ranking, verification.choice)
-        else:
-            design = design_under_test(result)
-            verification, extra = verify_delivered(design, config, progress), ""
-    finally:
-        progress.close()
-    write_verification(args.out, verification, design, extra)
-    if not args.quiet:
-        print(summary(verification))
-        if verification.choice:
-            print(f"delivered {verification.choice}")
-        print(f"wrote {args.out}/verification.json and the verification section of report.html")
-    return verdict_exit(verification, args.quiet)
+    top = DEFAULT_TOP_K if args.verify_top is None else args.verify_top
+    verified, chosen_again = [], False
+    for number, result in enumerate(job.designs, start=1):
+        config = with_print_density(settings(args), result.report.settings)
+        progress = progress_line()
+        try:
+            if top > 0:
+                chosen, verification, design, ranking = verify_top(result, top, config, progress)
+                if chosen is not result:
+                    job, chosen_again = job.delivered(number, chosen, verification.choice), True
+                extra = ranking_html(ranking, verification.choice)
+            else:
+                design = design_under_test(result)
+                verification, extra = verify_delivered(design, config, progress), ""
+        finally:
+            progress.close()
+        verified.append((verification, design, extra))
+    if chosen_again:
+        # report.json, the pick plan, the fingers and the pictures follow the newly chosen candidates
+        write_set_outputs(job, args.out)
+    codes = [0]
+    for number, (verification, design, extra) in enumerate(verified, start=1):
+        out = args.out / set_folder(number, job.several)
+        write_verification(out, verification, design, extra)
+        if not args.quiet:
+            print(summary(verification))
+            if verification.choice:
+                print(f"delivered {verification.choice}")
+            print(f"wrote {out}/verification.json and the verification section of report.html")
+        codes.append(verdict_exit(verification, args.quiet))
+    return max(codes)
 
 
 def restore_section(directory: Path) -> None:

@@ -22,7 +22,8 @@ from ..measure import quality_decimals, quality_title, quality_words
 from ..parallel import resolve_jobs
 from ..pipeline import DesignResult, flat_finger
 from ..progress import Progress
-from ..report.models import DesignReport, chosen_candidate, ranked_candidates
+from ..report.models import DesignReport
+from ..report.ranking import chosen_candidate, ranked_candidates
 from ..sampler import REJECTION_REASONS
 from .grasp_scenes import GraspScene, chosen_grasp_scenes, reseat_grasps
 from .html import closing_sections, html_page, image, key_value_table, text, unverified_verdict

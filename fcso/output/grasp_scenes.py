@@ -14,7 +14,8 @@ from ..evaluate import CandidateEvaluation, Scenario, contact_samples
 from ..pad import surface_in_pad
 from ..parts import Part
 from ..printfit import closing_travel_mm
-from ..report.models import DesignReport, chosen_candidate
+from ..report.models import DesignReport
+from ..report.ranking import chosen_candidate
 from ..rles import largest_empty_cap
 from ..sampler import SIDES, GraspSample
 

@@ -6,7 +6,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..measure import quality_decimals, quality_title, quality_words
-from ..report.models import CandidateReport, DesignReport, chosen_candidate, ranked_candidates
+from ..report.models import CandidateReport, DesignReport
+from ..report.ranking import chosen_candidate, ranked_candidates
 
 #: Column groups of the quality table: title, ScenarioQuality field, decimals.
 SCENARIO_GROUPS = (("RLES", "rles", 4), ("A mm2", "contact_area_mm2", 1), ("E", "effective_area", 1))

@@ -11,10 +11,8 @@ from ..config import DesignConfig
 from ..errors import NoGraspError
 from ..parts import Part
 from ..progress import Progress, progress_with_note
-from ..report.models import (
-    PadSizeReport,
-    chosen_candidate,
-)
+from ..report.models import PadSizeReport
+from ..report.ranking import chosen_candidate
 from .choose import choose_candidate
 from .finish import DesignResult, finish_design
 from .prepare import Prepared, prepare

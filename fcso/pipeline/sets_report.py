@@ -21,8 +21,8 @@ from ..report.models import (
     PickStep,
     SetScenarioReport,
     UngraspableReport,
-    chosen_candidate,
 )
+from ..report.ranking import chosen_candidate
 from .report import ungraspable_entry
 
 if TYPE_CHECKING:  # the partition search builds on these reports: its outcome is only read here
@@ -148,6 +148,98 @@ def sets_report(
         not_served=sorted(not_served, key=lambda entry: order[entry.part]),
         search=search_report(outcome, names, scenarios, attempts, reached, settings),
     )
+
+
+def delivered_set_report(
+    report: FingerSetsReport,
+    number: int,
+    design,
+    why: str,
+    solo_scenarios: list[SetScenarioReport] | None = None,
+) -> FingerSetsReport:
+    """``report`` with set ``number`` delivered as ``design``: another candidate or pad size than the measure's, chosen
+    by truth (:func:`fcso.sim.choose.verify_top`).
+
+    What describes the finger follows it: the pick plan's grasps of the set's parts, the set's quality, pad case and
+    retained shares, its scenarios' E and E / E*, the job's worst and median retained and ``min_retained_reached``.
+    Which parts the set serves stays as the design decided: a simulated finger that passes serves its parts whatever
+    share of the measure's best it keeps.
+
+    Parameters
+    ----------
+    report : FingerSetsReport
+    number : int
+        The set, 1 = first.
+    design : DesignResult
+        The finger delivered for it.
+    why : str
+        The choice's reason, kept in the set's entry (``chosen_by_truth``).
+    solo_scenarios : list of SetScenarioReport, optional
+        Scenario entries whose ``solo_quality`` E* the retained shares are of: those of ``design``'s pad size's report
+        when it is not ``report``'s; default ``report``'s own.
+
+    Returns
+    -------
+    FingerSetsReport
+    """
+    chosen = chosen_candidate(design.report)
+    quality = {(s.part, s.pose_index): q.measure for s, q in zip(design.report.scenarios, chosen.per_scenario)}
+    solo = {(s.part, s.pose_index): s.solo_quality for s in solo_scenarios or report.scenarios}
+    scenarios = [
+        s.model_copy(
+            update={
+                "quality": round(float(quality[key]), 6),
+                "solo_quality": round(solo[key], 6),
+                "retained": _ratio(quality[key], solo[key]) if solo[key] > 0 else None,
+            }
+        )
+        if (key := (s.part, s.pose_index)) in quality and s.set == number
+        else s
+        for s in report.scenarios
+    ]
+    retained = [s.retained for s in scenarios if s.set == number and s.retained is not None]
+    sets = [
+        s.model_copy(
+            update={
+                "quality": round(design.best.quality, 6),
+                "worst_retained": round(min(retained), 6),
+                "mean_retained": round(float(np.mean(retained)), 6),
+                "pad_case": design.best.case,
+                "chosen_by_truth": why,
+            }
+        )
+        if s.set == number
+        else s
+        for s in report.sets
+    ]
+    grasps = design.report.grasps
+    plan = [
+        step.model_copy(update={"parts": [_with_grasps(p, grasps) for p in step.parts]}) if step.set == number else step
+        for step in report.pick_plan
+    ]
+    kept = [s.retained for s in scenarios if s.retained is not None]
+    size = (design.report.settings.sampler.length_mm, design.report.settings.sampler.width_mm)
+    delivered_sizes = {size} | {
+        (p.length_mm, p.width_mm) for p in report.pad_sizes if p.chosen and len(report.sets) > 1
+    }
+    return report.model_copy(
+        update={
+            "scenarios": scenarios,
+            "sets": sets,
+            "pick_plan": plan,
+            "worst_retained": round(min(kept), 6),
+            "median_retained": round(float(np.median(kept)), 6),
+            "min_retained_reached": min(kept) >= report.min_retained,
+            "pad_sizes": [
+                p.model_copy(update={"chosen": (p.length_mm, p.width_mm) in delivered_sizes}) for p in report.pad_sizes
+            ],
+        }
+    )
+
+
+def _with_grasps(pick: PickPart, grasps) -> PickPart:
+    """``pick`` with its part's grasps among ``grasps`` (a design's, scenario order)."""
+    return pick.model_copy(update={"grasps": [g for g in grasps if g.part == pick.part]})
 
 
 def search_report(outcome, names, scenarios, attempts, reached, settings) -> PartitionSearchReport:

@@ -29,9 +29,8 @@ from .models import (
     SearchReport,
     SetScenarioReport,
     UngraspableReport,
-    chosen_candidate,
-    ranked_candidates,
 )
+from .ranking import chosen_candidate, ranked_candidates
 
 __all__ = [
     "CandidateReport",

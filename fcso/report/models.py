@@ -309,6 +309,12 @@ class FingerSetReport(ReportModel):
     worst_retained: float = Field(description="Least E / E* over its scenarios")
     mean_retained: float = Field(description="Mean E / E* over its scenarios")
     pad_case: str = Field(description="good, bad or mixed (METHOD §5)")
+    chosen_by_truth: str | None = Field(
+        None,
+        description="Why the choice by truth (--verify-top, the daemon's [verify] top_k) delivered another candidate "
+        "or pad size than the measure's, when it did: quality and retained are then the delivered finger's, and its "
+        "parts stay served (its finger is the best of those simulated); null: the measure's choice is delivered",
+    )
 
 
 class IdenticalPartsReport(ReportModel):
@@ -529,7 +535,10 @@ class PadSizeReport(ReportModel):
         "finger sets the worst over the sets; null when no part could be grasped with this size or it was screened out"
     )
     flat_pads: bool = Field(False, description="Its design delivered flat pads (nothing beat flat): ranked last")
-    chosen: bool = Field(description="The size delivered")
+    chosen: bool = Field(
+        description="The size delivered; with several finger sets, a size any set is delivered on (the choice by truth "
+        "may deliver a set on another size)"
+    )
     screened_out: bool = Field(False, description="Not designed in full: the sets' screen ruled it out (note says why)")
     note: str | None = Field(None, description="Why this size gave no design")
 
@@ -584,17 +593,3 @@ class JobReport(ReportModel):
         description="Where every set's finger copies go in the job's build volume, added by fcsod (schema: "
         "schemas/placement-report.json)",
     )
-
-
-def chosen_candidate(report: DesignReport) -> CandidateReport:
-    """The candidate the design chose."""
-    return next(c for c in report.candidates if c.index == report.best)
-
-
-def ranked_candidates(report: DesignReport, limit: int | None = None) -> list[CandidateReport]:
-    """Candidates best first, at most ``limit``: the exactly evaluated ones, then the screened ones,
-    each by larger Q, then larger mean E, then smaller index."""
-    rows = sorted(
-        report.candidates, key=lambda c: (c.evaluation != "exact", -c.quality, -c.mean_effective_area, c.index)
-    )
-    return rows if limit is None else rows[:limit]

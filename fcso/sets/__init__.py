@@ -14,7 +14,7 @@ designed exactly (:func:`fcso.pipeline.design_prepared`). Every quality is an
 effective area E in mm²; retained qualities are ratios (0..1).
 """
 
-from .design import SetsResult, design_sets
+from .design import design_sets
 from .identity import SAME_GEOMETRY_TOLERANCE_MM, identical_groups, same_geometry
 from .judged import PartitionAttempt, search_judged_exactly
 from .partition import (
@@ -25,6 +25,7 @@ from .partition import (
     restricted_growth,
     search_partition,
 )
+from .result import SetsResult
 from .screening import SetScreener, SetScreening, SoloQuality, screen_set, screening_pools, solo_quality
 
 __all__ = [

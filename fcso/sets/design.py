@@ -32,43 +32,16 @@ from ..pipeline import (
 from ..pipeline.report import part_report
 from ..pipeline.sets_report import exact_retained, sets_report, zero_quality_report
 from ..progress import Progress, progress_with_note
-from ..report.models import DesignReport, FingerSetsReport, JobReport, UngraspableReport, chosen_candidate
+from ..report.models import JobReport, UngraspableReport
+from ..report.ranking import chosen_candidate
 from ..version import __version__
 from .identity import identical_groups
 from .judged import PartitionAttempt, search_judged_exactly
 from .partition import PartitionOutcome, search_partition
+from .result import SetsResult
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, sets_of, solo_picks, solo_quality
 from .sizes import SizeScreen, best_screened, screened_out_note, sizes_to_design
 from .truth import SetsTruth
-
-
-@dataclass
-class SetsResult:
-    """What :func:`design_sets` returns.
-
-    Attributes
-    ----------
-    designs : list of DesignResult
-        One finger design per set, set order.
-    report : FingerSetsReport or None
-        The sets and the pick plan; None with ``[finger_sets] max = 1``.
-    job_report : JobReport or None
-        The job's ``report.json`` with two or more sets; with one, the
-        design's own report (``designs[0].report``, whose ``finger_sets`` is ``report``).
-    """
-
-    designs: list[DesignResult]
-    report: FingerSetsReport | None
-    job_report: JobReport | None
-
-    @property
-    def several(self) -> bool:
-        """Whether two or more finger sets serve the job: its outputs then go into ``set-<k>`` folders."""
-        return self.job_report is not None
-
-    def job(self) -> DesignReport | JobReport:
-        """The job's ``report.json``: the job report with several sets, the one design's report with one."""
-        return self.job_report if self.several else self.designs[0].report
 
 
 def design_sets(
@@ -115,22 +88,28 @@ def design_sets(
         )
 
     screened, screened_out = _screened_sizes(parts, config, progress, repair)
+    made: list[SetsResult] = []
 
     def design_one_size(sized: DesignConfig) -> SetsResult:
         # popped: a size's screened job is freed once designed
         one = screened.pop(_size_of(sized))
         if isinstance(one, NoGraspError):
             raise one
-        return _design_screened(one, progress)
+        made.append(_design_screened(one, progress))
+        return made[-1]
 
     result, sizes = best_pad_size(config, design_one_size, score, progress, screened_out)
     finger_sets = result.report.model_copy(update={"pad_sizes": sizes})
+    others = sorted((r for r in made if r is not result), key=lambda r: score(r).rank, reverse=True)
+    for entry, one in zip(result.report.sets, result.designs):
+        # a set's other sizes for the choice by truth: the sets of the same parts the other sizes designed
+        one.other_sizes = [d for r in others for s, d in zip(r.report.sets, r.designs) if s.parts == entry.parts]
+    size_reports = {_size_of(r.designs[0].report.settings): r.report for r in made}
     if result.several:
-        return SetsResult(
-            result.designs, finger_sets, result.job_report.model_copy(update={"finger_sets": finger_sets})
-        )
+        job_report = result.job_report.model_copy(update={"finger_sets": finger_sets})
+        return SetsResult(result.designs, finger_sets, job_report, size_reports)
     result.designs[0].report = result.designs[0].report.model_copy(update={"finger_sets": finger_sets})
-    return SetsResult(result.designs, finger_sets, None)
+    return SetsResult(result.designs, finger_sets, None, size_reports)
 
 
 def _size_of(config: DesignConfig) -> tuple[float, float]:

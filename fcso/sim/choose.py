@@ -12,7 +12,8 @@ from ..geometry import to_trimesh
 from ..parallel import resolve_jobs
 from ..pipeline import DesignResult, finish_candidates
 from ..progress import Progress
-from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport, ranked_candidates
+from ..report.models import CandidateReport, DesignReport, FingerReport, GraspReport, PrintFitReport
+from ..report.ranking import ranked_candidates
 from .config import VerifyConfig
 from .report import RankedCandidate, VerificationReport, flat_beats, successes, verdict_text
 from .verify import DesignUnderTest, design_under_test, finger_hull, grasp_case, verify, verify_delivered

@@ -29,7 +29,6 @@ false`` turns all of it off, the choice among ``top_k`` candidates included.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -98,13 +97,15 @@ def choose_by_verification(run) -> Verified | None:
     choosing = settings.top_k > 0 and not several
     if not settings.enabled or not (choosing or settings.deliver != "always"):
         return None
-    designs, fingers, held, warnings = list(run.sets.designs), [], [], []
+    sets, fingers, held, warnings = run.sets, [], [], []
     for number, result in enumerate(run.sets.designs, start=1):
         label = f"finger set {number}: " if several else ""
         config = _verify_config(settings, result.report.settings, run.task.config.state.dir)
         if choosing:
             chosen, verification, design, ranking = verify_top(result, settings.top_k, config, _progress(run.log))
-            designs[number - 1] = chosen
+            if chosen is not result:
+                # the sets' report and the pick plan (the plan message, the finger library) follow the delivered finger
+                sets = sets.delivered(number, chosen, verification.choice)
             fingers.append(SetVerified(verification, design, ranking_html(ranking, verification.choice)))
             run.log("info", f"verification delivered {verification.choice}")
         else:
@@ -121,7 +122,6 @@ def choose_by_verification(run) -> Verified | None:
             held.append(f"{label}{reason}")
     if held:
         run.log("warning", f"held for an operator: {'; '.join(held)}")
-    sets = dataclasses.replace(run.sets, designs=designs)
     return Verified(sets, tuple(fingers), "; ".join(held) or None, tuple(warnings))
 
 

@@ -18,7 +18,7 @@ from fcso import design, load_config, load_part, write_outputs
 from fcso.cli import ProgressLine, main
 from fcso.output.design_page import load_report_inputs
 from fcso.output.render import CONTACT_COLOUR, PICTURE_SIZES
-from fcso.report.models import DesignReport, ranked_candidates
+from fcso.report import DesignReport, ranked_candidates
 from tests.conftest import HANG_GUARD_S
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,7 +14,7 @@ from fcso.finger import fuse
 from fcso.geometry import to_manifold
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate
-from fcso.report.models import chosen_candidate
+from fcso.report import chosen_candidate
 from fcso.sim import choose as choose_module
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
