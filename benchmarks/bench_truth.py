@@ -179,6 +179,10 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         )
         figures.rows.append(row)
         notes = [] if scenario.beats_flat else ["design: flat is as good"]
+        if not designed.nominal_held:
+            notes.append("nominal grasp dropped it")
+        elif designed.nominal_offset_mm > every.success_mm or designed.nominal_offset_deg > every.success_deg:
+            notes.append(f"nominal grasp {designed.nominal_offset_mm:.1f} mm {designed.nominal_offset_deg:.1f} deg off")
         if designed.success_rate < 0.9:
             notes.append(miss_reason(designed, every))
         if row.weaker:

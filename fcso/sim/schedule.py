@@ -206,6 +206,13 @@ def scenario_simulations(
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 
+def nominal_grasp(scene: Scene, case: GraspCase, config: VerifyConfig) -> TrialRun:
+    """The designed finger's (``scene``) unperturbed grasp alone, in this process: :func:`scenario_simulations`'
+    first grasp, read from or written to its cache entry, so the full run reads it back."""
+    keys = {"fcso": scene_key(scene, case, config)}
+    return _simulated_grasp(({"fcso": scene}, case, config, keys), ("fcso", 0, None))
+
+
 def _grasp_plan(
     case: GraspCase, scene_key_hex: str, kind: str, number: int, error: np.ndarray | None
 ) -> tuple[np.ndarray, bool, str]:
