@@ -198,7 +198,8 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         )
     for verified in ranking:
         candidate = next(c for c in report.candidates if c.index == verified.index)
-        if all(n == every.trials for n in verified.trials_run):
+        # a candidate rejected before its trials (METHOD §5b) ran none
+        if verified.trials_run and all(n == every.trials for n in verified.trials_run):
             q = min(s.effective_area for s in candidate.per_scenario)
             figures.correlation.append((candidate.quality, q, float(np.mean(verified.success_rates))))
     if args.candidates:
