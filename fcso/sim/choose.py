@@ -189,42 +189,30 @@ def _verified_in_order(
     """Verify ``result``'s best ``top`` candidates in the measure's order until one passes or ``deadline`` (a
     :func:`time.monotonic` time) has passed; the first is always verified.
 
-    A candidate whose unperturbed grasp leaves a part off its seat is rejected before its trials (METHOD §5b,
-    :func:`fcso.sim.verify.nominal_seats`) and does not count among the ``top``: the next exactly evaluated one (a
-    finalist of METHOD §8b) takes its place. In a finger shared by several parts every finalist of a size may leave
-    one part off its seat; a rejection costs a grasp per scenario, not its trials.
-
     Returns
     -------
     ranked : list of CandidateReport
-        The candidates planned, in the measure's order: the best ``top``, and one more per rejected one.
+        The best ``top`` candidates by the measure.
     outcomes : list of (rank, candidate, built, verification)
         The verified ones, ``built`` as :func:`candidate_designs` gives it.
     """
-    pool = ranked_candidates(result.report)
-    # at least the top ones, exactly evaluated or not, as without rejections
-    most = min(len(pool), max(top, sum(c.evaluation == "exact" for c in pool)))
-    planned = min(top, len(pool))
+    ranked = ranked_candidates(result.report, top)
     outcomes = []
     # the design's own choice is built as printed; the others are built together, side by side on the workers
     others: dict[int, tuple] = {}
-    for rank, candidate in enumerate(pool):
-        if rank >= planned:
-            break
+    for rank, candidate in enumerate(ranked):
         if candidate.index == result.report.best:
             built = (design_under_test(result), result.best, result.report.grasps, result.report.print_fit, [])
         else:
             if candidate.index not in others:
-                rest = [c for c in pool[rank:planned] if c.index != result.report.best]
+                rest = [c for c in ranked[rank:] if c.index != result.report.best]
                 others = dict(zip([c.index for c in rest], candidate_designs(result, rest, jobs=config.jobs)))
             built = others[candidate.index]
         verification = verify(built[0], config, progress)
         outcomes.append((rank, candidate, built, verification))
         if verification.passed or time.monotonic() >= deadline:
             break
-        if verification.unseated_scenarios:
-            planned = min(planned + 1, most)
-    return pool[:planned], outcomes
+    return ranked, outcomes
 
 
 def _pad_size(result: DesignResult) -> tuple[float, float]:
