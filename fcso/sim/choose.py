@@ -114,12 +114,7 @@ def verify_top(
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
     flat_design = result.report.finger.flat_pads
     fallback = [o for o in outcomes if o[1].index == result.report.best] if flat_design else outcomes
-    # a candidate that leaves a part off its seat (METHOD §5b) comes after every one that does not
-    preferred = passing + sorted(
-        (o for o in fallback if not o[3].passed),
-        key=lambda o: (not o[3].unseated_scenarios, worst_success_share(o[3]), -o[0]),
-        reverse=True,
-    )
+    preferred = passing + sorted((o for o in fallback if not o[3].passed), key=_truth_rank, reverse=True)
     chosen, fused, unwritable = _deliverable(result, preferred, outcomes, config, progress)
     ranking = _ranking(outcomes, chosen[1].index)
     rank, candidate, built, verification = chosen
@@ -163,6 +158,14 @@ def verify_top(
             )
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def _truth_rank(outcome: tuple) -> tuple:
+    """How a verified ``(rank, candidate, built, verification)`` that did not pass ranks by truth, larger first: one
+    that holds every part at its seat (METHOD §5b), then by its worst scenario's successful trials
+    (:func:`worst_success_share`), then by the measure's order."""
+    rank, _, _, verification = outcome
+    return not verification.unseated_scenarios, worst_success_share(verification), -rank
 
 
 def _verified_by_size(

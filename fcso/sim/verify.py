@@ -202,8 +202,8 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 def nominal_seats(
     design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None]:
-    """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each, until one does
-    not hold its part at its designed seat (:func:`seat_miss`).
+    """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each (two for a
+    drop), until one does not hold its part at its designed seat (:func:`seat_miss`).
 
     Every scenario is checked, not only those the trials reach before a failure stops them (``stop_early``): in a
     finger shared by several parts, one part may slide off its seat into another part's pocket (the stepped block of
@@ -228,6 +228,11 @@ def nominal_seats(
             if not out_of_arena(error):
                 raise
             continue
+        if not run.held and config.arena_retry_factor > 1.0:
+            # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed with
+            # the full run's larger arena, simulated again (its outcome replaces the first in the cache)
+            larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
+            run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}))
         offset = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), scene.part_com_mm)
         missed = seat_miss(run.held, *offset, config)
         if missed is not None:
