@@ -224,15 +224,15 @@ def nominal_seats(
         scene = built[number][2]
         try:
             run = nominal_grasp(scene, case, config)
+            if not run.held and config.arena_retry_factor > 1.0:
+                # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed
+                # with the full run's larger arena, simulated again (its outcome replaces the first in the cache)
+                larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
+                run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}))
         except mujoco.FatalError as error:
             if not out_of_arena(error):
                 raise
             continue
-        if not run.held and config.arena_retry_factor > 1.0:
-            # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed with
-            # the full run's larger arena, simulated again (its outcome replaces the first in the cache)
-            larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
-            run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}))
         offset = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), scene.part_com_mm)
         missed = seat_miss(run.held, *offset, config)
         if missed is not None:
