@@ -153,7 +153,8 @@ class VerificationReport(_Model):
     unseated_scenarios: list[str] = Field(
         default_factory=list,
         description="Scenarios whose designed finger's unperturbed grasp drops the part or holds it off its designed "
-        "seat by more than success_mm or success_deg (METHOD §5b): they fail; choosing among candidates "
+        "seat by more than success_mm or success_deg where the flat control's holds it there (METHOD §5b, never worse "
+        "than flat): they fail; choosing among candidates "
         "(stop_early), every scenario's is checked before any trial and the first such one stops the verification",
     )
     warnings: list[str]

@@ -160,7 +160,7 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
         ran = len(scenario.fcso.trials)
         missed = nominal_miss(scenario.fcso, config)
-        if scenario.failure_reason is None and missed is not None:
+        if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
             unseated.append(case.name)
             warnings.append(f"{case.name}: {missed} (METHOD §5b)")
         if scenario.failure_reason is not None:
@@ -203,7 +203,8 @@ def nominal_seats(
     design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None]:
     """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each (two for a
-    drop), until one does not hold its part at its designed seat (:func:`seat_miss`).
+    drop), until one does not hold its part at its designed seat (:func:`seat_miss`) where the flat control's
+    unperturbed grasp does (never worse than flat: a part flat pads drop or hold off its seat too rejects nothing).
 
     Every scenario is checked, not only those the trials reach before a failure stops them (``stop_early``): in a
     finger shared by several parts, one part may slide off its seat into another part's pocket (the stepped block of
@@ -215,29 +216,36 @@ def nominal_seats(
     built : dict
         Scenario number -> its :func:`fitted_pieces`, for the verification to reuse.
     rejected : (str, str) or None
-        The first scenario whose grasp misses its seat and why; None when every one holds its part there (a
-        scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
+        The first scenario whose grasp misses its seat where flat pads' does not, and why; None when there is none
+        (a scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
     """
     built = {}
     for number, case in enumerate(design.cases):
         built[number] = fitted_pieces(case, design, config)
-        scene = built[number][2]
+        pieces, _, scene = built[number]
         try:
-            run = nominal_grasp(scene, case, config)
-            if not run.held and config.arena_retry_factor > 1.0:
-                # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed
-                # with the full run's larger arena, simulated again (its outcome replaces the first in the cache)
-                larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
-                run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}))
+            missed = _nominal_seat_miss(scene, case, config, "fcso")
+            # flat pads that cannot hold the part at its seat either leave nothing a carving would be worse than
+            if missed is not None:
+                flat = build_scene(case, pieces.pieces, None, design.finger_hull_mm, config)
+                if _nominal_seat_miss(flat, case, config, "flat") is None:
+                    return built, (case.name, missed)
         except mujoco.FatalError as error:
             if not out_of_arena(error):
                 raise
-            continue
-        offset = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), scene.part_com_mm)
-        missed = seat_miss(run.held, *offset, config)
-        if missed is not None:
-            return built, (case.name, missed)
     return built, None
+
+
+def _nominal_seat_miss(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str) -> str | None:
+    """:func:`seat_miss` of a finger's (``kind``) unperturbed grasp in ``scene``."""
+    run = nominal_grasp(scene, case, config, kind)
+    if not run.held and config.arena_retry_factor > 1.0:
+        # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed with the
+        # full run's larger arena, simulated again (its outcome replaces the first in the cache)
+        larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
+        run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}), kind)
+    offset = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), scene.part_com_mm)
+    return seat_miss(run.held, *offset, config)
 
 
 def seat_miss(held: bool, offset_mm: float, offset_deg: float, config: VerifyConfig) -> str | None:
