@@ -3,7 +3,7 @@
 METHOD §7b, §7c and §12. Run from the repository root::
 
     python -m benchmarks.bench_truth [--splits development,test,suite] [--seeds N] [--trials N] [--top-k K]
-                                     [--families NAME,...] [--candidates K] [--bunny]
+                                     [--families NAME,...] [--shared-only] [--candidates K] [--bunny]
 
 Three sets of parts, every one designed with ``fcso.DesignConfig()`` as it
 ships: no part gets settings of its own, no pose or yaw is chosen for it.
@@ -15,6 +15,9 @@ ships: no part gets settings of its own, no pose or yaw is chosen for it.
   development (about a third), and jobs of 2-4 parts sharing one finger,
   held-out families among them. Reported, never tuned on;
 - ``suite``: the hand-made parts of :mod:`examples.sim_parts`.
+
+``--shared-only`` runs only the shared-finger jobs of the development and test
+splits (:data:`SHARED_JOBS`; the suite has none).
 
 The delivered candidate is chosen as the daemon chooses it (``--top-k``
 candidates verified in the measure's order, each stopped at its first failed
@@ -109,10 +112,11 @@ def suite_jobs() -> list[Job]:
     return [Job(name, "suite", [(name, mesh, caging)]) for name, mesh, caging in made]
 
 
-def drawn_jobs(split: str, seeds: int, families: set[str] | None) -> list[Job]:
-    """One job per drawn part of ``split``, and the split's shared-finger jobs of :data:`SHARED_JOBS`."""
+def drawn_jobs(split: str, seeds: int, families: set[str] | None, shared_only: bool = False) -> list[Job]:
+    """One job per drawn part of ``split`` (none with ``shared_only``), and the split's shared-finger jobs of
+    :data:`SHARED_JOBS`."""
     drawn = [p for p in part_families.split(split, seeds) if not families or p.family in families]
-    jobs = [Job(p.name, split, [(p.name, p.mesh, p.caging)]) for p in drawn]
+    jobs = [] if shared_only else [Job(p.name, split, [(p.name, p.mesh, p.caging)]) for p in drawn]
     first = {p.family: p for p in part_families.split(split, 1)}
     for group in SHARED_JOBS[split]:
         if families and not families & set(group):
@@ -175,6 +179,10 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         )
         figures.rows.append(row)
         notes = [] if scenario.beats_flat else ["design: flat is as good"]
+        if not designed.nominal_held:
+            notes.append("nominal grasp dropped it")
+        elif designed.nominal_offset_mm > every.success_mm or designed.nominal_offset_deg > every.success_deg:
+            notes.append(f"nominal grasp {designed.nominal_offset_mm:.1f} mm {designed.nominal_offset_deg:.1f} deg off")
         if designed.success_rate < 0.9:
             notes.append(miss_reason(designed, every))
         if row.weaker:
@@ -190,7 +198,8 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         )
     for verified in ranking:
         candidate = next(c for c in report.candidates if c.index == verified.index)
-        if all(n == every.trials for n in verified.trials_run):
+        # a candidate rejected before its trials (METHOD §5b) ran none
+        if verified.trials_run and all(n == every.trials for n in verified.trials_run):
             q = min(s.effective_area for s in candidate.per_scenario)
             figures.correlation.append((candidate.quality, q, float(np.mean(verified.success_rates))))
     if args.candidates:
@@ -272,6 +281,9 @@ def main() -> None:
     parser.add_argument("--splits", default="development,test,suite", help="comma-separated: development, test, suite")
     parser.add_argument("--seeds", type=int, default=1, help="parts drawn per family and split (1 or 2)")
     parser.add_argument("--families", help="comma-separated family names to run (default: all)")
+    parser.add_argument(
+        "--shared-only", action="store_true", help="only the shared-finger jobs (SHARED_JOBS; no suite parts)"
+    )
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--top-k", type=int, default=3, help="candidates verified by the choice ([verify] top_k)")
     parser.add_argument(
@@ -296,8 +308,10 @@ def main() -> None:
                 jobs.append(Job("stanford-bunny", "suite", [("stanford-bunny", bunny, True)]))
             if families:
                 jobs = [j for j in jobs if j.name in families]
+            if args.shared_only:
+                jobs = []
         else:
-            jobs = drawn_jobs(split, args.seeds, families)
+            jobs = drawn_jobs(split, args.seeds, families, args.shared_only)
         print(f"\n== {split}")
         print(
             f"{'part':<34} {'pose':>4} {'pad':>6} {'capture':>7} {'flat':>5} | {'designed':>7} {'median':>8} "

@@ -73,16 +73,18 @@ def verify_top(
     at the first whose every scenario passes; no further candidate is
     started once ``config.choice_budget_s`` went on verification. With
     ``config.stop_early`` a candidate's verification stops as soon as it can
-    no longer pass (:func:`fcso.sim.schedule.scenario_simulations`). When none of
-    those tried passes, the best of them by truth is delivered: the highest
-    worst-scenario success count over the planned trials
+    no longer pass (:func:`fcso.sim.schedule.scenario_simulations`), and one whose unperturbed grasp leaves any
+    part off its seat where flat pads hold it there is rejected before its trials
+    (:func:`fcso.sim.verify.nominal_seats`, METHOD §5b). When none
+    of those tried passes, the best of them by truth is delivered: one that holds every part at its seat, then the
+    highest worst-scenario success count over the planned trials
     (:func:`worst_success_share`), then the measure's order; but flat pads the
     design chose (``report.finger.flat_pads``) are kept unless a carving passes.
     The delivered candidate's verification is complete whatever stopped
     early in the choice (:func:`fcso.sim.verify.verify_delivered`, METHOD
     §12b): every trial and the holding test, designed and flat. A carving
-    that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`)
-    is delivered as flat pads on its grasps: never worse than flat by the judge.
+    that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`), or that holds a part off its
+    seat, is delivered as flat pads on its grasps: never worse than flat by the judge.
     None passing, the other pad sizes' candidates are verified alike, best size first, and the first that passes
     is delivered.
 
@@ -113,9 +115,7 @@ def verify_top(
     # flat pads were designed because no carving captures a part better: a carving replaces them only by passing
     flat_design = result.report.finger.flat_pads
     fallback = [o for o in outcomes if o[1].index == result.report.best] if flat_design else outcomes
-    preferred = passing + sorted(
-        (o for o in fallback if not o[3].passed), key=lambda o: (worst_success_share(o[3]), -o[0]), reverse=True
-    )
+    preferred = passing + sorted((o for o in fallback if not o[3].passed), key=_truth_rank, reverse=True)
     chosen, fused, unwritable = _deliverable(result, preferred, outcomes, config, progress)
     ranking = _ranking(outcomes, chosen[1].index)
     rank, candidate, built, verification = chosen
@@ -142,8 +142,10 @@ def verify_top(
             f"pad size {size[0]:g} x {size[1]:g} mm, {why}, after none of the {first_size[0]:g} mm pads' "
             "candidates passed"
         )
-    if not kept_flat and flat_beats(verification):
-        why += f"; flat pads beat it ({verdict_text(verification)}): delivered with flat pads on its grasps"
+    if not kept_flat and (flat_beats(verification) or verification.unseated_scenarios):
+        # a part held off its seat is held where the robot does not expect it, whatever the other parts' trials
+        beaten = "flat pads beat it" if flat_beats(verification) else "it holds a part off its seat (METHOD §5b)"
+        why += f"; {beaten} ({verdict_text(verification)}): delivered with flat pads on its grasps"
         result, design, verification = _flat_delivery(
             result, candidate, [*unwritable, f"verification delivered {why}"], config, progress
         )
@@ -157,6 +159,14 @@ def verify_top(
             )
     verification = verification.model_copy(update={"ranking": ranking, "choice": why})
     return result, verification, design, ranking
+
+
+def _truth_rank(outcome: tuple) -> tuple:
+    """How a verified ``(rank, candidate, built, verification)`` that did not pass ranks by truth, larger first: one
+    that holds every part at its seat (METHOD §5b), then by its worst scenario's successful trials
+    (:func:`worst_success_share`), then by the measure's order."""
+    rank, _, _, verification = outcome
+    return not verification.unseated_scenarios, worst_success_share(verification), -rank
 
 
 def _verified_by_size(

@@ -102,7 +102,8 @@ class ScenarioVerification(_Model):
         "could no longer reach pass_success_rate (stop_early); null: every trial ran",
     )
     passed: bool = Field(
-        description="The designed finger's success rate reaches pass_success_rate and it holds as well as flat pads"
+        description="The designed finger's success rate reaches pass_success_rate, it holds as well as flat pads, and "
+        "its unperturbed grasp holds the part at its designed seat (METHOD §5b)"
     )
     frames: list[PoseSnapshot] = Field(
         description="The designed finger's unperturbed grasp, 20 frames per second (MCAP scene)"
@@ -148,6 +149,13 @@ class VerificationReport(_Model):
         default_factory=list,
         description="Scenarios not verified because an earlier one had failed, so the design could not pass "
         "(stop_early)",
+    )
+    unseated_scenarios: list[str] = Field(
+        default_factory=list,
+        description="Scenarios whose designed finger's unperturbed grasp drops the part or holds it off its designed "
+        "seat by more than success_mm or success_deg where the flat control's holds it there (METHOD §5b, never worse "
+        "than flat): they fail; choosing among candidates "
+        "(stop_early), every scenario's is checked before any trial and the first such one stops the verification",
     )
     warnings: list[str]
     timings_s: dict[str, float] = Field(description="Wall time per stage, s")
@@ -207,6 +215,8 @@ def verdict_text(verification: VerificationReport) -> str:
         head += ", better than flat pads"
     if not_held(verification):
         head += ", NOT HELD in " + ", ".join(not_held(verification))
+    if verification.unseated_scenarios:
+        head += ", OFF ITS SEAT in " + ", ".join(verification.unseated_scenarios)
     return f"{head}: " + "; ".join(figures or ["no scenario"])
 
 

@@ -206,6 +206,14 @@ def scenario_simulations(
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 
+def nominal_grasp(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str = "fcso") -> TrialRun:
+    """A finger's (``scene``; ``kind`` "fcso" or "flat") unperturbed grasp alone, in this process:
+    :func:`scenario_simulations`' first grasp, read from or written to its cache entry, so the full run reads it
+    back."""
+    keys = {kind: scene_key(scene, case, config)}
+    return _simulated_grasp(({kind: scene}, case, config, keys), (kind, 0, None))
+
+
 def _grasp_plan(
     case: GraspCase, scene_key_hex: str, kind: str, number: int, error: np.ndarray | None
 ) -> tuple[np.ndarray, bool, str]:

@@ -28,7 +28,7 @@ from .report import (
     successes,
 )
 from .scene import GraspCase, Scene, build_scene, with_arena
-from .schedule import ScenarioSimulations, scenario_simulations
+from .schedule import ScenarioSimulations, nominal_grasp, scenario_simulations
 from .trials import Frame, approach_opening_mm, perturbations, pose_error, seated_overlaps_mm
 
 
@@ -107,6 +107,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     simulated further: a scenario's trials stop at the deciding failure
     (:func:`scenario_simulations`), its holding test is skipped, and so are the
     later scenarios (``unverified_scenarios``); the verdict is the full run's.
+    Before any trial it then judges every scenario's unperturbed grasp (:func:`nominal_seats`, METHOD §5b) and
+    stops at the first that does not hold its part at its designed seat (timed as ``seats``); without
+    ``stop_early`` such a scenario fails after its full run. Either way it is listed in ``unseated_scenarios``.
 
     Parameters
     ----------
@@ -129,8 +132,17 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         report_progress("verification", counter[0], total)
 
     report_progress("verification", 0, total)
-    scenarios, warnings, unverified = [], [], []
-    for stream, case in enumerate(design.cases):
+    scenarios, warnings, unverified, unseated = [], [], [], []
+    built, rejected = {}, None
+    if config.stop_early:
+        clock = time.perf_counter()
+        built, rejected = nominal_seats(design, config)
+        timings["seats"] = time.perf_counter() - clock
+    if rejected is not None:
+        name, why = rejected
+        unseated, unverified = [name], [c.name for c in design.cases]
+        warnings.append(f"{name}: {why}: the design cannot pass, no trial is run (METHOD §5b, stop_early)")
+    for stream, case in enumerate([] if rejected else design.cases):
         if scenarios and config.stop_early and not scenarios[-1].passed:
             # the design can no longer pass: the verdict is settled
             unverified = [c.name for c in design.cases[stream:]]
@@ -140,13 +152,17 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
             )
             break
         clock = time.perf_counter()
-        pieces, pad, seated = fitted_pieces(case, design, config)
+        pieces, pad, seated = built.pop(stream, None) or fitted_pieces(case, design, config)
         timings["decomposition"] += time.perf_counter() - clock
         clock = time.perf_counter()
         scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance, seated)
         timings["simulation"] += time.perf_counter() - clock
         warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
         ran = len(scenario.fcso.trials)
+        missed = nominal_miss(scenario.fcso, config)
+        if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
+            unseated.append(case.name)
+            warnings.append(f"{case.name}: {missed} (METHOD §5b)")
         if scenario.failure_reason is not None:
             warnings.append(f"{case.name}: not simulated: {scenario.failure_reason}")
         elif scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
@@ -177,9 +193,81 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         scenarios=scenarios,
         passed=all(s.passed for s in scenarios) and not unverified,
         unverified_scenarios=unverified,
+        unseated_scenarios=unseated,
         warnings=warnings,
         timings_s={k: round(v, 3) for k, v in timings.items()},
     )
+
+
+def nominal_seats(
+    design: DesignUnderTest, config: VerifyConfig
+) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None]:
+    """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each (two for a
+    drop), until one does not hold its part at its designed seat (:func:`seat_miss`) where the flat control's
+    unperturbed grasp does (never worse than flat: a part flat pads drop or hold off its seat too rejects nothing).
+
+    Every scenario is checked, not only those the trials reach before a failure stops them (``stop_early``): in a
+    finger shared by several parts, one part may slide off its seat into another part's pocket (the stepped block of
+    bench_truth's development split, 9.6 mm off) while the first scenario's trials decide the verdict. The grasps are
+    cached as the full run's own (:func:`fcso.sim.schedule.nominal_grasp`).
+
+    Returns
+    -------
+    built : dict
+        Scenario number -> its :func:`fitted_pieces`, for the verification to reuse.
+    rejected : (str, str) or None
+        The first scenario whose grasp misses its seat where flat pads' does not, and why; None when there is none
+        (a scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
+    """
+    built = {}
+    for number, case in enumerate(design.cases):
+        built[number] = fitted_pieces(case, design, config)
+        pieces, _, scene = built[number]
+        try:
+            missed = _nominal_seat_miss(scene, case, config, "fcso")
+            # flat pads that cannot hold the part at its seat either leave nothing a carving would be worse than
+            if missed is not None:
+                flat = build_scene(case, pieces.pieces, None, design.finger_hull_mm, config)
+                if _nominal_seat_miss(flat, case, config, "flat") is None:
+                    return built, (case.name, missed)
+        except mujoco.FatalError as error:
+            if not out_of_arena(error):
+                raise
+    return built, None
+
+
+def _nominal_seat_miss(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str) -> str | None:
+    """:func:`seat_miss` of a finger's (``kind``) unperturbed grasp in ``scene``."""
+    run = nominal_grasp(scene, case, config, kind)
+    if not run.held and config.arena_retry_factor > 1.0:
+        # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed with the
+        # full run's larger arena, simulated again (its outcome replaces the first in the cache)
+        larger = with_arena(scene, int(scene.arena_bytes * config.arena_retry_factor))
+        run = nominal_grasp(larger, case, config.model_copy(update={"reuse_simulations": False}), kind)
+    offset = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), scene.part_com_mm)
+    return seat_miss(run.held, *offset, config)
+
+
+def seat_miss(held: bool, offset_mm: float, offset_deg: float, config: VerifyConfig) -> str | None:
+    """Why a designed finger's unperturbed grasp does not hold its part as designed (METHOD §5b), or None when it does.
+
+    It must lift the part (``held``) at the seat the design gives it: within ``config.success_mm`` and
+    ``config.success_deg`` (``offset_mm``, ``offset_deg``: its centre of mass's distance and its rotation from there),
+    the tolerance of a precision trial, whose pose is judged against this grasp's.
+    """
+    if not held:
+        return "the unperturbed grasp drops the part"
+    if offset_mm > config.success_mm or offset_deg > config.success_deg:
+        return (
+            f"the unperturbed grasp holds the part {offset_mm:.1f} mm and {offset_deg:.1f} deg off its designed seat "
+            f"(tolerance {config.success_mm:g} mm, {config.success_deg:g} deg)"
+        )
+    return None
+
+
+def nominal_miss(finger: FingerResult, config: VerifyConfig) -> str | None:
+    """:func:`seat_miss` of a simulated finger's unperturbed grasp."""
+    return seat_miss(finger.nominal_held, finger.nominal_offset_mm, finger.nominal_offset_deg, config)
 
 
 def verify_delivered(
@@ -368,7 +456,7 @@ def verify_case(
         flat=results["flat"],
         holds_as_flat=holds,
         stopped_after_trials=stopped,
-        passed=not precision_failed and bool(holds),
+        passed=not precision_failed and bool(holds) and nominal_miss(results["fcso"], config) is None,
         frames=[_snapshot(f) for f in frames],
         reused_simulations=simulated.reused,
     )

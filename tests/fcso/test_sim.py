@@ -30,7 +30,7 @@ from fcso.sim.collision import (
 )
 from fcso.sim.config import VerifyConfig
 from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
-from fcso.sim.report import Fidelity, VerificationReport
+from fcso.sim.report import Fidelity, VerificationReport, verdict_text
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.schedule import scenario_simulations
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
@@ -337,6 +337,36 @@ def test_carved_pad_centres_a_displaced_part_and_flat_pad_does_not(ridged, tmp_p
         errors[kind] = pose_error(run.part_in_gripper, np.linalg.inv(case.tcp), case.part.center_mass)
     assert errors["carved"][0] <= 0.1
     assert errors["flat"][0] >= 1.8
+
+
+def test_a_scenario_whose_unperturbed_grasp_slides_off_its_seat_fails_and_is_rejected_before_any_trial(
+    ridged, tmp_path
+):
+    # METHOD §5b in a finger shared by scenarios: the second one's designed seat is 2 mm along the pads from the
+    # pocket (as a part resting beside another part's pocket), and the V-grooves slide its ridge into the pocket
+    # (test_carved_pad_centres_a_displaced_part_and_flat_pad_does_not): its unperturbed grasp holds the part 2 mm off
+    # its seat. The trial starts without error, so it ends where that grasp ends, a success judged against it.
+    case, _, _, hull, fingerpad = ridged
+    tcp = case.tcp.copy()
+    tcp[:3, 3] -= 2.0 * case.tcp[:3, 0]
+    shifted = dataclasses.replace(case, name="shifted pose 0", tcp=tcp)
+    design_2 = DesignUnderTest([case, shifted], fingerpad, hull)
+    settings = {"trials": 1, "position_error_mm": 0.0, "yaw_error_deg": 0.0, "lift_mm": 10.0}
+
+    full = verify(design_2, _config(tmp_path, stop_early=False, reuse_simulations=True, **settings))
+
+    seated, off = full.scenarios
+    assert seated.passed and seated.fcso.nominal_offset_mm <= 0.3
+    assert off.fcso.nominal_held and 1.7 <= off.fcso.nominal_offset_mm <= 2.3 and off.fcso.trials[0].success
+    assert not off.passed and not full.passed and full.unseated_scenarios == ["shifted pose 0"]
+    assert "OFF ITS SEAT in shifted pose 0" in verdict_text(full)
+    assert any(w.startswith("shifted pose 0: the unperturbed grasp holds the part 2.0 mm") for w in full.warnings)
+
+    # choosing among candidates (stop_early): every scenario's unperturbed grasp is judged before any trial, the
+    # second rejects the design, and no trial is run
+    chosen = verify(design_2, _config(tmp_path, reuse_simulations=True, **settings))
+    assert not chosen.passed and chosen.scenarios == [] and chosen.unseated_scenarios == ["shifted pose 0"]
+    assert chosen.unverified_scenarios == [case.name, "shifted pose 0"]
 
 
 def test_flat_pad_holding_force_rises_with_friction(tmp_path):
@@ -753,8 +783,9 @@ def test_a_scenario_out_of_mujocos_arena_is_simulated_again_with_a_larger_one_or
     )
     assert retried.warnings == sized.warnings
     # without a retry, or when the larger arena runs out too (20 kB, then 80 kB), the scenario fails with the reason
+    # (run in full: choosing, a grasp short of its arena that drops the part rejects the design before its trials)
     for arena in ({"arena_mb": 0.03, "arena_retry_factor": 1.0}, {"arena_mb": 0.02}):
-        report = verify(under_test, _config(tmp_path, **arena, **settings))
+        report = verify(under_test, _config(tmp_path, stop_early=False, **arena, **settings))
         scenario = report.scenarios[0]
         assert not report.passed and not scenario.passed and scenario.fcso.trials == scenario.flat.trials == []
         assert scenario.failure_reason.startswith("MuJoCo ran out of its memory arena (")
