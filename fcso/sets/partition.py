@@ -446,11 +446,12 @@ def _certified_clique(graph: _ConflictGraph) -> tuple[list[int], dict[tuple[int,
 def _partition_by_counts(
     screener: SetScreener, placing: np.ndarray, lower: int, config: DesignConfig, progress: Progress
 ) -> tuple[tuple[int, ...], list[int]]:
-    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then from ``lower`` sets up, placed greedily
-    by ``placing`` (pairs' compatibility) and improved by moves; the best seen and the numbers of sets tried.
+    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then into one set fewer than the last one
+    used while it reaches ``min_retained``, down to ``lower`` sets, placed greedily by ``placing`` (pairs'
+    compatibility) and improved by moves; the best seen and the numbers of sets tried.
 
-    With ``max = "auto"`` the first partition may use one set per part: the greedy placing opens a set only for a
-    part no set suits, so it uses as many as the conflicts need; fewer are then tried from ``lower`` up to it.
+    The greedy placing opens a set only for a part no set suits, so a partition may use fewer sets than allowed (with
+    ``max = "auto"``, one per part): the next count tried is below the sets it used.
     """
     settings = config.finger_sets
     max_sets, threshold = settings.sets_allowed(len(placing)), settings.min_retained
@@ -463,13 +464,17 @@ def _partition_by_counts(
 
     tried, seen = [], []
     first = min(lower, max_sets)
-    counts = [max_sets]
-    step = max_sets - first + 1
+    count = max_sets
     # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
     # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
-    # searched; else the fewest sets from the lower bound up (with "auto", up to the sets the first partition used)
-    for number, count in enumerate(counts):
+    # searched; else one set fewer than the last partition used, down to the lower bound, until a count misses
+    # min_retained: by the same argument every count below it misses it too. So one count that misses is searched in
+    # full (every move, its sets searched), not every count between the lower bound and the fewest that reach it
+    while count >= first:
+        number = len(tried)
         tried.append(count)
+        # the counts left if every one down to the lower bound is searched
+        step = number + count - first + 1
         progress("partition", number, step, f"{count} sets")
 
         def moved(
@@ -488,13 +493,10 @@ def _partition_by_counts(
         screener.retained(doubt)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        reached = searched_key(current)[0] == 1
-        if reached != (count == max_sets):
+        if searched_key(current)[0] != 1:
             break
-        if number == 0:
-            counts.extend(range(first, max(current) + 1 if settings.max == "auto" else max_sets))
-            step = len(counts)
-    progress("partition", step, step, f"{tried[-1]} sets")
+        count = max(current)
+    progress("partition", len(tried), len(tried), f"{tried[-1]} sets")
     return max(seen, key=searched_key), tried
 
 
