@@ -76,3 +76,31 @@ def test_the_claim_is_made_on_these_parts(screener, method):
     assert scaled.fewest_sets_proven and scaled.lower_bound_sets == 2
     if method == "carving_neighbours+colouring+local_moves":
         assert scaled.screened_pairs < len(PARTS) * (len(PARTS) - 1) // 2
+
+
+#: The knobs above with three that taper less or not at all: with ``max = "auto"`` and 0.36 to keep, the greedy placing
+#: by the quick figures uses three sets; two reach min_retained, one does not.
+MORE_PARTS = PARTS + [knob_part("narrowing-less", 12.0, 0.85), knob_part("widening-less", 10.2, 1 / 0.85)]
+MORE_PARTS.append(knob_part("straight", 12.0, 1.0))
+
+
+def test_auto_tries_fewer_sets_downwards_until_a_count_misses():
+    # from the sets the first partition used, one fewer at a time: the first count that misses min_retained ends the
+    # search (with fewer sets, every part keeping no more, it misses too); the fewest that reached are taken
+    cfg = config().updated({"quality": {"measure": "paper"}})
+    prepared = prepare(MORE_PARTS, cfg)
+    solos = [solo_quality(prepared, m, cfg) for m in range(len(prepared.scenarios))]
+    part_scenarios = [
+        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u] for u in range(len(MORE_PARTS))
+    ]
+    settings = {"finger_sets": {"max": "auto", "min_retained": 0.36, "exhaustive_parts": 1}}
+    with WorkerPool((prepared, screening_pools(solos, 10), solo_picks(solos), cfg), 1) as pool:
+        screener = SetScreener(prepared, part_scenarios, solos, cfg, pool)
+        scaled = search_partition(screener, len(MORE_PARTS), cfg.updated(settings), quiet)
+        every_part = screener.retained([frozenset(range(len(MORE_PARTS)))])[0]
+    # one set per part allowed, three used, then two (reached) and one (missed)
+    assert scaled.sets_tried == [8, 2, 1]
+    assert min(float(r.min()) for r in every_part.values()) < 0.36
+    # the knobs tapering steeply in one finger, the others in another
+    assert scaled.assignment == (0, 0, 0, 0, 0, 1, 1, 1)
+    assert float(scaled.retained.min()) >= 0.36
