@@ -80,8 +80,12 @@ def test_the_claim_is_made_on_these_parts(screener, method):
 
 #: The knobs above with three that taper less or not at all: with ``max = "auto"`` and 0.36 to keep, the greedy placing
 #: by the quick figures uses three sets; two reach min_retained, one does not.
-MORE_PARTS = PARTS + [knob_part("narrowing-less", 12.0, 0.85), knob_part("widening-less", 10.2, 1 / 0.85)]
-MORE_PARTS.append(knob_part("straight", 12.0, 1.0))
+MORE_PARTS = [
+    *PARTS,
+    knob_part("narrowing-less", 12.0, 0.85),
+    knob_part("widening-less", 10.2, 1 / 0.85),
+    knob_part("straight", 12.0, 1.0),
+]
 
 
 def test_auto_tries_fewer_sets_downwards_until_a_count_misses():
