@@ -278,8 +278,9 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        all its parts are suspected (their pairs screened then, at most
        ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
        it is a lower bound among the screened pairs only.
-    3. ``max`` sets first, then (only if they reach ``min_retained``) from
-       the lower bound's number of sets up: parts go greedily, most suspected
+    3. ``max`` sets first, then (only while they reach ``min_retained``) one
+       set fewer than the last partition used, down to the lower bound's
+       number of sets: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
@@ -288,10 +289,10 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
        (a large set's quick figure is pessimistic and flat), taken only when
        they reach ``min_retained`` or raise the worst r. The fewest sets
-       that reach ``min_retained`` are taken, else the best seen: when
-       ``max`` sets miss it no other number is searched (if a part never
-       keeps more in a larger set, a split into fewer sets refines into
-       ``max`` sets that keep as much).
+       that reach ``min_retained`` are taken, else the best seen: the first
+       number of sets that misses it ends the search (if a part never keeps
+       more in a larger set, a split into fewer sets refines into more sets
+       that keep as much, so fewer sets miss it too).
 
     Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
     quick screenings (a set's size each) or a bounded number of set searches.
