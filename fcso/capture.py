@@ -315,24 +315,14 @@ def _add_side_gaps(pad, turned, whole, fraction, gap):
     count_v, columns = pad.shape
     lowest = whole.min()
     shifts = whole.max() + 2 - lowest
-    # per turned row, the span of its columns where the part is: outside it the clearance is infinite, and a part
-    # smaller than the pad leaves most rows empty
-    first = np.full(count_v, columns)
-    last = np.zeros(count_v, dtype=np.int64)
     for yaw in range(turned.shape[0]):
-        for source in range(count_v):
-            first[source], last[source] = columns, 0
-            for column in range(columns):
-                if turned[yaw, source, column] > -np.inf:
-                    first[source] = min(first[source], column)
-                    last[source] = column + 1
         # the clearance of every whole shift per row of v: its least over the rows of w
         per_shift = np.empty((shifts, count_v))
         for shift in range(shifts):
             for v in range(count_v):
                 source = min(max(v - (lowest + shift), 0), count_v - 1)
                 least = np.inf
-                for column in range(first[source], last[source]):
+                for column in range(columns):
                     least = min(least, pad[v, column] - turned[yaw, source, column])
                 per_shift[shift, v] = least
         for offset in range(whole.shape[0]):
