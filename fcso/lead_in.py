@@ -63,11 +63,7 @@ def printed_draft(
             for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
         ]
 
-    captures = {lead_in: captures_at(lead_in)}
-    # a capture is at most 1 (every start): within FLAT_MARGIN of it under lead_in_deg, no wider draft can capture
-    # clearly more, and its landscapes (a set screening measures them for each of its finalists) go unmeasured
-    if not min(captures[lead_in]) + FLAT_MARGIN > 1.0:
-        captures.update({angle: captures_at(angle) for angle in alternatives})
+    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
     worst = {angle: min(values) for angle, values in captures.items()}
     widest = max(worst.values())
     if widest < worst[lead_in] + FLAT_MARGIN:
