@@ -246,7 +246,7 @@ _CLIQUE_ROUNDS = 12
 #: Parts probed pairwise for the conflict clique, per set allowed: the most dissimilar carvings (a constant).
 PROBES_PER_SET = 2
 #: Sets the scaled search probes for with ``[finger_sets] max = "auto"``: the default ``max``'s probes (the most
-#: dissimilar parts are where conflicts are likeliest; the conflict clique grows beyond them by its own probes).
+#: dissimilar parts are where conflicts are likeliest), and the conflict clique grown as far as for that ``max``.
 _AUTO_PROBED_SETS = 4
 #: Pairs quick-screened between two progress reports.
 _PAIRS_PER_PROGRESS = 2000
@@ -345,7 +345,6 @@ class _ConflictGraph:
 
     screener: SetScreener
     parts: int
-    max_sets: int
     probed_sets: int
     threshold: float
     progress: Progress
@@ -371,7 +370,8 @@ class _ConflictGraph:
 
     def extended(self, clique: list[int]) -> list[int]:
         """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
-        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
+        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max`` (with
+        ``"auto"``, the default max's :data:`_AUTO_PROBED_SETS`)."""
         if self.every_pair or not clique:
             return clique
         descriptors, suspected, compatibility = self.descriptors, self.suspected, self.compatibility
@@ -381,7 +381,9 @@ class _ConflictGraph:
         order = sorted(range(self.parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
         candidates = [p for p in order if p not in clique]
         for part in candidates[: 2 * PROBES_PER_SET * self.probed_sets]:
-            if len(clique) > self.max_sets:
+            # every pair of the clique is then searched as a set, and with "auto" max is the number of parts: the
+            # count search, going down, stops at the first count that misses min_retained whatever the bound
+            if len(clique) > self.probed_sets:
                 break
             self.quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
             if all(suspected[part, q] for q in clique):
@@ -392,7 +394,6 @@ class _ConflictGraph:
 def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> _ConflictGraph:
     """Step 1 of :func:`_scaled_search`: the pairs to screen, screened quickly."""
     settings = config.finger_sets
-    max_sets = settings.sets_allowed(parts)
     probed_sets = _AUTO_PROBED_SETS if settings.max == "auto" else settings.max
     every_pair = parts - 1 <= 2 * settings.pairs_per_part
     descriptors = None
@@ -407,7 +408,6 @@ def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, pro
     graph = _ConflictGraph(
         screener,
         parts,
-        max_sets,
         probed_sets,
         settings.min_retained,
         progress,
