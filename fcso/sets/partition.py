@@ -278,9 +278,9 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        all its parts are suspected (their pairs screened then, at most
        ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
        it is a lower bound among the screened pairs only.
-    3. ``max`` sets first, then (only while they reach ``min_retained``) one
-       set fewer than the last partition used, down to the lower bound's
-       number of sets: parts go greedily, most suspected
+    3. ``max`` sets first, then (only if they reach ``min_retained``) the
+       fewest sets that reach it, bisected between the lower bound and the
+       sets used: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
@@ -289,10 +289,10 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
        (a large set's quick figure is pessimistic and flat), taken only when
        they reach ``min_retained`` or raise the worst r. The fewest sets
-       that reach ``min_retained`` are taken, else the best seen: the first
-       number of sets that misses it ends the search (if a part never keeps
-       more in a larger set, a split into fewer sets refines into more sets
-       that keep as much, so fewer sets miss it too).
+       that reach ``min_retained`` are taken, else the best seen: a number
+       of sets that misses it rules out every smaller one (if a part never
+       keeps more in a larger set, a split into fewer sets refines into more
+       sets that keep as much, so fewer sets miss it too).
 
     Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
     quick screenings (a set's size each) or a bounded number of set searches.
@@ -447,13 +447,10 @@ def _certified_clique(graph: _ConflictGraph) -> tuple[list[int], dict[tuple[int,
 def _partition_by_counts(
     screener: SetScreener, placing: np.ndarray, lower: int, config: DesignConfig, progress: Progress
 ) -> tuple[tuple[int, ...], list[int]]:
-    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then into one set fewer than the last one
-    used while it reaches ``min_retained``, down to ``lower`` sets, placed greedily by ``placing`` (pairs'
-    compatibility) and improved by moves; the best seen and the numbers of sets tried.
-
-    The greedy placing opens a set only for a part no set suits, so a partition may use fewer sets than allowed (with
-    ``max = "auto"``, one per part): the next count tried is below the sets it used.
-    """
+    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then (if they reach ``min_retained``) into
+    the counts a bisection picks between ``lower`` and the fewest sets used so far (the greedy placing opens a set only
+    for a part no set suits), placed greedily by ``placing`` (pairs' compatibility) and improved by moves; the best
+    seen and the numbers of sets tried."""
     settings = config.finger_sets
     max_sets, threshold = settings.sets_allowed(len(placing)), settings.min_retained
 
@@ -464,18 +461,17 @@ def _partition_by_counts(
         return partition_key(assignment, screener.partition_retained(assignment), threshold)
 
     tried, seen = [], []
-    first = min(lower, max_sets)
-    count = max_sets
+    # counts below low are ruled out; fewest is the fewest sets a partition reaching min_retained used
+    low, fewest, count = min(lower, max_sets), max_sets + 1, max_sets
     # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
-    # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
-    # searched; else one set fewer than the last partition used, down to the lower bound, until a count misses
-    # min_retained: by the same argument every count below it misses it too. So one count that misses is searched in
-    # full (every move, its sets searched), not every count between the lower bound and the fewest that reach it
-    while count >= first:
+    # lower bound assumes, a split into fewer sets refines into max sets keeping as much); else, by the same argument,
+    # a count that misses rules out every smaller one, so the fewest are bisected: counts tried one by one from a loose
+    # lower bound, or from the many sets of the greedy placing with "auto", cost a count search (moves, set searches)
+    # per set between them
+    while True:
         number = len(tried)
         tried.append(count)
-        # the counts left if every one down to the lower bound is searched
-        step = number + count - first + 1
+        step = number + 1 + max(0, min(fewest, max_sets) - low).bit_length()
         progress("partition", number, step, f"{count} sets")
 
         def moved(
@@ -494,9 +490,15 @@ def _partition_by_counts(
         screener.retained(doubt)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        if searched_key(current)[0] != 1:
+        if searched_key(current)[0] == 1:
+            fewest = min(fewest, max(current) + 1)
+        elif count == max_sets:
             break
-        count = max(current)
+        else:
+            low = count + 1
+        if low >= fewest:
+            break
+        count = (low + fewest - 1) // 2
     progress("partition", len(tried), len(tried), f"{tried[-1]} sets")
     return max(seen, key=searched_key), tried
 
