@@ -246,7 +246,7 @@ _CLIQUE_ROUNDS = 12
 #: Parts probed pairwise for the conflict clique, per set allowed: the most dissimilar carvings (a constant).
 PROBES_PER_SET = 2
 #: Sets the scaled search probes for with ``[finger_sets] max = "auto"``: the default ``max``'s probes (the most
-#: dissimilar parts are where conflicts are likeliest), and the conflict clique grown as far as for that ``max``.
+#: dissimilar parts are where conflicts are likeliest; the conflict clique grows beyond them by its own probes).
 _AUTO_PROBED_SETS = 4
 #: Pairs quick-screened between two progress reports.
 _PAIRS_PER_PROGRESS = 2000
@@ -278,9 +278,8 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        all its parts are suspected (their pairs screened then, at most
        ``PROBES_PER_SET x max`` parts per round, until it exceeds ``max``);
        it is a lower bound among the screened pairs only.
-    3. ``max`` sets first, then (only if they reach ``min_retained``) the
-       fewest sets that reach it, bisected between the lower bound and the
-       sets used: parts go greedily, most suspected
+    3. ``max`` sets first, then (only if they reach ``min_retained``) from
+       the lower bound's number of sets up: parts go greedily, most suspected
        first, to the set they suit best, then parts of the worst scenario's
        set move while a move improves the objective (at most
        :data:`_MOVES_PER_COUNT` moves, judged by the best figure known for
@@ -289,10 +288,10 @@ def _scaled_search(screener: SetScreener, parts: int, config: DesignConfig, prog
        :data:`_SEARCHED_MOVES` best by the quick figure searched and deciding
        (a large set's quick figure is pessimistic and flat), taken only when
        they reach ``min_retained`` or raise the worst r. The fewest sets
-       that reach ``min_retained`` are taken, else the best seen: a number
-       of sets that misses it rules out every smaller one (if a part never
-       keeps more in a larger set, a split into fewer sets refines into more
-       sets that keep as much, so fewer sets miss it too).
+       that reach ``min_retained`` are taken, else the best seen: when
+       ``max`` sets miss it no other number is searched (if a part never
+       keeps more in a larger set, a split into fewer sets refines into
+       ``max`` sets that keep as much).
 
     Pair screenings grow linearly with the parts beyond ``2 pairs_per_part + 1`` of them; every other step costs
     quick screenings (a set's size each) or a bounded number of set searches.
@@ -345,6 +344,7 @@ class _ConflictGraph:
 
     screener: SetScreener
     parts: int
+    max_sets: int
     probed_sets: int
     threshold: float
     progress: Progress
@@ -370,8 +370,7 @@ class _ConflictGraph:
 
     def extended(self, clique: list[int]) -> list[int]:
         """The clique grown by parts whose quick pairs with all its parts are suspected (sparse graph): candidates
-        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max`` (with
-        ``"auto"``, the default max's :data:`_AUTO_PROBED_SETS`)."""
+        the most dissimilar to the clique first, at most PROBES_PER_SET x max of them, until it exceeds ``max``."""
         if self.every_pair or not clique:
             return clique
         descriptors, suspected, compatibility = self.descriptors, self.suspected, self.compatibility
@@ -381,9 +380,7 @@ class _ConflictGraph:
         order = sorted(range(self.parts), key=lambda p: (-int(degree[p]), -float(apart[p]), p))
         candidates = [p for p in order if p not in clique]
         for part in candidates[: 2 * PROBES_PER_SET * self.probed_sets]:
-            # every pair of the clique is then searched as a set, and with "auto" max is the number of parts: the
-            # count search, going down, stops at the first count that misses min_retained whatever the bound
-            if len(clique) > self.probed_sets:
+            if len(clique) > self.max_sets:
                 break
             self.quick_pairs([(min(part, q), max(part, q)) for q in clique if np.isnan(compatibility[part, q])])
             if all(suspected[part, q] for q in clique):
@@ -394,6 +391,7 @@ class _ConflictGraph:
 def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, progress: Progress) -> _ConflictGraph:
     """Step 1 of :func:`_scaled_search`: the pairs to screen, screened quickly."""
     settings = config.finger_sets
+    max_sets = settings.sets_allowed(parts)
     probed_sets = _AUTO_PROBED_SETS if settings.max == "auto" else settings.max
     every_pair = parts - 1 <= 2 * settings.pairs_per_part
     descriptors = None
@@ -408,6 +406,7 @@ def _conflict_graph(screener: SetScreener, parts: int, config: DesignConfig, pro
     graph = _ConflictGraph(
         screener,
         parts,
+        max_sets,
         probed_sets,
         settings.min_retained,
         progress,
@@ -447,10 +446,12 @@ def _certified_clique(graph: _ConflictGraph) -> tuple[list[int], dict[tuple[int,
 def _partition_by_counts(
     screener: SetScreener, placing: np.ndarray, lower: int, config: DesignConfig, progress: Progress
 ) -> tuple[tuple[int, ...], list[int]]:
-    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then (if they reach ``min_retained``) into
-    the counts a bisection picks between ``lower`` and the fewest sets used so far (the greedy placing opens a set only
-    for a part no set suits), placed greedily by ``placing`` (pairs' compatibility) and improved by moves; the best
-    seen and the numbers of sets tried."""
+    """Step 3 of :func:`_scaled_search`: partitions into ``max`` sets, then from ``lower`` sets up, placed greedily
+    by ``placing`` (pairs' compatibility) and improved by moves; the best seen and the numbers of sets tried.
+
+    With ``max = "auto"`` the first partition may use one set per part: the greedy placing opens a set only for a
+    part no set suits, so it uses as many as the conflicts need; fewer are then tried from ``lower`` up to it.
+    """
     settings = config.finger_sets
     max_sets, threshold = settings.sets_allowed(len(placing)), settings.min_retained
 
@@ -461,17 +462,14 @@ def _partition_by_counts(
         return partition_key(assignment, screener.partition_retained(assignment), threshold)
 
     tried, seen = [], []
-    # counts below low are ruled out; fewest is the fewest sets a partition reaching min_retained used
-    low, fewest, count = min(lower, max_sets), max_sets + 1, max_sets
+    first = min(lower, max_sets)
+    counts = [max_sets]
+    step = max_sets - first + 1
     # max first: if max sets miss min_retained, fewer miss it too (a part never keeping more in a larger set, as the
-    # lower bound assumes, a split into fewer sets refines into max sets keeping as much); else, by the same argument,
-    # a count that misses rules out every smaller one, so the fewest are bisected: counts tried one by one from a loose
-    # lower bound, or from the many sets of the greedy placing with "auto", cost a count search (moves, set searches)
-    # per set between them
-    while True:
-        number = len(tried)
+    # lower bound assumes, a split into fewer sets refines into max sets keeping as much), so no other count is
+    # searched; else the fewest sets from the lower bound up (with "auto", up to the sets the first partition used)
+    for number, count in enumerate(counts):
         tried.append(count)
-        step = number + 1 + max(0, min(fewest, max_sets) - low).bit_length()
         progress("partition", number, step, f"{count} sets")
 
         def moved(
@@ -490,16 +488,13 @@ def _partition_by_counts(
         screener.retained(doubt)
         current = _improve(screener, current, count, key, _MOVES_PER_COUNT, moved, searched_key)
         seen.append(current)
-        if searched_key(current)[0] == 1:
-            fewest = min(fewest, max(current) + 1)
-        elif count == max_sets:
+        reached = searched_key(current)[0] == 1
+        if reached != (count == max_sets):
             break
-        else:
-            low = count + 1
-        if low >= fewest:
-            break
-        count = (low + fewest - 1) // 2
-    progress("partition", len(tried), len(tried), f"{tried[-1]} sets")
+        if number == 0:
+            counts.extend(range(first, max(current) + 1 if settings.max == "auto" else max_sets))
+            step = len(counts)
+    progress("partition", step, step, f"{tried[-1]} sets")
     return max(seen, key=searched_key), tried
 
 

@@ -76,35 +76,3 @@ def test_the_claim_is_made_on_these_parts(screener, method):
     assert scaled.fewest_sets_proven and scaled.lower_bound_sets == 2
     if method == "carving_neighbours+colouring+local_moves":
         assert scaled.screened_pairs < len(PARTS) * (len(PARTS) - 1) // 2
-
-
-#: The knobs above with three that taper less or not at all: with ``max = "auto"`` and 0.36 to keep, the greedy placing
-#: by the quick figures uses three sets, and the conflict clique bounds the count by one set only.
-MORE_PARTS = [
-    *PARTS,
-    knob_part("narrowing-less", 12.0, 0.85),
-    knob_part("widening-less", 10.2, 1 / 0.85),
-    knob_part("straight", 12.0, 1.0),
-]
-
-
-def test_auto_bisects_the_fewest_sets_between_the_lower_bound_and_the_sets_used():
-    # a count that misses min_retained rules out every smaller one (with fewer sets, every part keeping no more, it
-    # misses too): the fewest sets are bisected between the lower bound and the sets the partitions used
-    cfg = config().updated({"quality": {"measure": "paper"}})
-    prepared = prepare(MORE_PARTS, cfg)
-    solos = [solo_quality(prepared, m, cfg) for m in range(len(prepared.scenarios))]
-    part_scenarios = [
-        [m for m, s in enumerate(prepared.scenarios) if s.part_index == u] for u in range(len(MORE_PARTS))
-    ]
-    settings = {"finger_sets": {"max": "auto", "min_retained": 0.36, "exhaustive_parts": 1}}
-    with WorkerPool((prepared, screening_pools(solos, 10), solo_picks(solos), cfg), 1) as pool:
-        screener = SetScreener(prepared, part_scenarios, solos, cfg, pool)
-        scaled = search_partition(screener, len(MORE_PARTS), cfg.updated(settings), quiet)
-        every_part = screener.retained([frozenset(range(len(MORE_PARTS)))])[0]
-    assert scaled.lower_bound_sets == 1
-    # one set per part allowed and three used; between one and three: one set (missed: one finger keeps less than
-    # 0.36 of some part), then two (missed); the three sets are the fewest found
-    assert scaled.sets_tried == [8, 1, 2]
-    assert min(float(r.min()) for r in every_part.values()) < 0.36
-    assert max(scaled.assignment) + 1 == 3 and float(scaled.retained.min()) >= 0.36
