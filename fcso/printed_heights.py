@@ -11,9 +11,9 @@ these heights.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import maximum_filter
 
 from .grid import ScreenGrid
+from .jit import compiled
 from .screen import ScreenGeometry
 
 
@@ -69,16 +69,46 @@ def fitted_pad_heights(
         # out, instead of spreading below it over the whole grid (the same result, ~30x fewer passes)
         heights = np.maximum(heights, floor_mm)
         drop = cell_mm / np.tan(np.radians(lead_in_deg))
-        diagonal = drop * np.sqrt(2.0)
-        for _ in range(heights.shape[0] + heights.shape[1]):
-            straight = maximum_filter(
-                heights, footprint=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool), mode="constant", cval=-np.inf
-            )
-            corner = maximum_filter(
-                heights, footprint=np.array([[1, 0, 1], [0, 0, 0], [1, 0, 1]], bool), mode="constant", cval=-np.inf
-            )
-            grown = np.maximum(heights, np.maximum(straight - drop, corner - diagonal))
-            if np.array_equal(grown, heights):
-                break
-            heights = grown
+        heights = _drafted(heights, float(drop), float(drop * np.sqrt(2.0)))
     return np.maximum(heights, floor_mm)
+
+
+@compiled("(float64[:, ::1], float64, float64)")
+def _drafted(heights, drop, diagonal):
+    """Every wall of ``heights`` drafted: passes of ``H = max(H, max of the 4 side neighbours - drop, max of the 4
+    corner neighbours - diagonal)`` over the grid until none changes, at most ``count_v + count_w`` of them.
+
+    A pass in one loop: as array operations each pass cost two maximum filters and their temporaries, and every
+    candidate a screening measures on its pad is drafted at each draft angle.
+    """
+    rows, columns = heights.shape
+    current = heights.copy()
+    grown = np.empty_like(current)
+    for _ in range(rows + columns):
+        changed = False
+        for i in range(rows):
+            for j in range(columns):
+                straight, corner = -np.inf, -np.inf
+                if i > 0:
+                    straight = max(straight, current[i - 1, j])
+                    if j > 0:
+                        corner = max(corner, current[i - 1, j - 1])
+                    if j + 1 < columns:
+                        corner = max(corner, current[i - 1, j + 1])
+                if i + 1 < rows:
+                    straight = max(straight, current[i + 1, j])
+                    if j > 0:
+                        corner = max(corner, current[i + 1, j - 1])
+                    if j + 1 < columns:
+                        corner = max(corner, current[i + 1, j + 1])
+                if j > 0:
+                    straight = max(straight, current[i, j - 1])
+                if j + 1 < columns:
+                    straight = max(straight, current[i, j + 1])
+                value = max(current[i, j], max(straight - drop, corner - diagonal))
+                grown[i, j] = value
+                changed = changed or value != current[i, j]
+        if not changed:
+            break
+        current, grown = grown, current
+    return current

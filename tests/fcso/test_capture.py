@@ -28,6 +28,7 @@ from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate, prepare
+from fcso.printed_heights import fitted_pad_heights
 
 
 def _prepared(mesh, name: str, **sections):
@@ -288,3 +289,18 @@ def test_holding_of_a_grasp_at_the_centre_of_mass_and_far_above_it():
     assert np.all(sideways >= 6.8) and np.all(sideways <= 12.2)
     # along the closing axis the coupled fingers hold the part whatever the lever
     assert below[2:4] == pytest.approx([30.0, 30.0], abs=1e-6)
+
+
+def test_a_drafted_pocket_falls_by_the_lead_in_over_side_and_corner_cells():
+    # one carved cell 5 mm high on a floor at 0, 1 mm cells and a 45 degree draft: the wall falls 1 mm per side step
+    # and sqrt(2) mm per corner step (8 neighbours), down to the floor
+    carved = np.full((7, 7), -np.inf)
+    carved[3, 3] = 5.0
+    heights = fitted_pad_heights(carved, 0.0, 1.0, 0.0, 45.0)
+    root2 = np.sqrt(2.0)
+    assert heights[3, 3] == 5.0
+    assert heights[3, 4] == pytest.approx(4.0) and heights[2, 2] == pytest.approx(5.0 - root2)
+    assert heights[3, 6] == pytest.approx(2.0) and heights[0, 0] == pytest.approx(5.0 - 3 * root2)
+    # one corner then one side step: the fastest fall to (1, 2) from the peak
+    assert heights[1, 2] == pytest.approx(5.0 - root2 - 1.0)
+    assert heights.min() >= 0.0
