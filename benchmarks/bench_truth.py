@@ -46,7 +46,7 @@ from examples import part_families, sim_parts
 from fcso.parts import Part
 from fcso.sim.choose import candidate_designs, verify_top
 from fcso.sim.config import VerifyConfig
-from fcso.sim.verify import verify, weaker_than_flat
+from fcso.sim.verify import nominal_miss, verify, weaker_than_flat
 
 #: Jobs of several parts sharing one finger, per split: family names (each split's first seed). The test split's
 #: mix held-out and development families; the development split's, drawn from its own families, keep the two
@@ -179,10 +179,12 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         )
         figures.rows.append(row)
         notes = [] if scenario.beats_flat else ["design: flat is as good"]
-        if not designed.nominal_held:
-            notes.append("nominal grasp dropped it")
-        elif designed.nominal_offset_mm > every.success_mm or designed.nominal_offset_deg > every.success_deg:
-            notes.append(f"nominal grasp {designed.nominal_offset_mm:.1f} mm {designed.nominal_offset_deg:.1f} deg off")
+        if nominal_miss(designed, every) is not None:
+            notes.append(
+                f"nominal grasp {designed.nominal_offset_mm:.1f} mm {designed.nominal_offset_deg:.1f} deg off"
+                if designed.nominal_held
+                else "nominal grasp dropped it"
+            )
         if designed.success_rate < 0.9:
             notes.append(miss_reason(designed, every))
         if row.weaker:
