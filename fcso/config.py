@@ -126,6 +126,12 @@ class FilterConfig(_Section):
     full_cover_fraction: float = Field(
         0.99, gt=0, le=1, description="Fraction of the pad face a cross-section must cover to count as full"
     )
+    wrapped_faces: bool = Field(
+        True,
+        description="A face flat against the pad that ends inside the pad at both ends of its length is good: the "
+        "pocket's end walls wrap the part's edges and capture it along the pads (METHOD §3b); false is the paper's "
+        "filter, which labels every flat face bad",
+    )
 
 
 class PosesConfig(_Section):

@@ -42,7 +42,8 @@ class PadGeometry:
     good : bool
         The filter's label.
     basis : str
-        Why: ``"ratio"`` (R against th) or ``"normals"`` (normal clustering, when d_n = D).
+        Why: ``"ratio"`` (R against th), ``"normals"`` (normal clustering, when d_n = D) or ``"wrapped"`` (a flat
+        face that ends inside the pad at both ends of its length, ``[filter] wrapped_faces``).
     """
 
     intersection: manifold3d.Manifold
@@ -132,6 +133,8 @@ def pad_geometry(
         # R is not trusted: a face flat against the pad is bad whatever its box
         flat = abs(dominant[0]) >= np.cos(np.radians(filter_config.cluster_angle_deg))
         good, basis = not flat, "normals"
+        if flat and filter_config.wrapped_faces and volume > 0 and _wrapped(lower_upper[1], lower_upper[4], length):
+            good, basis = True, "wrapped"
     return PadGeometry(
         intersection=rebuilt_from_mesh(intersection),
         surface_vertices=surface_vertices,
@@ -144,6 +147,21 @@ def pad_geometry(
         basis=basis,
         dominant_normal=dominant,
     )
+
+
+#: The least pad left beyond each end of a wrapped face, mm: the printed clearance (0.4 mm with MJF) and a printable
+#: wall (0.5 mm) must fit between the part's edge and the pad's end, or the end wall prints as nothing.
+WRAP_MARGIN_MM = 1.0
+
+
+def _wrapped(start_mm: float, end_mm: float, length_mm: float) -> bool:
+    """Whether a part section from ``start_mm`` to ``end_mm`` along the pad (v) ends inside it at both ends.
+
+    The filter's flatness test sees a face flat against the pad and calls the pocket flat; but a face shorter than
+    the pad leaves pad material beyond both its edges, and the carved pocket's end walls hold it along the pads: the
+    sharp-edged 20 mm cube in a 35 mm pad is held 10/10 in simulation where the flat pocket holds it 1/10.
+    """
+    return start_mm >= WRAP_MARGIN_MM and end_mm <= length_mm - WRAP_MARGIN_MM
 
 
 def surface_in_pad(

@@ -140,6 +140,28 @@ def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_
             assert trial.held and trial.error_mm <= 0.3, (scenario.pose_index, trial)
 
 
+def test_a_sharp_edged_cube_shorter_than_the_pad_is_wrapped_and_held_where_the_papers_filter_keeps_it_flat(tmp_path):
+    # a 20 mm cube with sharp edges in 35 mm pads: its face lies flat against the pad, so METHOD §5's normals test
+    # calls every geometry bad and the pads stay flat, which hold the cube anywhere along them; but the face ends 7.5
+    # mm inside each end of the pad, and the carved pocket's end walls (0.4 mm clearance, drafted) centre it
+    cube = plain_box(20.0, 20.0, 20.0)
+    config = fcso.DesignConfig().updated({"poses": {"count": 1}, "sampler": {"length_mm": 35.0}})
+    paper = fcso.design(
+        [Part(name="cube", path="cube", mesh=cube)], config.updated({"filter": {"wrapped_faces": False}})
+    )
+    assert paper.report.finger.flat_pads
+    assert {label for sample in paper.report.scenarios[0].samples for label in sample.labels} == {"bad"}
+
+    wrapped = fcso.design([Part(name="cube", path="cube", mesh=cube)], config)
+    assert not wrapped.report.finger.flat_pads
+    verification = verify(design_under_test(wrapped), VerifyConfig(trials=5, stop_early=False, cache_dir=tmp_path))
+    (scenario,) = verification.scenarios
+    # the flat pads centre a start only where it already lay within the 0.3 mm tolerance along them (of +-2 mm)
+    assert [trial.success for trial in scenario.fcso.trials] == [True] * 5
+    assert sum(trial.success for trial in scenario.flat.trials) <= 2
+    assert scenario.holds_as_flat
+
+
 def _verification(*scenarios, passed=False, unverified=()):
     """A verification whose scenarios are ``(designed successes, flat successes, holds_as_flat)`` of 10 trials."""
 
