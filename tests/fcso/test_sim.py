@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from examples.batch_demo import batch_demo_part_files, batch_demo_settings
+from examples.batch_demo import DEMO_10MM_PADS, batch_demo_part_files, batch_demo_settings
 from examples.sim_parts import featured_cube, ridged_block
 from fcso import DesignConfig, design
 from fcso.geometry import box, to_manifold, to_trimesh
@@ -42,6 +42,7 @@ from fcso.sim.verify import (
     flat_pad,
     grasp_case,
     is_flat_control,
+    nominal_miss,
     part_pieces,
     seated_overlap_notes,
     verify,
@@ -211,7 +212,7 @@ def test_the_skipped_steady_lift_ends_where_the_stepped_lift_ends(tmp_path, monk
 def test_a_part_rocking_in_carved_pads_skips_the_lift_and_ends_where_the_stepped_lift_ends(tmp_path, monkeypatch):
     # the demo's xyz cube in its carved pads (its embossed letters) rocks in the lift, at 0.15 degrees/s 13 mm into it
     # and dying away
-    result = design(batch_demo_part_files()[:1], batch_demo_settings())
+    result = design(batch_demo_part_files()[:1], batch_demo_settings().updated({"sampler": DEMO_10MM_PADS}))
     under_test = design_under_test(result)
     case, config = under_test.cases[0], _config(tmp_path)
     part, pad, _ = fitted_pieces(case, under_test, config)
@@ -367,6 +368,25 @@ def test_a_scenario_whose_unperturbed_grasp_slides_off_its_seat_fails_and_is_rej
     chosen = verify(design_2, _config(tmp_path, reuse_simulations=True, **settings))
     assert not chosen.passed and chosen.scenarios == [] and chosen.unseated_scenarios == ["shifted pose 0"]
     assert chosen.unverified_scenarios == [case.name, "shifted pose 0"]
+
+
+def test_a_part_that_flat_pads_cannot_hold_either_rejects_no_candidate_before_its_trials(ridged, tmp_path):
+    # METHOD §5b is "never worse than flat" said of the seat: the ridged block 300 times as dense weighs more than the
+    # 60 N grip's friction carries (2 x 0.4 x 60 N) and its V-grooves are vertical, so in the unperturbed grasp it
+    # slides down the carved pads and the flat ones alike; a carving flat pads do no better than is not rejected
+    # before its trials, which judge it
+    case, _, _, hull, fingerpad = ridged
+    design_1 = DesignUnderTest([case], fingerpad, hull)
+    settings = {"trials": 1, "position_error_mm": 0.0, "yaw_error_deg": 0.0, "lift_mm": 10.0, "density_g_cm3": 300.0}
+
+    chosen = verify(design_1, _config(tmp_path, reuse_simulations=True, **settings))
+
+    (scenario,) = chosen.scenarios
+    # both slide down in the pads: the carved ones end 4 mm off the seat, flat ones 0.6 mm (beyond the 0.3 mm)
+    assert nominal_miss(scenario.fcso, chosen.settings) and nominal_miss(scenario.flat, chosen.settings)
+    assert chosen.unseated_scenarios == [] and chosen.unverified_scenarios == []
+    # its trial ran; the scenario still does not pass, its designed seat missed
+    assert len(scenario.fcso.trials) == 1 and not scenario.passed and not chosen.passed
 
 
 def test_flat_pad_holding_force_rises_with_friction(tmp_path):
