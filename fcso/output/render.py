@@ -233,7 +233,6 @@ class Panel:
 
 def fit_axes(axes, points: np.ndarray, margin: float = 0.04) -> None:
     """Limits of ``axes`` around ``points`` (2D) with a relative ``margin``, equal aspect."""
-    """Equal-scale limits around ``points`` that fill the panel."""
     lower, upper = points.min(axis=0), points.max(axis=0)
     centre, size = (lower + upper) / 2.0, np.maximum(upper - lower, 1e-9) * (1.0 + 2.0 * margin)
     box = axes.get_position()
@@ -254,14 +253,12 @@ def new_figure(kind: str) -> Figure:
 
 def panels(figure: Figure, count: int, right_margin: float = 0.0) -> list[Panel]:
     """``count`` panels side by side across ``figure``, leaving ``right_margin`` (a fraction) free."""
-    """``count`` side-by-side panels with room for a title above each."""
     width = (1.0 - right_margin) / count
     return [Panel(figure, (k * width + 0.01, 0.02, width - 0.02, 0.86)) for k in range(count)]
 
 
 def caption(axes, text: str) -> None:
-    """A panel's title."""
-    """Text centred above a panel (a figure text: axes titles cost a tick layout)."""
+    """A panel's title: a figure text centred above it (an axes title would cost a tick layout)."""
     box = axes.get_position()
     axes.figure.text((box.x0 + box.x1) / 2.0, box.y1 + 0.02, text, ha="center", va="bottom", fontsize=9)
 
