@@ -266,6 +266,10 @@ def _outer_hulls(part: manifold3d.Manifold, reach_boxes: np.ndarray) -> list[tup
 
 #: Pad prisms thinner than this are left out, mm (a thousandth of the finest printer's resolution).
 MIN_PIECE_WIDTH_MM = 1e-3
+#: Pad prisms smaller than this are left out, mm³: MuJoCo refuses a mesh under 1e-15 m³ (1e-6 mm³), and a needle
+#: under a sliver of the face can be wider than MIN_PIECE_WIDTH_MM and still that small (a slotted block's pad:
+#: 9.6e-7 mm³); its neighbours hold that material.
+MIN_PIECE_VOLUME_MM3 = 1e-5
 
 
 def pad_prism_pieces(pad: trimesh.Trimesh, thickness_mm: float, cache_dir: Path | None) -> ConvexPieces:
@@ -300,7 +304,9 @@ def pad_prism_pieces(pad: trimesh.Trimesh, thickness_mm: float, cache_dir: Path 
     ConvexPieces
         Pieces in the pad frame.
     """
-    return _cached_pieces(pad, f"prisms {float(thickness_mm)!r}", lambda: _prisms(pad, thickness_mm), cache_dir)
+    # the least volume is in the key: decompositions cached with smaller pieces than MuJoCo accepts are not reused
+    settings = f"prisms {float(thickness_mm)!r} least {MIN_PIECE_VOLUME_MM3!r} mm3"
+    return _cached_pieces(pad, settings, lambda: _prisms(pad, thickness_mm), cache_dir)
 
 
 def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -342,7 +348,10 @@ def _prisms(pad: trimesh.Trimesh, thickness_mm: float) -> list[tuple[np.ndarray,
         top = vertices[np.unique(corners[cluster])]
         behind = top.copy()
         behind[:, 0] = back
-        prism = manifold3d.Manifold.hull_points(np.vstack([top, behind])).to_mesh64()
+        solid_prism = manifold3d.Manifold.hull_points(np.vstack([top, behind]))
+        if solid_prism.volume() < MIN_PIECE_VOLUME_MM3:
+            continue
+        prism = solid_prism.to_mesh64()
         piece = (
             np.asarray(prism.vert_properties[:, :3], dtype=np.float64),
             np.asarray(prism.tri_verts, dtype=np.int64),
