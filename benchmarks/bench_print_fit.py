@@ -13,7 +13,7 @@ off, closing at 20 mm/s with 60 N, lift 100 mm, success within 0.3 mm and
 Part sets (``--sets``): the paper's cube-like part (a 30 mm cube with 8 mm
 V-notches and a hole, ``examples/sim_parts.featured_cube``, designed upright
 across its notches), the demo parts (``examples/parts``: the 20 mm xyz cube
-and the solar tracker with the batch demo's former 10 mm pads; the capsela plug has no
+and the solar tracker with the batch demo's 10 mm pads; the capsela plug has no
 grasp at 50 mm) and the bunny of the paper's experiment (``examples/paper.toml``). ``--oversize MM`` adds the cube
 printed MM too large on every side (a process deviation the clearance is
 meant to absorb), with clearance 0 and the profile's.
@@ -48,7 +48,7 @@ from fcso.sim.verify import DesignUnderTest, design_under_test, verify
 REPO = Path(__file__).resolve().parent.parent
 PARTS = REPO / "examples" / "parts"
 
-#: The demo parts with the batch-demo job's former 10 mm pads: a fine carving, where clearance and walls matter most.
+#: The demo parts with the batch-demo job's 10 mm pads: a fine carving, where clearance and walls matter most.
 DEMO_SETTINGS = {"poses": {"count": 1, "select": "most_probable"}, "sampler": DEMO_10MM_PADS}
 
 
@@ -65,7 +65,7 @@ def bunny_parts() -> tuple[list[Part], dict]:
 
 
 def demo_parts() -> tuple[list[Part], dict]:
-    """The demo parts of examples/parts that a 50 mm gripper can hold, with the batch demo's former 10 mm pads."""
+    """The demo parts of examples/parts that a 50 mm gripper can hold, with the batch demo's 10 mm pads."""
     return [fcso.load_part(PARTS / "20mm-xyz-cube.stl"), fcso.load_part(PARTS / "solar_tracker.stl")], DEMO_SETTINGS
 
 

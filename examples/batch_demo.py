@@ -10,8 +10,8 @@ from fcsod.config import JobManifest, parse_manifest
 #: The job folder: ``job.toml`` and the part files it names.
 BATCH_DEMO = Path(__file__).resolve().parent / "jobs" / "batch-demo"
 
-#: The 10 mm pads the demo job used until it took the product's pad sizes: two tests pin defects found on its parts
-#: with them (the cube rocking in the pads its embossed letters carve, a float32 flap on the finger of both parts).
+#: The demo job's 10 mm pads (its ``[sampler]``): two tests pin defects found on its parts with them (the cube rocking
+#: in the pads its embossed letters carve, a float32 flap on the finger of both parts), whatever pads the job takes.
 DEMO_10MM_PADS = {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 4.0, "penetration_mm": 3.0, "stride_mm": 10.0}
 
 

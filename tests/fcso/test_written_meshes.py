@@ -135,7 +135,7 @@ def test_every_written_mesh_reads_back_as_one_watertight_body(name, profile, par
 
 
 def test_the_demo_parts_on_one_finger_write_one_body_without_the_float32_flap(tmp_path):
-    # the batch demo's cube and solar tracker on one finger with the 10 mm pads it had: two vertices that
+    # the batch demo's cube and solar tracker on one finger with its 10 mm pads: two vertices that
     # manifold3d keeps apart round to one float32 point and once left a two-triangle flap of zero volume beside the
     # finger, so the design was refused
     result = fcso.design(batch_demo_part_files(), batch_demo_settings().updated({"sampler": DEMO_10MM_PADS}))
