@@ -21,7 +21,7 @@ from fcso.sim import choose as choose_module
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
 from fcso.sim.report import FingerResult, ScenarioVerification, TrialResult, VerificationReport, flat_beats
-from fcso.sim.verify import design_under_test, verify
+from fcso.sim.verify import design_under_test, is_flat_control, verify
 
 
 def _two_ridge_ranked_by_q():
@@ -191,6 +191,26 @@ def test_flat_pads_beat_a_carving_only_where_they_do_no_worse_anywhere():
     # no evidence against the carving: it passed, or a scenario was not simulated
     assert not flat_beats(_verification((10, 10, False), passed=True))
     assert not flat_beats(_verification((0, 1, True), unverified=["part pose 1"]))
+
+
+def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(tmp_path):
+    # a block with holes near its grasp faces, of the test split (examples/part_families.py): every verified carving
+    # seats it 0/10 where flat pads seat it 1/10 in one pose, and neither does better in the other
+    drawn = draw("holed-block", 100)
+    result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    assert not result.report.finger.flat_pads
+
+    chosen, verification, design, _ = verify_top(result, 3, VerifyConfig(trials=10, cache_dir=tmp_path))
+
+    assert chosen.report.finger.flat_pads and chosen.report.best in [c.index for c in result.report.candidates]
+    assert "flat pads beat it (not verified: " in verification.choice
+    assert verification.choice.endswith("delivered with flat pads on its grasps")
+    # the delivered finger is its own flat control: never below flat, scenario by scenario
+    for scenario in verification.scenarios:
+        assert [t.model_dump() for t in scenario.fcso.trials] == [t.model_dump() for t in scenario.flat.trials]
+        assert len(scenario.fcso.trials) == 10
+    assert is_flat_control(design.fingerpad, design.cases[0].pad_size_mm, design.cases[0].penetration_mm)
+    assert chosen.finger.is_watertight and len(chosen.finger.split(only_watertight=False)) == 1
 
 
 def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(tmp_path):
