@@ -143,7 +143,7 @@ def capture_landscape(
     pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, rows_w]
     gap = np.zeros((len(offsets), len(yaws)))
     levers = []
-    for sign, heights, (u_c, v_c) in zip((1, -1), part_mm, centres_uv_mm):
+    for sign, heights, (u_c, v_c) in zip((1.0, -1.0), part_mm, centres_uv_mm):
         heights = np.asarray(heights, dtype=np.float64)[:, rows_w]
         # a row of w the part never enters leaves every gap infinite: only the others are read (at least one, so
         # a part outside the box still gives infinite gaps)
@@ -153,11 +153,12 @@ def capture_landscape(
         # the part turned by every start yaw about its centre of mass, exactly (METHOD §7c): a feature round about
         # the vertical turns into itself and so fixes no rotation
         turned = _turned_heights(np.ascontiguousarray(part), v_mm, float(u_c), float(v_c), yaws)
-        # the shift along v of every start in whole cells, as the offsets are laid out: offsets / cell in floats
-        # fell a rounding either side of a whole cell, and the interpolation between whole cells then lost the
-        # part's leading or trailing end cell (an inf weighted by the rounding), which meets the pocket's end wall
-        shifts = sign * np.arange(-steps, steps + 1, dtype=np.int64)
-        _add_side_gaps(np.ascontiguousarray(pad_mm[:, entered]), turned, shifts, gap)
+        # the shift along v of every start in cells: the clearance per column is known for whole
+        # cells and interpolated between them, so the landscape has no steps of a cell's rounding
+        shift = sign * offsets / cell_mm
+        whole = np.floor(shift).astype(np.int64)
+        fraction = shift - whole
+        _add_side_gaps(np.ascontiguousarray(pad_mm[:, entered]), turned, whole, fraction, gap)
         levers.append(abs(depth_mm - u_c))
     centre = (steps, turns)
     # a centre no pad touches has an infinite gap: every separation is then inf - inf, read as never seated
@@ -285,10 +286,8 @@ def _turned_heights(part, v_mm, u_c, v_c, yaws):
                 if previous_in:
                     # the segment from the previous point: every cell centre it spans, interpolated
                     low, high = min(previous_v, v_turned), max(previous_v, v_turned)
-                    # a cell centre on the segment's end counts, within a rounding (unturned, the part's end cells
-                    # lie on cell centres, and the last one was lost at 27.5 / 0.2 = 137.4999...)
-                    first = max(int(np.ceil((low - 1e-9) / cell - 0.5)), 0)
-                    last = min(int(np.floor((high + 1e-9) / cell - 0.5)), count_v - 1)
+                    first = max(int(np.ceil(low / cell - 0.5)), 0)
+                    last = min(int(np.floor(high / cell - 0.5)), count_v - 1)
                     for target in range(first, last + 1):
                         centre = (target + 0.5) * cell
                         share = 0.0 if high - low < 1e-12 else (centre - previous_v) / (v_turned - previous_v)
@@ -299,8 +298,8 @@ def _turned_heights(part, v_mm, u_c, v_c, yaws):
     return turned
 
 
-@compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[:, ::1])")
-def _add_side_gaps(pad, turned, shifts, gap):
+@compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
+def _add_side_gaps(pad, turned, whole, fraction, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
 
     Parameters
@@ -310,19 +309,32 @@ def _add_side_gaps(pad, turned, shifts, gap):
     turned : (yaws, count_v, columns) float
         The part's column heights turned by each start yaw (:func:`_turned_heights`), ``-inf`` where it is not in
         the box, mm.
-    shifts : (offsets,) int64
-        Each start's shift along ``v``, whole cells.
+    whole, fraction : (offsets,) int64, float
+        Each start's shift along ``v`` in cells: its whole cells and the rest.
     """
     count_v, columns = pad.shape
+    lowest = whole.min()
+    shifts = whole.max() + 2 - lowest
     for yaw in range(turned.shape[0]):
-        for offset in range(shifts.shape[0]):
-            least = np.inf
+        # the clearance of every whole shift per row of v: its least over the rows of w
+        per_shift = np.empty((shifts, count_v))
+        for shift in range(shifts):
             for v in range(count_v):
-                # beyond the box's end the part reads as at the end (a part longer than the pad goes on); where it
-                # is not in the box the clearance is inf: no contact
-                source = min(max(v - shifts[offset], 0), count_v - 1)
+                source = min(max(v - (lowest + shift), 0), count_v - 1)
+                least = np.inf
                 for column in range(columns):
                     least = min(least, pad[v, column] - turned[yaw, source, column])
+                per_shift[shift, v] = least
+        for offset in range(whole.shape[0]):
+            row, share = whole[offset] - lowest, fraction[offset]
+            least = np.inf
+            for v in range(count_v):
+                # interpolated between whole cells, so the landscape has no steps of a cell's rounding; inf - inf
+                # (no pad or no part on either side) is no contact
+                shifted = (1.0 - share) * per_shift[row, v] + share * per_shift[row + 1, v]
+                if np.isnan(shifted):
+                    shifted = np.inf
+                least = min(least, shifted)
             gap[offset, yaw] += least
 
 

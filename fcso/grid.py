@@ -75,10 +75,8 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
     keep = np.abs(det) >= 1e-12
     u, v, w, det = u[keep], v[keep], w[keep], det[keep]
     cell = grid.cell_mm
-    # a cell centre on a triangle's edge is covered within a rounding, along v as along w: a box's end on a row of
-    # centres was in the map seen from one pad and not from the other (the "-" pad's frame rounds differently)
-    row_first = np.clip(np.ceil((v.min(1) - 1e-9) / cell - 0.5), 0, grid.count_v).astype(np.int64)
-    row_last = np.clip(np.floor((v.max(1) + 1e-9) / cell - 0.5), -1, grid.count_v - 1).astype(np.int64)
+    row_first = np.clip(np.ceil(v.min(1) / cell - 0.5), 0, grid.count_v).astype(np.int64)
+    row_last = np.clip(np.floor(v.max(1) / cell - 0.5), -1, grid.count_v - 1).astype(np.int64)
     rows = np.maximum(row_last - row_first + 1, 0)
     if rows.sum() == 0:
         return heights.astype(np.float32)
@@ -98,8 +96,8 @@ def column_heights(vertices: np.ndarray, faces: np.ndarray, grid: ScreenGrid) ->
     for a, b in ((0, 1), (1, 2), (2, 0)):
         va, vb, wa, wb = ev[:, a], ev[:, b], ew[:, a], ew[:, b]
         span = vb - va
-        crosses = (np.minimum(va, vb) - 1e-9 <= pv) & (pv <= np.maximum(va, vb) + 1e-9) & (span != 0.0)
-        t = np.where(crosses, np.clip((pv - va) / np.where(span != 0.0, span, 1.0), 0.0, 1.0), 0.0)
+        crosses = (np.minimum(va, vb) <= pv) & (pv <= np.maximum(va, vb)) & (span != 0.0)
+        t = np.where(crosses, (pv - va) / np.where(span != 0.0, span, 1.0), 0.0)
         crossing_w = wa + t * (wb - wa)
         low = np.where(crosses, np.minimum(low, crossing_w), low)
         high = np.where(crosses, np.maximum(high, crossing_w), high)
