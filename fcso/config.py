@@ -127,8 +127,8 @@ class FilterConfig(_Section):
         0.99, gt=0, le=1, description="Fraction of the pad face a cross-section must cover to count as full"
     )
     # off by default: wrapping holds a sharp-edged cube 10/10 where flat pads hold it 1/10, but on the development
-    # split the measure ranks wrapped pockets of a holed and a slotted block first (capture 0.92-1.00) and they seat
-    # them 1-7/10 where the carvings they displace seat them 9-10/10
+    # split the measure ranks wrapped pockets of a holed and a slotted block first and they seat them 2 and 1/10 and
+    # not at all (off its seat, delivered flat), where the carvings they displace seat them 10/10
     wrapped_faces: bool = Field(
         False,
         description="A face flat against the pad that ends inside the pad at both ends of its length is good: the "
