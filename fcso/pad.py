@@ -89,6 +89,21 @@ def pad_box(sampler: SamplerConfig) -> manifold3d.Manifold:
     return box((0.0, 0.0, 0.0), (sampler.thickness_mm, sampler.length_mm, sampler.width_mm))
 
 
+#: The least pad left beyond each end of a wrapped face, mm: the printed clearance (0.4 mm with MJF) and a printable
+#: wall (0.5 mm) must fit between the part's edge and the pad's end, or the end wall prints as nothing.
+WRAP_MARGIN_MM = 1.0
+
+
+def _wrapped(start_mm: float, end_mm: float, length_mm: float) -> bool:
+    """Whether a part section from ``start_mm`` to ``end_mm`` along the pad (v) ends inside it at both ends.
+
+    The filter's flatness test sees a face flat against the pad and calls the pocket flat; but a face shorter than
+    the pad leaves pad material beyond both its edges, and the carved pocket's end walls hold it along the pads: the
+    sharp-edged 20 mm cube in a 35 mm pad is held 10/10 in simulation where the flat pocket holds it 1/10.
+    """
+    return start_mm >= WRAP_MARGIN_MM and end_mm <= length_mm - WRAP_MARGIN_MM
+
+
 def pad_geometry(
     part: manifold3d.Manifold,
     part_vertices: np.ndarray,
@@ -147,21 +162,6 @@ def pad_geometry(
         basis=basis,
         dominant_normal=dominant,
     )
-
-
-#: The least pad left beyond each end of a wrapped face, mm: the printed clearance (0.4 mm with MJF) and a printable
-#: wall (0.5 mm) must fit between the part's edge and the pad's end, or the end wall prints as nothing.
-WRAP_MARGIN_MM = 1.0
-
-
-def _wrapped(start_mm: float, end_mm: float, length_mm: float) -> bool:
-    """Whether a part section from ``start_mm`` to ``end_mm`` along the pad (v) ends inside it at both ends.
-
-    The filter's flatness test sees a face flat against the pad and calls the pocket flat; but a face shorter than
-    the pad leaves pad material beyond both its edges, and the carved pocket's end walls hold it along the pads: the
-    sharp-edged 20 mm cube in a 35 mm pad is held 10/10 in simulation where the flat pocket holds it 1/10.
-    """
-    return start_mm >= WRAP_MARGIN_MM and end_mm <= length_mm - WRAP_MARGIN_MM
 
 
 def surface_in_pad(
