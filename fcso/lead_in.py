@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .capture import pad_landscapes
+from .capture import CandidateSqueeze
 from .config import DesignConfig
 from .grid import ScreenGrid
 from .screen import ScreenGeometry
@@ -53,17 +53,11 @@ def printed_draft(
     why : str or None
     """
     lead_in = config.print.resolved()["lead_in_deg"]
-    alternatives = wider_drafts(config)
-    grid = ScreenGrid.for_config(config)
-
-    def captures_at(angle: float) -> list[float]:
-        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
-        return [
-            landscape.fraction
-            for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
-        ]
-
-    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
+    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, ScreenGrid.for_config(config), config)
+    captures = {
+        angle: [landscape.fraction for landscape in squeezed.landscapes(angle)]
+        for angle in [lead_in, *wider_drafts(config)]
+    }
     worst = {angle: min(values) for angle, values in captures.items()}
     widest = max(worst.values())
     if widest < worst[lead_in] + FLAT_MARGIN:
