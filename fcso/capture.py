@@ -366,6 +366,46 @@ def _turned_heights(part, v_mm, u_c, v_c, yaws):
     return turned
 
 
+@compiled("(float64[:, ::1],)")
+def _row_kinds(values):
+    """Each row's kind, numbered from 0 in order of first appearance: rows alike bit for bit share one.
+
+    Parameters
+    ----------
+    values : (rows, columns) float
+
+    Returns
+    -------
+    (rows,) int64
+    """
+    rows, columns = values.shape
+    bits = values.view(np.int64)
+    kind = np.empty(rows, dtype=np.int64)
+    # the first row of each kind
+    first = np.empty(rows, dtype=np.int64)
+    kinds = 0
+    for row in range(rows):
+        kind[row] = -1
+        # the row before first, as neighbouring rows are the likeliest alike; then the first row of every kind
+        for candidate in range(-1, kinds):
+            other = row - 1 if candidate < 0 else first[candidate]
+            if other < 0:
+                continue
+            alike = True
+            for column in range(columns):
+                if bits[row, column] != bits[other, column]:
+                    alike = False
+                    break
+            if alike:
+                kind[row] = kind[other]
+                break
+        if kind[row] < 0:
+            kind[row] = kinds
+            first[kinds] = row
+            kinds += 1
+    return kind
+
+
 @compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
 def _add_side_gaps(pad, turned, whole, fraction, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
@@ -381,25 +421,38 @@ def _add_side_gaps(pad, turned, whole, fraction, gap):
         Each start's shift along ``v`` in cells: its whole cells and the rest.
     """
     count_v, columns = pad.shape
-    lowest = whole.min()
-    shifts = whole.max() + 2 - lowest
+    lowest, highest = whole.min(), whole.max()
+    # rows of v whose pad is alike bit for bit (most of a pad, as a pocket is often the same along v) meet each row
+    # of the turned part with the same clearance: it is measured once per kind of pad row and turned row, for the
+    # runs of rows of one kind
+    kind = _row_kinds(pad)
+    starts = np.flatnonzero(np.diff(kind)) + 1
+    starts = np.concatenate((np.zeros(1, dtype=np.int64), starts, np.full(1, count_v, dtype=np.int64)))
+    clearance = np.empty((kind.max() + 1, count_v))
     for yaw in range(turned.shape[0]):
-        # the clearance of every whole shift per row of v: its least over the rows of w
-        per_shift = np.empty((shifts, count_v))
-        for shift in range(shifts):
-            for v in range(count_v):
-                source = min(max(v - (lowest + shift), 0), count_v - 1)
-                least = np.inf
-                for column in range(columns):
-                    least = min(least, pad[v, column] - turned[yaw, source, column])
-                per_shift[shift, v] = least
+        known = np.zeros(clearance.shape, dtype=np.bool_)
+        # the clearance of every row of v against each row of the part: its least over the rows of w
+        for run in range(starts.shape[0] - 1):
+            first, end, alike = starts[run], starts[run + 1], kind[starts[run]]
+            # the rows of the turned part this run meets at some whole shift (or the next one, interpolated to)
+            low = min(max(first - highest - 1, 0), count_v - 1)
+            high = min(max(end - 1 - lowest, 0), count_v - 1)
+            for source in range(low, high + 1):
+                if not known[alike, source]:
+                    least = np.inf
+                    for column in range(columns):
+                        least = min(least, pad[first, column] - turned[yaw, source, column])
+                    clearance[alike, source] = least
+                    known[alike, source] = True
         for offset in range(whole.shape[0]):
-            row, share = whole[offset] - lowest, fraction[offset]
+            shift, share = whole[offset], fraction[offset]
             least = np.inf
             for v in range(count_v):
                 # interpolated between whole cells, so the landscape has no steps of a cell's rounding; inf - inf
                 # (no pad or no part on either side) is no contact
-                shifted = (1.0 - share) * per_shift[row, v] + share * per_shift[row + 1, v]
+                here = clearance[kind[v], min(max(v - shift, 0), count_v - 1)]
+                beyond = clearance[kind[v], min(max(v - shift - 1, 0), count_v - 1)]
+                shifted = (1.0 - share) * here + share * beyond
                 if np.isnan(shifted):
                     shifted = np.inf
                 least = min(least, shifted)
