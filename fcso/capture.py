@@ -516,11 +516,34 @@ def pad_landscapes(
     return CandidateSqueeze(chosen, centres_uv_mm, widths_mm, sliding_axes, grid, config).landscapes(flat=flat)
 
 
+def sample_part(
+    screens: tuple[ScreenGeometry, ScreenGeometry],
+    centres_uv_mm: tuple[np.ndarray, np.ndarray],
+    width_mm: float,
+    sliding_axis: np.ndarray,
+    grid: ScreenGrid,
+    config: DesignConfig,
+) -> SqueezedPart:
+    """One scenario's sample ready to be squeezed on any pad (:func:`squeezed_part`): its "+" and "-" geometries,
+    centres of mass, width and sliding axis as :func:`pad_landscapes` takes them."""
+    shape = (grid.count_v, grid.count_w)
+    return squeezed_part(
+        (screens[0].heights_mm.reshape(shape), screens[1].heights_mm.reshape(shape)),
+        centres_uv_mm,
+        grid.cell_mm,
+        config.sampler.penetration_mm,
+        width_mm,
+        config.verify,
+        sliding_axis,
+    )
+
+
 class CandidateSqueeze:
     """A candidate's scenarios squeezed on the pad it carves, printed with any draft (:func:`pad_landscapes`).
 
     The carving and each part turned by every start yaw are the same at every draft, so they are made once for the
-    drafts :func:`fcso.lead_in.printed_draft` compares. Parameters as :func:`pad_landscapes`'s.
+    drafts :func:`fcso.lead_in.printed_draft` compares. Parameters as :func:`pad_landscapes`'s, and ``parts``: the
+    scenarios' parts when already squeezed (:func:`sample_part`).
     """
 
     def __init__(
@@ -531,22 +554,17 @@ class CandidateSqueeze:
         sliding_axes: list[np.ndarray],
         grid: ScreenGrid,
         config: DesignConfig,
+        parts: list[SqueezedPart] | None = None,
     ):
         self.chosen, self.grid, self.config = chosen, grid, config
-        depth = config.sampler.penetration_mm
-        shape = (grid.count_v, grid.count_w)
-        self.parts = [
-            squeezed_part(
-                (pair[0].heights_mm.reshape(shape), pair[1].heights_mm.reshape(shape)),
-                centres,
-                grid.cell_mm,
-                depth,
-                width,
-                config.verify,
-                axis,
-            )
-            for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
-        ]
+        self.parts = (
+            parts
+            if parts is not None
+            else [
+                sample_part(pair, centres, width, axis, grid, config)
+                for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
+            ]
+        )
         self.carved: np.ndarray | None = None
 
     def landscapes(self, lead_in_deg: float | None = None, flat: bool = False) -> list[CaptureLandscape]:

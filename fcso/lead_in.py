@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .capture import CandidateSqueeze
+from .capture import CandidateSqueeze, SqueezedPart
 from .config import DesignConfig
 from .grid import ScreenGrid
 from .screen import ScreenGeometry
@@ -35,6 +35,7 @@ def printed_draft(
     widths_mm: list[float],
     sliding_axes: list[np.ndarray],
     config: DesignConfig,
+    parts: list[SqueezedPart] | None = None,
 ) -> tuple[float, list[float], str | None]:
     """The draft of a candidate's samples (:func:`fcso.evaluate.printed_lead_in_deg`) and its scenarios' captures.
 
@@ -44,6 +45,8 @@ def printed_draft(
         Per scenario, its sample's two geometries, centres of mass, width and sliding axis, as
         :func:`fcso.capture.pad_landscapes`.
     config : DesignConfig
+    parts : list of SqueezedPart, optional
+        The scenarios' samples when already squeezed (:func:`fcso.capture.sample_part`).
 
     Returns
     -------
@@ -53,7 +56,8 @@ def printed_draft(
     why : str or None
     """
     lead_in = config.print.resolved()["lead_in_deg"]
-    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, ScreenGrid.for_config(config), config)
+    grid = ScreenGrid.for_config(config)
+    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, grid, config, parts)
     captures = {
         angle: [landscape.fraction for landscape in squeezed.landscapes(angle)]
         for angle in [lead_in, *wider_drafts(config)]

@@ -22,7 +22,7 @@ from examples.sim_parts import (
     upright_grasp_settings,
 )
 from fcso.capture import CandidateSqueeze, pad_landscapes, sliding_error_weights, squeeze, squeezed_part
-from fcso.evaluate import printed_lead_in_deg
+from fcso.evaluate import printed_lead_in_deg, screen_on_pad
 from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
@@ -201,6 +201,20 @@ def test_a_candidate_squeezed_once_gives_at_every_draft_the_landscapes_of_its_pa
             assert np.array_equal(a.separation_mm, b.separation_mm) and np.array_equal(a.captured, b.captured)
 
 
+def test_candidates_screened_on_their_pads_with_their_samples_squeezed_once_screen_as_each_alone():
+    # screen_on_pad keeps each sample squeezed (turned by every start yaw) for the next candidates that share it
+    prepared, config = _prepared(ribbed_block(), "ribbed")
+    samples = prepared.scenarios[0].samples
+    picks = [samples.index(_sample_at(prepared, s, 5.0)) for s in (0.0, 3.0, 0.0, -3.0, 3.0)]
+    squeezed: dict = {}
+    for k in picks:
+        kept = screen_on_pad(prepared.scenarios, (k,), config, prepared.lattice, squeezed=squeezed)
+        alone = screen_on_pad(prepared.scenarios, (k,), config, prepared.lattice)
+        assert kept.quality == alone.quality and kept.mean_effective_area == alone.mean_effective_area
+        assert [s.capture for s in kept.scenarios] == [s.capture for s in alone.scenarios]
+    assert len(squeezed) == len(set(picks)) == 3
+
+
 def test_the_gap_of_pad_rows_alike_is_measured_once_and_is_the_gap_of_every_row_measured_alone():
     # the squeeze measures one clearance per kind of pad row (rows alike bit for bit, most of a pocket along v)
     # and turned part row: the separation of the straightforward sum over every start, row and column
@@ -232,9 +246,7 @@ def test_the_gap_of_pad_rows_alike_is_measured_once_and_is_the_gap_of_every_row_
     for entered, turned, whole, fraction in part.sides:
         count_v = len(rows)
         for offset, (shift, share) in enumerate(zip(whole, fraction)):
-            here, beyond = (
-                np.clip(np.arange(count_v) - k, 0, count_v - 1) for k in (shift, shift + 1)
-            )
+            here, beyond = (np.clip(np.arange(count_v) - k, 0, count_v - 1) for k in (shift, shift + 1))
             for yaw in range(len(part.yaws_deg)):
                 # np.fmin skips what inf - inf gives, as the squeeze reads it: no contact
                 least = [
