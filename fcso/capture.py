@@ -541,9 +541,10 @@ def sample_part(
 class CandidateSqueeze:
     """A candidate's scenarios squeezed on the pad it carves, printed with any draft (:func:`pad_landscapes`).
 
-    The carving and each part turned by every start yaw are the same at every draft, so they are made once for the
-    drafts :func:`fcso.lead_in.printed_draft` compares. Parameters as :func:`pad_landscapes`'s, and ``parts``: the
-    scenarios' parts when already squeezed (:func:`sample_part`).
+    The carving grown by the clearance and each part turned by every start yaw are the same at every draft, so they
+    are made once for the drafts :func:`fcso.lead_in.printed_draft` compares, and each landscape once when asked
+    again. Parameters as :func:`pad_landscapes`'s, and ``parts``: the scenarios' parts when already squeezed
+    (:func:`sample_part`).
     """
 
     def __init__(
@@ -565,20 +566,37 @@ class CandidateSqueeze:
                 for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
             ]
         )
-        self.carved: np.ndarray | None = None
+        self.grown: np.ndarray | None = None
+        self.pads: dict[float, np.ndarray] = {}
+        self.squeezed: dict[tuple[int, float], CaptureLandscape] = {}
+
+    def pad(self, lead_in_deg: float) -> np.ndarray:
+        """The pad's face heights printed with ``[print]``'s clearance and ``lead_in_deg`` (degrees), (count_v,
+        count_w) mm (:func:`fitted_pad_heights`)."""
+        if lead_in_deg not in self.pads:
+            geometries = [g for pair in self.chosen for g in pair]
+            _, floor = pad_case(geometries, self.config)
+            cell = self.grid.cell_mm
+            if self.grown is None:
+                # grown by the clearance and raised to the floor, without a draft: drafting that is drafting the
+                # carving grown, and the growth is most of a pad's cost
+                clearance = self.config.print.resolved()["clearance_mm"]
+                self.grown = fitted_pad_heights(carved_heights(geometries, self.grid), floor, cell, clearance, 0.0)
+            self.pads[lead_in_deg] = fitted_pad_heights(self.grown, floor, cell, 0.0, lead_in_deg)
+        return self.pads[lead_in_deg]
+
+    def landscape(self, number: int, lead_in_deg: float) -> CaptureLandscape:
+        """Scenario ``number``'s landscape on the pad printed with ``lead_in_deg`` (degrees)."""
+        key = (number, lead_in_deg)
+        if key not in self.squeezed:
+            self.squeezed[key] = squeeze(self.pad(lead_in_deg), self.parts[number])
+        return self.squeezed[key]
 
     def landscapes(self, lead_in_deg: float | None = None, flat: bool = False) -> list[CaptureLandscape]:
         """One landscape per scenario, on the pad printed with ``lead_in_deg`` (degrees; None: ``[print]``'s), or
         between flat pads (face at ``D``) with ``flat``."""
-        config, grid = self.config, self.grid
         if flat:
-            pad = np.full((grid.count_v, grid.count_w), config.sampler.penetration_mm)
-        else:
-            geometries = [g for pair in self.chosen for g in pair]
-            fit = config.print.resolved()
-            _, floor = pad_case(geometries, config)
-            if self.carved is None:
-                self.carved = carved_heights(geometries, grid)
-            draft = fit["lead_in_deg"] if lead_in_deg is None else lead_in_deg
-            pad = fitted_pad_heights(self.carved, floor, grid.cell_mm, fit["clearance_mm"], draft)
-        return [squeeze(pad, part) for part in self.parts]
+            pad = np.full((self.grid.count_v, self.grid.count_w), self.config.sampler.penetration_mm)
+            return [squeeze(pad, part) for part in self.parts]
+        draft = self.config.print.resolved()["lead_in_deg"] if lead_in_deg is None else lead_in_deg
+        return [self.landscape(number, draft) for number in range(len(self.parts))]

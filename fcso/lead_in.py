@@ -58,9 +58,17 @@ def printed_draft(
     lead_in = config.print.resolved()["lead_in_deg"]
     grid = ScreenGrid.for_config(config)
     squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, grid, config, parts)
+    default = [landscape.fraction for landscape in squeezed.landscapes(lead_in)]
+    alternatives = wider_drafts(config)
+    # a wider draft is taken only where its worst scenario captures FLAT_MARGIN more than the default's worst: one
+    # scenario short of that rules it out (the scenarios worst under the default first, the likeliest), and with
+    # every wider draft ruled out the default stands, as below
+    threshold = min(default) + FLAT_MARGIN
+    order = np.argsort(default, kind="stable")
+    if all(any(squeezed.landscape(int(k), angle).fraction < threshold for k in order) for angle in alternatives):
+        return lead_in, default, None
     captures = {
-        angle: [landscape.fraction for landscape in squeezed.landscapes(angle)]
-        for angle in [lead_in, *wider_drafts(config)]
+        angle: [landscape.fraction for landscape in squeezed.landscapes(angle)] for angle in [lead_in, *alternatives]
     }
     worst = {angle: min(values) for angle, values in captures.items()}
     widest = max(worst.values())

@@ -181,8 +181,8 @@ def test_a_wider_lead_in_is_printed_where_the_default_draft_cannot_reach_the_sta
 
 
 def test_a_candidate_squeezed_once_gives_at_every_draft_the_landscapes_of_its_pad_printed_with_that_draft():
-    # CandidateSqueeze carves the candidate and turns its parts once for every draft printed_draft compares: the
-    # same landscapes as a pad printed with each draft from scratch
+    # CandidateSqueeze carves the candidate, grows the carving and turns its parts once for every draft
+    # printed_draft compares: the same pads and landscapes as a pad printed with each draft from scratch
     prepared, config = _prepared(ribbed_block(), "ribbed")
     samples = [_sample_at(prepared, 0.0, 5.0), _sample_at(prepared, 3.0, 5.0)]
     arguments = (
@@ -193,7 +193,18 @@ def test_a_candidate_squeezed_once_gives_at_every_draft_the_landscapes_of_its_pa
         ScreenGrid.for_config(config),
     )
     squeezed = CandidateSqueeze(*arguments, config)
+    geometries = [g for s in samples for g in s.screen]
     for angle in (15.0, 30.0, 45.0, 15.0):
+        # the carving grown by the clearance once, then drafted: the pad printed with that draft from its carving
+        fit = config.print.resolved()
+        printed = fitted_pad_heights(
+            carved_heights(geometries, arguments[-1]),
+            pad_case(geometries, config)[1],
+            arguments[-1].cell_mm,
+            fit["clearance_mm"],
+            angle,
+        )
+        assert np.array_equal(squeezed.pad(angle), printed)
         once = squeezed.landscapes(angle)
         anew = pad_landscapes(*arguments, config.updated({"print": {"lead_in_deg": angle}}))
         for a, b in zip(once, anew, strict=True):
