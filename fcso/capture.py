@@ -126,6 +126,56 @@ def capture_landscape(
     -------
     CaptureLandscape
     """
+    part = squeezed_part(part_mm, centres_uv_mm, cell_mm, depth_mm, width_mm, config, sliding_axis)
+    return squeeze(pad_mm, part)
+
+
+@dataclass
+class SqueezedPart:
+    """What a capture landscape needs of its part, whatever the pad (:func:`squeezed_part`): one scenario's sample
+    is squeezed on the pads of many candidates and at every draft of :func:`fcso.lead_in.printed_draft`.
+
+    Attributes
+    ----------
+    offsets_mm, yaws_deg : (nt,), (ny,) float
+        The landscape's start errors, mm and degrees (:class:`CaptureLandscape`).
+    rows_w : slice
+        The rows of ``w`` the landscape reads.
+    sides : list of ((columns,) bool, (ny, count_v, k) float, (nt,) int64, (nt,) float)
+        Per pad ("+", "-"): the rows read that the part enters, its heights turned by every start yaw
+        (:func:`_turned_heights`) on them, and every start's shift along ``v`` in whole cells and the rest.
+    lever_mm : float
+        The mean lever of a turn about the vertical at the contact, mm.
+    width_mm, depth_mm, cell_mm : float
+        As :func:`capture_landscape`'s.
+    weights : (nt, ny) float
+        How likely each start error is (0 outside the test's box).
+    config : VerifyConfig
+    """
+
+    offsets_mm: np.ndarray
+    yaws_deg: np.ndarray
+    rows_w: slice
+    sides: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    lever_mm: float
+    width_mm: float
+    depth_mm: float
+    cell_mm: float
+    weights: np.ndarray
+    config: VerifyConfig
+
+
+def squeezed_part(
+    part_mm: tuple[np.ndarray, np.ndarray],
+    centres_uv_mm: tuple[np.ndarray, np.ndarray],
+    cell_mm: float,
+    depth_mm: float,
+    width_mm: float,
+    config: VerifyConfig,
+    sliding_axis: np.ndarray | None = None,
+) -> SqueezedPart:
+    """The pad-independent half of :func:`capture_landscape` (same parameters but the pad): the part turned by
+    every start yaw, ready to be squeezed on any pad by :func:`squeeze`."""
     error_mm = config.position_error_mm
     axis = np.abs(np.asarray((0.0, 1.0) if sliding_axis is None else sliding_axis, dtype=np.float64)[:2])
     axis /= np.linalg.norm(axis)
@@ -136,13 +186,11 @@ def capture_landscape(
     turns = int(np.ceil(reach_deg / YAW_STEP_DEG))
     yaws_deg = np.arange(-turns, turns + 1) * YAW_STEP_DEG
     yaws = np.radians(yaws_deg)
-    count_v = pad_mm.shape[0]
+    count_v = part_mm[0].shape[0]
     v_mm = (np.arange(count_v) + 0.5) * cell_mm
     # every few rows of w: the squeeze is decided along v, and a coarser w costs a fraction
     rows_w = slice(0, None, max(1, int(round(W_STEP_MM / cell_mm))))
-    pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, rows_w]
-    gap = np.zeros((len(offsets), len(yaws)))
-    levers = []
+    sides, levers = [], []
     for sign, heights, (u_c, v_c) in zip((1.0, -1.0), part_mm, centres_uv_mm):
         heights = np.asarray(heights, dtype=np.float64)[:, rows_w]
         # a row of w the part never enters leaves every gap infinite: only the others are read (at least one, so
@@ -157,10 +205,32 @@ def capture_landscape(
         # cells and interpolated between them, so the landscape has no steps of a cell's rounding
         shift = sign * offsets / cell_mm
         whole = np.floor(shift).astype(np.int64)
-        fraction = shift - whole
-        _add_side_gaps(np.ascontiguousarray(pad_mm[:, entered]), turned, whole, fraction, gap)
+        sides.append((entered, turned, whole, shift - whole))
         levers.append(abs(depth_mm - u_c))
-    centre = (steps, turns)
+    in_yaw = np.abs(yaws_deg) <= config.yaw_error_deg + 1e-9
+    return SqueezedPart(
+        offsets_mm=offsets,
+        yaws_deg=yaws_deg,
+        rows_w=rows_w,
+        sides=sides,
+        lever_mm=max(float(np.mean(levers)), cell_mm),
+        width_mm=width_mm,
+        depth_mm=depth_mm,
+        cell_mm=cell_mm,
+        weights=np.outer(sliding_error_weights(offsets, error_mm, axis), in_yaw),
+        config=config,
+    )
+
+
+def squeeze(pad_mm: np.ndarray, part: SqueezedPart) -> CaptureLandscape:
+    """The capture landscape of ``part`` between two pads of face heights ``pad_mm`` ((count_v, count_w) float, mm;
+    :func:`capture_landscape`)."""
+    config, cell_mm, offsets, yaws_deg = part.config, part.cell_mm, part.offsets_mm, part.yaws_deg
+    pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, part.rows_w]
+    gap = np.zeros((len(offsets), len(yaws_deg)))
+    for entered, turned, whole, fraction in part.sides:
+        _add_side_gaps(np.ascontiguousarray(pad_mm[:, entered]), turned, whole, fraction, gap)
+    centre = (len(offsets) // 2, len(yaws_deg) // 2)
     # a centre no pad touches has an infinite gap: every separation is then inf - inf, read as never seated
     with np.errstate(invalid="ignore"):
         separation = -(gap - gap[centre])
@@ -168,16 +238,14 @@ def capture_landscape(
     # METHOD §5b: closing from the nominal seat, the pads must both touch the part before they touch each other.
     # The "-" pad is the "+" pad turned about the vertical: at the same column its face is the "+" pad's at the
     # mirrored v, and the faces lie H+ + H- + width - 2 D apart.
-    pads_apart = float(np.min(pad_mm + pad_mm[::-1, :])) + width_mm - 2.0 * depth_mm
+    pads_apart = float(np.min(pad_mm + pad_mm[::-1, :])) + part.width_mm - 2.0 * part.depth_mm
     pads_gap = pads_apart - float(gap[centre]) if np.isfinite(gap[centre]) else -np.inf
-    lever_mm = max(float(np.mean(levers)), cell_mm)
-    successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * lever_mm, config.friction)
+    successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * part.lever_mm, config.friction)
     seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (
         np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
     )
     captured = seat.ravel()[successor].reshape(separation.shape) & np.isfinite(separation)
-    in_yaw = np.abs(yaws_deg) <= config.yaw_error_deg + 1e-9
-    weights = np.outer(sliding_error_weights(offsets, error_mm, axis), in_yaw)
+    weights = part.weights
     return CaptureLandscape(
         offsets_mm=offsets,
         yaws_deg=yaws_deg,
@@ -298,6 +366,46 @@ def _turned_heights(part, v_mm, u_c, v_c, yaws):
     return turned
 
 
+@compiled("(float64[:, ::1],)")
+def _row_kinds(values):
+    """Each row's kind, numbered from 0 in order of first appearance: rows alike bit for bit share one.
+
+    Parameters
+    ----------
+    values : (rows, columns) float
+
+    Returns
+    -------
+    (rows,) int64
+    """
+    rows, columns = values.shape
+    bits = values.view(np.int64)
+    kind = np.empty(rows, dtype=np.int64)
+    # the first row of each kind
+    first = np.empty(rows, dtype=np.int64)
+    kinds = 0
+    for row in range(rows):
+        kind[row] = -1
+        # the row before first, as neighbouring rows are the likeliest alike; then the first row of every kind
+        for candidate in range(-1, kinds):
+            other = row - 1 if candidate < 0 else first[candidate]
+            if other < 0:
+                continue
+            alike = True
+            for column in range(columns):
+                if bits[row, column] != bits[other, column]:
+                    alike = False
+                    break
+            if alike:
+                kind[row] = kind[other]
+                break
+        if kind[row] < 0:
+            kind[row] = kinds
+            first[kinds] = row
+            kinds += 1
+    return kind
+
+
 @compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
 def _add_side_gaps(pad, turned, whole, fraction, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
@@ -313,25 +421,38 @@ def _add_side_gaps(pad, turned, whole, fraction, gap):
         Each start's shift along ``v`` in cells: its whole cells and the rest.
     """
     count_v, columns = pad.shape
-    lowest = whole.min()
-    shifts = whole.max() + 2 - lowest
+    lowest, highest = whole.min(), whole.max()
+    # rows of v whose pad is alike bit for bit (most of a pad, as a pocket is often the same along v) meet each row
+    # of the turned part with the same clearance: it is measured once per kind of pad row and turned row, for the
+    # runs of rows of one kind
+    kind = _row_kinds(pad)
+    starts = np.flatnonzero(np.diff(kind)) + 1
+    starts = np.concatenate((np.zeros(1, dtype=np.int64), starts, np.full(1, count_v, dtype=np.int64)))
+    clearance = np.empty((kind.max() + 1, count_v))
     for yaw in range(turned.shape[0]):
-        # the clearance of every whole shift per row of v: its least over the rows of w
-        per_shift = np.empty((shifts, count_v))
-        for shift in range(shifts):
-            for v in range(count_v):
-                source = min(max(v - (lowest + shift), 0), count_v - 1)
-                least = np.inf
-                for column in range(columns):
-                    least = min(least, pad[v, column] - turned[yaw, source, column])
-                per_shift[shift, v] = least
+        known = np.zeros(clearance.shape, dtype=np.bool_)
+        # the clearance of every row of v against each row of the part: its least over the rows of w
+        for run in range(starts.shape[0] - 1):
+            first, end, alike = starts[run], starts[run + 1], kind[starts[run]]
+            # the rows of the turned part this run meets at some whole shift (or the next one, interpolated to)
+            low = min(max(first - highest - 1, 0), count_v - 1)
+            high = min(max(end - 1 - lowest, 0), count_v - 1)
+            for source in range(low, high + 1):
+                if not known[alike, source]:
+                    least = np.inf
+                    for column in range(columns):
+                        least = min(least, pad[first, column] - turned[yaw, source, column])
+                    clearance[alike, source] = least
+                    known[alike, source] = True
         for offset in range(whole.shape[0]):
-            row, share = whole[offset] - lowest, fraction[offset]
+            shift, share = whole[offset], fraction[offset]
             least = np.inf
             for v in range(count_v):
                 # interpolated between whole cells, so the landscape has no steps of a cell's rounding; inf - inf
                 # (no pad or no part on either side) is no contact
-                shifted = (1.0 - share) * per_shift[row, v] + share * per_shift[row + 1, v]
+                here = clearance[kind[v], min(max(v - shift, 0), count_v - 1)]
+                beyond = clearance[kind[v], min(max(v - shift - 1, 0), count_v - 1)]
+                shifted = (1.0 - share) * here + share * beyond
                 if np.isnan(shifted):
                     shifted = np.inf
                 least = min(least, shifted)
@@ -392,27 +513,90 @@ def pad_landscapes(
     -------
     list of CaptureLandscape, one per scenario.
     """
-    depth = config.sampler.penetration_mm
-    if flat:
-        pad = np.full((grid.count_v, grid.count_w), depth)
-    else:
-        geometries = [g for pair in chosen for g in pair]
-        fit = config.print.resolved()
-        _, floor = pad_case(geometries, config)
-        pad = fitted_pad_heights(
-            carved_heights(geometries, grid), floor, grid.cell_mm, fit["clearance_mm"], fit["lead_in_deg"]
-        )
+    return CandidateSqueeze(chosen, centres_uv_mm, widths_mm, sliding_axes, grid, config).landscapes(flat=flat)
+
+
+def sample_part(
+    screens: tuple[ScreenGeometry, ScreenGeometry],
+    centres_uv_mm: tuple[np.ndarray, np.ndarray],
+    width_mm: float,
+    sliding_axis: np.ndarray,
+    grid: ScreenGrid,
+    config: DesignConfig,
+) -> SqueezedPart:
+    """One scenario's sample ready to be squeezed on any pad (:func:`squeezed_part`): its "+" and "-" geometries,
+    centres of mass, width and sliding axis as :func:`pad_landscapes` takes them."""
     shape = (grid.count_v, grid.count_w)
-    return [
-        capture_landscape(
-            pad,
-            (pair[0].heights_mm.reshape(shape), pair[1].heights_mm.reshape(shape)),
-            centres,
-            grid.cell_mm,
-            depth,
-            width,
-            config.verify,
-            axis,
+    return squeezed_part(
+        (screens[0].heights_mm.reshape(shape), screens[1].heights_mm.reshape(shape)),
+        centres_uv_mm,
+        grid.cell_mm,
+        config.sampler.penetration_mm,
+        width_mm,
+        config.verify,
+        sliding_axis,
+    )
+
+
+class CandidateSqueeze:
+    """A candidate's scenarios squeezed on the pad it carves, printed with any draft (:func:`pad_landscapes`).
+
+    The carving grown by the clearance and each part turned by every start yaw are the same at every draft, so they
+    are made once for the drafts :func:`fcso.lead_in.printed_draft` compares, and each landscape once when asked
+    again. Parameters as :func:`pad_landscapes`'s, and ``parts``: the scenarios' parts when already squeezed
+    (:func:`sample_part`).
+    """
+
+    def __init__(
+        self,
+        chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
+        centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
+        widths_mm: list[float],
+        sliding_axes: list[np.ndarray],
+        grid: ScreenGrid,
+        config: DesignConfig,
+        parts: list[SqueezedPart] | None = None,
+    ):
+        self.chosen, self.grid, self.config = chosen, grid, config
+        self.parts = (
+            parts
+            if parts is not None
+            else [
+                sample_part(pair, centres, width, axis, grid, config)
+                for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
+            ]
         )
-        for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
-    ]
+        self.grown: np.ndarray | None = None
+        self.pads: dict[float, np.ndarray] = {}
+        self.squeezed: dict[tuple[int, float], CaptureLandscape] = {}
+
+    def pad(self, lead_in_deg: float) -> np.ndarray:
+        """The pad's face heights printed with ``[print]``'s clearance and ``lead_in_deg`` (degrees), (count_v,
+        count_w) mm (:func:`fitted_pad_heights`)."""
+        if lead_in_deg not in self.pads:
+            geometries = [g for pair in self.chosen for g in pair]
+            _, floor = pad_case(geometries, self.config)
+            cell = self.grid.cell_mm
+            if self.grown is None:
+                # grown by the clearance and raised to the floor, without a draft: drafting that is drafting the
+                # carving grown, and the growth is most of a pad's cost
+                clearance = self.config.print.resolved()["clearance_mm"]
+                self.grown = fitted_pad_heights(carved_heights(geometries, self.grid), floor, cell, clearance, 0.0)
+            self.pads[lead_in_deg] = fitted_pad_heights(self.grown, floor, cell, 0.0, lead_in_deg)
+        return self.pads[lead_in_deg]
+
+    def landscape(self, number: int, lead_in_deg: float) -> CaptureLandscape:
+        """Scenario ``number``'s landscape on the pad printed with ``lead_in_deg`` (degrees)."""
+        key = (number, lead_in_deg)
+        if key not in self.squeezed:
+            self.squeezed[key] = squeeze(self.pad(lead_in_deg), self.parts[number])
+        return self.squeezed[key]
+
+    def landscapes(self, lead_in_deg: float | None = None, flat: bool = False) -> list[CaptureLandscape]:
+        """One landscape per scenario, on the pad printed with ``lead_in_deg`` (degrees; None: ``[print]``'s), or
+        between flat pads (face at ``D``) with ``flat``."""
+        if flat:
+            pad = np.full((self.grid.count_v, self.grid.count_w), self.config.sampler.penetration_mm)
+            return [squeeze(pad, part) for part in self.parts]
+        draft = self.config.print.resolved()["lead_in_deg"] if lead_in_deg is None else lead_in_deg
+        return [self.landscape(number, draft) for number in range(len(self.parts))]

@@ -14,7 +14,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .capture import CaptureLandscape, pad_landscapes
+from .capture import CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
 from .config import DesignConfig
 from .contact import PadContact, SurfaceSamples, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
@@ -335,6 +335,7 @@ def screen_on_pad(
     lattice: NormalLattice,
     holding: bool = False,
     captures: list[float] | None = None,
+    squeezed: dict[tuple[int, int], SqueezedPart] | None = None,
 ) -> ScreenedCandidate:
     """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
 
@@ -360,6 +361,11 @@ def screen_on_pad(
     captures : list of float, optional
         Every scenario's capture on this candidate's pad when already known (the same candidate screened on its pad
         before, without holding): its landscapes are not measured again.
+    squeezed : dict, optional
+        Samples squeezed for other candidates of the same ``scenarios`` and ``config``
+        (:func:`fcso.capture.sample_part`), by
+        scenario position and sample index: used and filled here, as the candidates one screening measures on their
+        pads share most of their samples.
 
     Returns
     -------
@@ -372,12 +378,22 @@ def screen_on_pad(
     if captures is None:
         # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
         # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
+        parts = None
+        if squeezed is not None:
+            grid = ScreenGrid.for_config(config)
+            for key, sample in zip(enumerate(choice), chosen):
+                if key not in squeezed:
+                    squeezed[key] = sample_part(
+                        sample.screen, sample.centres_uv_mm, sample.width_mm, sample.sample.sliding_axis, grid, config
+                    )
+            parts = [squeezed[key] for key in enumerate(choice)]
         _, captures, _ = printed_draft(
             screens,
             [s.centres_uv_mm for s in chosen],
             [s.width_mm for s in chosen],
             [s.sample.sliding_axis for s in chosen],
             config,
+            parts,
         )
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:

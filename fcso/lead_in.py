@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .capture import pad_landscapes
+from .capture import CandidateSqueeze, SqueezedPart
 from .config import DesignConfig
 from .grid import ScreenGrid
 from .screen import ScreenGeometry
@@ -35,6 +35,7 @@ def printed_draft(
     widths_mm: list[float],
     sliding_axes: list[np.ndarray],
     config: DesignConfig,
+    parts: list[SqueezedPart] | None = None,
 ) -> tuple[float, list[float], str | None]:
     """The draft of a candidate's samples (:func:`fcso.evaluate.printed_lead_in_deg`) and its scenarios' captures.
 
@@ -44,6 +45,8 @@ def printed_draft(
         Per scenario, its sample's two geometries, centres of mass, width and sliding axis, as
         :func:`fcso.capture.pad_landscapes`.
     config : DesignConfig
+    parts : list of SqueezedPart, optional
+        The scenarios' samples when already squeezed (:func:`fcso.capture.sample_part`).
 
     Returns
     -------
@@ -53,17 +56,20 @@ def printed_draft(
     why : str or None
     """
     lead_in = config.print.resolved()["lead_in_deg"]
-    alternatives = wider_drafts(config)
     grid = ScreenGrid.for_config(config)
-
-    def captures_at(angle: float) -> list[float]:
-        drafted = config if angle == lead_in else config.updated({"print": {"lead_in_deg": angle}})
-        return [
-            landscape.fraction
-            for landscape in pad_landscapes(screens, centres_uv_mm, widths_mm, sliding_axes, grid, drafted)
-        ]
-
-    captures = {angle: captures_at(angle) for angle in [lead_in, *alternatives]}
+    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, grid, config, parts)
+    default = [landscape.fraction for landscape in squeezed.landscapes(lead_in)]
+    alternatives = wider_drafts(config)
+    # a wider draft is taken only where its worst scenario captures FLAT_MARGIN more than the default's worst: one
+    # scenario short of that rules it out (the scenarios worst under the default first, the likeliest), and with
+    # every wider draft ruled out the default stands, as below
+    threshold = min(default) + FLAT_MARGIN
+    order = np.argsort(default, kind="stable")
+    if all(any(squeezed.landscape(int(k), angle).fraction < threshold for k in order) for angle in alternatives):
+        return lead_in, default, None
+    captures = {
+        angle: [landscape.fraction for landscape in squeezed.landscapes(angle)] for angle in [lead_in, *alternatives]
+    }
     worst = {angle: min(values) for angle, values in captures.items()}
     widest = max(worst.values())
     if widest < worst[lead_in] + FLAT_MARGIN:

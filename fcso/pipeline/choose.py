@@ -324,7 +324,9 @@ def _listed_batch(contexts, task: tuple[int, list[tuple[int, ...]]]) -> list[Scr
 
 def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidate]:
     _, scenarios, config, lattice = context
-    return [screen_on_pad(scenarios, choice, config, lattice) for choice in choices]
+    # the batch's candidates share most samples: each is squeezed once (fcso.capture.sample_part)
+    squeezed: dict = {}
+    return [screen_on_pad(scenarios, choice, config, lattice, squeezed=squeezed) for choice in choices]
 
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:

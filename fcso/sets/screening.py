@@ -174,10 +174,13 @@ def screen_set(
     def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
         return [(c.quality, c.mean_effective_area) for c in map(screened, choices)]
 
+    scenarios = [prepared.scenarios[m] for m in scenario_numbers]
+    # the candidates screened on their pads share most samples: each is squeezed once (fcso.capture.sample_part)
+    squeezed: dict = {}
+
     def on_pad(choice: tuple[int, ...], holding: bool = False, captures: list[float] | None = None):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
-        scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures)
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures, squeezed)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)

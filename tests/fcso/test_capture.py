@@ -21,14 +21,15 @@ from examples.sim_parts import (
     two_ridge_block,
     upright_grasp_settings,
 )
-from fcso.capture import pad_landscapes, sliding_error_weights
-from fcso.evaluate import printed_lead_in_deg
+from fcso.capture import CandidateSqueeze, pad_landscapes, sliding_error_weights, squeeze, squeezed_part
+from fcso.evaluate import printed_lead_in_deg, screen_on_pad
 from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n
 from fcso.measure import capture_measure, scenario_measure
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate, prepare
-from fcso.printed_heights import fitted_pad_heights
+from fcso.printed_heights import carved_heights, fitted_pad_heights
+from fcso.screen import pad_case
 
 
 def _prepared(mesh, name: str, **sections):
@@ -177,6 +178,99 @@ def test_a_wider_lead_in_is_printed_where_the_default_draft_cannot_reach_the_sta
         None,
     )
     assert printed_lead_in_deg(scenarios, choice, config.updated({"print": {"profile": "custom"}})) == (0.0, None)
+
+
+def test_a_candidate_squeezed_once_gives_at_every_draft_the_landscapes_of_its_pad_printed_with_that_draft():
+    # CandidateSqueeze carves the candidate, grows the carving and turns its parts once for every draft
+    # printed_draft compares: the same pads and landscapes as a pad printed with each draft from scratch
+    prepared, config = _prepared(ribbed_block(), "ribbed")
+    samples = [_sample_at(prepared, 0.0, 5.0), _sample_at(prepared, 3.0, 5.0)]
+    arguments = (
+        [s.screen for s in samples],
+        [s.centres_uv_mm for s in samples],
+        [s.width_mm for s in samples],
+        [s.sample.sliding_axis for s in samples],
+        ScreenGrid.for_config(config),
+    )
+    squeezed = CandidateSqueeze(*arguments, config)
+    geometries = [g for s in samples for g in s.screen]
+    for angle in (15.0, 30.0, 45.0, 15.0):
+        # the carving grown by the clearance once, then drafted: the pad printed with that draft from its carving
+        fit = config.print.resolved()
+        printed = fitted_pad_heights(
+            carved_heights(geometries, arguments[-1]),
+            pad_case(geometries, config)[1],
+            arguments[-1].cell_mm,
+            fit["clearance_mm"],
+            angle,
+        )
+        assert np.array_equal(squeezed.pad(angle), printed)
+        once = squeezed.landscapes(angle)
+        anew = pad_landscapes(*arguments, config.updated({"print": {"lead_in_deg": angle}}))
+        for a, b in zip(once, anew, strict=True):
+            assert a.fraction == b.fraction and a.pads_gap_mm == b.pads_gap_mm
+            assert np.array_equal(a.separation_mm, b.separation_mm) and np.array_equal(a.captured, b.captured)
+
+
+def test_candidates_screened_on_their_pads_with_their_samples_squeezed_once_screen_as_each_alone():
+    # screen_on_pad keeps each sample squeezed (turned by every start yaw) for the next candidates that share it
+    prepared, config = _prepared(ribbed_block(), "ribbed")
+    samples = prepared.scenarios[0].samples
+    picks = [samples.index(_sample_at(prepared, s, 5.0)) for s in (0.0, 3.0, 0.0, -3.0, 3.0)]
+    squeezed: dict = {}
+    for k in picks:
+        kept = screen_on_pad(prepared.scenarios, (k,), config, prepared.lattice, squeezed=squeezed)
+        alone = screen_on_pad(prepared.scenarios, (k,), config, prepared.lattice)
+        assert kept.quality == alone.quality and kept.mean_effective_area == alone.mean_effective_area
+        assert [s.capture for s in kept.scenarios] == [s.capture for s in alone.scenarios]
+    assert len(squeezed) == len(set(picks)) == 3
+
+
+def test_the_gap_of_pad_rows_alike_is_measured_once_and_is_the_gap_of_every_row_measured_alone():
+    # the squeeze measures one clearance per kind of pad row (rows alike bit for bit, most of a pocket along v)
+    # and turned part row: the separation of the straightforward sum over every start, row and column
+    prepared, config = _prepared(ribbed_block(), "ribbed")
+    sample = _sample_at(prepared, 0.0, 5.0)
+    grid = ScreenGrid.for_config(config)
+    shape = (grid.count_v, grid.count_w)
+    part = squeezed_part(
+        (sample.screen[0].heights_mm.reshape(shape), sample.screen[1].heights_mm.reshape(shape)),
+        sample.centres_uv_mm,
+        grid.cell_mm,
+        config.sampler.penetration_mm,
+        sample.width_mm,
+        config.verify,
+        sample.sample.sliding_axis,
+    )
+    geometries = list(sample.screen)
+    fit = config.print.resolved()
+    pad = fitted_pad_heights(
+        carved_heights(geometries, grid),
+        pad_case(geometries, config)[1],
+        grid.cell_mm,
+        fit["clearance_mm"],
+        fit["lead_in_deg"],
+    )
+    rows = pad[:, part.rows_w]
+    assert len(np.unique(rows, axis=0)) < len(rows) / 2  # most rows are alike: the case the sharing is for
+    gap = np.zeros((len(part.offsets_mm), len(part.yaws_deg)))
+    for entered, turned, whole, fraction in part.sides:
+        count_v = len(rows)
+        for offset, (shift, share) in enumerate(zip(whole, fraction)):
+            here, beyond = (np.clip(np.arange(count_v) - k, 0, count_v - 1) for k in (shift, shift + 1))
+            for yaw in range(len(part.yaws_deg)):
+                # np.fmin skips what inf - inf gives, as the squeeze reads it: no contact
+                least = [
+                    np.fmin.reduce(rows[:, entered] - turned[yaw, source], axis=1, initial=np.inf)
+                    for source in (here, beyond)
+                ]
+                shifted = (1.0 - share) * least[0] + share * least[1]
+                gap[offset, yaw] += np.min(np.where(np.isnan(shifted), np.inf, shifted))
+    centre = (len(part.offsets_mm) // 2, len(part.yaws_deg) // 2)
+    with np.errstate(invalid="ignore"):
+        expected = -(gap - gap[centre])
+    expected[~np.isfinite(expected)] = np.inf
+    assert np.array_equal(squeeze(pad, part).separation_mm, expected)
 
 
 def test_capture_chooses_the_ridge_that_centres_where_q_chooses_the_larger_area():
