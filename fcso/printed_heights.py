@@ -51,7 +51,10 @@ def fitted_pad_heights(
     (count_v, count_w) float
     """
     heights = np.asarray(carved_mm, dtype=np.float64).copy()
-    if clearance_mm > 0 and np.isfinite(heights).any():
+    if clearance_mm > 0 and lead_in_deg > 0:
+        # METHOD §9c, as fcso.printfit.carve: the drafted exact pocket, c deeper
+        heights = heights + clearance_mm
+    elif clearance_mm > 0 and np.isfinite(heights).any():
         # the part grown by a ball: grey dilation by a hemisphere, so pocket edges are rounded as carved
         radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
         padded = np.pad(heights, radius, constant_values=-np.inf)

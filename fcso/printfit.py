@@ -273,7 +273,13 @@ def carve(
     local = part.transform(affine_3x4(frame))
     if clearance_mm <= 0 and lead_in_deg <= 0:
         return local ^ pad_box
-    if clearance_mm > 0:
+    if clearance_mm > 0 and lead_in_deg > 0:
+        # METHOD §9c: the clearance becomes depth. A part grown by a ball and drafted leaves c (1 - sin α) / cos α
+        # of play at every wall parallel to the closing axis once the part rests on the floor (0.31 mm at 15°,
+        # beyond the 0.3 mm success tolerance): the drafted exact pocket, c deeper, seats it on its drafted walls
+        # instead, and a pocket printed up to c sin α (normal) smaller seats it up to c shallower, still centred.
+        local = local.translate([clearance_mm, 0.0, 0.0])
+    elif clearance_mm > 0:
         margin = clearance_mm + 1e-3
         local = grow(local ^ box((-margin,) * 3, tuple(x + margin for x in size_mm)), clearance_mm)
     # clipped to a box 1 mm larger than S: no face of the carving lies on a face of S,
