@@ -24,11 +24,11 @@ then shifted by ``σ t`` along ``v``. The pad's heights stay. ``s`` then is
 a minimum over cells of turned and shifted height maps: a landscape of a few
 hundred ``δ`` costs a few milliseconds.
 
-Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it:
-the clearance grows each carved geometry by ``c`` (a disc-shaped maximum
-filter, then ``+ c`` in depth) and the lead-in drafts every pocket wall,
-``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
-depth).
+Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it
+(:func:`fcso.printed_heights.fitted_pad_heights`): the clearance moves a
+drafted pocket ``c`` deeper (METHOD §9c) and the lead-in drafts every
+pocket wall, ``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face,
+exact at depth).
 """
 
 from __future__ import annotations

@@ -304,7 +304,9 @@ class PrintConfig(_Section):
     clearance_mm: float | None = Field(
         None,
         ge=0,
-        description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm",
+        description="Gap between the part and its pocket, mm: with a lead-in the drafted pocket is carved this much "
+        "deeper and seats the part that much deeper on its drafted walls (METHOD §9c); without one the pocket is "
+        "carved from the part grown by it",
     )
     lead_in_deg: float | None = Field(
         None,

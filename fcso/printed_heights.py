@@ -1,10 +1,11 @@
 """The pad's face heights as printed, on the screening grid (METHOD §8b, §9b).
 
-:mod:`fcso.printfit` carves a pocket as the part grown by the clearance
-(a ball) with its walls drafted by the lead-in; this is the same on column
-heights: a grey dilation by a hemisphere, then every wall drafted,
-``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
-depth). The capture model (:mod:`fcso.capture`) squeezes parts between
+:mod:`fcso.printfit` carves a drafted pocket as the part moved ``c``
+deeper with its walls drafted by the lead-in (METHOD §9c), and an undrafted
+one as the part grown by a ball of radius ``c``; this is the same on column
+heights: ``+ c``, or a grey dilation by a hemisphere, then every wall
+drafted, ``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face,
+exact at depth). The capture model (:mod:`fcso.capture`) squeezes parts between
 these heights.
 """
 
