@@ -24,11 +24,11 @@ then shifted by ``σ t`` along ``v``. The pad's heights stay. ``s`` then is
 a minimum over cells of turned and shifted height maps: a landscape of a few
 hundred ``δ`` costs a few milliseconds.
 
-Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it:
-the clearance grows each carved geometry by ``c`` (a disc-shaped maximum
-filter, then ``+ c`` in depth) and the lead-in drafts every pocket wall,
-``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
-depth).
+Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it
+(:func:`fcso.printed_heights.fitted_pad_heights`): the clearance moves a
+drafted pocket ``c`` deeper (METHOD §9c) and the lead-in drafts every
+pocket wall, ``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face,
+exact at depth).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import numpy as np
 from .config import DesignConfig, VerifyConfig
 from .grid import ScreenGrid
 from .jit import compiled
-from .printed_heights import carved_heights, fitted_pad_heights
+from .printed_heights import carved_heights, clearance_heights, drafted_heights
 from .screen import ScreenGeometry, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
@@ -541,7 +541,7 @@ def sample_part(
 class CandidateSqueeze:
     """A candidate's scenarios squeezed on the pad it carves, printed with any draft (:func:`pad_landscapes`).
 
-    The carving grown by the clearance and each part turned by every start yaw are the same at every draft, so they
+    The carving given its clearance and each part turned by every start yaw are the same at every draft, so they
     are made once for the drafts :func:`fcso.lead_in.printed_draft` compares, and each landscape once when asked
     again. Parameters as :func:`pad_landscapes`'s, and ``parts``: the scenarios' parts when already squeezed
     (:func:`sample_part`).
@@ -566,7 +566,7 @@ class CandidateSqueeze:
                 for pair, centres, width, axis in zip(chosen, centres_uv_mm, widths_mm, sliding_axes)
             ]
         )
-        self.grown: np.ndarray | None = None
+        self.cleared: dict[bool, np.ndarray] = {}
         self.pads: dict[float, np.ndarray] = {}
         self.squeezed: dict[tuple[int, float], CaptureLandscape] = {}
 
@@ -577,12 +577,13 @@ class CandidateSqueeze:
             geometries = [g for pair in self.chosen for g in pair]
             _, floor = pad_case(geometries, self.config)
             cell = self.grid.cell_mm
-            if self.grown is None:
-                # grown by the clearance and raised to the floor, without a draft: drafting that is drafting the
-                # carving grown, and the growth is most of a pad's cost
+            drafted = lead_in_deg > 0
+            if drafted not in self.cleared:
+                # the carving given its clearance is the same at every draft
                 clearance = self.config.print.resolved()["clearance_mm"]
-                self.grown = fitted_pad_heights(carved_heights(geometries, self.grid), floor, cell, clearance, 0.0)
-            self.pads[lead_in_deg] = fitted_pad_heights(self.grown, floor, cell, 0.0, lead_in_deg)
+                carved = carved_heights(geometries, self.grid)
+                self.cleared[drafted] = clearance_heights(carved, cell, clearance, drafted)
+            self.pads[lead_in_deg] = drafted_heights(self.cleared[drafted], floor, cell, lead_in_deg)
         return self.pads[lead_in_deg]
 
     def landscape(self, number: int, lead_in_deg: float) -> CaptureLandscape:

@@ -252,7 +252,7 @@ PRINT_PROFILES: dict[str, dict[str, float]] = {
         # 0.4 mm between interface areas (+-0.2 mm of tolerance for each part)
         "clearance_mm": 0.4,
         # design value, the same for every profile (see README "Printed fit"): at D = 4 mm
-        # a 15 degree draft opens the pocket by D tan 15 = 1.07 mm per side at the pad face
+        # a 15 degree draft opens the pocket by (D + c) tan 15 = 1.18 mm per side at the pad face (METHOD §9c)
         "lead_in_deg": 15.0,
         # HP MJF design guidelines, "Wall thickness": 0.5 mm for short walls along Z
         # (0.3 mm in the XY plane); the larger, orientation-free value
@@ -304,7 +304,9 @@ class PrintConfig(_Section):
     clearance_mm: float | None = Field(
         None,
         ge=0,
-        description="Gap between the part and its pocket: the pocket is carved from the part grown by it, mm",
+        description="Gap between the part and its pocket, mm: with a lead-in the drafted pocket is carved this much "
+        "deeper and seats the part that much deeper on its drafted walls (METHOD §9c); without one the pocket is "
+        "carved from the part grown by it",
     )
     lead_in_deg: float | None = Field(
         None,

@@ -498,10 +498,11 @@ def versus_flat(
 def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig) -> tuple[float, str | None]:
     """The draft a candidate is printed with: ``lead_in_deg``, or a wider one that captures more (METHOD §7b).
 
-    A pocket's lead-in bounds the start errors it guides in: at depth D a
-    draft opens the pocket by D tan(angle) per side, 1.07 mm at 15° and
-    D = 4 mm, under the ±2 mm of the precision test (measured: a ribbed block
-    seats 5/10 with 15°, 10/10 with 30° and 45°). A wider draft also lets a
+    A pocket's lead-in bounds the start errors it guides in: at depth D and
+    clearance c a draft opens the pocket by (D + c) tan(angle) per side
+    (METHOD §9c), 1.18 mm at 15°, D = 4 mm and c = 0.4 mm, under the ±2 mm
+    of the precision test (measured with the earlier pocket: a ribbed block
+    seated 5/10 with 15°, 10/10 with 30° and 45°). A wider draft also lets a
     part ride up and out more easily, so it is taken only when its worst
     scenario's capture gains at least :data:`FLAT_MARGIN`; among equal
     captures the smallest angle.

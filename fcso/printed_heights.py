@@ -1,10 +1,11 @@
 """The pad's face heights as printed, on the screening grid (METHOD §8b, §9b).
 
-:mod:`fcso.printfit` carves a pocket as the part grown by the clearance
-(a ball) with its walls drafted by the lead-in; this is the same on column
-heights: a grey dilation by a hemisphere, then every wall drafted,
-``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face, exact at
-depth). The capture model (:mod:`fcso.capture`) squeezes parts between
+:mod:`fcso.printfit` carves a drafted pocket as the part moved ``c``
+deeper with its walls drafted by the lead-in (METHOD §9c), and an undrafted
+one as the part grown by a ball of radius ``c``; this is the same on column
+heights: ``+ c``, or a grey dilation by a hemisphere, then every wall
+drafted, ``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face,
+exact at depth). The capture model (:mod:`fcso.capture`) squeezes parts between
 these heights.
 """
 
@@ -50,20 +51,35 @@ def fitted_pad_heights(
     -------
     (count_v, count_w) float
     """
+    cleared = clearance_heights(carved_mm, cell_mm, clearance_mm, drafted=lead_in_deg > 0)
+    return drafted_heights(cleared, floor_mm, cell_mm, lead_in_deg)
+
+
+def clearance_heights(carved_mm: np.ndarray, cell_mm: float, clearance_mm: float, drafted: bool) -> np.ndarray:
+    """The carved heights given the clearance, before any draft: ``c`` deeper for a pocket that will be drafted
+    (METHOD §9c, as :func:`fcso.printfit.carve`), else grown by a ball of radius ``c``; mm, as ``carved_mm``."""
     heights = np.asarray(carved_mm, dtype=np.float64).copy()
-    if clearance_mm > 0 and np.isfinite(heights).any():
-        # the part grown by a ball: grey dilation by a hemisphere, so pocket edges are rounded as carved
-        radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
-        padded = np.pad(heights, radius, constant_values=-np.inf)
-        grown = np.full_like(heights, -np.inf)
-        count_v, count_w = heights.shape
-        for dv in range(-radius, radius + 1):
-            for dw in range(-radius, radius + 1):
-                lateral = np.hypot(dv, dw) * cell_mm
-                if lateral <= clearance_mm + 1e-9:
-                    window = padded[radius + dv : radius + dv + count_v, radius + dw : radius + dw + count_w]
-                    np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
-        heights = grown
+    if clearance_mm <= 0 or not np.isfinite(heights).any():
+        return heights
+    if drafted:
+        return heights + clearance_mm
+    # grey dilation by a hemisphere, so pocket edges are rounded as carved
+    radius = int(np.ceil(clearance_mm / cell_mm - 1e-9))
+    padded = np.pad(heights, radius, constant_values=-np.inf)
+    grown = np.full_like(heights, -np.inf)
+    count_v, count_w = heights.shape
+    for dv in range(-radius, radius + 1):
+        for dw in range(-radius, radius + 1):
+            lateral = np.hypot(dv, dw) * cell_mm
+            if lateral <= clearance_mm + 1e-9:
+                window = padded[radius + dv : radius + dv + count_v, radius + dw : radius + dw + count_w]
+                np.maximum(grown, window + np.sqrt(clearance_mm**2 - min(lateral, clearance_mm) ** 2), out=grown)
+    return grown
+
+
+def drafted_heights(heights_mm: np.ndarray, floor_mm: float, cell_mm: float, lead_in_deg: float) -> np.ndarray:
+    """Heights (:func:`clearance_heights`) with every wall drafted by ``lead_in_deg`` and raised to the floor, mm."""
+    heights = np.asarray(heights_mm, dtype=np.float64)
     if lead_in_deg > 0 and np.isfinite(heights).any():
         # raised to the floor first: the draft then stops where it meets the floor, a few cells
         # out, instead of spreading below it over the whole grid (the same result, ~30x fewer passes)

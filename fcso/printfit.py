@@ -1,21 +1,27 @@
 """Fingers that fit after printing: clearance, lead-ins and thin walls of the pocket.
 
 METHOD §4 carves the exact negative of the part. A printed part and a
-printed finger both deviate from their meshes, so this module carves the
-pocket from the part grown by a clearance ``c`` (an offset surface,
-``I_n = S ∩ (G_n ⊕ ball(c))``), drafts its walls by a lead-in angle so that
-a displaced part is guided in as the fingers close, and removes pad walls
+printed finger both deviate from their meshes, so this module drafts the
+pocket's walls by a lead-in angle ``α`` so that a displaced part is guided
+in as the fingers close, gives it a clearance ``c`` and removes pad walls
 thinner than the printer can make (a morphological opening).
+
+The clearance becomes depth, not play (METHOD §9c): a drafted pocket is
+the exact part moved ``c`` deeper into the pad, drafted. At its designed
+depth the part is at least ``c sin α`` from every wall (``c`` from faces
+that face the pad), and closing seats it ``c`` deeper on the drafted walls,
+which centre it; a pocket printed smaller seats it shallower, still
+centred. Grown by a ball of radius ``c`` instead (``G ⊕ ball(c)``, kept
+where there is no lead-in), the part came to rest on the pocket's floor
+with ``c (1 - sin α) / cos α`` of play at every wall parallel to the
+closing axis (0.31 mm at 15°, beyond the 0.3 mm success tolerance).
 
 Seating rule with a clearance (used by :func:`fcso.contact.seat`): as the
 gripper closes, both pads travel toward the part until contact. A pad may
 advance past the METHOD §6 seat by at most :func:`closing_travel_mm`
-(``2 c``: enough to close the clearance on every pocket wall within 60
-degrees of facing the pad), so with ``c = 0`` seating is METHOD §6 exactly.
-A clearance therefore changes the quality only through where the part
-seats: walls that face the pad get back into contact after the advance;
-walls parallel to the closing axis keep their gap ``c`` and drop out of
-contact, as they do in a real clearance fit.
+(``2 c``: enough to close a ball's clearance on every pocket wall within 60
+degrees of facing the pad, and the ``c`` of a drafted pocket), so with
+``c = 0`` seating is METHOD §6 exactly.
 
 All Minkowski sums and differences are with convex kernels and exact
 (:func:`minkowski_convex`, :func:`minkowski_difference_convex`): the solid
@@ -246,8 +252,9 @@ def carve(
 ) -> manifold3d.Manifold:
     """What one good pad geometry removes from the pad when printed fit is on.
 
-    ``S ∩ (G_n ⊕ ball(c))`` drafted by the lead-in. Only the part within
-    ``c`` of the pad box can reach into it, so the part is clipped to the box
+    With a lead-in, the part moved ``c`` deeper along ``u``, drafted (METHOD
+    §9c); without one, ``S ∩ (G_n ⊕ ball(c))``. Only the part within ``c``
+    of the pad box can reach into it, so the part is clipped to the box
     grown by ``c`` before it is grown (the same set, far fewer triangles).
 
     Parameters
@@ -273,7 +280,10 @@ def carve(
     local = part.transform(affine_3x4(frame))
     if clearance_mm <= 0 and lead_in_deg <= 0:
         return local ^ pad_box
-    if clearance_mm > 0:
+    if clearance_mm > 0 and lead_in_deg > 0:
+        # the clearance becomes depth, not play (the module's note, METHOD §9c)
+        local = local.translate([clearance_mm, 0.0, 0.0])
+    elif clearance_mm > 0:
         margin = clearance_mm + 1e-3
         local = grow(local ^ box((-margin,) * 3, tuple(x + margin for x in size_mm)), clearance_mm)
     # clipped to a box 1 mm larger than S: no face of the carving lies on a face of S,
@@ -281,9 +291,8 @@ def carve(
     outer = box((-1.0,) * 3, tuple(x + 1.0 for x in size_mm))
     carved = local ^ outer
     if lead_in_deg > 0:
-        # the grown part's facets carry slivers where the ball's copies meet (a 1 800-triangle solar tracker): the
-        # cone's sum runs over every facet, so merging them first halves the draft's time for a change of volume
-        # under 1e-4 mm³
+        # the cone's sum runs over every convex patch of the part's facets: merged within 1e-4 mm first, a
+        # tessellated part has fewer of them, for a change of volume under 1e-4 mm³
         inside = (local ^ pad_box).as_original().simplify(SIMPLIFY_TOLERANCE_MM)
         carved = carved + draft(inside, outer, depth_mm + clearance_mm, lead_in_deg)
     return carved

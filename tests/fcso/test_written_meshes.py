@@ -22,6 +22,7 @@ import trimesh
 
 import fcso
 from examples.batch_demo import DEMO_10MM_PADS, batch_demo_part_files, batch_demo_settings
+from examples.part_families import draw
 from examples.sim_parts import two_ridge_block
 from fcso.finger import without_zero_area_faces
 from fcso.output.files import output_files
@@ -179,3 +180,15 @@ def test_the_two_ridge_block_gets_a_written_finger_with_the_defaults(tmp_path):
     )
     assert run.returncode == 0, run.stderr
     _assert_one_body(_read_back(tmp_path / "out" / "finger.stl"), "two_ridge_block finger.stl")
+
+
+def test_a_gear_whose_finger_has_a_fan_of_vertices_closer_than_float32_is_written_as_one_body(tmp_path):
+    # a spur gear of the test split (examples/part_families.py), the defaults: its pocket's floor meets a drafted wall
+    # in a fan of six vertices within 7e-7 mm, which float32 keeps distinct; their faces have no area and no edge flip
+    # mends a fan whose edges have no length, so the design was refused
+    drawn = draw("spur-gear", 100)
+    result = fcso.design([fcso.Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    files = output_files(result, draw=lambda inputs, progress: collections.defaultdict(bytes))
+    for file_name in ("finger.stl", "fingerpad.stl"):
+        (tmp_path / file_name).write_bytes(files[file_name])
+        _assert_one_body(_read_back(tmp_path / file_name), f"spur gear 100: {file_name}")
