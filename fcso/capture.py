@@ -25,10 +25,8 @@ a minimum over cells of turned and shifted height maps: a landscape of a few
 hundred ``δ`` costs a few milliseconds.
 
 Printed fit is modelled on the heights as :mod:`fcso.printfit` carves it
-(:func:`fcso.printed_heights.fitted_pad_heights`): the clearance moves a
-drafted pocket ``c`` deeper (METHOD §9c) and the lead-in drafts every
-pocket wall, ``H(x) = max_y H(y) - |x - y| cot α`` (wider at the pad face,
-exact at depth).
+(:mod:`fcso.printed_heights`): a drafted pocket is ``c`` deeper (METHOD §9c)
+and every wall is drafted, ``H(x) = max_y H(y) - |x - y| cot α``.
 """
 
 from __future__ import annotations
@@ -580,8 +578,7 @@ class CandidateSqueeze:
             drafted = lead_in_deg > 0
             if drafted not in self.cleared:
                 # the carving given its clearance is the same at every draft
-                clearance = self.config.print.resolved()["clearance_mm"]
-                carved = carved_heights(geometries, self.grid)
+                carved, clearance = carved_heights(geometries, self.grid), self.config.print.resolved()["clearance_mm"]
                 self.cleared[drafted] = clearance_heights(carved, cell, clearance, drafted)
             self.pads[lead_in_deg] = drafted_heights(self.cleared[drafted], floor, cell, lead_in_deg)
         return self.pads[lead_in_deg]
