@@ -114,30 +114,30 @@ def test_a_design_that_does_not_pass_is_told_in_full_and_exits_3(tmp_path):
 
 
 def test_the_command_tries_the_other_pad_sizes_and_its_pick_plan_follows_the_delivered_finger(tmp_path):
-    # the development split's notched bar through the command as shipped (finger sets, max = 4): the measure
-    # prefers the 20 mm pads, none of whose 3 best candidates passes; a 10 mm pad's candidate seats it 10/10 in both
+    # the development split's holed block through the command as shipped (finger sets, max = 4): the measure
+    # prefers the 10 mm pads, none of whose 3 best candidates passes; a 20 mm pad's candidate seats it 10/10 in both
     # poses. Until the set's finger carried its other sizes, the command delivered the measure's pads where
     # fcso.design's did not
-    drawn = draw("notched-bar", 0)
-    part = tmp_path / "notched.stl"
+    drawn = draw("holed-block", 0)
+    part = tmp_path / "holed.stl"
     drawn.mesh.export(part)
     out = tmp_path / "out"
     run = fcso("design", part, "--out", out, "--verify-top", "3", "--quiet")
     assert run.returncode == 0, run.stderr
 
     verification = VerificationReport.model_validate_json((out / "verification.json").read_text())
-    assert verification.passed and verification.choice.startswith("pad size 10 x 20 mm, candidate ")
+    assert verification.passed and verification.choice.startswith("pad size 20 x 20 mm, candidate ")
     report = json.loads((out / "report.json").read_text())
     sets = report["finger_sets"]
-    assert report["settings"]["sampler"]["length_mm"] == 10.0
-    assert [s["length_mm"] for s in sets["pad_sizes"] if s["chosen"]] == [10.0]
+    assert report["settings"]["sampler"]["length_mm"] == 20.0
+    assert [s["length_mm"] for s in sets["pad_sizes"] if s["chosen"]] == [20.0]
     assert sets["sets"][0]["chosen_by_truth"] == verification.choice
-    # the cell picks with the grasps of the finger it mounts, not the 20 mm pads' grasps
+    # the cell picks with the grasps of the finger it mounts, not the 10 mm pads' grasps
     assert sets["pick_plan"][0]["parts"][0]["grasps"] == report["grasps"]
     assert (
         sets["sets"][0]["pad_case"] == next(c for c in report["candidates"] if c["index"] == report["best"])["pad_case"]
     )
-    # the files written are the 10 mm pad's: read back, one watertight body
-    assert sorted(trimesh.load(out / "fingerpad.stl").extents.round(3)) == [5.0, 10.0, 20.0]
+    # the files written are the 20 mm pad's: read back, one watertight body
+    assert sorted(trimesh.load(out / "fingerpad.stl").extents.round(3)) == [5.0, 20.0, 20.0]
     finger = trimesh.load(out / "finger.stl")
     assert finger.is_watertight and len(finger.split(only_watertight=False)) == 1
