@@ -3,7 +3,8 @@
 METHOD §7b, §7c and §12. Run from the repository root::
 
     python -m benchmarks.bench_truth [--splits development,test,suite] [--seeds N] [--trials N] [--top-k K]
-                                     [--families NAME,...] [--shared-only] [--candidates K] [--bunny]
+                                     [--families NAME,...] [--shared-only | --single-only] [--candidates K]
+                                     [--bunny]
 
 Three sets of parts, every one designed with ``fcso.DesignConfig()`` as it
 ships: no part gets settings of its own, no pose or yaw is chosen for it.
@@ -17,7 +18,8 @@ ships: no part gets settings of its own, no pose or yaw is chosen for it.
 - ``suite``: the hand-made parts of :mod:`examples.sim_parts`.
 
 ``--shared-only`` runs only the shared-finger jobs of the development and test
-splits (:data:`SHARED_JOBS`; the suite has none).
+splits (:data:`SHARED_JOBS`; the suite has none), ``--single-only`` only the
+one-part jobs.
 
 The delivered candidate is chosen as the daemon chooses it (``--top-k``
 candidates verified in the measure's order, each stopped at its first failed
@@ -112,13 +114,15 @@ def suite_jobs() -> list[Job]:
     return [Job(name, "suite", [(name, mesh, caging)]) for name, mesh, caging in made]
 
 
-def drawn_jobs(split: str, seeds: int, families: set[str] | None, shared_only: bool = False) -> list[Job]:
+def drawn_jobs(
+    split: str, seeds: int, families: set[str] | None, shared_only: bool = False, single_only: bool = False
+) -> list[Job]:
     """One job per drawn part of ``split`` (none with ``shared_only``), and the split's shared-finger jobs of
-    :data:`SHARED_JOBS`."""
+    :data:`SHARED_JOBS` (none with ``single_only``)."""
     drawn = [p for p in part_families.split(split, seeds) if not families or p.family in families]
     jobs = [] if shared_only else [Job(p.name, split, [(p.name, p.mesh, p.caging)]) for p in drawn]
     first = {p.family: p for p in part_families.split(split, 1)}
-    for group in SHARED_JOBS[split]:
+    for group in [] if single_only else SHARED_JOBS[split]:
         if families and not families & set(group):
             continue
         members = [first[f] for f in group]
@@ -283,9 +287,11 @@ def main() -> None:
     parser.add_argument("--splits", default="development,test,suite", help="comma-separated: development, test, suite")
     parser.add_argument("--seeds", type=int, default=1, help="parts drawn per family and split (1 or 2)")
     parser.add_argument("--families", help="comma-separated family names to run (default: all)")
-    parser.add_argument(
+    only = parser.add_mutually_exclusive_group()
+    only.add_argument(
         "--shared-only", action="store_true", help="only the shared-finger jobs (SHARED_JOBS; no suite parts)"
     )
+    only.add_argument("--single-only", action="store_true", help="only the one-part jobs")
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--top-k", type=int, default=3, help="candidates verified by the choice ([verify] top_k)")
     parser.add_argument(
@@ -313,7 +319,7 @@ def main() -> None:
             if args.shared_only:
                 jobs = []
         else:
-            jobs = drawn_jobs(split, args.seeds, families, args.shared_only)
+            jobs = drawn_jobs(split, args.seeds, families, args.shared_only, args.single_only)
         print(f"\n== {split}")
         print(
             f"{'part':<34} {'pose':>4} {'pad':>6} {'capture':>7} {'flat':>5} | {'designed':>7} {'median':>8} "
