@@ -301,11 +301,13 @@ def run_case(parts: int, runs: int, target_s: float, max_sets: int | str = 4, tr
 
 
 #: The settings that give the method of b7cf7d7, before METHOD revision 3 changed its defaults: ranked by the
-#: paper's Q (§7), the exact pocket (§9b's ``custom`` profile) and the paper's sampler (no §3b positions or face yaws).
+#: paper's Q (§7), the exact pocket (§9b's ``custom`` profile), the paper's sampler (no §3b positions or face yaws)
+#: and the paper's filter (no wrapped faces).
 FIRST_METHOD = {
     "quality": {"measure": "paper"},
     "print": {"profile": "custom"},
     "sampler": {"feature_positions": False, "face_yaws": False},
+    "filter": {"wrapped_faces": False},
 }
 
 #: One design of a job in a fresh process, on whichever fcso its working folder holds: argv = the parts' folder and

@@ -126,11 +126,11 @@ class FilterConfig(_Section):
     full_cover_fraction: float = Field(
         0.99, gt=0, le=1, description="Fraction of the pad face a cross-section must cover to count as full"
     )
-    # off by default: wrapping holds a sharp-edged cube 10/10 where flat pads hold it 1/10, but on the development
-    # split the measure ranks wrapped pockets of a holed and a slotted block first and they seat them 2 and 1/10 and
-    # not at all (off its seat, delivered flat), where the carvings they displace seat them 10/10
+    # on by default: with drafted pockets whose clearance becomes depth (METHOD §9c) the wrapped end walls centre the
+    # part instead of leaving it the clearance as play, and block-like parts whose only features are their own
+    # edges (a boss's base, a shouldered block, a plain box) are caged where the paper's filter leaves them flat
     wrapped_faces: bool = Field(
-        False,
+        True,
         description="A face flat against the pad that ends inside the pad at both ends of its length is good: the "
         "pocket's end walls wrap the part's edges and capture it along the pads (METHOD §3b); false is the paper's "
         "filter, which labels every flat face bad",
