@@ -384,8 +384,13 @@ def test_finger_sets_are_designed_with_every_pad_size_and_keep_the_best(tmp_path
 
 def test_finger_sets_design_in_full_only_the_pad_sizes_their_screen_cannot_rule_out():
     # the three knobs conflict pairwise on a 10 mm pad (3 sets screened, test_auto_gives_pairwise_conflicting_parts_
-    # one_set_each) and share a 35 mm pad (1 set screened): two sets apart, the 10 mm size's sets are not designed
-    job = design_sets(THREE_KNOBS, config(finger_sets={"max": "auto"}, sampler={"length_mm": [10.0, 35.0]}))
+    # one_set_each) and share a 35 mm pad (1 set screened): two sets apart, the 10 mm size's sets are not designed.
+    # The paper's filter: with wrapped faces each knob's pockets wrap its own ends and the knobs conflict pairwise on
+    # 35 mm pads too (3 sets at either size), so both sizes are designed
+    job = design_sets(
+        THREE_KNOBS,
+        config(finger_sets={"max": "auto"}, sampler={"length_mm": [10.0, 35.0]}, filter={"wrapped_faces": False}),
+    )
     sizes = {entry.length_mm: entry for entry in job.report.pad_sizes}
     assert sizes[10.0].quality is None and sizes[10.0].screened_out and not sizes[10.0].chosen
     assert sizes[10.0].note.startswith(
