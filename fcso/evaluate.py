@@ -66,6 +66,16 @@ class SampleGeometry:
     #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
     #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
+    #: This sample squeezed for any pad by (grid, D, [verify]): a part's best samples are screened on many sets' pads.
+    squeezed: dict[tuple, SqueezedPart] = field(default_factory=dict, repr=False, compare=False)
+
+    def squeezed_part(self, grid: ScreenGrid, config: DesignConfig) -> SqueezedPart:
+        """:func:`fcso.capture.sample_part` of this sample on ``grid`` (cells in mm), made once per process."""
+        key = (grid.cell_mm, grid.count_v, grid.count_w, config.sampler.penetration_mm, config.verify.model_dump_json())
+        if key not in self.squeezed:
+            axis = self.sample.sliding_axis
+            self.squeezed[key] = sample_part(self.screen, self.centres_uv_mm, self.width_mm, axis, grid, config)
+        return self.squeezed[key]
 
     @property
     def width_mm(self) -> float:
@@ -336,6 +346,7 @@ def screen_on_pad(
     holding: bool = False,
     captures: list[float] | None = None,
     squeezed: dict[tuple[int, int], SqueezedPart] | None = None,
+    landscapes: dict | None = None,
 ) -> ScreenedCandidate:
     """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
 
@@ -362,10 +373,10 @@ def screen_on_pad(
         Every scenario's capture on this candidate's pad when already known (the same candidate screened on its pad
         before, without holding): its landscapes are not measured again.
     squeezed : dict, optional
-        Samples squeezed for other candidates of the same ``scenarios`` and ``config``
-        (:func:`fcso.capture.sample_part`), by
-        scenario position and sample index: used and filled here, as the candidates one screening measures on their
-        pads share most of their samples.
+        Filled with the samples squeezed (:func:`fcso.capture.sample_part`) by scenario position and sample index;
+        each sample keeps its own (:meth:`SampleGeometry.squeezed_part`), so candidates sharing it squeeze it once.
+    landscapes : dict, optional
+        Landscapes of other candidates with the same ``config`` (:class:`fcso.capture.CandidateSqueeze`'s ``known``).
 
     Returns
     -------
@@ -378,15 +389,11 @@ def screen_on_pad(
     if captures is None:
         # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
         # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
-        parts = None
+        # each sample squeezed once per process (SampleGeometry.squeezed_part), whichever candidates share it
+        grid = ScreenGrid.for_config(config)
+        parts = [sample.squeezed_part(grid, config) for sample in chosen]
         if squeezed is not None:
-            grid = ScreenGrid.for_config(config)
-            for key, sample in zip(enumerate(choice), chosen):
-                if key not in squeezed:
-                    squeezed[key] = sample_part(
-                        sample.screen, sample.centres_uv_mm, sample.width_mm, sample.sample.sliding_axis, grid, config
-                    )
-            parts = [squeezed[key] for key in enumerate(choice)]
+            squeezed.update(zip(enumerate(choice), parts))
         _, captures, _ = printed_draft(
             screens,
             [s.centres_uv_mm for s in chosen],
@@ -394,6 +401,7 @@ def screen_on_pad(
             [s.sample.sliding_axis for s in chosen],
             config,
             parts,
+            landscapes,
         )
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:

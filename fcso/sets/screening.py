@@ -176,11 +176,13 @@ def screen_set(
 
     scenarios = [prepared.scenarios[m] for m in scenario_numbers]
     # the candidates screened on their pads share most samples: each is squeezed once (fcso.capture.sample_part)
+    # and a candidate whose carving is another's bit for bit is squeezed on its pad only where its samples are new
     squeezed: dict = {}
+    landscapes: dict = {}
 
     def on_pad(choice: tuple[int, ...], holding: bool = False, captures: list[float] | None = None):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
-        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures, squeezed)
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures, squeezed, landscapes)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)

@@ -1,0 +1,101 @@
+"""The design's fast paths give the answers of the computations they replace, on real parts (issue 48's time).
+
+Each test makes a small job of parts built with manifold3d and checks a cached or vectorised step against the same
+step computed from scratch the way it was before: equal bit for bit, not within a tolerance.
+"""
+
+import manifold3d
+import numpy as np
+import pytest
+
+import fcso
+from fcso.capture import sample_part
+from fcso.evaluate import screen_on_pad
+from fcso.geometry import to_trimesh
+from fcso.grid import ScreenGrid
+from fcso.holding import holding_forces_n, merge_contacts, row_groups
+from fcso.lead_in import printed_draft
+from fcso.pipeline import prepare
+from tests.conftest import small_config
+
+
+@pytest.fixture(scope="module")
+def two_parts():
+    """A hexagonal prism and a round part (the pair of test_sets' screening test), prepared with 10 mm pads."""
+    hex_prism = manifold3d.Manifold.cylinder(16.0, 20.0 / np.sqrt(3.0), circular_segments=6)
+    round_part = manifold3d.Manifold.cylinder(16.0, 7.0, circular_segments=128)
+    parts = [
+        fcso.Part(name="hex", path="hex.stl", mesh=to_trimesh(hex_prism)),
+        fcso.Part(name="round", path="round.stl", mesh=to_trimesh(round_part)),
+    ]
+    config = small_config(search={"jobs": 1})
+    return prepare(parts, config), config
+
+
+def _contacts(prepared):
+    """Every sample's contact samples as holding takes them: points, normals into the part, pads (both sides)."""
+    for scenario in prepared.scenarios:
+        for sample in scenario.samples[::7]:
+            surfaces = sample.surfaces
+            points = np.vstack([s.points @ f[:3, :3] for s, f in zip(surfaces, sample.frames)])
+            normals = np.vstack([s.normals @ f[:3, :3] for s, f in zip(surfaces, sample.frames)])
+            pads = np.concatenate([np.full(len(s.points), side) for side, s in enumerate(surfaces)])
+            yield sample, points, normals, pads
+
+
+def test_contacts_merged_by_one_integer_per_row_are_grouped_as_unique_rows(two_parts):
+    # merge_contacts groups contacts by (pad, grid cell, normal direction): numbered in mixed radix, the groups and
+    # their order are np.unique's on the rows, so the holding programmes keep their columns in the same order
+    prepared, _ = two_parts
+    checked = 0
+    for _, points, normals, pads in _contacts(prepared):
+        keys = np.column_stack([pads, np.floor(points / 1.5).astype(np.int64), np.rint(normals * 1.5).astype(np.int64)])
+        assert np.array_equal(row_groups(keys), np.unique(keys, axis=0, return_inverse=True)[1].ravel())
+        checked += len(keys) > 0
+    assert checked > 10
+    # columns whose ranges overflow one integer fall back to np.unique on the rows
+    wide = np.array([[0, 2**40, -(2**40)], [1, -(2**40), 2**40], [0, 2**40, -(2**40)]], dtype=np.int64)
+    assert np.array_equal(row_groups(wide), np.unique(wide, axis=0, return_inverse=True)[1].ravel())
+    assert len(row_groups(np.zeros((0, 3), dtype=np.int64))) == 0
+
+
+def test_holding_of_merged_contacts_is_the_holding_of_contacts_merged_as_unique_rows(two_parts):
+    prepared, config = two_parts
+    for sample, points, normals, pads in list(_contacts(prepared))[:6]:
+        merged = merge_contacts(points, normals, pads)
+        # merged as before: np.unique on the rows
+        keys = np.column_stack([pads, np.floor(points / 1.5).astype(np.int64), np.rint(normals * 1.5).astype(np.int64)])
+        group = np.unique(keys, axis=0, return_inverse=True)[1].ravel()
+        count = np.bincount(group)
+        before = np.column_stack([np.bincount(group, points[:, k]) for k in range(3)]) / count[:, None]
+        assert np.array_equal(merged[0], before)
+        forces = holding_forces_n(
+            points, normals, pads, sample.sample.closing_axis, points.mean(axis=0), 0.05, 0.4, 60.0, 30.0
+        )
+        assert forces.shape == (6,) and np.all(forces >= 0.0)
+
+
+def test_a_sample_squeezed_once_per_process_screens_candidates_as_squeezed_anew(two_parts):
+    # SampleGeometry.squeezed_part keeps each sample squeezed (turned by every start yaw) for every candidate that
+    # shares it: the captures on the candidates' pads are those of printed_draft squeezing every sample anew
+    prepared, config = two_parts
+    grid = ScreenGrid.for_config(config)
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    choices = [(h, r) for h in range(0, len(hexes), max(1, len(hexes) // 4)) for r in (0, len(rounds) // 2)]
+    for choice in choices:
+        chosen = [prepared.scenarios[m].samples[k] for m, k in enumerate(choice)]
+        kept = [g.squeezed_part(grid, config) for g in chosen]
+        assert all(g.squeezed_part(grid, config) is part for g, part in zip(chosen, kept))
+        for g, part in zip(chosen, kept):
+            anew = sample_part(g.screen, g.centres_uv_mm, g.width_mm, g.sample.sliding_axis, grid, config)
+            for a, b in zip(part.sides, anew.sides):
+                assert all(np.array_equal(x, y) for x, y in zip(a, b))
+        screened = screen_on_pad(prepared.scenarios, choice, config, prepared.lattice, holding=True)
+        _, captures, _ = printed_draft(
+            [g.screen for g in chosen],
+            [g.centres_uv_mm for g in chosen],
+            [g.width_mm for g in chosen],
+            [g.sample.sliding_axis for g in chosen],
+            config,
+        )
+        assert [s.capture for s in screened.scenarios] == captures
