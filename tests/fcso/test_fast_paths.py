@@ -9,13 +9,15 @@ import numpy as np
 import pytest
 
 import fcso
-from fcso.capture import sample_part
+from fcso.capture import CandidateSqueeze, sample_part
 from fcso.evaluate import screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n, merge_contacts, row_groups
 from fcso.lead_in import printed_draft
 from fcso.pipeline import prepare
+from fcso.printed_heights import carved_heights, clearance_heights, drafted_heights
+from fcso.screen import pad_case
 from tests.conftest import small_config
 
 
@@ -99,3 +101,81 @@ def test_a_sample_squeezed_once_per_process_screens_candidates_as_squeezed_anew(
             config,
         )
         assert [s.capture for s in screened.scenarios] == captures
+
+
+def _drafted_in_passes(heights: np.ndarray, floor_mm: float, cell_mm: float, lead_in_deg: float) -> np.ndarray:
+    """The drafted heights as they were computed before: passes over a copy of the whole grid (each cell from its
+    neighbours' heights of the pass before) until none changes."""
+    current = np.maximum(np.asarray(heights, dtype=np.float64), floor_mm)
+    drop = cell_mm / np.tan(np.radians(lead_in_deg))
+    rows, columns = current.shape
+    for _ in range(rows + columns):
+        padded = np.pad(current, 1, constant_values=-np.inf)
+        straight = np.max([padded[:-2, 1:-1], padded[2:, 1:-1], padded[1:-1, :-2], padded[1:-1, 2:]], axis=0)
+        corner = np.max([padded[:-2, :-2], padded[:-2, 2:], padded[2:, :-2], padded[2:, 2:]], axis=0)
+        grown = np.maximum(current, np.maximum(straight - drop, corner - drop * np.sqrt(2.0)))
+        if np.array_equal(grown, current):
+            break
+        current = grown
+    return np.maximum(current, floor_mm)
+
+
+def test_walls_drafted_in_alternating_sweeps_are_the_walls_drafted_in_passes(two_parts):
+    # drafted_heights updates the grid in place, sweeping it in alternating orders: the heights of the passes over a
+    # copy bit for bit, on the pads real candidates carve, at every draft the design compares
+    prepared, config = two_parts
+    grid = ScreenGrid.for_config(config)
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    clearance = config.print.resolved()["clearance_mm"]
+    checked = 0
+    for h, r in [(h, r) for h in range(0, len(hexes), max(1, len(hexes) // 5)) for r in (0, len(rounds) // 2)]:
+        geometries = [*hexes[h].screen, *rounds[r].screen]
+        floor = pad_case(geometries, config)[1]
+        carved = carved_heights(geometries, grid)
+        for drafted in (True, False):
+            cleared = clearance_heights(carved, grid.cell_mm, clearance, drafted)
+            for angle in (15.0, 30.0, 45.0):
+                assert np.array_equal(
+                    drafted_heights(cleared, floor, grid.cell_mm, angle),
+                    _drafted_in_passes(cleared, floor, grid.cell_mm, angle),
+                )
+                checked += 1
+    assert checked >= 12
+
+
+def test_landscapes_of_a_carving_squeezed_before_are_those_squeezed_anew(two_parts):
+    # CandidateSqueeze with ``known`` reuses a landscape where a part meets a carving already squeezed bit for bit:
+    # a candidate of the same carving (the hex's pocket under the round part's, test_sets) gets the landscapes of a
+    # squeeze from scratch, and one of another carving is squeezed anew
+    prepared, config = two_parts
+    grid = ScreenGrid.for_config(config)
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    known: dict = {}
+    reused = 0
+    for h in range(0, len(hexes), max(1, len(hexes) // 6)):
+        for r in range(0, len(rounds), max(1, len(rounds) // 3)):
+            chosen = [hexes[h], rounds[r]]
+            arguments = (
+                [g.screen for g in chosen],
+                [g.centres_uv_mm for g in chosen],
+                [g.width_mm for g in chosen],
+                [g.sample.sliding_axis for g in chosen],
+                grid,
+                config,
+            )
+            parts = [g.squeezed_part(grid, config) for g in chosen]
+            before = len(known)
+            cached = CandidateSqueeze(*arguments, parts, known)
+            anew = CandidateSqueeze(*arguments)
+            for angle in (15.0, 30.0):
+                for a, b in zip(cached.landscapes(angle), anew.landscapes(angle), strict=True):
+                    assert a.fraction == b.fraction and a.pads_gap_mm == b.pads_gap_mm
+                    assert np.array_equal(a.separation_mm, b.separation_mm) and np.array_equal(a.captured, b.captured)
+            reused += before + 4 > len(known)
+            # the whole screening as the set's screening runs it, with the landscapes known
+            screened = screen_on_pad(prepared.scenarios, (h, r), config, prepared.lattice, landscapes=known)
+            alone = screen_on_pad(prepared.scenarios, (h, r), config, prepared.lattice)
+            assert [s.capture for s in screened.scenarios] == [s.capture for s in alone.scenarios]
+            assert screened.quality == alone.quality
+    # a carving met again (the same round sample under several hex samples' pockets) reused its landscapes
+    assert reused > 0
