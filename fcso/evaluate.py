@@ -16,7 +16,7 @@ import trimesh
 
 from .capture import CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
 from .config import DesignConfig
-from .contact import PadContact, SurfaceSamples, sample_surface, seat
+from .contact import PadContact, SurfaceSamples, contact_seed, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
 from .holding import holding_forces_n
@@ -68,6 +68,16 @@ class SampleGeometry:
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
     #: This sample squeezed for any pad by (grid, D, [verify]): a part's best samples are screened on many sets' pads.
     squeezed: dict[tuple, SqueezedPart] = field(default_factory=dict, repr=False, compare=False)
+    #: The six holding forces (N) measured in this process, by the key of ``held``: a finalist's exact contacts are
+    #: often its screened ones, and screenings and exact evaluations run in the same workers.
+    forces: dict[tuple, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+
+    def holding_n(self, scenario: Scenario, surfaces, contacts, normals_rest: np.ndarray, config: DesignConfig):
+        """:func:`holding_n` of this sample's contacts (N), measured once per process and contacts."""
+        key = holding_key(contacts, config)
+        if key not in self.forces:
+            self.forces[key] = holding_n(scenario, self, surfaces, contacts, normals_rest, config)
+        return self.forces[key].copy()
 
     def squeezed_part(self, grid: ScreenGrid, config: DesignConfig) -> SqueezedPart:
         """:func:`fcso.capture.sample_part` of this sample on ``grid`` (cells in mm), made once per process."""
@@ -200,43 +210,6 @@ def sample_geometry(
     )
 
 
-def contact_seed(config: DesignConfig, scenario_number: int, sample_index: int, side_number: int) -> tuple[int, ...]:
-    """The seed of one pad geometry's contact samples: ``(contact.seed, scenario, sample, side)``.
-
-    So a report can be rebuilt with exactly the samples the design used.
-
-    Parameters
-    ----------
-    config : DesignConfig
-    scenario_number, sample_index, side_number : int
-        Position of the scenario in the design, of the sample in the scenario,
-        and the side (0: "+", 1: "-").
-    """
-    return (config.contact.seed, scenario_number, sample_index, side_number)
-
-
-def contact_samples(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    config: DesignConfig,
-    scenario_number: int,
-    sample_index: int,
-    side_number: int,
-) -> SurfaceSamples:
-    """The design's surface samples of one pad geometry (seeded by :func:`contact_seed`).
-
-    Parameters
-    ----------
-    vertices, faces : ndarray
-        Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
-    config : DesignConfig
-    scenario_number, sample_index, side_number : int
-        As for :func:`contact_seed`.
-    """
-    seed = list(contact_seed(config, scenario_number, sample_index, side_number))
-    return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
-
-
 def evaluate_candidate(
     scenarios: list[Scenario],
     choice: tuple[int, ...],
@@ -289,7 +262,7 @@ def evaluate_candidate(
         if not by_capture:
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
-        holding = holding_n(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
+        holding = sample.holding_n(scenario, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
         # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores;
         # and a good geometry seats at t = 0 (§5): a good pad that stops short of that on a side is blocked there by
@@ -406,13 +379,12 @@ def screen_on_pad(
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
-        key = (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
+        key = holding_key(contacts, config)
         if key not in sample.held:
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
             held = (
-                holding_n(scenarios[number], sample, surfaces, contacts, normals, config)
+                sample.holding_n(scenarios[number], surfaces, contacts, normals, config)
                 if len(normals)
                 else np.zeros(1)
             )
@@ -420,6 +392,13 @@ def screen_on_pad(
         return sample.held[key]
 
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
+
+
+def holding_key(contacts, config: DesignConfig) -> tuple:
+    """What a sample's holding forces depend on beside the sample: its contact masks per pad, the test's conditions
+    and the print's density (the key of :attr:`SampleGeometry.held` and :attr:`SampleGeometry.forces`)."""
+    conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
+    return (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
 
 
 def holding_n(

@@ -266,6 +266,9 @@ class SetScreener:
         self.picks = solo_picks(solos)
         self.quick_cache: dict[frozenset[int], np.ndarray] = {}
         self.exact: dict[frozenset[int], np.ndarray] = {}
+        #: holding shares the workers measured since the screener began, by (scenario, sample): sent with the quick
+        #: screenings of those samples, so a worker forked earlier does not measure what the other one did
+        self.learned: dict[tuple[int, int], dict[tuple, float]] = {}
 
     def _scenarios(self, members: frozenset[int]) -> tuple[int, ...]:
         return tuple(m for p in sorted(members) for m in self.part_scenarios[p])
@@ -289,10 +292,14 @@ class SetScreener:
         # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
+        known = [{(m, self.picks[m]) for numbers in batch for m in numbers} & self.learned.keys() for batch in batches]
         areas = []
-        for batch_areas, held in self.pool.map(_quick_task, batches):
+        sent = [(batch, {key: self.learned[key] for key in keys}) for batch, keys in zip(batches, known)]
+        for batch_areas, held in self.pool.map(_quick_task, sent):
             areas.extend(batch_areas)
             keep_held(self.prepared, held)
+            for key, entries in held.items():
+                self.learned.setdefault(key, {}).update(entries)
         for members, area in zip(fresh, areas):
             self.quick_cache[members] = self._ratios(members, area)
         return [self._per_part(members, self.quick_cache[members]) for members in sets]
@@ -381,10 +388,13 @@ def _probe_task(context, task: tuple[tuple[int, ...], tuple[int, ...]]) -> np.nd
 
 
 def _quick_task(
-    context, batch: list[tuple[int, ...]]
+    context, task: tuple[list[tuple[int, ...]], dict[tuple[int, int], dict[tuple, float]]]
 ) -> tuple[list[np.ndarray], dict[tuple[int, int], dict[tuple, float]]]:
-    """Quick screenings of a batch of sets, and the holding shares their samples know afterwards (:func:`keep_held`)."""
+    """Quick screenings of a batch of sets, given the holding shares its samples have been measured with since this
+    worker was forked, and the holding shares they know afterwards (:func:`keep_held`)."""
     prepared, pools, picks, config = context
+    batch, known = task
+    keep_held(prepared, known)
     areas = [quick_screen(prepared, numbers, picks, config) for numbers in batch]
     touched = {(m, picks[m]) for numbers in batch for m in numbers}
     return areas, {key: dict(prepared.scenarios[key[0]].samples[key[1]].held) for key in sorted(touched)}

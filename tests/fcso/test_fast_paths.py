@@ -4,20 +4,24 @@ Each test makes a small job of parts built with manifold3d and checks a cached o
 step computed from scratch the way it was before: equal bit for bit, not within a tolerance.
 """
 
+import copy
+
 import manifold3d
 import numpy as np
 import pytest
 
 import fcso
 from fcso.capture import CandidateSqueeze, sample_part
-from fcso.evaluate import screen_on_pad
+from fcso.evaluate import holding_n, screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.grid import ScreenGrid
 from fcso.holding import holding_forces_n, merge_contacts, row_groups
 from fcso.lead_in import printed_draft
-from fcso.pipeline import prepare
+from fcso.parallel import WorkerPool
+from fcso.pipeline import evaluate_exact, prepare
 from fcso.printed_heights import carved_heights, clearance_heights, drafted_heights
 from fcso.screen import pad_case
+from fcso.sets.screening import SetScreener, screening_pools, solo_picks, solo_quality
 from tests.conftest import small_config
 
 
@@ -179,3 +183,47 @@ def test_landscapes_of_a_carving_squeezed_before_are_those_squeezed_anew(two_par
             assert screened.quality == alone.quality
     # a carving met again (the same round sample under several hex samples' pockets) reused its landscapes
     assert reused > 0
+
+
+def test_holding_measured_once_per_sample_and_contacts_is_the_holding_measured_anew(two_parts):
+    # SampleGeometry.holding_n keeps the six holding forces of each set of contacts: the exact evaluation of a
+    # finalist, whose contacts are often its screened ones, reads those the screening measured, and the same forces
+    # as holding_n measures from scratch
+    prepared, config = two_parts
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    reused = 0
+    for choice in [(h, r) for h in range(0, len(hexes), max(1, len(hexes) // 4)) for r in (0, len(rounds) // 2)]:
+        screened = screen_on_pad(prepared.scenarios, choice, config, prepared.lattice, holding=True)
+        known = sum(len(prepared.scenarios[m].samples[k].forces) for m, k in enumerate(choice))
+        exact = evaluate_exact(prepared, choice, config)
+        reused += known == sum(len(prepared.scenarios[m].samples[k].forces) for m, k in enumerate(choice))
+        for m, (k, evaluation) in enumerate(zip(choice, exact.scenarios)):
+            sample, scenario = prepared.scenarios[m].samples[k], prepared.scenarios[m]
+            contacts = [c.contact for c in evaluation.contacts]
+            anew = holding_n(scenario, sample, sample.surfaces, contacts, evaluation.contact_normals, config)
+            assert np.array_equal(evaluation.holding_n, anew)
+            # the screened share is the share of the forces measured anew for the screened contacts
+            assert 0.0 <= screened.scenarios[m].measure
+    assert reused > 0
+
+
+def test_quick_screenings_sent_the_holding_measured_by_other_workers_are_those_measured_anew(two_parts):
+    # SetScreener.quick sends each batch the holding shares other workers measured for its samples since the pool
+    # was forked: the screenings are those of workers that measure every holding themselves
+    prepared, config = two_parts
+    clean = copy.deepcopy(prepared)
+    solos = [solo_quality(prepared, m, config) for m in range(len(prepared.scenarios))]
+    sets = [frozenset({0, 1}), frozenset({0}), frozenset({1})]
+
+    def quick(job, learned=None):
+        context = (job, screening_pools(solos, config.finger_sets.screen_samples), solo_picks(solos), config)
+        with WorkerPool(context, 2) as pool:
+            screener = SetScreener(job, [[0], [1]], solos, config, pool)
+            screener.learned = copy.deepcopy(learned or {})
+            return screener.quick(sets), screener.learned
+
+    measured, learned = quick(copy.deepcopy(clean))
+    assert learned  # the workers' holding shares came back
+    sent, _ = quick(copy.deepcopy(clean), learned)
+    for a, b in zip(measured, sent, strict=True):
+        assert a.keys() == b.keys() and all(np.array_equal(a[p], b[p]) for p in a)
