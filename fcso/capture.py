@@ -31,6 +31,7 @@ and every wall is drafted, ``H(x) = max_y H(y) - |x - y| cot α``.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,8 +45,7 @@ from .screen import ScreenGeometry, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
 YAW_STEP_DEG = 0.5
-#: How far the landscape reaches beyond the start error box, mm and degrees:
-#: a descent may leave the box on its way to the seat.
+#: How far the landscape reaches beyond the start error box, mm and degrees: a descent may leave it for the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
 #: Spacing of the rows across the pad width that the landscape reads, mm.
 W_STEP_MM = 0.6
@@ -250,6 +250,20 @@ def squeeze(pad_mm: np.ndarray, part: SqueezedPart) -> CaptureLandscape:
         fraction=float((weights * captured).sum() / weights.sum()) if pads_gap > 0 else 0.0,
         pads_gap_mm=pads_gap,
     )
+
+
+def squeeze_key(pad_mm: np.ndarray, part: SqueezedPart) -> tuple[bytes, float]:
+    """What :func:`squeeze` reads of a pad ((count_v, count_w) float, mm) for ``part``: the :func:`digest` of the rows
+    of ``w`` it enters on each side, and the least sum of the pad's heights and their mirror (mm), where pads meet."""
+    pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, part.rows_w]
+    read = b"".join(np.ascontiguousarray(pad_mm[:, entered]).tobytes() for entered, *_ in part.sides)
+    return digest(read), float(np.min(pad_mm + pad_mm[::-1, :]))
+
+
+def digest(data: bytes) -> bytes:
+    """A 256-bit BLAKE2b digest of ``data``, the key of heights in caches: two arrays of other bytes share one with
+    probability 2^-256, and the arrays themselves (tens of kB each) held hundreds of MB in a large set's screening."""
+    return hashlib.blake2b(data, digest_size=32).digest()
 
 
 def sliding_error_weights(offsets_mm: np.ndarray, error_mm: float, sliding_axis: np.ndarray) -> np.ndarray:
@@ -496,9 +510,9 @@ class CandidateSqueeze:
     The carving given its clearance and each part turned by every start yaw are the same at every draft, so they
     are made once for the drafts :func:`fcso.lead_in.printed_draft` compares, and each landscape once when asked
     again. Parameters as :func:`pad_landscapes`'s, and ``parts``: the scenarios' parts when already squeezed
-    (:func:`sample_part`); ``known``: landscapes of other candidates with the same settings, by part, carving and
-    draft, used and filled here (a pad is its carving's, so a candidate whose carving is another's bit for bit, as
-    when one scenario's sample lies under the others' pockets, squeezes only its new samples).
+    (:func:`sample_part`); ``known``: landscapes of other candidates with the same settings, used and filled here
+    (:meth:`known_landscape`): a candidate whose carving is another's bit for bit, as when one scenario's sample lies
+    under the others' pockets, or whose pad is where a part meets it, squeezes only its new samples.
     """
 
     def __init__(
@@ -527,11 +541,12 @@ class CandidateSqueeze:
         self.carving: tuple[np.ndarray, bytes, float] | None = None
 
     def carved(self) -> tuple[np.ndarray, bytes, float]:
-        """The carving (:func:`carved_heights`, mm), its bytes and the pad's floor (:func:`pad_case`, mm), made once."""
+        """The carving (:func:`carved_heights`, mm), its digest (:func:`digest`) and the pad's floor (:func:`pad_case`,
+        mm), made once."""
         if self.carving is None:
             geometries = [g for pair in self.chosen for g in pair]
             carved = carved_heights(geometries, self.grid)
-            self.carving = carved, carved.tobytes(), pad_case(geometries, self.config)[1]
+            self.carving = carved, digest(carved.tobytes()), pad_case(geometries, self.config)[1]
         return self.carving
 
     def pad(self, lead_in_deg: float) -> np.ndarray:
@@ -556,13 +571,24 @@ class CandidateSqueeze:
             if self.known is None:
                 self.squeezed[key] = squeeze(self.pad(lead_in_deg), part)
             else:
-                _, carving, floor = self.carved()
-                shared = (id(part), carving, floor, lead_in_deg)
-                # the part is kept beside its landscape: its id then names no other part while the entry lives
-                if shared not in self.known or self.known[shared][0] is not part:
-                    self.known[shared] = (part, squeeze(self.pad(lead_in_deg), part))
-                self.squeezed[key] = self.known[shared][1]
+                self.squeezed[key] = self.known_landscape(part, lead_in_deg)
         return self.squeezed[key]
+
+    def known_landscape(self, part: SqueezedPart, lead_in_deg: float) -> CaptureLandscape:
+        """``part``'s landscape on the pad printed with ``lead_in_deg`` (degrees) from ``known``: squeezed before on
+        the same carving, or on a pad that is this one bit for bit where the squeeze reads it (:func:`squeeze_key`),
+        else squeezed now; the part is kept beside its landscape, so its id names no other part while they live."""
+        _, carving, floor = self.carved()
+        by_carving = (id(part), carving, floor, self.config.print.resolved()["clearance_mm"], lead_in_deg)
+        entry = self.known.get(by_carving)
+        if entry is None or entry[0] is not part:
+            pad = self.pad(lead_in_deg)
+            by_pad = (id(part), *squeeze_key(pad, part))
+            entry = self.known.get(by_pad)
+            if entry is None or entry[0] is not part:
+                entry = self.known[by_pad] = (part, squeeze(pad, part))
+            self.known[by_carving] = entry
+        return entry[1]
 
     def landscapes(self, lead_in_deg: float | None = None, flat: bool = False) -> list[CaptureLandscape]:
         """One landscape per scenario, on the pad printed with ``lead_in_deg`` (degrees; None: ``[print]``'s), or

@@ -17,6 +17,11 @@ from ..pipeline import Prepared, evaluate_exact, screen_choice, subset
 from ..screen import screen
 from ..search import rerank, search
 
+#: Landscapes the quick screenings of this process squeezed (:meth:`fcso.capture.CandidateSqueeze.known_landscape`),
+#: at most :data:`_QUICK_LANDSCAPES_KEPT` (7 kB each): a set with a part moved in or out keeps most of its members' pad
+#: where they meet it, and the partition's moves screen many such sets.
+_QUICK_LANDSCAPES: dict = {}
+_QUICK_LANDSCAPES_KEPT = 4096
 #: Scenarios quick-screened per worker task: each measures its holding (six linear programs, 0.1-0.3 s, unless its
 #: sample held the same contacts before), so a few make a task of a second or so and the workers share the pairs.
 _QUICK_SCENARIOS_PER_TASK = 8
@@ -223,7 +228,10 @@ def quick_screen(
         choose, so the set can keep at least this much of each.
     """
     scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice, True)
+    if len(_QUICK_LANDSCAPES) > _QUICK_LANDSCAPES_KEPT:
+        _QUICK_LANDSCAPES.clear()
+    choice = tuple(picks[m] for m in scenario_numbers)
+    screened = screen_on_pad(scenarios, choice, config, prepared.lattice, True, landscapes=_QUICK_LANDSCAPES)
     return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import fcso
-from fcso.capture import CandidateSqueeze, sample_part
+from fcso.capture import CandidateSqueeze, sample_part, squeeze, squeeze_key
 from fcso.evaluate import holding_n, screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.grid import ScreenGrid
@@ -227,3 +227,27 @@ def test_quick_screenings_sent_the_holding_measured_by_other_workers_are_those_m
     sent, _ = quick(copy.deepcopy(clean), learned)
     for a, b in zip(measured, sent, strict=True):
         assert a.keys() == b.keys() and all(np.array_equal(a[p], b[p]) for p in a)
+
+
+def test_a_squeeze_reads_of_the_pad_only_what_its_key_holds(two_parts):
+    # squeeze_key names what squeeze reads: a pad changed elsewhere has the same key and gives the same landscape,
+    # a pad changed where the part enters it has another key
+    prepared, config = two_parts
+    grid = ScreenGrid.for_config(config)
+    sample = prepared.scenarios[0].samples[len(prepared.scenarios[0].samples) // 2]
+    part = sample.squeezed_part(grid, config)
+    pad = CandidateSqueeze(
+        [sample.screen], [sample.centres_uv_mm], [sample.width_mm], [sample.sample.sliding_axis], grid, config
+    ).pad(15.0)
+    columns = np.arange(grid.count_w)
+    unread = np.setdiff1d(columns, columns[part.rows_w])
+    assert len(unread) > 0
+    elsewhere = pad.copy()
+    elsewhere[:, unread] += 1.0
+    assert squeeze_key(elsewhere, part) == squeeze_key(pad, part)
+    a, b = squeeze(pad, part), squeeze(elsewhere, part)
+    assert a.fraction == b.fraction and np.array_equal(a.separation_mm, b.separation_mm)
+    entered = columns[part.rows_w][part.sides[0][0]]
+    inside = pad.copy()
+    inside[:, entered[0]] += 1.0
+    assert squeeze_key(inside, part) != squeeze_key(pad, part)
