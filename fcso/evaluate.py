@@ -14,7 +14,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .capture import CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
+from .capture import CandidateSqueeze, CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
 from .config import DesignConfig
 from .contact import PadContact, SurfaceSamples, contact_seed, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
@@ -243,15 +243,17 @@ def evaluate_candidate(
     seated = iter(seat([s for pair in drawn for s in pair], vertices, faces, config.contact.eps_mm, travel_mm=travel))
     by_capture = config.quality.measure == "capture"
     if by_capture:
-        landscapes = pad_landscapes(
+        grid = ScreenGrid.for_config(config)
+        # pad_landscapes with each sample squeezed once per process (SampleGeometry.squeezed_part)
+        landscapes = CandidateSqueeze(
             [s.screen for s in chosen],
             [s.centres_uv_mm for s in chosen],
             [s.width_mm for s in chosen],
             [s.sample.sliding_axis for s in chosen],
-            ScreenGrid.for_config(config),
+            grid,
             config,
-            flat=flat,
-        )
+            [s.squeezed_part(grid, config) for s in chosen],
+        ).landscapes(flat=flat)
     results = []
     for number, (scenario, sample, surfaces) in enumerate(zip(scenarios, chosen, drawn)):
         contacts = (next(seated), next(seated))
@@ -518,6 +520,7 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
         [s.width_mm for s in samples],
         [s.sample.sliding_axis for s in samples],
         config,
+        [s.squeezed_part(ScreenGrid.for_config(config), config) for s in samples],
     )
     return angle, why
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import fcso
-from fcso.capture import CandidateSqueeze, sample_part, squeeze, squeeze_key
+from fcso.capture import CandidateSqueeze, pad_landscapes, sample_part, squeeze, squeeze_key
 from fcso.evaluate import holding_n, screen_on_pad
 from fcso.geometry import to_trimesh
 from fcso.grid import ScreenGrid
@@ -202,6 +202,19 @@ def test_holding_measured_once_per_sample_and_contacts_is_the_holding_measured_a
             contacts = [c.contact for c in evaluation.contacts]
             anew = holding_n(scenario, sample, sample.surfaces, contacts, evaluation.contact_normals, config)
             assert np.array_equal(evaluation.holding_n, anew)
+        # its landscapes, with each sample squeezed once per process, are those of samples squeezed anew
+        chosen = [prepared.scenarios[m].samples[k] for m, k in enumerate(choice)]
+        landscapes = pad_landscapes(
+            [g.screen for g in chosen],
+            [g.centres_uv_mm for g in chosen],
+            [g.width_mm for g in chosen],
+            [g.sample.sliding_axis for g in chosen],
+            ScreenGrid.for_config(config),
+            config,
+        )
+        for landscape, evaluation in zip(landscapes, exact.scenarios, strict=True):
+            assert np.array_equal(landscape.separation_mm, evaluation.capture.separation_mm)
+            assert landscape.fraction == evaluation.capture.fraction
             # the screened share is the share of the forces measured anew for the screened contacts
             assert 0.0 <= screened.scenarios[m].measure
     assert reused > 0
