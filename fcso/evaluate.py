@@ -37,6 +37,12 @@ from .screen import (
 )
 from .verify_config import CAPTURE_CONDITIONS
 
+#: Samples a process keeps squeezed (:meth:`SampleGeometry.squeezed_part`), 0.5-1.6 MB each (a 35 mm pad's part
+#: turned by every start yaw): more than a set screening's candidates share, and a bound however many parts a job has.
+SQUEEZED_KEPT = 160
+#: Those samples by (id, key), the one squeezed last last.
+_SQUEEZED_ORDER: dict[tuple[int, tuple], SampleGeometry] = {}
+
 
 @dataclass
 class SampleGeometry:
@@ -80,11 +86,18 @@ class SampleGeometry:
         return self.forces[key].copy()
 
     def squeezed_part(self, grid: ScreenGrid, config: DesignConfig) -> SqueezedPart:
-        """:func:`fcso.capture.sample_part` of this sample on ``grid`` (cells in mm), made once per process."""
+        """:func:`fcso.capture.sample_part` of this sample on ``grid`` (cells in mm), made once per process while it is
+        among the :data:`SQUEEZED_KEPT` samples squeezed last."""
         key = (grid.cell_mm, grid.count_v, grid.count_w, config.sampler.penetration_mm, config.verify.model_dump_json())
         if key not in self.squeezed:
             axis = self.sample.sliding_axis
             self.squeezed[key] = sample_part(self.screen, self.centres_uv_mm, self.width_mm, axis, grid, config)
+        # the latest last; the earliest beyond the bound forgotten (the registry holds the sample: its id stays its)
+        _SQUEEZED_ORDER[(id(self), key)] = _SQUEEZED_ORDER.pop((id(self), key), self)
+        while len(_SQUEEZED_ORDER) > SQUEEZED_KEPT:
+            (_, earliest), sample = next(iter(_SQUEEZED_ORDER.items()))
+            del _SQUEEZED_ORDER[(id(sample), earliest)]
+            sample.squeezed.pop(earliest, None)
         return self.squeezed[key]
 
     @property

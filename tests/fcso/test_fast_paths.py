@@ -5,6 +5,7 @@ step computed from scratch the way it was before: equal bit for bit, not within 
 """
 
 import copy
+import sys
 
 import manifold3d
 import numpy as np
@@ -264,3 +265,26 @@ def test_a_squeeze_reads_of_the_pad_only_what_its_key_holds(two_parts):
     inside = pad.copy()
     inside[:, entered[0]] += 1.0
     assert squeeze_key(inside, part) != squeeze_key(pad, part)
+
+
+def test_a_process_keeps_the_samples_squeezed_last_and_screens_as_without(two_parts, monkeypatch):
+    # at most SQUEEZED_KEPT samples keep their squeezed parts (1-2 MB each): the earliest are squeezed again when met
+    # again, and the screenings are the same
+    prepared, config = two_parts
+    evaluate = sys.modules["fcso.evaluate"]
+    monkeypatch.setattr(evaluate, "SQUEEZED_KEPT", 2)
+    hexes, rounds = (s.samples for s in prepared.scenarios)
+    choices = [(h, r) for h in range(0, len(hexes), max(1, len(hexes) // 4)) for r in (0, len(rounds) // 2)]
+    kept = [screen_on_pad(prepared.scenarios, c, config, prepared.lattice, holding=True) for c in choices * 2]
+    squeezed = [g for s in prepared.scenarios for g in s.samples if g.squeezed]
+    assert len(squeezed) <= 2
+    for choice, screened in zip(choices * 2, kept):
+        chosen = [prepared.scenarios[m].samples[k] for m, k in enumerate(choice)]
+        _, captures, _ = printed_draft(
+            [g.screen for g in chosen],
+            [g.centres_uv_mm for g in chosen],
+            [g.width_mm for g in chosen],
+            [g.sample.sliding_axis for g in chosen],
+            config,
+        )
+        assert [s.capture for s in screened.scenarios] == captures
