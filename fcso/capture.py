@@ -31,11 +31,13 @@ and every wall is drafted, ``H(x) = max_y H(y) - |x - y| cot α``.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from .config import DesignConfig, VerifyConfig
+from .descent import descent
 from .grid import ScreenGrid
 from .jit import compiled
 from .printed_heights import carved_heights, clearance_heights, drafted_heights
@@ -43,13 +45,8 @@ from .screen import ScreenGeometry, pad_case
 
 #: Steps of the yaw grid of the landscape, degrees.
 YAW_STEP_DEG = 0.5
-#: How far the landscape reaches beyond the start error box, mm and degrees:
-#: a descent may leave the box on its way to the seat.
+#: How far the landscape reaches beyond the start error box, mm and degrees: a descent may leave it for the seat.
 MARGIN_MM, MARGIN_DEG = 1.0, 1.0
-#: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
-#: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
-#: 0.1-0.25 mm under 60 N), and which made a cylinder in its round pocket capture every start yaw.
-TURN_RESOLUTION_MM = 0.02
 #: Spacing of the rows across the pad width that the landscape reads, mm.
 W_STEP_MM = 0.6
 
@@ -238,7 +235,7 @@ def squeeze(pad_mm: np.ndarray, part: SqueezedPart) -> CaptureLandscape:
     # mirrored v, and the faces lie H+ + H- + width - 2 D apart.
     pads_apart = float(np.min(pad_mm + pad_mm[::-1, :])) + part.width_mm - 2.0 * part.depth_mm
     pads_gap = pads_apart - float(gap[centre]) if np.isfinite(gap[centre]) else -np.inf
-    successor = _descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * part.lever_mm, config.friction)
+    successor = descent(separation, cell_mm, np.radians(YAW_STEP_DEG) * part.lever_mm, config.friction)
     seat = (np.abs(offsets)[:, None] <= config.success_mm + 1e-9) & (
         np.abs(yaws_deg)[None, :] <= config.success_deg + 1e-9
     )
@@ -253,6 +250,20 @@ def squeeze(pad_mm: np.ndarray, part: SqueezedPart) -> CaptureLandscape:
         fraction=float((weights * captured).sum() / weights.sum()) if pads_gap > 0 else 0.0,
         pads_gap_mm=pads_gap,
     )
+
+
+def squeeze_key(pad_mm: np.ndarray, part: SqueezedPart) -> tuple[bytes, float]:
+    """What :func:`squeeze` reads of a pad ((count_v, count_w) float, mm) for ``part``: the :func:`digest` of the rows
+    of ``w`` it enters on each side, and the least sum of the pad's heights and their mirror (mm), where pads meet."""
+    pad_mm = np.asarray(pad_mm, dtype=np.float64)[:, part.rows_w]
+    read = b"".join(np.ascontiguousarray(pad_mm[:, entered]).tobytes() for entered, *_ in part.sides)
+    return digest(read), float(np.min(pad_mm + pad_mm[::-1, :]))
+
+
+def digest(data: bytes) -> bytes:
+    """A 256-bit BLAKE2b digest of ``data``, the key of heights in caches: two arrays of other bytes share one with
+    probability 2^-256, and the arrays themselves (tens of kB each) held hundreds of MB in a large set's screening."""
+    return hashlib.blake2b(data, digest_size=32).digest()
 
 
 def sliding_error_weights(offsets_mm: np.ndarray, error_mm: float, sliding_axis: np.ndarray) -> np.ndarray:
@@ -281,25 +292,6 @@ def sliding_error_weights(offsets_mm: np.ndarray, error_mm: float, sliding_axis:
         # along a table axis: uniform, the box's edge included
         return (t <= b + 1e-9).astype(np.float64)
     return np.clip(np.minimum(a + b - t, 2.0 * a), 0.0, None) / (4.0 * a * b)
-
-
-def _descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: float) -> np.ndarray:
-    """Where steepest descent of ``separation`` ends from every node (flat indices).
-
-    A move to one of the eight neighbours is taken when its drop exceeds
-    what friction holds back: a slide along the pads must drop ``s`` by
-    more than ``2 μ`` per mm (two jaws), a turn only needs to drop it by
-    more than :data:`TURN_RESOLUTION_MM`, since the part pivots about a contact instead of sliding along it
-    (measured: friction-gated turns left the zig-zag L-part and the hex
-    prism at captures of 0.19 and 0.62 where the simulation seats 10/10).
-    Among the moves taken the steepest (drop per length) wins.
-    """
-    successor = _steepest_moves(separation, step_mm, turn_mm, friction)
-    successor = successor.ravel()
-    # pointer jumping: separation falls along every move, so the chains end
-    for _ in range(int(np.ceil(np.log2(separation.size))) + 1):
-        successor = successor[successor]
-    return successor
 
 
 @compiled("(float64[:, ::1], float64[::1], float64, float64, float64[::1])")
@@ -457,30 +449,6 @@ def _add_side_gaps(pad, turned, whole, fraction, gap):
             gap[offset, yaw] += least
 
 
-@compiled("(float64[:, ::1], float64, float64, float64)")
-def _steepest_moves(separation, step_mm, turn_mm, friction):
-    """Each node's steepest move of :func:`_descent` (its own flat index where none is taken)."""
-    rows, columns = separation.shape
-    best_slope = np.zeros(separation.shape)
-    successor = np.arange(separation.size).reshape(rows, columns)
-    for dr in (-1, 0, 1):
-        for dc in (-1, 0, 1):
-            if dr == 0 and dc == 0:
-                continue
-            length = np.hypot(dr * step_mm, dc * turn_mm)
-            held_below = 2.0 * friction * abs(dr) * step_mm + TURN_RESOLUTION_MM * abs(dc) + 1e-9
-            for r in range(rows):
-                for c in range(columns):
-                    inside = 0 <= r + dr < rows and 0 <= c + dc < columns
-                    neighbour = separation[r + dr, c + dc] if inside else np.inf
-                    drop = separation[r, c] - neighbour
-                    slope = drop / length
-                    if np.isfinite(slope) and not drop <= held_below and slope > best_slope[r, c]:
-                        best_slope[r, c] = slope
-                        successor[r, c] = (r + dr) * columns + c + dc
-    return successor
-
-
 def pad_landscapes(
     chosen: list[tuple[ScreenGeometry, ScreenGeometry]],
     centres_uv_mm: list[tuple[np.ndarray, np.ndarray]],
@@ -542,7 +510,9 @@ class CandidateSqueeze:
     The carving given its clearance and each part turned by every start yaw are the same at every draft, so they
     are made once for the drafts :func:`fcso.lead_in.printed_draft` compares, and each landscape once when asked
     again. Parameters as :func:`pad_landscapes`'s, and ``parts``: the scenarios' parts when already squeezed
-    (:func:`sample_part`).
+    (:func:`sample_part`); ``known``: landscapes of other candidates with the same settings, used and filled here
+    (:meth:`known_landscape`): a candidate whose carving is another's bit for bit, as when one scenario's sample lies
+    under the others' pockets, or whose pad is where a part meets it, squeezes only its new samples.
     """
 
     def __init__(
@@ -554,8 +524,9 @@ class CandidateSqueeze:
         grid: ScreenGrid,
         config: DesignConfig,
         parts: list[SqueezedPart] | None = None,
+        known: dict | None = None,
     ):
-        self.chosen, self.grid, self.config = chosen, grid, config
+        self.chosen, self.grid, self.config, self.known = chosen, grid, config, known
         self.parts = (
             parts
             if parts is not None
@@ -567,18 +538,27 @@ class CandidateSqueeze:
         self.cleared: dict[bool, np.ndarray] = {}
         self.pads: dict[float, np.ndarray] = {}
         self.squeezed: dict[tuple[int, float], CaptureLandscape] = {}
+        self.carving: tuple[np.ndarray, bytes, float] | None = None
+
+    def carved(self) -> tuple[np.ndarray, bytes, float]:
+        """The carving (:func:`carved_heights`, mm), its digest (:func:`digest`) and the pad's floor (:func:`pad_case`,
+        mm), made once."""
+        if self.carving is None:
+            geometries = [g for pair in self.chosen for g in pair]
+            carved = carved_heights(geometries, self.grid)
+            self.carving = carved, digest(carved.tobytes()), pad_case(geometries, self.config)[1]
+        return self.carving
 
     def pad(self, lead_in_deg: float) -> np.ndarray:
         """The pad's face heights printed with ``[print]``'s clearance and ``lead_in_deg`` (degrees), (count_v,
         count_w) mm (:func:`fitted_pad_heights`)."""
         if lead_in_deg not in self.pads:
-            geometries = [g for pair in self.chosen for g in pair]
-            _, floor = pad_case(geometries, self.config)
+            carved, _, floor = self.carved()
             cell = self.grid.cell_mm
             drafted = lead_in_deg > 0
             if drafted not in self.cleared:
                 # the carving given its clearance is the same at every draft
-                carved, clearance = carved_heights(geometries, self.grid), self.config.print.resolved()["clearance_mm"]
+                clearance = self.config.print.resolved()["clearance_mm"]
                 self.cleared[drafted] = clearance_heights(carved, cell, clearance, drafted)
             self.pads[lead_in_deg] = drafted_heights(self.cleared[drafted], floor, cell, lead_in_deg)
         return self.pads[lead_in_deg]
@@ -587,8 +567,28 @@ class CandidateSqueeze:
         """Scenario ``number``'s landscape on the pad printed with ``lead_in_deg`` (degrees)."""
         key = (number, lead_in_deg)
         if key not in self.squeezed:
-            self.squeezed[key] = squeeze(self.pad(lead_in_deg), self.parts[number])
+            part = self.parts[number]
+            if self.known is None:
+                self.squeezed[key] = squeeze(self.pad(lead_in_deg), part)
+            else:
+                self.squeezed[key] = self.known_landscape(part, lead_in_deg)
         return self.squeezed[key]
+
+    def known_landscape(self, part: SqueezedPart, lead_in_deg: float) -> CaptureLandscape:
+        """``part``'s landscape on the pad printed with ``lead_in_deg`` (degrees) from ``known``: squeezed before on
+        the same carving, or on a pad that is this one bit for bit where the squeeze reads it (:func:`squeeze_key`),
+        else squeezed now; the part is kept beside its landscape, so its id names no other part while they live."""
+        _, carving, floor = self.carved()
+        by_carving = (id(part), carving, floor, self.config.print.resolved()["clearance_mm"], lead_in_deg)
+        entry = self.known.get(by_carving)
+        if entry is None or entry[0] is not part:
+            pad = self.pad(lead_in_deg)
+            by_pad = (id(part), *squeeze_key(pad, part))
+            entry = self.known.get(by_pad)
+            if entry is None or entry[0] is not part:
+                entry = self.known[by_pad] = (part, squeeze(pad, part))
+            self.known[by_carving] = entry
+        return entry[1]
 
     def landscapes(self, lead_in_deg: float | None = None, flat: bool = False) -> list[CaptureLandscape]:
         """One landscape per scenario, on the pad printed with ``lead_in_deg`` (degrees; None: ``[print]``'s), or

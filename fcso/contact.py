@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import igl
 import numpy as np
 
+from .config import DesignConfig
 from .geometry import triangle_areas_normals
 
 
@@ -284,3 +285,40 @@ def _signed_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
         igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
     )[0]
     return np.asarray(distances)
+
+
+def contact_seed(config: DesignConfig, scenario_number: int, sample_index: int, side_number: int) -> tuple[int, ...]:
+    """The seed of one pad geometry's contact samples: ``(contact.seed, scenario, sample, side)``.
+
+    So a report can be rebuilt with exactly the samples the design used.
+
+    Parameters
+    ----------
+    config : DesignConfig
+    scenario_number, sample_index, side_number : int
+        Position of the scenario in the design, of the sample in the scenario,
+        and the side (0: "+", 1: "-").
+    """
+    return (config.contact.seed, scenario_number, sample_index, side_number)
+
+
+def contact_samples(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    config: DesignConfig,
+    scenario_number: int,
+    sample_index: int,
+    side_number: int,
+) -> SurfaceSamples:
+    """The design's surface samples of one pad geometry (seeded by :func:`contact_seed`).
+
+    Parameters
+    ----------
+    vertices, faces : ndarray
+        Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
+    config : DesignConfig
+    scenario_number, sample_index, side_number : int
+        As for :func:`contact_seed`.
+    """
+    seed = list(contact_seed(config, scenario_number, sample_index, side_number))
+    return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)

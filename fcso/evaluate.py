@@ -14,9 +14,9 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .capture import CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
+from .capture import CandidateSqueeze, CaptureLandscape, SqueezedPart, pad_landscapes, sample_part
 from .config import DesignConfig
-from .contact import PadContact, SurfaceSamples, sample_surface, seat
+from .contact import PadContact, SurfaceSamples, contact_seed, sample_surface, seat
 from .geometry import rebuilt_from_mesh, to_manifold
 from .grid import ScreenGrid, column_heights
 from .holding import holding_forces_n
@@ -36,6 +36,12 @@ from .screen import (
     screened_bound,
 )
 from .verify_config import CAPTURE_CONDITIONS
+
+#: Samples a process keeps squeezed (:meth:`SampleGeometry.squeezed_part`), 0.5-1.6 MB each (a 35 mm pad's part
+#: turned by every start yaw): more than a set screening's candidates share, and a bound however many parts a job has.
+SQUEEZED_KEPT = 160
+#: Those samples by (id, key), the one squeezed last last.
+_SQUEEZED_ORDER: dict[tuple[int, tuple], SampleGeometry] = {}
 
 
 @dataclass
@@ -66,6 +72,33 @@ class SampleGeometry:
     #: Holding shares of screened contacts by (the contact masks, [quality] and density): a part keeps the same
     #: contacts in most sets it is screened in, and holding costs six linear programs (:func:`screen_on_pad`).
     held: dict[tuple, float] = field(default_factory=dict, repr=False, compare=False)
+    #: This sample squeezed for any pad by (grid, D, [verify]): a part's best samples are screened on many sets' pads.
+    squeezed: dict[tuple, SqueezedPart] = field(default_factory=dict, repr=False, compare=False)
+    #: The six holding forces (N) measured in this process, by the key of ``held``: a finalist's exact contacts are
+    #: often its screened ones, and screenings and exact evaluations run in the same workers.
+    forces: dict[tuple, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+
+    def holding_n(self, scenario: Scenario, surfaces, contacts, normals_rest: np.ndarray, config: DesignConfig):
+        """:func:`holding_n` of this sample's contacts (N), measured once per process and contacts."""
+        key = holding_key(contacts, config)
+        if key not in self.forces:
+            self.forces[key] = holding_n(scenario, self, surfaces, contacts, normals_rest, config)
+        return self.forces[key].copy()
+
+    def squeezed_part(self, grid: ScreenGrid, config: DesignConfig) -> SqueezedPart:
+        """:func:`fcso.capture.sample_part` of this sample on ``grid`` (cells in mm), made once per process while it is
+        among the :data:`SQUEEZED_KEPT` samples squeezed last."""
+        key = (grid.cell_mm, grid.count_v, grid.count_w, config.sampler.penetration_mm, config.verify.model_dump_json())
+        if key not in self.squeezed:
+            axis = self.sample.sliding_axis
+            self.squeezed[key] = sample_part(self.screen, self.centres_uv_mm, self.width_mm, axis, grid, config)
+        # the latest last; the earliest beyond the bound forgotten (the registry holds the sample: its id stays its)
+        _SQUEEZED_ORDER[(id(self), key)] = _SQUEEZED_ORDER.pop((id(self), key), self)
+        while len(_SQUEEZED_ORDER) > SQUEEZED_KEPT:
+            (_, earliest), sample = next(iter(_SQUEEZED_ORDER.items()))
+            del _SQUEEZED_ORDER[(id(sample), earliest)]
+            sample.squeezed.pop(earliest, None)
+        return self.squeezed[key]
 
     @property
     def width_mm(self) -> float:
@@ -190,43 +223,6 @@ def sample_geometry(
     )
 
 
-def contact_seed(config: DesignConfig, scenario_number: int, sample_index: int, side_number: int) -> tuple[int, ...]:
-    """The seed of one pad geometry's contact samples: ``(contact.seed, scenario, sample, side)``.
-
-    So a report can be rebuilt with exactly the samples the design used.
-
-    Parameters
-    ----------
-    config : DesignConfig
-    scenario_number, sample_index, side_number : int
-        Position of the scenario in the design, of the sample in the scenario,
-        and the side (0: "+", 1: "-").
-    """
-    return (config.contact.seed, scenario_number, sample_index, side_number)
-
-
-def contact_samples(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    config: DesignConfig,
-    scenario_number: int,
-    sample_index: int,
-    side_number: int,
-) -> SurfaceSamples:
-    """The design's surface samples of one pad geometry (seeded by :func:`contact_seed`).
-
-    Parameters
-    ----------
-    vertices, faces : ndarray
-        Part surface inside the pad box, pad frame (:func:`fcso.pad.surface_in_pad`).
-    config : DesignConfig
-    scenario_number, sample_index, side_number : int
-        As for :func:`contact_seed`.
-    """
-    seed = list(contact_seed(config, scenario_number, sample_index, side_number))
-    return sample_surface(vertices, faces, config.contact.sample_density_per_mm2, seed)
-
-
 def evaluate_candidate(
     scenarios: list[Scenario],
     choice: tuple[int, ...],
@@ -260,15 +256,17 @@ def evaluate_candidate(
     seated = iter(seat([s for pair in drawn for s in pair], vertices, faces, config.contact.eps_mm, travel_mm=travel))
     by_capture = config.quality.measure == "capture"
     if by_capture:
-        landscapes = pad_landscapes(
+        grid = ScreenGrid.for_config(config)
+        # pad_landscapes with each sample squeezed once per process (SampleGeometry.squeezed_part)
+        landscapes = CandidateSqueeze(
             [s.screen for s in chosen],
             [s.centres_uv_mm for s in chosen],
             [s.width_mm for s in chosen],
             [s.sample.sliding_axis for s in chosen],
-            ScreenGrid.for_config(config),
+            grid,
             config,
-            flat=flat,
-        )
+            [s.squeezed_part(grid, config) for s in chosen],
+        ).landscapes(flat=flat)
     results = []
     for number, (scenario, sample, surfaces) in enumerate(zip(scenarios, chosen, drawn)):
         contacts = (next(seated), next(seated))
@@ -279,7 +277,7 @@ def evaluate_candidate(
         if not by_capture:
             results.append(ScenarioEvaluation(contacts, normals, radius, area, effective, measure=effective))
             continue
-        holding = holding_n(scenario, sample, surfaces, [c.contact for c in contacts], normals, config)
+        holding = sample.holding_n(scenario, surfaces, [c.contact for c in contacts], normals, config)
         holding_share = min(1.0, float(holding.min()) / config.verify.hold_force_n)
         # METHOD §5b: pads that meet each other before they squeeze the part hold nothing, whatever else it scores;
         # and a good geometry seats at t = 0 (§5): a good pad that stops short of that on a side is blocked there by
@@ -336,6 +334,7 @@ def screen_on_pad(
     holding: bool = False,
     captures: list[float] | None = None,
     squeezed: dict[tuple[int, int], SqueezedPart] | None = None,
+    landscapes: dict | None = None,
 ) -> ScreenedCandidate:
     """Screen a candidate as its exact evaluation measures it: capture on the pad the whole candidate carves.
 
@@ -362,10 +361,10 @@ def screen_on_pad(
         Every scenario's capture on this candidate's pad when already known (the same candidate screened on its pad
         before, without holding): its landscapes are not measured again.
     squeezed : dict, optional
-        Samples squeezed for other candidates of the same ``scenarios`` and ``config``
-        (:func:`fcso.capture.sample_part`), by
-        scenario position and sample index: used and filled here, as the candidates one screening measures on their
-        pads share most of their samples.
+        Filled with the samples squeezed (:func:`fcso.capture.sample_part`) by scenario position and sample index;
+        each sample keeps its own (:meth:`SampleGeometry.squeezed_part`), so candidates sharing it squeeze it once.
+    landscapes : dict, optional
+        Landscapes of other candidates with the same ``config`` (:class:`fcso.capture.CandidateSqueeze`'s ``known``).
 
     Returns
     -------
@@ -378,15 +377,11 @@ def screen_on_pad(
     if captures is None:
         # under the draft the candidate would be printed with: ranked under the default lead-in only, a pad that
         # captures fully once drafted wider lost to one that captures half at any draft (METHOD §5b)
-        parts = None
+        # each sample squeezed once per process (SampleGeometry.squeezed_part), whichever candidates share it
+        grid = ScreenGrid.for_config(config)
+        parts = [sample.squeezed_part(grid, config) for sample in chosen]
         if squeezed is not None:
-            grid = ScreenGrid.for_config(config)
-            for key, sample in zip(enumerate(choice), chosen):
-                if key not in squeezed:
-                    squeezed[key] = sample_part(
-                        sample.screen, sample.centres_uv_mm, sample.width_mm, sample.sample.sliding_axis, grid, config
-                    )
-            parts = [squeezed[key] for key in enumerate(choice)]
+            squeezed.update(zip(enumerate(choice), parts))
         _, captures, _ = printed_draft(
             screens,
             [s.centres_uv_mm for s in chosen],
@@ -394,17 +389,17 @@ def screen_on_pad(
             [s.sample.sliding_axis for s in chosen],
             config,
             parts,
+            landscapes,
         )
 
     def holding_share(number: int, contacts: tuple[np.ndarray, np.ndarray]) -> float:
         sample = chosen[number]
-        conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
-        key = (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
+        key = holding_key(contacts, config)
         if key not in sample.held:
             surfaces = sample.surfaces
             normals = np.vstack([s.normals[c] @ f[:3, :3] for s, c, f in zip(surfaces, contacts, sample.frames)])
             held = (
-                holding_n(scenarios[number], sample, surfaces, contacts, normals, config)
+                sample.holding_n(scenarios[number], surfaces, contacts, normals, config)
                 if len(normals)
                 else np.zeros(1)
             )
@@ -412,6 +407,13 @@ def screen_on_pad(
         return sample.held[key]
 
     return screen(screens, config, lattice, captures=captures, holding=holding_share if holding else None)
+
+
+def holding_key(contacts, config: DesignConfig) -> tuple:
+    """What a sample's holding forces depend on beside the sample: its contact masks per pad, the test's conditions
+    and the print's density (the key of :attr:`SampleGeometry.held` and :attr:`SampleGeometry.forces`)."""
+    conditions = tuple(getattr(config.verify, name) for name in CAPTURE_CONDITIONS)
+    return (*(np.packbits(c).tobytes() for c in contacts), conditions, config.print.resolved()["density_g_cm3"])
 
 
 def holding_n(
@@ -531,6 +533,7 @@ def printed_lead_in_deg(scenarios: list[Scenario], choice, config: DesignConfig)
         [s.width_mm for s in samples],
         [s.sample.sliding_axis for s in samples],
         config,
+        [s.squeezed_part(ScreenGrid.for_config(config), config) for s in samples],
     )
     return angle, why
 

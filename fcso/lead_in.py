@@ -36,6 +36,7 @@ def printed_draft(
     sliding_axes: list[np.ndarray],
     config: DesignConfig,
     parts: list[SqueezedPart] | None = None,
+    known: dict | None = None,
 ) -> tuple[float, list[float], str | None]:
     """The draft of a candidate's samples (:func:`fcso.evaluate.printed_lead_in_deg`) and its scenarios' captures.
 
@@ -47,6 +48,8 @@ def printed_draft(
     config : DesignConfig
     parts : list of SqueezedPart, optional
         The scenarios' samples when already squeezed (:func:`fcso.capture.sample_part`).
+    known : dict, optional
+        Landscapes of other candidates with the same settings (:class:`fcso.capture.CandidateSqueeze`'s).
 
     Returns
     -------
@@ -57,7 +60,7 @@ def printed_draft(
     """
     lead_in = config.print.resolved()["lead_in_deg"]
     grid = ScreenGrid.for_config(config)
-    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, grid, config, parts)
+    squeezed = CandidateSqueeze(screens, centres_uv_mm, widths_mm, sliding_axes, grid, config, parts, known)
     default = [landscape.fraction for landscape in squeezed.landscapes(lead_in)]
     alternatives = wider_drafts(config)
     # a wider draft is taken only where its worst scenario captures FLAT_MARGIN more than the default's worst: one

@@ -91,19 +91,25 @@ def drafted_heights(heights_mm: np.ndarray, floor_mm: float, cell_mm: float, lea
 
 @compiled("(float64[:, ::1], float64, float64)")
 def _drafted(heights, drop, diagonal):
-    """Every wall of ``heights`` drafted: passes of ``H = max(H, max of the 4 side neighbours - drop, max of the 4
-    corner neighbours - diagonal)`` over the grid until none changes, at most ``count_v + count_w`` of them.
+    """Every wall of ``heights`` drafted: ``H = max(H, max of the 4 side neighbours - drop, max of the 4 corner
+    neighbours - diagonal)`` at every cell until none changes.
 
-    A pass in one loop: as array operations each pass cost two maximum filters and their temporaries, and every
-    candidate a screening measures on its pad is drafted at each draft angle.
+    In place, in sweeps that alternate between the grid's two diagonal orders, so a draft runs down a whole wall
+    in one sweep (passes over a copy moved it one cell per pass: a 4 mm pocket at a 15-degree draft is 60 passes of
+    a 0.25 mm grid). Each height reached is the largest over paths from a cell of ``heights`` of its height less
+    each step's drop, taken in order, whichever order the cells are visited in: the least heights above
+    ``heights`` that no step raises, bit for bit those of the passes over a copy. At most ``2 (count_v +
+    count_w)`` sweeps.
     """
     rows, columns = heights.shape
     current = heights.copy()
-    grown = np.empty_like(current)
-    for _ in range(rows + columns):
+    for sweep in range(2 * (rows + columns)):
         changed = False
-        for i in range(rows):
-            for j in range(columns):
+        backward = sweep % 2 == 1
+        for r in range(rows):
+            i = rows - 1 - r if backward else r
+            for c in range(columns):
+                j = columns - 1 - c if backward else c
                 straight, corner = -np.inf, -np.inf
                 if i > 0:
                     straight = max(straight, current[i - 1, j])
@@ -122,9 +128,9 @@ def _drafted(heights, drop, diagonal):
                 if j + 1 < columns:
                     straight = max(straight, current[i, j + 1])
                 value = max(current[i, j], max(straight - drop, corner - diagonal))
-                grown[i, j] = value
-                changed = changed or value != current[i, j]
+                if value != current[i, j]:
+                    current[i, j] = value
+                    changed = True
         if not changed:
             break
-        current, grown = grown, current
     return current

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from ..contact import PadPlacement, seat
-from ..evaluate import CandidateEvaluation, Scenario, contact_samples
+from ..contact import PadPlacement, contact_samples, seat
+from ..evaluate import CandidateEvaluation, Scenario
 from ..pad import surface_in_pad
 from ..parts import Part
 from ..printfit import closing_travel_mm

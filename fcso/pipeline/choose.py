@@ -326,7 +326,11 @@ def _pad_batch(context, choices: list[tuple[int, ...]]) -> list[ScreenedCandidat
     _, scenarios, config, lattice = context
     # the batch's candidates share most samples: each is squeezed once (fcso.capture.sample_part)
     squeezed: dict = {}
-    return [screen_on_pad(scenarios, choice, config, lattice, squeezed=squeezed) for choice in choices]
+    # and a candidate whose carving is another's bit for bit is squeezed on its pad only where its samples are new
+    known: dict = {}
+    return [
+        screen_on_pad(scenarios, choice, config, lattice, squeezed=squeezed, landscapes=known) for choice in choices
+    ]
 
 
 def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:

@@ -17,6 +17,11 @@ from ..pipeline import Prepared, evaluate_exact, screen_choice, subset
 from ..screen import screen
 from ..search import rerank, search
 
+#: Landscapes the quick screenings of this process squeezed (:meth:`fcso.capture.CandidateSqueeze.known_landscape`),
+#: at most :data:`_QUICK_LANDSCAPES_KEPT` (7 kB each): a set with a part moved in or out keeps most of its members' pad
+#: where they meet it, and the partition's moves screen many such sets.
+_QUICK_LANDSCAPES: dict = {}
+_QUICK_LANDSCAPES_KEPT = 4096
 #: Scenarios quick-screened per worker task: each measures its holding (six linear programs, 0.1-0.3 s, unless its
 #: sample held the same contacts before), so a few make a task of a second or so and the workers share the pairs.
 _QUICK_SCENARIOS_PER_TASK = 8
@@ -176,11 +181,13 @@ def screen_set(
 
     scenarios = [prepared.scenarios[m] for m in scenario_numbers]
     # the candidates screened on their pads share most samples: each is squeezed once (fcso.capture.sample_part)
+    # and a candidate whose carving is another's bit for bit is squeezed on its pad only where its samples are new
     squeezed: dict = {}
+    landscapes: dict = {}
 
     def on_pad(choice: tuple[int, ...], holding: bool = False, captures: list[float] | None = None):
         numbers = tuple(int(pools[m][k]) for m, k in zip(scenario_numbers, choice))
-        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures, squeezed)
+        return screen_on_pad(scenarios, numbers, config, prepared.lattice, holding, captures, squeezed, landscapes)
 
     budget = config.finger_sets.screen_evaluations
     outcome = search(counts, bounds, evaluate, budget, budget)
@@ -221,7 +228,10 @@ def quick_screen(
         choose, so the set can keep at least this much of each.
     """
     scenarios = [prepared.scenarios[m] for m in scenario_numbers]
-    screened = screen_on_pad(scenarios, tuple(picks[m] for m in scenario_numbers), config, prepared.lattice, True)
+    if len(_QUICK_LANDSCAPES) > _QUICK_LANDSCAPES_KEPT:
+        _QUICK_LANDSCAPES.clear()
+    choice = tuple(picks[m] for m in scenario_numbers)
+    screened = screen_on_pad(scenarios, choice, config, prepared.lattice, True, landscapes=_QUICK_LANDSCAPES)
     return np.array([s.measure for s in screened.scenarios], dtype=np.float64)
 
 
@@ -264,6 +274,9 @@ class SetScreener:
         self.picks = solo_picks(solos)
         self.quick_cache: dict[frozenset[int], np.ndarray] = {}
         self.exact: dict[frozenset[int], np.ndarray] = {}
+        #: holding shares the workers measured since the screener began, by (scenario, sample): sent with the quick
+        #: screenings of those samples, so a worker forked earlier does not measure what the other one did
+        self.learned: dict[tuple[int, int], dict[tuple, float]] = {}
 
     def _scenarios(self, members: frozenset[int]) -> tuple[int, ...]:
         return tuple(m for p in sorted(members) for m in self.part_scenarios[p])
@@ -287,10 +300,14 @@ class SetScreener:
         # batched so a task carries well over ~100 ms and every worker gets tasks
         size = max(1, _QUICK_SCENARIOS_PER_TASK // max(1, max((len(t) for t in tasks), default=1)))
         batches = [tasks[i : i + size] for i in range(0, len(tasks), size)]
+        known = [{(m, self.picks[m]) for numbers in batch for m in numbers} & self.learned.keys() for batch in batches]
         areas = []
-        for batch_areas, held in self.pool.map(_quick_task, batches):
+        sent = [(batch, {key: self.learned[key] for key in keys}) for batch, keys in zip(batches, known)]
+        for batch_areas, held in self.pool.map(_quick_task, sent):
             areas.extend(batch_areas)
             keep_held(self.prepared, held)
+            for key, entries in held.items():
+                self.learned.setdefault(key, {}).update(entries)
         for members, area in zip(fresh, areas):
             self.quick_cache[members] = self._ratios(members, area)
         return [self._per_part(members, self.quick_cache[members]) for members in sets]
@@ -379,10 +396,13 @@ def _probe_task(context, task: tuple[tuple[int, ...], tuple[int, ...]]) -> np.nd
 
 
 def _quick_task(
-    context, batch: list[tuple[int, ...]]
+    context, task: tuple[list[tuple[int, ...]], dict[tuple[int, int], dict[tuple, float]]]
 ) -> tuple[list[np.ndarray], dict[tuple[int, int], dict[tuple, float]]]:
-    """Quick screenings of a batch of sets, and the holding shares their samples know afterwards (:func:`keep_held`)."""
+    """Quick screenings of a batch of sets, given the holding shares its samples have been measured with since this
+    worker was forked, and the holding shares they know afterwards (:func:`keep_held`)."""
     prepared, pools, picks, config = context
+    batch, known = task
+    keep_held(prepared, known)
     areas = [quick_screen(prepared, numbers, picks, config) for numbers in batch]
     touched = {(m, picks[m]) for numbers in batch for m in numbers}
     return areas, {key: dict(prepared.scenarios[key[0]].samples[key[1]].held) for key in sorted(touched)}
