@@ -82,6 +82,18 @@ def test_holding_of_merged_contacts_is_the_holding_of_contacts_merged_as_unique_
         assert forces.shape == (6,) and np.all(forces >= 0.0)
 
 
+def _captures_from_scratch(chosen, config) -> list[float]:
+    """The captures :func:`printed_draft` measures for ``chosen`` samples, each squeezed anew."""
+    _, captures, _ = printed_draft(
+        [g.screen for g in chosen],
+        [g.centres_uv_mm for g in chosen],
+        [g.width_mm for g in chosen],
+        [g.sample.sliding_axis for g in chosen],
+        config,
+    )
+    return captures
+
+
 def test_a_sample_squeezed_once_per_process_screens_candidates_as_squeezed_anew(two_parts):
     # SampleGeometry.squeezed_part keeps each sample squeezed (turned by every start yaw) for every candidate that
     # shares it: the captures on the candidates' pads are those of printed_draft squeezing every sample anew
@@ -98,14 +110,7 @@ def test_a_sample_squeezed_once_per_process_screens_candidates_as_squeezed_anew(
             for a, b in zip(part.sides, anew.sides):
                 assert all(np.array_equal(x, y) for x, y in zip(a, b))
         screened = screen_on_pad(prepared.scenarios, choice, config, prepared.lattice, holding=True)
-        _, captures, _ = printed_draft(
-            [g.screen for g in chosen],
-            [g.centres_uv_mm for g in chosen],
-            [g.width_mm for g in chosen],
-            [g.sample.sliding_axis for g in chosen],
-            config,
-        )
-        assert [s.capture for s in screened.scenarios] == captures
+        assert [s.capture for s in screened.scenarios] == _captures_from_scratch(chosen, config)
 
 
 def _drafted_in_passes(heights: np.ndarray, floor_mm: float, cell_mm: float, lead_in_deg: float) -> np.ndarray:
@@ -280,11 +285,4 @@ def test_a_process_keeps_the_samples_squeezed_last_and_screens_as_without(two_pa
     assert len(squeezed) <= 2
     for choice, screened in zip(choices * 2, kept):
         chosen = [prepared.scenarios[m].samples[k] for m, k in enumerate(choice)]
-        _, captures, _ = printed_draft(
-            [g.screen for g in chosen],
-            [g.centres_uv_mm for g in chosen],
-            [g.width_mm for g in chosen],
-            [g.sample.sliding_axis for g in chosen],
-            config,
-        )
-        assert [s.capture for s in screened.scenarios] == captures
+        assert [s.capture for s in screened.scenarios] == _captures_from_scratch(chosen, config)
