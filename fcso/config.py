@@ -184,14 +184,6 @@ class SearchConfig(_Section):
         "measured on the pad the whole candidate carves, as the exact evaluation measures it (METHOD §7b, §8b); the "
         "exact_top_k are chosen among them, and a finger set's screening keeps their best",
     )
-    pad_ascent_evaluations: int = Field(
-        2000,
-        ge=0,
-        description="Under the capture measure, candidates screened on their whole pad at most by the coordinate "
-        "ascent that starts from the best of the pad_top_k (one scenario's sample moved at a time, the best move "
-        "taken): a finger shared by several parts, or one pose's pocket, can take another part off its seat, which "
-        "each sample's own screening does not see (METHOD §7b, §8b); 0: no ascent",
-    )
     report_candidates: int = Field(
         1000, ge=1, description="Best screened candidates listed in report.json (exact ones always are)"
     )

@@ -152,65 +152,11 @@ def search(
             results.update(zip(chunk, evaluate(chunk)))
         return SearchOutcome("exhaustive", results, total, True)
 
-    key, run, leader = _runner(counts, evaluate, results, batch_size)
-    if _branch_and_bound(counts, upper_bounds, run, results, max(1, max_evaluations // 2), keep):
-        return SearchOutcome("branch_and_bound", results, total, True)
-    for seed in _seeds(counts, upper_bounds, lambda: leader[0] if leader else None):
-        if len(results) >= max_evaluations:
-            break
-        _coordinate_ascent(seed, counts, run, results, key, max_evaluations)
-    return SearchOutcome("branch_and_bound+coordinate_ascent", results, total, False)
-
-
-def ascend(
-    starts: Sequence[tuple[int, ...]],
-    counts: Sequence[int],
-    evaluate: BatchEvaluate,
-    budget: int,
-    known: dict[tuple[int, ...], tuple[float, float]] | None = None,
-    batch_size: int = 256,
-) -> dict[tuple[int, ...], tuple[float, float]]:
-    """Coordinate ascent from each start in turn (every sample of one scenario tried, the best move taken, until no
-    move helps), while fewer than ``budget`` new candidates were evaluated.
-
-    Parameters
-    ----------
-    starts : sequence of tuple of int
-        Starting candidates, one sample index per scenario, in the order to climb from.
-    counts : sequence of int
-        ``N_s,m``: valid samples per scenario.
-    evaluate : callable
-        ``evaluate(choices)`` returns ``(Q, mean E)`` for every choice.
-    budget : int
-        New candidates to evaluate at most (those in ``known`` are free).
-    known : dict, optional
-        ``(Q, mean E)`` of candidates already evaluated with ``evaluate``'s quality.
-    batch_size : int
-        Choices handed to ``evaluate`` at once.
-
-    Returns
-    -------
-    dict
-        Every candidate evaluated, ``known`` ones included, to ``(Q, mean E)``.
-    """
-    results = dict(known or {})
-    key, run, _ = _runner(counts, evaluate, results, batch_size)
-    limit = len(results) + budget
-    for start in starts:
-        if len(results) >= limit:
-            break
-        _coordinate_ascent(tuple(start), counts, run, results, key, limit)
-    return results
-
-
-def _runner(counts, evaluate: BatchEvaluate, results: dict, batch_size: int):
-    """The search's ranking key, its batched evaluation into ``results`` and the best candidate so far (a list of at
-    most one, kept as results arrive: seeds ask for it often)."""
-
     def key(choice: tuple[int, ...]) -> tuple[float, float, int]:
         quality, mean = results[choice]
         return quality, mean, -candidate_index(choice, counts)
 
+    # the best so far, kept as results arrive: seeds ask for it often
     leader: list[tuple[int, ...]] = []
 
     def run(choices: list[tuple[int, ...]]) -> None:
@@ -222,7 +168,13 @@ def _runner(counts, evaluate: BatchEvaluate, results: dict, batch_size: int):
             if not leader or key(best) > key(leader[0]):
                 leader[:] = [best]
 
-    return key, run, leader
+    if _branch_and_bound(counts, upper_bounds, run, results, max(1, max_evaluations // 2), keep):
+        return SearchOutcome("branch_and_bound", results, total, True)
+    for seed in _seeds(counts, upper_bounds, lambda: leader[0] if leader else None):
+        if len(results) >= max_evaluations:
+            break
+        _coordinate_ascent(seed, counts, run, results, key, max_evaluations)
+    return SearchOutcome("branch_and_bound+coordinate_ascent", results, total, False)
 
 
 def _branch_and_bound(counts, upper_bounds, run, results, budget: int, keep: int = 1) -> bool:

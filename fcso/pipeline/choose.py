@@ -26,7 +26,7 @@ from ..report.models import (
     CandidateReport,
 )
 from ..screen import ScreenedCandidate, carve_heights, screen
-from ..search import SearchOutcome, ascend, candidate_index, quality_upper_bound, rerank, search
+from ..search import SearchOutcome, candidate_index, quality_upper_bound, rerank, search
 from .prepare import Prepared, subset
 from .report import (
     candidate_reports,
@@ -61,8 +61,6 @@ class ChosenCandidate:
     kept_screens: dict[tuple[int, ...], ScreenedCandidate] = dataclasses.field(repr=False)
     indices: dict[tuple[int, ...], int] = dataclasses.field(repr=False)
     upper_bound: float = 0.0
-    #: candidates screened on the pad the whole candidate carves (the capture measure's second screening)
-    screened_on_pad: int = 0
     warnings: list[str] = dataclasses.field(default_factory=list, repr=False)
     timings_s: dict[str, float] = dataclasses.field(default_factory=dict, repr=False)
 
@@ -87,7 +85,7 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     warnings, timings = list(prepared.warnings), dict(prepared.timings_s)
 
     clock = time.perf_counter()
-    outcome, indices, ranked, finalists, kept, on_pad = _screened_ranking(prepared, config, report_progress)
+    outcome, indices, ranked, finalists, kept = _screened_ranking(prepared, config, report_progress)
     timings["screening"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
@@ -118,14 +116,13 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     timings["exact"] = time.perf_counter() - clock
     candidate = candidate_reports([best_choice], {best_choice: exact[best_choice]}, {}, indices)[0]
     return ChosenCandidate(
-        best_choice, candidate, outcome, ranked, exact, kept, indices, upper_bound, on_pad, warnings, timings
+        best_choice, candidate, outcome, ranked, exact, kept, indices, upper_bound, warnings, timings
     )
 
 
 def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress: Progress) -> tuple:
     """The screening of :func:`choose_candidate` (METHOD §8): the search's outcome, each screened candidate's index,
-    the candidates ranked, the exact finalists, the listed candidates' screenings the search kept, and how many
-    candidates were screened on their whole pad."""
+    the candidates ranked, the exact finalists, and the listed candidates' screenings the search kept."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     counts = [len(s.samples) for s in scenarios]
     total = int(np.prod(counts, dtype=object))
@@ -139,8 +136,6 @@ def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress:
     # their per-scenario values as they are screened instead of screening again
     keep_screens = expected <= config.search.report_candidates
     kept_screens: dict[tuple[int, ...], ScreenedCandidate] = {}
-    # under the capture measure, the candidates screened again on their whole pad
-    on_pad: dict[tuple[int, ...], ScreenedCandidate] = {}
     with WorkerPool(screen_data, jobs, config.compute.scheduler) as pool:
 
         def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
@@ -182,29 +177,18 @@ def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress:
         )
         if config.quality.measure == "capture":
             # the search ranked by each sample's own capture: the best are screened again on the candidate's pad
-            def screen_on_pads(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
-                chunks = [choices[i : i + _PAD_CHUNK] for i in range(0, len(choices), _PAD_CHUNK)]
-                on_pad.update(zip(choices, (c for chunk in pool.map(_pad_batch, chunks) for c in chunk)))
-                return [(on_pad[c].quality, on_pad[c].mean_effective_area) for c in choices]
-
             top = ranked[: config.search.pad_top_k]
-            scores = dict(zip(top, screen_on_pads(top)))
-            # each sample's own capture cannot see another scenario's pocket taking a part off its seat: on a
-            # finger shared by two parts the best it ranked kept 0.15 on its pad where one sample away kept 0.5.
-            # So climb on the candidate's pad itself, from its best there
-            scores = ascend(
-                rerank(top, scores, counts)[:1], counts, screen_on_pads, config.search.pad_ascent_evaluations, scores
-            )
+            chunks = [top[i : i + _PAD_CHUNK] for i in range(0, len(top), _PAD_CHUNK)]
+            on_pad = dict(zip(top, (c for chunk in pool.map(_pad_batch, chunks) for c in chunk)))
             kept_screens.update(on_pad)
-            indices.update({c: candidate_index(c, counts) for c in scores})
-            ranked = rerank(ranked, scores, counts)
+            ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in on_pad.items()}, counts)
         finalists = ranked[: config.search.exact_top_k]
         # the report lists each screened candidate's per-scenario values: those not kept are screened again only
         # when the finger is made (:func:`listed_screens`): a finger set judged and not delivered never needs them
         listed = ranked[config.search.exact_top_k : config.search.report_candidates]
         kept = {c: kept_screens[c] for c in listed if c in kept_screens}
     report_progress("screening", expected, expected)
-    return outcome, indices, ranked, finalists, kept, len(on_pad)
+    return outcome, indices, ranked, finalists, kept
 
 
 def choose_candidates(

@@ -274,7 +274,6 @@ def _finished_design(
             evaluated=len(outcome.evaluated),
             screened=len(outcome.evaluated),
             exact=len(exact),
-            screened_on_pad=chosen.screened_on_pad,
             candidates_total=outcome.total,
             proven_optimal=outcome.proven_optimal,
             jobs=jobs,

@@ -197,11 +197,6 @@ class SearchReport(ReportModel):
     evaluated: int = Field(description="Candidates evaluated (screened)")
     screened: int = Field(0, description="Candidates screened")
     exact: int = Field(0, description="Best screened candidates re-evaluated exactly; the design is the best of these")
-    screened_on_pad: int = Field(
-        0,
-        description="Candidates screened again on the pad the whole candidate carves (capture measure): the "
-        "search.pad_top_k best and those of the coordinate ascent from the best of them (METHOD §8b)",
-    )
     candidates_total: int = Field(description="C = product of valid samples per scenario")
     proven_optimal: bool = Field(
         description="Every candidate was screened, or branch and bound proved the screened best"

@@ -9,7 +9,7 @@ import pytest
 
 import fcso
 from fcso.pipeline import prepare, screen_choice
-from fcso.search import ascend, candidate_index, quality_upper_bound, rerank, search
+from fcso.search import candidate_index, quality_upper_bound, rerank, search
 from tests.conftest import REPO, data_path, small_config
 
 
@@ -98,50 +98,6 @@ def test_coordinate_ascent_climbs_when_bounds_cannot_prune():
     outcome = search(counts, [np.full(6, 1000.0)] * 3, batch(evaluate), max_exhaustive=1, max_evaluations=60)
     assert outcome.kind == "branch_and_bound+coordinate_ascent"
     assert peak in outcome.evaluated and len(outcome.evaluated) <= 60
-
-
-def test_ascent_climbs_from_its_first_start_within_its_budget_and_keeps_what_it_knew():
-    counts = [7, 7, 7]
-    peak = (6, 0, 3)
-    calls = []
-
-    def evaluate(choice):
-        calls.append(choice)
-        quality = 50.0 - sum(abs(a - b) for a, b in zip(choice, peak))
-        return quality, quality
-
-    known = {(0, 6, 0): (1.0, 1.0)}
-    climbed = ascend([(0, 6, 0)], counts, batch(evaluate), budget=100, known=known)
-    # one move per scenario reaches the peak: three rounds of 6 new samples each, then a round that confirms it
-    assert peak in climbed and climbed[peak] == (50.0, 50.0)
-    assert climbed[(0, 6, 0)] == (1.0, 1.0) and (0, 6, 0) not in calls
-    assert len(calls) == len(set(calls)) == len(climbed) - 1 <= 100
-    # no budget: nothing new is evaluated
-    assert ascend([(0, 6, 0)], counts, batch(evaluate), budget=0, known=known) == known
-    # a small budget stops the climb before the peak
-    short = ascend([(0, 6, 0)], counts, batch(evaluate), budget=8)
-    assert len(short) <= 8 and peak not in short
-
-
-def test_a_finger_shared_by_two_parts_is_climbed_to_on_its_own_pad_not_on_each_samples_pockets():
-    # the development split's notched bar and hexagonal prism on one 20 mm pad: the best candidates by each sample's
-    # own capture carve pockets that take the other part off its seat; moving one scenario's sample at a time on
-    # the candidate's pad finds one that keeps both
-    from examples import part_families
-
-    first = {p.family: p for p in part_families.split("development", 1)}
-    parts = [fcso.Part(name=f, path=f, mesh=first[f].mesh) for f in ("notched-bar", "polygon-prism")]
-    config = fcso.DesignConfig().updated({"sampler": {"length_mm": 20.0}})
-    climbed = fcso.design(parts, config).report
-    ranked_only = fcso.design(parts, config.updated({"search": {"pad_ascent_evaluations": 0}})).report
-
-    def worst_capture(report):
-        return min(s.capture for s in report.scenarios)
-
-    assert ranked_only.search.screened_on_pad == config.search.pad_top_k
-    assert climbed.search.screened_on_pad > config.search.pad_top_k
-    assert worst_capture(climbed) >= 2 * worst_capture(ranked_only)
-    assert worst_capture(climbed) >= 0.4
 
 
 def test_search_finds_the_screened_optimum_on_a_real_design():
