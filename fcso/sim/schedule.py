@@ -25,9 +25,10 @@ judged.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from ..parallel import WorkerPool, resolve_jobs
@@ -212,6 +213,24 @@ def nominal_grasp(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str
     back."""
     keys = {kind: scene_key(scene, case, config)}
     return _simulated_grasp(({kind: scene}, case, config, keys), (kind, 0, None))
+
+
+def nominal_grasps(
+    scenes: Sequence[Scene], cases: Sequence[GraspCase], config: VerifyConfig, kind: str = "fcso"
+) -> list[TrialRun | mujoco.FatalError]:
+    """:func:`nominal_grasp` of several scenarios (``scenes[k]`` grasps ``cases[k]``) side by side on ``config.jobs``
+    forked workers, in order: a run each, or the error of a scenario MuJoCo refused (the caller decides)."""
+    jobs = min(resolve_jobs(config.jobs), len(cases))
+    with WorkerPool((list(scenes), list(cases), config, kind), jobs) as pool:
+        return pool.map(_nominal_task, range(len(cases)))
+
+
+def _nominal_task(context, number: int) -> TrialRun | mujoco.FatalError:
+    scenes, cases, config, kind = context
+    try:
+        return nominal_grasp(scenes[number], cases[number], config, kind)
+    except mujoco.FatalError as error:
+        return error
 
 
 def _grasp_plan(

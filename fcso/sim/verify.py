@@ -18,6 +18,7 @@ from ..version import __version__
 from .collision import ConvexPieces, finger_body_hull, pad_prism_pieces, part_shell_pieces
 from .config import VerifyConfig
 from .diskcache import evict
+from .outcomes import TrialRun
 from .report import (
     Fidelity,
     FingerResult,
@@ -28,7 +29,7 @@ from .report import (
     successes,
 )
 from .scene import GraspCase, Scene, build_scene, with_arena
-from .schedule import ScenarioSimulations, nominal_grasp, scenario_simulations
+from .schedule import ScenarioSimulations, nominal_grasp, nominal_grasps, scenario_simulations
 from .trials import Frame, approach_opening_mm, perturbations, pose_error, seated_overlaps_mm
 
 
@@ -203,8 +204,9 @@ def nominal_seats(
     design: DesignUnderTest, config: VerifyConfig
 ) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None]:
     """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each (two for a
-    drop), until one does not hold its part at its designed seat (:func:`seat_miss`) where the flat control's
-    unperturbed grasp does (never worse than flat: a part flat pads drop or hold off its seat too rejects nothing).
+    drop), side by side; the first scenario whose grasp does not hold its part at its designed seat
+    (:func:`seat_miss`) where the flat control's unperturbed grasp does rejects the finger (never worse than flat: a
+    part flat pads drop or hold off its seat too rejects nothing).
 
     Every scenario is checked, not only those the trials reach before a failure stops them (``stop_early``): in a
     finger shared by several parts, one part may slide off its seat into another part's pocket (the stepped block of
@@ -219,12 +221,15 @@ def nominal_seats(
         The first scenario whose grasp misses its seat where flat pads' does not, and why; None when there is none
         (a scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
     """
-    built = {}
-    for number, case in enumerate(design.cases):
-        built[number] = fitted_pieces(case, design, config)
+    built = {number: fitted_pieces(case, design, config) for number, case in enumerate(design.cases)}
+    # every scenario's grasp side by side (one core each): one after the other they were 40 % of a part's choice
+    runs = nominal_grasps([built[n][2] for n in built], design.cases, config)
+    for number, (case, run) in enumerate(zip(design.cases, runs)):
         pieces, _, scene = built[number]
         try:
-            missed = _nominal_seat_miss(scene, case, config, "fcso")
+            if isinstance(run, mujoco.FatalError):
+                raise run
+            missed = _nominal_seat_miss(scene, case, config, "fcso", run)
             # flat pads that cannot hold the part at its seat either leave nothing a carving would be worse than
             if missed is not None:
                 flat = build_scene(case, pieces.pieces, None, design.finger_hull_mm, config)
@@ -236,9 +241,11 @@ def nominal_seats(
     return built, None
 
 
-def _nominal_seat_miss(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str) -> str | None:
-    """:func:`seat_miss` of a finger's (``kind``) unperturbed grasp in ``scene``."""
-    run = nominal_grasp(scene, case, config, kind)
+def _nominal_seat_miss(
+    scene: Scene, case: GraspCase, config: VerifyConfig, kind: str, run: TrialRun | None = None
+) -> str | None:
+    """:func:`seat_miss` of a finger's (``kind``) unperturbed grasp in ``scene`` (``run``, when already simulated)."""
+    run = run or nominal_grasp(scene, case, config, kind)
     if not run.held and config.arena_retry_factor > 1.0:
         # a grasp short of MuJoCo's arena drops the part with a warning, not an error: a drop is confirmed with the
         # full run's larger arena, simulated again (its outcome replaces the first in the cache)

@@ -36,7 +36,7 @@ from fcso.sim.config import VerifyConfig
 from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
 from fcso.sim.report import Fidelity, VerificationReport, verdict_text
 from fcso.sim.scene import GraspCase, build_scene
-from fcso.sim.schedule import scenario_simulations
+from fcso.sim.schedule import nominal_grasp, nominal_grasps, scenario_simulations
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
     DesignUnderTest,
@@ -648,6 +648,23 @@ def test_grasps_and_holding_on_forked_workers_give_the_results_of_one_process(tm
     runs[2] = runs[2][1:]
     # the start errors matter: the trials end in different poses
     assert not np.allclose(runs[2][0].part_in_gripper, runs[2][1].part_in_gripper)
+
+
+def test_unperturbed_grasps_side_by_side_are_those_of_one_process(tmp_path):
+    config = _config(tmp_path, jobs=2, lift_mm=10.0)
+    cases = [_cube_case(20.0), _cube_case(16.0)]
+    scenes = [build_scene(case, _hull(case.part), None, np.zeros((0, 3)), config) for case in cases]
+
+    side_by_side = nominal_grasps(scenes, cases, config, "flat")
+
+    for scene, case, run in zip(scenes, cases, side_by_side):
+        alone = nominal_grasp(scene, case, config, "flat")
+        assert run.held == alone.held and np.array_equal(run.part_in_gripper, alone.part_in_gripper)
+    # two outcomes: the 20 mm cube is lifted (its lifted state kept for the holding test), the 16 mm one dropped
+    assert side_by_side[0].held and np.array_equal(
+        side_by_side[0].lifted, nominal_grasp(*scenes[:1], cases[0], config, "flat").lifted
+    )
+    assert not side_by_side[1].held
 
 
 #: Start errors of the cube between flat pads: along the closing axis (table x) the pads centre it, along the pads
