@@ -153,7 +153,10 @@ def test_worker_killed_mid_job_fails_that_job_only(tmp_path):
             tmp_path / "watch" / "victim", {"job.toml": slow_manifest("solar_tracker.stl"), "solar_tracker.stl": SOLAR}
         )
         started = daemon.wait_for(lambda v: isinstance(v, dict) and v.get("message") == "job started")
-        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("stage") == "load")
+        # the design's first progress line (it has done and total): the record was flushed after the job's load
+        # step before it. The load step's own "step load finished" line (stage "load") is sent before that flush:
+        # killed on it, the worker raced its own record
+        daemon.wait_for(lambda v: isinstance(v, dict) and v.get("done") is not None)
         os.kill(started["worker_pid"], signal.SIGKILL)
         failed = subscriber.wait_for(
             lambda v: isinstance(v, dict) and v.get("topic") == "status" and v["body"]["state"] == "failed", 60
