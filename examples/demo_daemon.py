@@ -63,15 +63,15 @@ def _wait_for_line(stream, text: str, timeout: float) -> None:
     raise SystemExit(f"demo: gave up waiting for {text!r}")
 
 
-def _show(line: str) -> None:
-    """One received message, in a few words."""
+def _show(line: str) -> str:
+    """One received message, in a few words; returns its topic ("" for liveliness and rejected messages)."""
     message = json.loads(line)
     if "daemon" in message:
         print(f"  daemon liveliness: {message['daemon']}")
-        return
+        return ""
     if "rejected" in message:
         print(f"  REJECTED {message['key']}: {message['rejected']}")
-        return
+        return ""
     topic, body = message["topic"], message.get("body") or {}
     if topic == "status":
         extra = body.get("error") or ", ".join(body.get("outputs", []))
@@ -127,6 +127,8 @@ def _show(line: str) -> None:
                         f"      pick {part['quantity']} x {part['part']} lying in pose {grasp['pose_index']}: TCP "
                         f"({position}) mm, close to {grasp['closing_width_mm']:.2f} mm"
                     )
+        for entry in body.get("not_served", []):
+            print(f"    not served: {entry['quantity']} x {entry['part']} to {entry['fallback']} ({entry['reason']})")
         if body["ungraspable_parts"]:
             print(f"    not picked (no finger can grasp them): {', '.join(body['ungraspable_parts'])}")
     if (
@@ -138,6 +140,7 @@ def _show(line: str) -> None:
             f"  (every message is signed: key {message['attachment']['signature']['key_id']}, checked with the "
             f"daemon's public key, signing.pub)"
         )
+    return topic
 
 
 def _try_without_certificate(config: Path, controller: Path, port: int) -> None:
@@ -218,6 +221,52 @@ class Ros2Cell:
         self.session.close()
 
 
+#: The tables of deploy/fcsod.toml that name the print server's folders, keys and network: the demo's own.
+SITE_TABLES = ("watch", "output", "state", "bus", "zenoh", "ros2")
+
+
+def _demo_config(port: int) -> str:
+    """deploy/fcsod.toml as shipped (repair, reuse, verification, sets judged by truth), with the demo's folders,
+    keys and loopback endpoint in place of the print server's."""
+    shipped, kept, site = (REPO / "deploy" / "fcsod.toml").read_text(encoding="utf-8").splitlines(), [], False
+    for line in shipped:
+        if line.startswith("["):
+            site = line.strip("[] ") in SITE_TABLES
+        if not site:
+            kept.append(line)
+    return (
+        "\n".join(kept)
+        + f"""
+
+# the demo's site: folders under demo-out/daemon, the keys of fcsod pki init, zenoh on loopback
+[watch]
+roots = ["watch"]
+settle_seconds = 1.0
+
+[output]
+root = "out"
+
+[state]
+dir = "state"
+
+[bus]
+prefix = "fcso"
+cell = "demo"
+signing_key = "pki/daemon/signing.key"
+
+[zenoh]
+config_file = "pki/daemon/zenoh.json5"
+listen = ["tls/127.0.0.1:{port}"]
+multicast_scouting = false
+
+[ros2]
+enabled = true
+domain_id = {ROS_DOMAIN_ID}
+namespace = "/demo"
+"""
+    )
+
+
 def main() -> int:
     shutil.rmtree(BASE, ignore_errors=True)
     (BASE / "watch").mkdir(parents=True)
@@ -251,39 +300,7 @@ def main() -> int:
     )
     controller = pki / "clients" / "demo-controller"
     config = BASE / "fcsod.toml"
-    config.write_text(
-        f"""[watch]
-roots = ["watch"]
-settle_seconds = 1.0
-
-[output]
-root = "out"
-
-[state]
-dir = "state"
-
-[bus]
-prefix = "fcso"
-cell = "demo"
-signing_key = "pki/daemon/signing.key"
-
-[zenoh]
-config_file = "pki/daemon/zenoh.json5"
-listen = ["tls/127.0.0.1:{port}"]
-multicast_scouting = false
-
-[ros2]
-enabled = true
-domain_id = {ROS_DOMAIN_ID}
-namespace = "/demo"
-
-# every finger set's design is verified in simulation after the job is done (METHOD §12)
-[verify]
-enabled = true
-trials = 10
-""",
-        encoding="utf-8",
-    )
+    config.write_text(_demo_config(port), encoding="utf-8")
     print(f"\nstarting fcsod (config {config}, zenoh tls/127.0.0.1:{port}, log {BASE / 'daemon.log'})")
     with open(BASE / "daemon.log", "w") as log:
         daemon = _fcsod("run", "--config", str(config), stdout=log, stderr=subprocess.STDOUT)
@@ -296,11 +313,6 @@ trials = 10
                 str(config),
                 "--save",
                 str(BASE / "received"),
-                # verification is on: the job's one finger (the design's choice of sets) is verified inside its
-                # design step, its message on .../verification follows the done status (it waited for a second
-                # one, of a second finger set the job no longer gets, until the time limit)
-                "--exit-after-verifications",
-                "1",
                 # a guard against a hung daemon, not a speed guess: the demo ends at its verification
                 "--timeout",
                 "7200",
@@ -320,8 +332,16 @@ trials = 10
                 print(f"  copied {path.name}")
                 time.sleep(0.3)
             print("what the cell controller receives:")
+            # verification is on: every finger set's finger is verified (one inside the design step, several
+            # after done), one message on .../verification each; the pick plan says how many sets there are
+            sets, verifications = None, 0
             for line in subscriber.stdout:
-                _show(line)
+                topic = _show(line)
+                sets = len(json.loads(line)["body"]["sets"]) if topic == "plan" else sets
+                verifications += topic.partition("/")[0] == "verification"
+                if sets is not None and verifications >= sets:
+                    break
+            subscriber.terminate()
             subscriber.wait()
             time.sleep(0.5)
             ros2_cell.show()

@@ -402,10 +402,10 @@ class FingerSetsConfig(_Section):
         0.0,
         ge=0,
         description="Sets judged by truth: seconds the simulation ([verify], METHOD §12) of the delivered sets' "
-        "fingers may take during the design, with the parts' own fingers designed for it. A set's finger that fails "
-        "a scenario its part's own finger passes does not serve that part: the part gets a set of its own while max "
-        "allows, else it is not_served. No simulation starts once this much time went into it; 0: off (sets judged "
-        "by the measure alone)",
+        "fingers may take during the design, with the parts' own fingers designed for it. A shared finger that fails "
+        "a scenario its part's own finger passes, or seats the part in fewer precision trials than flat pads, does "
+        "not serve that part: the part gets a set of its own while max allows, else it is not_served. No "
+        "simulation starts once this much time went into it; 0: off (sets judged by the measure alone)",
     )
 
     def sets_allowed(self, parts: int) -> int:

@@ -76,7 +76,7 @@ def sets_report(
     """The report of the sets, their scenarios, identical parts and the pick plan.
 
     ``unserved_by_truth``: distinct part -> why its set's simulated finger does not serve it (it fails where the
-    part's own finger passes, issue 48): not served either."""
+    part's own finger passes, or seats it less often than flat pads: issue 48): not served either."""
     unserved_by_truth = unserved_by_truth or {}
     settings = config.finger_sets
     several = len(designs) > 1
@@ -289,7 +289,7 @@ def _set_not_served(
 ) -> list[NotServedPart]:
     """The entries of set ``label``'s parts it does not serve: those keeping less than min_retained
     (``part_retained``: distinct part -> its least retained in the set), and those its simulated finger fails where
-    their own finger passes (``unserved_by_truth``: distinct part -> why)."""
+    their own finger passes or that it seats less often than flat pads (``unserved_by_truth``: distinct part -> why)."""
     used, allowed = used_allowed
     entries = []
     for u, kept in part_retained.items():

@@ -288,7 +288,7 @@ def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResu
     report_progress("finger sets", len(designs), len(designs), "")
     timings["finger_sets"] = time.perf_counter() - clock
     screened = _screened_retained(outcome, attempts, graspable, part_scenarios, sets.screener)
-    unserved = {graspable[p]: _TRUTH_REASON for p in outcome.unserved_by_truth}
+    unserved = {graspable[p]: truth.reasons[p] for p in outcome.unserved_by_truth}
     finger_sets = sets_report(
         prepared,
         size.loaded,
@@ -331,10 +331,6 @@ def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResu
         settings=config,
     )
     return SetsResult(designs, finger_sets, job)
-
-
-#: Why a part whose set's simulated finger fails where its own finger passes is not served (issue 48).
-_TRUTH_REASON = "verified: fails where its own finger passes"
 
 
 def _sets_truth(sets: _ExactSets, names: list[str], config: DesignConfig) -> SetsTruth | None:

@@ -1,12 +1,17 @@
 """Finger sets judged by truth (issue 48): a set's finger simulated (METHOD §12) against each part's own finger.
 
 A set whose verified finger fails a scenario that its part's solo finger
-would pass is not a serving set for that part. The delivered sets' fingers
-are simulated within ``[finger_sets] truth_budget_s``; where a set of two
-or more parts fails a scenario, the part's own finger (the set of that part
-alone, designed as any set is) is simulated in it, and a part it passes is
-named (:meth:`SetsTruth.unserved`) for the partition search to move
-(:func:`fcso.sets.judged.search_judged_exactly`).
+would pass is not a serving set for that part, nor is one that seats the part
+in fewer precision trials than flat pads do. The delivered sets' fingers are
+simulated within ``[finger_sets] truth_budget_s``; where a set of two or more
+parts fails a scenario, the part's own finger (the set of that part alone,
+designed as any set is) is simulated in it, and a part it passes is named
+(:meth:`SetsTruth.unserved`) for the partition search to move
+(:func:`fcso.sets.judged.search_judged_exactly`), as is a part the set's
+finger seats less often than flat pads. A set's finger is delivered with flat
+pads only when flat pads beat it on every part (:func:`fcso.sim.choose.verify_top`);
+a shared finger that beats them on one part and loses on another would
+otherwise reach the cell for both.
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ class SetsTruth:
         its scene).
     unsimulated : dict
         Set of parts -> why MuJoCo could not simulate its finger (the set is judged by the measure).
+    reasons : dict
+        Part -> why the last set judged for it does not serve it, as the report tells it.
     spent_s : float
         Time spent so far, s: the simulations and the parts' own fingers designed for them.
     """
@@ -58,30 +65,45 @@ class SetsTruth:
     verified: dict[frozenset[int], dict[tuple[str, int], VerifiedSetScenario]] = dataclasses.field(default_factory=dict)
     solo_passes: dict[tuple[int, str, int], bool | None] = dataclasses.field(default_factory=dict)
     unsimulated: dict[frozenset[int], str] = dataclasses.field(default_factory=dict)
+    reasons: dict[int, str] = dataclasses.field(default_factory=dict)
     spent_s: float = 0.0
 
     def left(self) -> bool:
         return self.spent_s < self.budget_s
 
     def unserved(self, members: frozenset[int]) -> list[int]:
-        """Parts of set ``members`` its simulated finger fails in a scenario their own finger passes; empty for a set
-        of one part, and for whatever the budget leaves unsimulated."""
+        """Parts of set ``members`` its simulated finger does not serve: those it seats in fewer precision trials than
+        flat pads in a scenario, and those it fails in a scenario their own finger passes; empty for a set of one part
+        (its own choice by truth delivers flat pads where they beat it), and for whatever the budget leaves
+        unsimulated. Why, per part: :attr:`reasons`."""
         if len(members) < 2:
             return []
         verdicts = self._verified(members)
         failing: dict[int, list[tuple[str, int]]] = {}
+        unserved: list[int] = []
         for part in sorted(members):
-            for key, scenario in (verdicts or {}).items():
-                if not scenario.passed and key[0] == self.names[part]:
-                    failing.setdefault(part, []).append(key)
-        unserved = []
+            mine = {key: s for key, s in (verdicts or {}).items() if key[0] == self.names[part]}
+            below_flat = [s for s in mine.values() if s.successes < s.flat_successes]
+            if below_flat:
+                unserved.append(part)
+                self.reasons[part] = (
+                    "verified: seats it less often than flat pads ("
+                    + ", ".join(
+                        f"pose {s.pose_index} {s.successes}/{s.trials} against flat {s.flat_successes}/{s.flat_trials}"
+                        for s in below_flat
+                    )
+                    + ")"
+                )
+                continue
+            failing[part] = [key for key, s in mine.items() if not s.passed]
         for part, keys in failing.items():
-            passes = self._solo_passes(part, keys)
+            passes = self._solo_passes(part, keys) if keys else {}
             for key in keys:
                 verdicts[key] = verdicts[key].model_copy(update={"solo_passed": passes.get(key)})
             if any(passes.values()):
                 unserved.append(part)
-        return unserved
+                self.reasons[part] = "verified: fails where its own finger passes"
+        return sorted(unserved)
 
     def report(self, outcome: PartitionOutcome) -> SetsTruthReport:
         """The report of the delivered partition's sets (set order) as simulated, with what moved and what is left

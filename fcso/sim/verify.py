@@ -222,13 +222,15 @@ def nominal_seats(
         (a scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
     """
     built = {number: fitted_pieces(case, design, config) for number, case in enumerate(design.cases)}
-    # every scenario's grasp side by side (one core each): one after the other they were 40 % of a part's choice
+    # every scenario's grasp side by side (one core each): one after the other they were most of a part's choice
     runs = nominal_grasps([built[n][2] for n in built], design.cases, config)
     for number, (case, run) in enumerate(zip(design.cases, runs)):
         pieces, _, scene = built[number]
+        if isinstance(run, mujoco.FatalError):
+            if out_of_arena(run):
+                continue
+            raise run
         try:
-            if isinstance(run, mujoco.FatalError):
-                raise run
             missed = _nominal_seat_miss(scene, case, config, "fcso", run)
             # flat pads that cannot hold the part at its seat either leave nothing a carving would be worse than
             if missed is not None:

@@ -11,11 +11,16 @@ finger; the simulation does not.
 
 from __future__ import annotations
 
+import pytest
+
 import fcso
 from examples.sim_parts import hex_prism, plain_cylinder
+from fcso.config import VerifyConfig
 from fcso.output.sets_page import pick_plan_text
 from fcso.parts import Part
+from fcso.report.models import VerifiedSetScenario
 from fcso.sets import design_sets
+from fcso.sets.truth import SetsTruth
 
 HEX = Part(name="hex", path="hex.stl", mesh=hex_prism())
 CYLINDER = Part(name="cylinder", path="cylinder.stl", mesh=plain_cylinder(12.0, 30.0))
@@ -79,3 +84,40 @@ def test_a_part_its_shared_finger_fails_with_no_set_left_is_not_served(tmp_path)
     assert sorted(p.part for step in sets.pick_plan for p in step.parts) == ["cylinder", "hex"]
     assert sets.sets_needed is None
     assert "not served: 1 x hex-22 to manual (verified: fails where its own finger passes" in pick_plan_text(sets)
+
+
+def _simulated(part: str, successes: int, flat_successes: int) -> VerifiedSetScenario:
+    return VerifiedSetScenario(
+        part=part,
+        pose_index=0,
+        trials=10,
+        successes=successes,
+        flat_trials=10,
+        flat_successes=flat_successes,
+        passed=successes == 10,
+    )
+
+
+def test_a_part_its_shared_finger_seats_less_often_than_flat_pads_is_not_served_by_it():
+    # the verdicts of bench_sets' 12-part job (set 2, simulated at 91605b6): the shared finger beats flat pads on the
+    # solar tracker and loses to them on the knob; the after-job choice keeps a finger that flat pads do not beat on
+    # every part, so the set's verdict must name the knob. No simulation runs here (budget 0): the rule is judged on
+    # the verdicts as the simulation gave them, and the part's own finger is not needed to judge it.
+    shared, knob_alone = frozenset({0, 1}), frozenset({1})
+    truth = SetsTruth(
+        made=lambda members: pytest.fail(f"no finger is made for {members}: the verdicts are known"),
+        names=["solar_tracker", "knob-narrowing-1"],
+        budget_s=0.0,
+        verify_config=VerifyConfig(),
+        verified={
+            shared: {
+                ("solar_tracker", 0): _simulated("solar_tracker", 1, 0),
+                ("knob-narrowing-1", 0): _simulated("knob-narrowing-1", 0, 4),
+            },
+            knob_alone: {("knob-narrowing-1", 0): _simulated("knob-narrowing-1", 2, 4)},
+        },
+    )
+    assert truth.unserved(shared) == [1]
+    assert truth.reasons == {1: "verified: seats it less often than flat pads (pose 0 0/10 against flat 4/10)"}
+    # alone, the part is its own design's: its choice by truth delivers flat pads where they beat it
+    assert truth.unserved(knob_alone) == []
