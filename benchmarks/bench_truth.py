@@ -4,7 +4,7 @@ METHOD §7b, §7c and §12. Run from the repository root::
 
     python -m benchmarks.bench_truth [--splits development,test,suite] [--seeds N] [--trials N] [--top-k K]
                                      [--families NAME,...] [--shared-only | --single-only] [--candidates K]
-                                     [--bunny]
+                                     [--bunny] [--as-shipped]
 
 Three sets of parts, every one designed with ``fcso.DesignConfig()`` as it
 ships: no part gets settings of its own, no pose or yaw is chosen for it.
@@ -19,7 +19,10 @@ ships: no part gets settings of its own, no pose or yaw is chosen for it.
 
 ``--shared-only`` runs only the shared-finger jobs of the development and test
 splits (:data:`SHARED_JOBS`; the suite has none), ``--single-only`` only the
-one-part jobs.
+one-part jobs. ``--as-shipped`` designs those jobs as the daemon does
+(``deploy/fcsod.toml``'s ``[design]``: up to 4 finger sets, judged by truth)
+instead of one finger for all; a part the job names ``not_served`` counts
+its flat control's trials.
 
 The delivered candidate is chosen as the daemon chooses it (``--top-k``
 candidates verified in the measure's order, each stopped at its first failed
@@ -37,7 +40,9 @@ from __future__ import annotations
 
 import argparse
 import time
+import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -46,6 +51,7 @@ from scipy.stats import spearmanr
 import fcso
 from examples import part_families, sim_parts
 from fcso.parts import Part
+from fcso.sets import design_sets
 from fcso.sim.choose import candidate_designs, verify_top
 from fcso.sim.config import VerifyConfig
 from fcso.sim.verify import nominal_miss, verify, weaker_than_flat
@@ -147,13 +153,25 @@ def miss_reason(outcome, config: VerifyConfig) -> str:
     return ", ".join(parts)
 
 
+def shipped_design_config() -> fcso.DesignConfig:
+    """``deploy/fcsod.toml``'s ``[design]`` over fcso's defaults: the daemon's design as shipped (its finger sets
+    judged by truth)."""
+    with open(Path(__file__).resolve().parents[1] / "deploy" / "fcsod.toml", "rb") as shipped:
+        return fcso.DesignConfig().updated(tomllib.load(shipped).get("design", {}))
+
+
 def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: SplitFigures) -> None:
-    """Design ``job`` with the defaults, choose by truth, verify the delivered finger fully; print its rows."""
+    """Design ``job`` with the defaults (one finger; with ``args.as_shipped`` a job of several parts as the daemon
+    ships, in finger sets judged by truth), choose by truth, verify each delivered finger fully; print its rows."""
     started = time.perf_counter()
     parts = [Part(name=name, path=name, mesh=mesh) for name, mesh, _ in job.parts]
-    caging = {name: flag for name, _, flag in job.parts}
     try:
-        result = fcso.design(parts, fcso.DesignConfig())
+        if args.as_shipped and len(parts) > 1:
+            sets = design_sets(parts, shipped_design_config())
+            results = sets.designs
+            not_served = {entry.part: entry.fallback for entry in (sets.report.not_served if sets.report else [])}
+        else:
+            results, not_served = [fcso.design(parts, fcso.DesignConfig())], {}
     except fcso.NoGraspError as error:
         print(f"{job.name:<34} no grasp: {error}", flush=True)
         return
@@ -162,6 +180,26 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
         print(f"{job.name:<34} design failed: {error}", flush=True)
         figures.failed.append(job.name)
         return
+    for number, result in enumerate(results, start=1):
+        label = f"set {number}: " if len(results) > 1 else ""
+        _delivered_rows(job, label, result, not_served, args, choose, every, figures)
+    print(f"  ({time.perf_counter() - started:.0f} s)", flush=True)
+
+
+def _delivered_rows(
+    job: Job,
+    label: str,
+    result: fcso.DesignResult,
+    not_served: dict[str, str],
+    args,
+    choose: VerifyConfig,
+    every: VerifyConfig,
+    figures: SplitFigures,
+) -> None:
+    """Choose ``result``'s finger by truth, verify it fully and print and keep a row per scenario. A part the job
+    does not serve (``not_served``: part -> fallback) is picked without a finger of its own: its row counts the flat
+    control's trials."""
+    caging = {name: flag for name, _, flag in job.parts}
     # the delivered finger's verification is complete (METHOD §12b): every trial and the holding test
     delivered, verification, _, ranking = verify_top(result, args.top_k, choose)
     report = delivered.report
@@ -169,6 +207,8 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
     pad = "flat" if report.finger.flat_pads else best.pad_case
     for scenario, outcome in zip(report.scenarios, verification.scenarios):
         designed, flat = outcome.fcso, outcome.flat
+        if scenario.part in not_served:
+            designed = flat
         row = Row(
             job,
             scenario.part,
@@ -193,9 +233,11 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
             notes.append(miss_reason(designed, every))
         if row.weaker:
             notes.append("holds less than flat")
-        label = scenario.part if len(job.parts) == 1 else f"{job.name[:16]}..{scenario.part}"
+        if scenario.part in not_served:
+            notes.append(f"not served: {not_served[scenario.part]} (flat control's trials)")
+        name = scenario.part if len(job.parts) == 1 else f"{label}{job.name[:16]}..{scenario.part}"
         print(
-            f"{label:<34} {scenario.pose_index:>4} {pad:>6} {scenario.capture:>7.2f} {scenario.flat_capture:>5.2f} | "
+            f"{name:<34} {scenario.pose_index:>4} {pad:>6} {scenario.capture:>7.2f} {scenario.flat_capture:>5.2f} | "
             f"{designed.success_rate * 10:>4.0f}/10 {designed.median_error_mm:>6.3f}mm "
             f"{_weakest(designed.holding_n):>6.1f}"
             f" | {flat.success_rate * 10:>4.0f}/10 {flat.median_error_mm:>6.3f}mm {_weakest(flat.holding_n):>6.1f} | "
@@ -226,7 +268,6 @@ def run_job(job: Job, args, choose: VerifyConfig, every: VerifyConfig, figures: 
             success = float(np.mean([s.fcso.success_rate for s in checked.scenarios]))
             q = min(s.effective_area for s in evaluation.scenarios)
             figures.correlation.append((evaluation.quality, q, success))
-    print(f"  ({time.perf_counter() - started:.0f} s)", flush=True)
 
 
 def summary(split: str, figures: SplitFigures, config: VerifyConfig) -> None:
@@ -298,6 +339,12 @@ def main() -> None:
         "--candidates", type=int, default=0, help="more candidates per job verified fully for the correlation"
     )
     parser.add_argument("--bunny", action="store_true", help="add the paper's bunny to the suite")
+    parser.add_argument(
+        "--as-shipped",
+        action="store_true",
+        help="jobs of several parts as the daemon designs them (deploy/fcsod.toml's [design]: finger sets judged by "
+        "truth), not one finger",
+    )
     args = parser.parse_args()
     families = set(args.families.split(",")) if args.families else None
     choose = VerifyConfig(trials=args.trials)
@@ -306,6 +353,7 @@ def main() -> None:
         f"product defaults (fcso.DesignConfig()); simulation: {args.trials} trials, +-2 mm +-3 deg, friction 0.4, "
         "60 N; success within 0.3 mm and 1 deg; choice by truth over "
         f"{args.top_k} candidates, the delivered finger verified with every trial"
+        + ("; jobs of several parts as shipped (deploy/fcsod.toml [design], finger sets)" if args.as_shipped else "")
     )
     shares: dict[str, tuple[float, float]] = {}
     for split in args.splits.split(","):
