@@ -94,10 +94,10 @@ class SetsTruth:
                     )
                     + ")"
                 )
-                continue
-            failing[part] = [key for key, s in mine.items() if not s.passed]
+            elif failed := [key for key, s in mine.items() if not s.passed]:
+                failing[part] = failed
         for part, keys in failing.items():
-            passes = self._solo_passes(part, keys) if keys else {}
+            passes = self._solo_passes(part, keys)
             for key in keys:
                 verdicts[key] = verdicts[key].model_copy(update={"solo_passed": passes.get(key)})
             if any(passes.values()):
