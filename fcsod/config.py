@@ -224,8 +224,7 @@ class VerifySettings(VerifyConfig):
         DEFAULT_TOP_K,
         ge=0,
         description="Verify up to K candidates in the order of the design's measure and deliver the first that passes "
-        "every scenario (0: verify only the delivered design; ignored for jobs of several finger sets and when "
-        "enabled is false)",
+        "every scenario, for each finger set (0: verify only the delivered design; ignored when enabled is false)",
     )
     time_limit_seconds: float = Field(
         600.0,

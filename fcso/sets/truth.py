@@ -5,7 +5,7 @@ would pass is not a serving set for that part, nor is one that seats the part
 in fewer precision trials than flat pads do. The delivered sets' fingers are
 simulated within ``[finger_sets] truth_budget_s``; where a set of two or more
 parts fails a scenario, the part's own finger (the set of that part alone,
-designed as any set is) is simulated in it, and a part it passes is named
+designed as any set is, chosen by truth as the job would deliver it) is simulated, and a part it passes is named
 (:meth:`SetsTruth.unserved`) for the partition search to move
 (:func:`fcso.sets.judged.search_judged_exactly`), as is a part the set's
 finger seats less often than flat pads. A set's finger is delivered with flat
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from ..config import VerifyConfig
 from ..pipeline import DesignResult
 from ..report.models import SetsTruthReport, VerifiedSet, VerifiedSetScenario
+from ..verify_config import DEFAULT_TOP_K
 from .partition import PartitionOutcome
 
 #: ``made(set_of_parts)``: the set's finished design (its finger made), or None when it cannot be made.
@@ -161,22 +162,29 @@ class SetsTruth:
         return self.verified.get(members)
 
     def _solo_passes(self, part: int, keys: list[tuple[str, int]]) -> dict[tuple[str, int], bool]:
-        """Whether ``part``'s own finger (designed here when it was not) passes each of its scenarios ``keys``, each
-        simulated until it can no longer pass (``stop_early``); scenarios the budget leaves unsimulated are
-        missing."""
+        """Whether ``part``'s own finger passes each of its scenarios ``keys``: the finger the choice by truth delivers
+        for the set of that part alone (:func:`fcso.sim.choose.verify_top` over its :data:`DEFAULT_TOP_K` best
+        candidates and its other pad sizes, within what is left of the budget), as the job would deliver it there.
+        Judging only the measure's best candidate would keep a part on a shared finger that fails it where the
+        choice for it alone passes. Missing when the budget is spent."""
         todo = [key for key in keys if (part, *key) not in self.solo_passes]
         if todo and self.left():
-            from ..sim.verify import DesignUnderTest, design_under_test, verify
+            from ..sim.choose import verify_top
 
             clock = time.perf_counter()
             design = self.made(frozenset([part]))
-            whole = None if design is None else design_under_test(design)
-            for case in [] if whole is None else whole.cases:
-                key = _case_key(case.name)
-                if key in todo and self.spent_s + time.perf_counter() - clock < self.budget_s:
-                    one = DesignUnderTest([case], whole.fingerpad, whole.finger_hull_mm)
-                    verification = self._simulated(verify, one, frozenset([part]), stop_early=True)
-                    self.solo_passes[(part, *key)] = None if verification is None else verification.passed
+            if design is not None:
+                verification = self._simulated(
+                    lambda result, config: verify_top(result, DEFAULT_TOP_K, config)[1],
+                    design,
+                    frozenset([part]),
+                    stop_early=True,
+                    choice_budget_s=max(self.budget_s - self.spent_s, 1e-3),
+                )
+                if verification is None:
+                    self.solo_passes.update({(part, *key): None for key in todo})
+                for scenario in [] if verification is None else verification.scenarios:
+                    self.solo_passes[(part, scenario.part, scenario.pose_index)] = scenario.passed
             self.spent_s += time.perf_counter() - clock
         return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
 
@@ -188,9 +196,3 @@ class SetsTruth:
         except ValueError as error:  # MuJoCo's model compiler: e.g. "mesh volume is too small"
             self.unsimulated[members] = str(error).splitlines()[0]
             return None
-
-
-def _case_key(name: str) -> tuple[str, int]:
-    """``(part, pose_index)`` of a simulation case named ``"<part> pose <k>"`` (:func:`fcso.sim.verify.grasp_case`)."""
-    part, _, pose = name.rpartition(" pose ")
-    return part, int(pose)

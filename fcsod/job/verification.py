@@ -3,9 +3,9 @@
 With a delivery policy other than ``always``, the design step verifies
 every finger set's finger before it is placed, one set or several alike
 (:func:`choose_by_verification`), and a finger that misses the policy holds
-the job; with ``[verify] top_k > 0`` a job of one finger verifies
-candidates in the order of the design's measure and delivers the first that
-passes every scenario (several sets keep their designs). These
+the job; with ``[verify] top_k > 0`` each set's candidates are verified in
+the order of the design's measure and the first that passes every scenario
+is delivered, one set or several alike. These
 verifications are then part of the job's output (``verification.json``,
 the report's section, ``verification.mcap``, in each set's folder with
 several, recorded in ``job.mcap``) and their messages follow the ``done``
@@ -82,19 +82,13 @@ def job_settings(daemon: VerifySettings, manifest: VerifySettings | None) -> Ver
 
 def choose_by_verification(run) -> Verified | None:
     """Design step, for every finger set alike (one or several): with a delivery policy other than ``always``,
-    verify each set's finger before it is placed; with ``top_k > 0`` a job of one finger verifies candidates in the
-    measure's order and delivers the first that passes (several sets keep their designs, verified after the job is
-    done under ``always``). The job is held (:attr:`Verified.held`) when a finger misses the policy
-    (:func:`held_reason`). None when nothing is verified before the job is done."""
+    verify each set's finger before it is placed; with ``top_k > 0`` each set's candidates are verified in the
+    measure's order and the first that passes is delivered (:func:`fcso.sim.choose.verify_top`). The job is held
+    (:attr:`Verified.held`) when a finger misses the policy (:func:`held_reason`). None when nothing is verified
+    before the job is done."""
     settings = _settings(run)
     several = run.sets.several
-    if settings.enabled and several and settings.top_k > 0:
-        run.log(
-            "warning",
-            "verify top_k chooses among one finger's candidates: with several finger sets each set's design is "
-            "verified as it is",
-        )
-    choosing = settings.top_k > 0 and not several
+    choosing = settings.top_k > 0
     if not settings.enabled or not (choosing or settings.deliver != "always"):
         return None
     sets, fingers, held, warnings = run.sets, [], [], []

@@ -162,13 +162,14 @@ def test_a_part_no_set_serves_is_not_served_in_the_report_the_plan_and_on_the_bu
 
 
 def test_finger_sets_that_miss_the_delivery_policy_hold_the_job_as_one_finger_does(tmp_path, capsys):
-    """One code path for one finger set or several: every set's finger is verified before it is placed, and a job
-    whose fingers miss ``deliver = "verified"`` is held with no finger in build.3mf until an operator approves it."""
+    """One code path for one finger set or several: every set's finger is chosen by truth among its candidates
+    (``top_k``) and verified before it is placed, and a job whose fingers miss ``deliver = "verified"`` is held with
+    no finger in build.3mf until an operator approves it."""
     port = free_port()
     config = write_config(tmp_path, port, verify="enabled = true")
     # parts of 10 kg/cm³, too heavy for any grip to lift: no finger can pass, whatever the machine (the density is
     # not among the conditions the design's capture measure predicts, so the job's two sets stay as they are)
-    manifest = MANIFEST + '\n[verify]\ntop_k = 0\ntrials = 1\ndensity_g_cm3 = 10000\ndeliver = "verified"\n'
+    manifest = MANIFEST + '\n[verify]\ntop_k = 1\ntrials = 1\ndensity_g_cm3 = 10000\ndeliver = "verified"\n'
     daemon = start_daemon(config)
     subscriber = start_subscriber(config)
     try:
@@ -219,6 +220,8 @@ def test_finger_sets_that_miss_the_delivery_policy_hold_the_job_as_one_finger_do
     for number in (1, 2):
         verification = json.loads((out / f"set-{number}" / "verification.json").read_text())
         assert verification["passed"] is False
+        # each set's finger chosen by truth, as one finger's is
+        assert verification["choice"], verification
     # approved: both sets' fingers placed, their grasps published with each set's verdict
     assert done["body"]["error"] is None
     with zipfile.ZipFile(out / "build.3mf") as archive:
