@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,9 +66,10 @@ class DesignResult:
         The finger the pad was fused onto.
     pad_to_finger : (4, 4) float
         Pad frame to finger frame.
-    other_sizes : list of DesignResult
+    other_sizes : iterable of DesignResult
         The designs of the other pad sizes of ``[sampler]`` (METHOD §3b), best by the size choice first, for the
-        choice by truth (:func:`fcso.sim.choose.verify_top`); empty with one size.
+        choice by truth (:func:`fcso.sim.choose.verify_top`); empty with one size. A finger set's are designed when
+        the choice first asks for them (:class:`fcso.sets.other_sizes.OtherSizes`).
     """
 
     report: DesignReport
@@ -78,7 +79,7 @@ class DesignResult:
     best: CandidateEvaluation
     flat_finger: FlatFinger
     pad_to_finger: np.ndarray
-    other_sizes: list[DesignResult] = dataclasses.field(default_factory=list)
+    other_sizes: Iterable[DesignResult] = dataclasses.field(default_factory=list)
 
 
 def finish_design(

@@ -37,6 +37,7 @@ from ..report.ranking import chosen_candidate
 from ..version import __version__
 from .identity import identical_groups
 from .judged import PartitionAttempt, search_judged_exactly
+from .other_sizes import OtherSizes, size_of
 from .partition import PartitionOutcome, search_partition
 from .result import SetsResult
 from .screening import SetScreener, SoloQuality, keep_held, screening_pools, sets_of, solo_picks, solo_quality
@@ -88,33 +89,31 @@ def design_sets(
         )
 
     screened, screened_out = _screened_sizes(parts, config, progress, repair)
+    named = {p.name: p for s in screened.values() if isinstance(s, _ScreenedSize) for p in s.loaded}
     made: list[SetsResult] = []
 
     def design_one_size(sized: DesignConfig) -> SetsResult:
         # popped: a size's screened job is freed once designed
-        one = screened.pop(_size_of(sized))
+        one = screened.pop(size_of(sized))
         if isinstance(one, NoGraspError):
             raise one
-        made.append(_design_screened(one, progress))
+        made.append(_design_screened(one, config.pad_size_configs(), repair, progress))
         return made[-1]
 
     result, sizes = best_pad_size(config, design_one_size, score, progress, screened_out)
     finger_sets = result.report.model_copy(update={"pad_sizes": sizes})
     others = sorted((r for r in made if r is not result), key=lambda r: score(r).rank, reverse=True)
     for entry, one in zip(result.report.sets, result.designs):
-        # a set's other sizes for the choice by truth: the sets of the same parts the other sizes designed
-        one.other_sizes = [d for r in others for s, d in zip(r.report.sets, r.designs) if s.parts == entry.parts]
-    size_reports = {_size_of(r.designs[0].report.settings): r.report for r in made}
+        # a set's other sizes for the choice by truth: the sets of the same parts the other sizes designed, then the
+        # sizes none did, designed for the set if the choice gets to them
+        designed = [d for r in others for s, d in zip(r.report.sets, r.designs) if s.parts == entry.parts]
+        one.other_sizes = OtherSizes.of(one, designed, [named[name] for name in entry.parts], config, repair)
+    size_reports = {size_of(r.designs[0].report.settings): r.report for r in made}
     if result.several:
         job_report = result.job_report.model_copy(update={"finger_sets": finger_sets})
         return SetsResult(result.designs, finger_sets, job_report, size_reports)
     result.designs[0].report = result.designs[0].report.model_copy(update={"finger_sets": finger_sets})
     return SetsResult(result.designs, finger_sets, None, size_reports)
-
-
-def _size_of(config: DesignConfig) -> tuple[float, float]:
-    """The pad size of settings of one size: length and width, mm."""
-    return config.sampler.length_mm, config.sampler.width_mm
 
 
 def _screened_sizes(
@@ -152,7 +151,7 @@ def _screened_sizes(
     screened_out = [
         None if k in kept else screened_out_note(screens[k], screens[best], best_size) for k in range(len(sized))
     ]
-    return {_size_of(sized[k]): screened[k] for k in sorted(kept)}, screened_out
+    return {size_of(sized[k]): screened[k] for k in sorted(kept)}, screened_out
 
 
 @dataclass
@@ -253,9 +252,12 @@ def _screening_pool(sets: _ExactSets) -> WorkerPool:
     )
 
 
-def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResult:
+def _design_screened(
+    size: _ScreenedSize, sizes: list[DesignConfig], repair: bool, progress: Progress | None
+) -> SetsResult:
     """The finger sets of a job with one pad size, designed in full from its screened partition
-    (:func:`search_judged_exactly`)."""
+    (:func:`search_judged_exactly`); ``sizes``: every pad size of the job's settings (a part's own finger judged by
+    truth is chosen among them, :class:`OtherSizes`)."""
     report_progress = progress or (lambda stage, done, total, note="": None)
     config, prepared, sets, graspable, part_scenarios = (
         size.config,
@@ -266,7 +268,7 @@ def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResu
     )
     unique, timings = [size.loaded[g[0]] for g in size.groups], size.timings_s
     clock = time.perf_counter()
-    truth = _sets_truth(sets, [prepared.parts[u].name for u in graspable], config)
+    truth = _sets_truth(sets, [prepared.parts[u] for u in graspable], config, sizes, repair)
     with _screening_pool(sets) as pool:
         # the screener keeps every set screened and probed for the size's screen: none is screened again
         sets.screener.pool = pool
@@ -333,14 +335,25 @@ def _design_screened(size: _ScreenedSize, progress: Progress | None) -> SetsResu
     return SetsResult(designs, finger_sets, job)
 
 
-def _sets_truth(sets: _ExactSets, names: list[str], config: DesignConfig) -> SetsTruth | None:
-    """The sets of parts ``names`` judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or
-    None when it is 0."""
+def _sets_truth(
+    sets: _ExactSets, parts: list[Part], config: DesignConfig, sizes: list[DesignConfig], repair: bool
+) -> SetsTruth | None:
+    """The sets of ``parts`` judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or None
+    when it is 0. A set's design carries the job's other pad ``sizes`` (:class:`OtherSizes`): a part's own finger is
+    chosen among them, as a job of that part alone chooses it."""
     if config.finger_sets.truth_budget_s <= 0:
         return None
     from ..sim.config import with_print_density
 
-    return SetsTruth(sets.made, names, config.finger_sets.truth_budget_s, with_print_density(config.verify, config))
+    def made(members: frozenset[int]) -> DesignResult | None:
+        result = sets.made(members)
+        if result is not None and not isinstance(result.other_sizes, OtherSizes):
+            result.other_sizes = OtherSizes.of(result, [], [parts[p] for p in sorted(members)], config, repair, sizes)
+        return result
+
+    return SetsTruth(
+        made, [p.name for p in parts], config.finger_sets.truth_budget_s, with_print_density(config.verify, config)
+    )
 
 
 def _identical_warnings(loaded: list[Part], groups: list[list[int]]) -> list[str]:

@@ -86,7 +86,7 @@ def verify_top(
     that did not pass and that flat pads beat (:func:`fcso.sim.report.flat_beats`), or that holds a part off its
     seat, is delivered as flat pads on its grasps: never worse than flat by the judge.
     None passing, the other pad sizes' candidates are verified alike, best size first, and the first that passes
-    is delivered.
+    is delivered; none passing at any size, the best by truth of every size tried.
 
     Parameters
     ----------
@@ -173,9 +173,12 @@ def _verified_by_size(
     result: DesignResult, top: int, config: VerifyConfig, progress, deadline: float
 ) -> tuple[DesignResult, list[CandidateReport], list[tuple]]:
     """:func:`_verified_in_order` of ``result``, then, none passing, of each of its other pad sizes (best first) until
-    one passes or ``deadline``; the design of the size that passed (:func:`_with_pad_size`), else ``result``, with its
-    ranked and verified candidates."""
+    one passes or ``deadline``; the design of the size that passed (:func:`_with_pad_size`), with its ranked and
+    verified candidates. None passing, the size whose best verified candidate ranks first by truth
+    (:func:`_truth_rank`), then by the measure's quality (as a design compares its sizes), but ``result`` when it is
+    flat pads (a carving replaces them only by passing)."""
     ranked, outcomes = _verified_in_order(result, top, config, progress, deadline)
+    tried = [(result, ranked, outcomes)]
     # the other sizes' candidates are verified alike (stopped early), and only the delivered one in full
     # (verify_top): a size none of whose candidates passes costs its choice, not a delivery
     for other in result.other_sizes if not any(o[3].passed for o in outcomes) else []:
@@ -184,7 +187,21 @@ def _verified_by_size(
         other_ranked, other_outcomes = _verified_in_order(other, top, config, progress, deadline)
         if any(o[3].passed for o in other_outcomes):
             return _with_pad_size(result, other), other_ranked, other_outcomes
-    return result, ranked, outcomes
+        tried.append((other, other_ranked, other_outcomes))
+    if result.report.finger.flat_pads:
+        return result, ranked, outcomes
+    # stopped at their first failed trial, candidates of any size compare by the trials they passed before it, then
+    # as a design compares its sizes: by the measure's quality (fcso.pipeline.design)
+    best = max(
+        range(len(tried)),
+        key=lambda k: (
+            max((_truth_rank(o)[:2] for o in tried[k][2]), default=()),
+            max((o[1].quality for o in tried[k][2]), default=0.0),
+            -k,
+        ),
+    )
+    other, other_ranked, other_outcomes = tried[best]
+    return (result if best == 0 else _with_pad_size(result, other)), other_ranked, other_outcomes
 
 
 def _verified_in_order(
