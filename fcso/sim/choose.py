@@ -175,8 +175,8 @@ def _verified_by_size(
     """:func:`_verified_in_order` of ``result``, then, none passing, of each of its other pad sizes (best first) until
     one passes or ``deadline``; the design of the size that passed (:func:`_with_pad_size`), with its ranked and
     verified candidates. None passing, the size whose best verified candidate ranks first by truth
-    (:func:`_truth_rank`), then by the measure's quality (as a design compares its sizes), but ``result`` when it is
-    flat pads (a carving replaces them only by passing)."""
+    (:func:`_truth_rank`), then by the measure's quality (as a design compares its sizes), among the sizes not
+    designed as flat pads (a carving replaces them only by passing), and ``result`` when it is flat pads."""
     ranked, outcomes = _verified_in_order(result, top, config, progress, deadline)
     tried = [(result, ranked, outcomes)]
     # the other sizes' candidates are verified alike (stopped early), and only the delivered one in full
@@ -187,7 +187,9 @@ def _verified_by_size(
         other_ranked, other_outcomes = _verified_in_order(other, top, config, progress, deadline)
         if any(o[3].passed for o in other_outcomes):
             return _with_pad_size(result, other), other_ranked, other_outcomes
-        tried.append((other, other_ranked, other_outcomes))
+        if not other.report.finger.flat_pads:
+            # a size designed as flat pads is delivered only by a carving that passes, as the design's own size
+            tried.append((other, other_ranked, other_outcomes))
     if result.report.finger.flat_pads:
         return result, ranked, outcomes
     # stopped at their first failed trial, candidates of any size compare by the trials they passed before it, then

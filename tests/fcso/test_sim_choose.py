@@ -15,6 +15,7 @@ from fcso.geometry import to_manifold
 from fcso.parts import Part
 from fcso.pipeline import finish_candidate
 from fcso.report import chosen_candidate
+from fcso.sets.other_sizes import OtherSizes
 from fcso.sim import choose as choose_module
 from fcso.sim.choose import verify_top
 from fcso.sim.config import VerifyConfig
@@ -205,7 +206,9 @@ def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(t
 
     chosen, verification, design, _ = verify_top(result, 3, VerifyConfig(trials=10, cache_dir=tmp_path))
 
-    assert chosen.report.finger.flat_pads and chosen.report.best in [c.index for c in result.report.candidates]
+    # none of the sizes' carvings passing, flat pads on the grasps of the size whose carvings did best by truth
+    verified = [c.index for d in [result, *result.other_sizes] for c in d.report.candidates]
+    assert chosen.report.finger.flat_pads and chosen.report.best in verified
     assert "flat pads beat it (not verified: " in verification.choice
     assert verification.choice.endswith("delivered with flat pads on its grasps")
     # the delivered finger is its own flat control: never below flat, scenario by scenario
@@ -236,7 +239,8 @@ def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tri
     # the notched bar of the development split: the measure prefers the 20 mm pads, none of whose 3 best candidates
     # passes; a 10 mm pad's candidate seats the bar 10/10 in both poses
     drawn = draw("notched-bar", 0)
-    result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], fcso.DesignConfig())
+    part = Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)
+    result = fcso.design([part], fcso.DesignConfig())
     assert [s.length_mm for s in result.report.pad_sizes if s.chosen] == [20.0]
     assert 10.0 in [o.report.settings.sampler.length_mm for o in result.other_sizes]
 
@@ -246,3 +250,13 @@ def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tri
     assert [s.length_mm for s in chosen.report.pad_sizes if s.chosen] == [10.0]
     assert verification.choice.startswith("pad size 10 x 20 mm, candidate ")
     assert all(len(s.fcso.trials) == 10 and s.fcso.success_rate == 1.0 for s in verification.scenarios)
+
+    # a finger set of the bar at a job's 20 mm pads, where the job designed no other size for the bar alone: the
+    # choice designs the sizes when it reaches them, and only as far as it goes (the simulations are in the cache)
+    result.other_sizes = OtherSizes.of(result, [], [part], fcso.DesignConfig(), repair=False)
+    assert [c.sampler.length_mm for c in result.other_sizes.to_design] == [10.0, 35.0]
+
+    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=tmp_path))
+
+    assert verification.passed and verification.choice.startswith("pad size 10 x 20 mm, candidate ")
+    assert [d.report.settings.sampler.length_mm for d in result.other_sizes.designed] == [10.0]
