@@ -47,7 +47,8 @@ class SetsTruth:
     verify_config : VerifyConfig
         The ``[verify]`` settings of the simulation (the design's, with its print profile's density).
     verified : dict
-        Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated.
+        Set of parts -> per scenario ``(part, pose_index) -> VerifiedSetScenario``, every set simulated (a part's
+        set alone as its choice by truth delivers it, once the part was judged against its own finger).
     solo_passes : dict
         ``(part, part name, pose_index)`` -> whether the part's own finger passes that scenario (None: MuJoCo refused
         its scene).
@@ -139,25 +140,13 @@ class SetsTruth:
         spent or its finger cannot be made."""
         if members in self.verified or members in self.unsimulated or not self.left():
             return self.verified.get(members)
-        from ..sim.report import successes
         from ..sim.verify import design_under_test, verify_delivered
 
         clock = time.perf_counter()
         design = self.made(members)
         verification = None if design is None else self._simulated(verify_delivered, design_under_test(design), members)
         if verification is not None:
-            self.verified[members] = {
-                (s.part, s.pose_index): VerifiedSetScenario(
-                    part=s.part,
-                    pose_index=s.pose_index,
-                    trials=len(s.fcso.trials),
-                    successes=successes(s.fcso.trials),
-                    flat_trials=len(s.flat.trials),
-                    flat_successes=successes(s.flat.trials),
-                    passed=s.passed,
-                )
-                for s in verification.scenarios
-            }
+            self.verified[members] = _verdicts(verification)
         self.spent_s += time.perf_counter() - clock
         return self.verified.get(members)
 
@@ -183,6 +172,9 @@ class SetsTruth:
                 )
                 if verification is None:
                     self.solo_passes.update({(part, *key): None for key in todo})
+                else:
+                    # the part's set alone is judged by the finger its choice delivers, not its measure's candidate
+                    self.verified[frozenset([part])] = _verdicts(verification)
                 for scenario in [] if verification is None else verification.scenarios:
                     self.solo_passes[(part, scenario.part, scenario.pose_index)] = scenario.passed
             self.spent_s += time.perf_counter() - clock
@@ -196,3 +188,21 @@ class SetsTruth:
         except ValueError as error:  # MuJoCo's model compiler: e.g. "mesh volume is too small"
             self.unsimulated[members] = str(error).splitlines()[0]
             return None
+
+
+def _verdicts(verification) -> dict[tuple[str, int], VerifiedSetScenario]:
+    """Per scenario ``(part, pose_index)``, the verdict of a complete :class:`fcso.sim.report.VerificationReport`."""
+    from ..sim.report import successes
+
+    return {
+        (s.part, s.pose_index): VerifiedSetScenario(
+            part=s.part,
+            pose_index=s.pose_index,
+            trials=len(s.fcso.trials),
+            successes=successes(s.fcso.trials),
+            flat_trials=len(s.flat.trials),
+            flat_successes=successes(s.flat.trials),
+            passed=s.passed,
+        )
+        for s in verification.scenarios
+    }
