@@ -107,6 +107,10 @@ def design_sets(
         # a set's other sizes for the choice by truth: the sets of the same parts the other sizes designed, then the
         # sizes none did, designed for the set if the choice gets to them
         designed = [d for r in others for s, d in zip(r.report.sets, r.designs) if s.parts == entry.parts]
+        # and those the truth's judgement of a part's own finger already designed for this set: not designed again
+        judged = one.other_sizes.designed if isinstance(one.other_sizes, OtherSizes) else []
+        have = {size_of(d.report.settings) for d in designed}
+        designed += [d for d in judged if size_of(d.report.settings) not in have]
         one.other_sizes = OtherSizes.of(one, designed, [named[name] for name in entry.parts], config, repair)
     size_reports = {size_of(r.designs[0].report.settings): r.report for r in made}
     if result.several:

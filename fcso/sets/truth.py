@@ -175,8 +175,7 @@ class SetsTruth:
                 else:
                     # the part's set alone is judged by the finger its choice delivers, not its measure's candidate
                     self.verified[frozenset([part])] = _verdicts(verification)
-                for scenario in [] if verification is None else verification.scenarios:
-                    self.solo_passes[(part, scenario.part, scenario.pose_index)] = scenario.passed
+                    self.solo_passes.update({(part, s.part, s.pose_index): s.passed for s in verification.scenarios})
             self.spent_s += time.perf_counter() - clock
         return {key: self.solo_passes[(part, *key)] for key in keys if (part, *key) in self.solo_passes}
 
