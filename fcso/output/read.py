@@ -40,17 +40,19 @@ def reload_parts(report: DesignReport, directory: Path) -> list[Part]:
     """The report's parts read again from their files, in the report's order, mm.
 
     A file is read once with the scale recorded for it (a 3MF in its own unit,
-    then scaled), and its parts are matched by name (a one-part file whatever
-    its name in the report).
+    then scaled) and repaired when the design repaired it (its ``repair``
+    figures, even when they list no change: the repair's reading of a file of
+    several shells is not the plain reading's), and its parts are matched by
+    name (a one-part file whatever its name in the report).
     """
     by_file: dict[tuple[str, float, bool], dict[str, Part]] = {}
     parts = []
     for entry in report.parts:
         path = _part_path(entry.file, directory)
-        key = (str(path), entry.scale_to_mm, bool(entry.repairs))
+        key = (str(path), entry.scale_to_mm, entry.repair is not None)
         if key not in by_file:
             is_3mf = path.suffix.lower() == ".3mf"
-            loaded = load_parts(path, units=1.0 if is_3mf else entry.scale_to_mm, repair=bool(entry.repairs))
+            loaded = load_parts(path, units=1.0 if is_3mf else entry.scale_to_mm, repair=entry.repair is not None)
             for part in loaded:
                 if is_3mf and entry.scale_to_mm != 1.0:
                     part.mesh.apply_scale(entry.scale_to_mm)
