@@ -126,6 +126,8 @@ def scenario_simulations(
     advance : callable
         Called after every kept grasp.
     """
+    if "flat" in scenes and scenes.get("fcso") is not None and _same_model(scenes["fcso"], scenes["flat"]):
+        return _as_own_control(scenario_simulations({"fcso": scenes["fcso"]}, case, errors, config, advance), advance)
     kinds = sorted(scenes, key=lambda kind: kind != "fcso")
     items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
     # no more workers than tasks: the grasps and every finger's pushes
@@ -205,6 +207,35 @@ def scenario_simulations(
     precision_failed = below_pass_rate(trials.get("fcso"), config)
     holding = {kind: {} for kind in scenes} if config.stop_early and precision_failed else forces
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
+
+
+def _same_model(designed: Scene, flat: Scene) -> bool:
+    """Whether the designed finger's scene is the flat control's to the last bit (the same model source: a design
+    delivered with flat pads, :func:`fcso.sim.verify.fitted_pieces`)."""
+    return designed.model_sha256 == flat.model_sha256
+
+
+def _as_own_control(designed: ScenarioSimulations, advance: Callable[[], None]) -> ScenarioSimulations:
+    """The simulations of a designed finger that is its own flat control (:func:`_same_model`), with the control's
+    taken from them.
+
+    MuJoCo repeats a simulation to the last bit, so the control's grasps and
+    pushes, from the same starts in the same model, end as the designed
+    finger's: they are not simulated a second time (both fingers' would
+    otherwise run side by side, each missing the other's cache entry). They
+    count as read from the cache when the designed finger's were, and each
+    kept grasp of the control is reported to ``advance`` as simulated.
+    """
+    for _ in designed.runs["fcso"]:
+        advance()
+    return ScenarioSimulations(
+        runs={"fcso": designed.runs["fcso"], "flat": list(designed.runs["fcso"])},
+        trials={"fcso": designed.trials["fcso"], "flat": [t.model_copy() for t in designed.trials["fcso"]]},
+        stopped_after=designed.stopped_after,
+        holding={"fcso": designed.holding["fcso"], "flat": dict(designed.holding["fcso"])},
+        precision_failed=designed.precision_failed,
+        reused=2 * designed.reused,
+    )
 
 
 def nominal_grasp(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str = "fcso") -> TrialRun:
