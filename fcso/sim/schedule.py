@@ -126,8 +126,6 @@ def scenario_simulations(
     advance : callable
         Called after every kept grasp.
     """
-    if "flat" in scenes and scenes.get("fcso") is not None and _same_model(scenes["fcso"], scenes["flat"]):
-        return _as_own_control(scenario_simulations({"fcso": scenes["fcso"]}, case, errors, config, advance), advance)
     kinds = sorted(scenes, key=lambda kind: kind != "fcso")
     items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
     # no more workers than tasks: the grasps and every finger's pushes
@@ -209,15 +207,15 @@ def scenario_simulations(
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 
-def _same_model(designed: Scene, flat: Scene) -> bool:
+def is_own_control(designed: Scene, flat: Scene) -> bool:
     """Whether the designed finger's scene is the flat control's to the last bit (the same model source: a design
     delivered with flat pads, :func:`fcso.sim.verify.fitted_pieces`)."""
     return designed.model_sha256 == flat.model_sha256
 
 
-def _as_own_control(designed: ScenarioSimulations, advance: Callable[[], None]) -> ScenarioSimulations:
-    """The simulations of a designed finger that is its own flat control (:func:`_same_model`), with the control's
-    taken from them.
+def as_own_control(designed: ScenarioSimulations, advance: Callable[[], None]) -> ScenarioSimulations:
+    """:func:`scenario_simulations` of the designed finger alone, when it is its own flat control
+    (:func:`is_own_control`), with the control's taken from them.
 
     MuJoCo repeats a simulation to the last bit, so the control's grasps and
     pushes, from the same starts in the same model, end as the designed
