@@ -207,6 +207,35 @@ def scenario_simulations(
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 
+def is_own_control(designed: Scene, flat: Scene) -> bool:
+    """Whether the designed finger's scene is the flat control's to the last bit (the same model source: a design
+    delivered with flat pads, :func:`fcso.sim.verify.fitted_pieces`)."""
+    return designed.model_sha256 == flat.model_sha256
+
+
+def as_own_control(designed: ScenarioSimulations, advance: Callable[[], None]) -> ScenarioSimulations:
+    """:func:`scenario_simulations` of the designed finger alone, when it is its own flat control
+    (:func:`is_own_control`), with the control's taken from them.
+
+    MuJoCo repeats a simulation to the last bit, so the control's grasps and
+    pushes, from the same starts in the same model, end as the designed
+    finger's: they are not simulated a second time (both fingers' would
+    otherwise run side by side, each missing the other's cache entry). They
+    count as read from the cache when the designed finger's were, and each
+    kept grasp of the control is reported to ``advance`` as simulated.
+    """
+    for _ in designed.runs["fcso"]:
+        advance()
+    return ScenarioSimulations(
+        runs={"fcso": designed.runs["fcso"], "flat": list(designed.runs["fcso"])},
+        trials={"fcso": designed.trials["fcso"], "flat": [t.model_copy() for t in designed.trials["fcso"]]},
+        stopped_after=designed.stopped_after,
+        holding={"fcso": designed.holding["fcso"], "flat": dict(designed.holding["fcso"])},
+        precision_failed=designed.precision_failed,
+        reused=2 * designed.reused,
+    )
+
+
 def nominal_grasp(scene: Scene, case: GraspCase, config: VerifyConfig, kind: str = "fcso") -> TrialRun:
     """A finger's (``scene``; ``kind`` "fcso" or "flat") unperturbed grasp alone, in this process:
     :func:`scenario_simulations`' first grasp, read from or written to its cache entry, so the full run reads it

@@ -29,7 +29,14 @@ from .report import (
     successes,
 )
 from .scene import GraspCase, Scene, build_scene, with_arena
-from .schedule import ScenarioSimulations, nominal_grasp, nominal_grasps, scenario_simulations
+from .schedule import (
+    ScenarioSimulations,
+    as_own_control,
+    is_own_control,
+    nominal_grasp,
+    nominal_grasps,
+    scenario_simulations,
+)
 from .trials import Frame, approach_opening_mm, perturbations, pose_error, seated_overlaps_mm
 
 
@@ -430,7 +437,13 @@ def verify_case(
     )
     part_name, _, pose = case.name.rpartition(" pose ")
     pose_index = int(pose) if pose.isdigit() else 0
-    simulated = simulations_within_arena(scenes, case, errors, config, advance)
+    # a design delivered with flat pads is the control itself: its simulations are the control's
+    own_control = is_own_control(scenes["fcso"], scenes["flat"])
+    simulated = simulations_within_arena(
+        {"fcso": scenes["fcso"]} if own_control else scenes, case, errors, config, advance
+    )
+    if own_control and not isinstance(simulated, str):
+        simulated = as_own_control(simulated, advance)
     if isinstance(simulated, str):
         unsimulated = {kind: _finger_result(kind, False, (0.0, 0.0), [], {}, None) for kind in scenes}
         return ScenarioVerification(

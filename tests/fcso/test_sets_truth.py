@@ -26,7 +26,16 @@ HEX = Part(name="hex", path="hex.stl", mesh=hex_prism())
 CYLINDER = Part(name="cylinder", path="cylinder.stl", mesh=plain_cylinder(12.0, 30.0))
 
 
-def truth_config(tmp_path, **finger_sets) -> fcso.DesignConfig:
+@pytest.fixture(scope="module")
+def truth_cache(tmp_path_factory):
+    """The module's cache of collision pieces and simulation outcomes. Both tests simulate the prism's and the
+    cylinder's fingers (the same designs, the same [verify] settings): outcomes are stored under the hash of all
+    that determines them (:mod:`fcso.sim.outcomes`), so the second reads them with the same results instead of
+    simulating them again."""
+    return tmp_path_factory.mktemp("sets-truth-cache")
+
+
+def truth_config(cache_dir, **finger_sets) -> fcso.DesignConfig:
     return fcso.DesignConfig().updated(
         {
             "poses": {"count": 1, "select": "most_probable"},
@@ -34,13 +43,13 @@ def truth_config(tmp_path, **finger_sets) -> fcso.DesignConfig:
             "sampler": {"length_mm": 20.0},
             # a budget no machine spends: the outcome must not depend on how fast the simulations run
             "finger_sets": {"min_retained": 0.0, "truth_budget_s": 1.0e9, **finger_sets},
-            "verify": {"trials": 6, "cache_dir": str(tmp_path)},
+            "verify": {"trials": 6, "cache_dir": str(cache_dir)},
         }
     )
 
 
-def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(tmp_path):
-    sets = design_sets([HEX, CYLINDER], truth_config(tmp_path, max=2)).report
+def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(truth_cache):
+    sets = design_sets([HEX, CYLINDER], truth_config(truth_cache, max=2)).report
     attempts = sets.search.attempts
     # the premise: by the measure alone one finger serves both (min_retained 0), and its simulated finger fails the
     # prism where the prism's own finger passes
@@ -65,10 +74,10 @@ def test_a_part_its_shared_finger_fails_where_its_own_passes_gets_its_own_set(tm
 HEX_22 = Part(name="hex-22", path="hex-22.stl", mesh=hex_prism(22.0))
 
 
-def test_a_part_its_shared_finger_fails_with_no_set_left_is_not_served(tmp_path):
+def test_a_part_its_shared_finger_fails_with_no_set_left_is_not_served(truth_cache):
     # the paper's filter: with wrapped faces the finger the smaller prism shares with the cylinder wraps its ends
     # and passes it
-    config = truth_config(tmp_path, max=2, unserved_fallback="manual").updated({"filter": {"wrapped_faces": False}})
+    config = truth_config(truth_cache, max=2, unserved_fallback="manual").updated({"filter": {"wrapped_faces": False}})
     sets = design_sets([HEX, HEX_22, CYLINDER], config).report
     # the premise: by the measure one finger serves all three; truth moves the first part it fails (hex) to the one
     # set left, and the smaller prism, failing on the finger it shares with the cylinder, has no set left

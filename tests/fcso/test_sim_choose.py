@@ -4,6 +4,8 @@ printed.
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 import fcso
@@ -23,7 +25,28 @@ from fcso.sim.report import FingerResult, ScenarioVerification, TrialResult, Ver
 from fcso.sim.verify import design_under_test, is_flat_control, verify
 
 
-def _two_ridge_ranked_by_q():
+@pytest.fixture(scope="module")
+def sim_cache(tmp_path_factory):
+    """The module's cache of collision pieces and simulation outcomes: outcomes are stored under the hash of all that
+    determines them (:mod:`fcso.sim.outcomes`), so a test reads what another test of the same design simulated, with
+    the same results, instead of simulating it again."""
+    return tmp_path_factory.mktemp("sim-choose-cache")
+
+
+@pytest.fixture(scope="module")
+def _two_ridge_design():
+    return _design_two_ridge_ranked_by_q()
+
+
+@pytest.fixture
+def two_ridge_ranked_by_q(_two_ridge_design):
+    """:func:`_design_two_ridge_ranked_by_q`, designed once for the module; each test gets its own copy of the
+    result."""
+    config, result = _two_ridge_design
+    return config, dataclasses.replace(result)
+
+
+def _design_two_ridge_ranked_by_q():
     """The two-ridge block designed with a printed fit, its candidates ranked by the paper's Q: ``(config, result)``.
 
     Q is fooled here: the two best sit on the horizontal ridges, and verification is what corrects it (the capture
@@ -38,11 +61,11 @@ def _two_ridge_ranked_by_q():
     return config, fcso.design([Part(name="two-ridge", path="two_ridge_block", mesh=mesh)], config)
 
 
-def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(tmp_path):
-    config, result = _two_ridge_ranked_by_q()
+def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearance(two_ridge_ranked_by_q, sim_cache):
+    config, result = two_ridge_ranked_by_q
     designed_best, designed_grasp = result.report.best, result.report.grasps[0]
 
-    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=tmp_path))
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=sim_cache))
 
     # the two best by Q sit on the horizontal ridges and let a displaced part slide; the third, on the vertical
     # ridge, centres it, and verification stops there
@@ -78,11 +101,13 @@ def test_verify_top_prefers_the_capturing_candidate_and_keeps_its_print_clearanc
     assert chosen.report.finger.volume_mm3 == pytest.approx(chosen.finger.volume, rel=1e-4)
 
 
-def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_best_of_the_rest(tmp_path, monkeypatch):
+def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_best_of_the_rest(
+    two_ridge_ranked_by_q, sim_cache, monkeypatch
+):
     # found on a drawn dovetail block with 35 mm pads: the choice delivered a candidate whose fused finger had a
     # zero-area face as written, and verify_top raised; no small part is known that does it, so the written check
     # refuses every finger the choice fuses (the design's own was written when it was designed)
-    _, result = _two_ridge_ranked_by_q()
+    _, result = two_ridge_ranked_by_q
     refused = []
 
     def refuse(finger, pad, sampler, overlap_mm):
@@ -92,7 +117,7 @@ def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_bes
         )
 
     monkeypatch.setattr(choose_module, "fuse", refuse)
-    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=tmp_path))
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=2, cache_dir=sim_cache))
 
     # the third candidate passes as in the test above, but cannot be printed: the best of the other two by truth (both
     # fail at their first trial, so the first by the measure, the design's own) is delivered, and the report says why
@@ -106,13 +131,13 @@ def test_a_passing_candidate_whose_finger_cannot_be_written_gives_way_to_the_bes
     )
 
 
-def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_passes(tmp_path):
+def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_passes(sim_cache):
     sampler = {"length_mm": 10.0, "width_mm": 10.0, "thickness_mm": 5.0, "penetration_mm": 4.0}
     config = fcso.DesignConfig().updated({"poses": {"count": 1}, "sampler": sampler})
     result = fcso.design([Part(name="plate", path="plate", mesh=plain_box(40.0, 30.0, 6.0))], config)
     assert result.report.finger.flat_pads and result.best.case == "bad"
 
-    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=3, cache_dir=tmp_path))
+    chosen, verification, _, ranking = verify_top(result, 3, VerifyConfig(trials=3, cache_dir=sim_cache))
 
     assert ranking[0].index == result.report.best
     passing = [r for r in ranking if r.passed]
@@ -126,7 +151,7 @@ def test_flat_pads_designed_for_a_plate_are_replaced_only_by_a_carving_that_pass
         assert verification.choice.endswith("the design's flat pads are kept: only a carving that passes replaces them")
 
 
-def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_tolerance(tmp_path):
+def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_tolerance(sim_cache):
     # METHOD §9c: a rib's flanks are parallel to the closing axis; printed with MJF's 0.4 mm clearance a pocket with
     # walls parallel to them would let the rib rest anywhere within +-0.4 mm, beyond the 0.3 mm success tolerance. The
     # delivered pocket's walls are drafted (the lead-in, or a wider one of [print] lead_in_alternatives_deg), so
@@ -134,14 +159,14 @@ def test_a_drafted_pocket_seats_a_rib_printed_with_clearance_within_the_success_
     mesh = ribbed_block()
     result = fcso.design([Part(name="rib", path="rib", mesh=mesh)], fcso.DesignConfig())
     assert result.report.print_fit.clearance_mm == pytest.approx(0.4)
-    verification = verify(design_under_test(result), VerifyConfig(trials=3, stop_early=False, cache_dir=tmp_path))
+    verification = verify(design_under_test(result), VerifyConfig(trials=3, stop_early=False, cache_dir=sim_cache))
     for scenario in verification.scenarios:
         assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
         for trial in scenario.fcso.trials:
             assert trial.held and trial.error_mm <= 0.3, (scenario.pose_index, trial)
 
 
-def test_a_sharp_edged_cube_shorter_than_the_pad_is_wrapped_and_held_where_the_papers_filter_keeps_it_flat(tmp_path):
+def test_a_sharp_edged_cube_shorter_than_the_pad_is_wrapped_and_held_where_the_papers_filter_keeps_it_flat(sim_cache):
     # a 20 mm cube with sharp edges in 35 mm pads: its face lies flat against the pad, so METHOD §5's normals test
     # calls every geometry bad and the pads stay flat, which hold the cube anywhere along them; but the face ends 7.5
     # mm inside each end of the pad, and the carved pocket's end walls (0.4 mm clearance, drafted) centre it
@@ -156,7 +181,7 @@ def test_a_sharp_edged_cube_shorter_than_the_pad_is_wrapped_and_held_where_the_p
     # the product's default filter wraps
     wrapped = fcso.design([Part(name="cube", path="cube", mesh=cube)], config)
     assert not wrapped.report.finger.flat_pads
-    verification = verify(design_under_test(wrapped), VerifyConfig(trials=5, stop_early=False, cache_dir=tmp_path))
+    verification = verify(design_under_test(wrapped), VerifyConfig(trials=5, stop_early=False, cache_dir=sim_cache))
     (scenario,) = verification.scenarios
     # the flat pads centre a start only where it already lay within the 0.3 mm tolerance along them (of +-2 mm)
     assert [trial.success for trial in scenario.fcso.trials] == [True] * 5
@@ -193,7 +218,7 @@ def test_flat_pads_beat_a_carving_only_where_they_do_no_worse_anywhere():
     assert not flat_beats(_verification((0, 1, True), unverified=["part pose 1"]))
 
 
-def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(tmp_path):
+def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(sim_cache):
     # a block with a round slot in each of two opposite faces, of the development split (examples/part_families.py),
     # its pockets printed without a lead-in: their 0.4 mm clearance is play across parallel walls (METHOD §9c), and
     # every verified carving seats the block 0/10 where flat pads seat it 1/10 in one pose, and neither better in
@@ -204,7 +229,7 @@ def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(t
     result = fcso.design([Part(name=drawn.name, path=drawn.name, mesh=drawn.mesh)], config)
     assert not result.report.finger.flat_pads
 
-    chosen, verification, design, _ = verify_top(result, 3, VerifyConfig(trials=10, cache_dir=tmp_path))
+    chosen, verification, design, _ = verify_top(result, 3, VerifyConfig(trials=10, cache_dir=sim_cache))
 
     # none of the sizes' carvings passing, flat pads on the grasps of the size whose carvings did best by truth
     verified = [c.index for d in [result, *result.other_sizes] for c in d.report.candidates]
@@ -219,7 +244,7 @@ def test_a_carving_that_flat_pads_beat_in_simulation_is_delivered_as_flat_pads(t
     assert chosen.finger.is_watertight and len(chosen.finger.split(only_watertight=False)) == 1
 
 
-def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(tmp_path):
+def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(sim_cache):
     # a block with a round slot in each of two opposite faces, of the development split: the best-scored pads carve
     # both slots into each pad, mirrored, and with the pad off the block's centre one slot's rib stops the other pad
     # 2.1-4.0 mm short of its seat; the nominal grasp then leaves the block 1.8 mm and 5 deg off the design's pose
@@ -229,13 +254,13 @@ def test_a_good_pad_blocked_by_its_mirrored_pocket_is_not_chosen(tmp_path):
     assert best.pad_case == "good"
     assert all(t <= 0.3 for scenario in best.per_scenario for t in scenario.seat_offsets_mm)
 
-    verification = verify(design_under_test(result), VerifyConfig(trials=1, cache_dir=tmp_path, stop_early=False))
+    verification = verify(design_under_test(result), VerifyConfig(trials=1, cache_dir=sim_cache, stop_early=False))
     # the unperturbed grasp seats the block where the design says
     for scenario in verification.scenarios:
         assert scenario.fcso.nominal_held and scenario.fcso.nominal_offset_mm <= 0.3
 
 
-def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tried(tmp_path):
+def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tried(sim_cache):
     # the notched bar of the development split: the measure prefers the 20 mm pads, none of whose 3 best candidates
     # passes; a 10 mm pad's candidate seats the bar 10/10 in both poses
     drawn = draw("notched-bar", 0)
@@ -244,7 +269,7 @@ def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tri
     assert [s.length_mm for s in result.report.pad_sizes if s.chosen] == [20.0]
     assert 10.0 in [o.report.settings.sampler.length_mm for o in result.other_sizes]
 
-    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=tmp_path))
+    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=sim_cache))
 
     assert verification.passed and chosen.report.settings.sampler.length_mm == 10.0
     assert [s.length_mm for s in chosen.report.pad_sizes if s.chosen] == [10.0]
@@ -256,7 +281,7 @@ def test_when_no_candidate_of_the_chosen_pad_size_passes_the_other_sizes_are_tri
     result.other_sizes = OtherSizes.of(result, [], [part], fcso.DesignConfig(), repair=False)
     assert [c.sampler.length_mm for c in result.other_sizes.to_design] == [10.0, 35.0]
 
-    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=tmp_path))
+    chosen, verification, _, _ = verify_top(result, 3, VerifyConfig(cache_dir=sim_cache))
 
     assert verification.passed and verification.choice.startswith("pad size 10 x 20 mm, candidate ")
     assert [d.report.settings.sampler.length_mm for d in result.other_sizes.designed] == [10.0]
