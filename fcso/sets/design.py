@@ -343,9 +343,13 @@ def _sets_truth(
     sets: _ExactSets, parts: list[Part], config: DesignConfig, sizes: list[DesignConfig], repair: bool
 ) -> SetsTruth | None:
     """The sets of ``parts`` judged by truth with ``[finger_sets] truth_budget_s`` (:class:`SetsTruth`), or None
-    when it is 0. A set's design carries the job's other pad ``sizes`` (:class:`OtherSizes`): a part's own finger is
-    chosen among them, as a job of that part alone chooses it."""
-    if config.finger_sets.truth_budget_s <= 0:
+    when it is 0 or there are fewer than two distinct parts. A set's design carries the job's other pad ``sizes``
+    (:class:`OtherSizes`): a part's own finger is chosen among them, as a job of that part alone chooses it."""
+    # one distinct part has no finger to share and nothing to be judged against: its set is its own finger, which
+    # the choice by truth after the design verifies (fcso.sim.choose.verify_top). Simulating it here, for the report,
+    # ran every trial and the holding test of each pad size's finger, though one size is delivered (a daemon's job
+    # of one plain block: 79 s of 3 sizes)
+    if config.finger_sets.truth_budget_s <= 0 or len(parts) < 2:
         return None
     from ..sim.config import with_print_density
 

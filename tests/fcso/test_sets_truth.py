@@ -130,3 +130,14 @@ def test_a_part_its_shared_finger_seats_less_often_than_flat_pads_is_not_served_
     assert truth.reasons == {1: "verified: seats it less often than flat pads (pose 0 0/10 against flat 4/10)"}
     # alone, the part is its own design's: its choice by truth delivers flat pads where they beat it
     assert truth.unserved(knob_alone) == []
+
+
+def test_a_job_of_one_distinct_part_is_not_judged_by_truth_during_its_design(tmp_path):
+    # one part, as many copies as the job likes, has no finger to share: its set is its own finger, which the choice
+    # by truth after the design verifies. Simulating it during the design too ran every trial and push of each pad
+    # size's finger for the report alone (three sizes of a shipped daemon's plain block: 79 s)
+    copies = [HEX, Part(name="hex-copy", path="hex-copy.stl", mesh=hex_prism())]
+    sets = design_sets(copies, truth_config(tmp_path / "cache", max=2)).report
+    assert [s.parts for s in sets.sets] == [["hex"]] and sets.truth is None
+    # nothing was simulated: no collision piece, no outcome in the cache
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").iterdir())
