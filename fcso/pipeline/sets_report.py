@@ -41,6 +41,16 @@ def _ratio(value: float, reference: float) -> float:
     return round(float(value) / float(reference), 6)
 
 
+def _known_solo(quality: float, solo: float) -> float:
+    """A scenario's E* as known once a set's finger gives it ``quality``: at least that quality.
+
+    The set's pad is a finger the part could have alone, and :func:`fcso.sets.screening.solo_quality` re-evaluates
+    only its screening's finalists exactly, so a set's own search can find a better candidate. So ``r = E / E*``
+    never exceeds 1: a share above it would say the set gives a part more than the part's best.
+    """
+    return max(float(solo), float(quality))
+
+
 def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[float]:
     """``r = E / E*`` of every scenario of a set's chosen candidate, ``E`` read as the scenario's quality (METHOD
     §11): E under the paper's measure, METHOD §7b's measure under the capture measure, exact as the design ranked it.
@@ -55,7 +65,7 @@ def exact_retained(chosen: CandidateReport, numbers: list[int], solos) -> list[f
         Per job scenario.
     """
     # the chosen candidate's exact evaluation, as the solo E* are evaluated (fcso.sets.screening.solo_quality)
-    return [q.measure / solos[m].exact for m, q in zip(numbers, chosen.per_scenario)]
+    return [q.measure / _known_solo(q.measure, solos[m].exact) for m, q in zip(numbers, chosen.per_scenario)]
 
 
 def sets_report(
@@ -185,6 +195,7 @@ def delivered_set_report(
     chosen = chosen_candidate(design.report)
     quality = {(s.part, s.pose_index): q.measure for s, q in zip(design.report.scenarios, chosen.per_scenario)}
     solo = {(s.part, s.pose_index): s.solo_quality for s in solo_scenarios or report.scenarios}
+    solo = {key: _known_solo(quality.get(key, 0.0), star) for key, star in solo.items()}
     scenarios = [
         s.model_copy(
             update={
@@ -345,7 +356,7 @@ def _scenario_entries(
     scenarios = []
     for m, scenario in enumerate(prepared.scenarios):
         label, area = exact.get(m, (None, 0.0))
-        star = solos[m].exact
+        star = _known_solo(area, solos[m].exact)
         scenarios.append(
             SetScenarioReport(
                 part=scenario.part.name,

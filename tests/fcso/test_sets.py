@@ -532,3 +532,27 @@ def test_auto_merges_the_sets_of_moved_parts_that_can_share_a_finger():
     assert ["widening-65", "widening-80"] in [sorted(s.parts) for s in sets.sets]
     assert sets.min_retained_reached and sets.not_served == [] and sets.sets_needed == 3
     assert all(s.retained >= 0.51 for s in sets.scenarios)
+
+
+def test_a_part_alone_keeps_at_most_all_of_its_solo_quality(tmp_path):
+    """E* is at least what the part's set gives it: its set's finger is one it could have alone.
+
+    The solar tracker alone in its most probable pose: the set's own search finds a better candidate than the solo
+    quality's finalists (0.823 against 0.576), and the report said it keeps 1.444 of its best.
+    """
+    out = tmp_path / "out"
+    tracker = REPO / "examples" / "jobs" / "batch-demo" / "solar_tracker.stl"
+    run = subprocess.run(
+        [sys.executable, "-m", "fcso.cli", "design", str(tracker), "--poses", "1", "--out", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=HANG_GUARD_S,
+        cwd=REPO,
+    )
+    assert run.returncode == 0, run.stderr
+    sets = json.loads((out / "report.json").read_text())["finger_sets"]
+    (scenario,) = sets["scenarios"]
+    assert scenario["quality"] > 0.0
+    assert scenario["solo_quality"] >= scenario["quality"]
+    assert scenario["retained"] == 1.0
+    assert sets["worst_retained"] == 1.0 and sets["sets"][0]["worst_retained"] == 1.0
