@@ -279,7 +279,10 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
 
 
 def _success_text(trials: list, stopped_after: int | None, planned: int) -> str:
-    """Success rate, or for trials stopped early the count of those run."""
+    """Success rate, or for trials stopped early the count of those run ("not run": the flat control of a designed
+    finger stopped early)."""
+    if stopped_after is not None and not trials:
+        return "not run"
     if stopped_after is None:
         return f"{successes(trials) / len(trials):.0%}" if trials else "-"
     return f"{successes(trials)} of {len(trials)} (stopped; {planned} planned)"
@@ -369,7 +372,7 @@ def ranking_html(ranking: list[RankedCandidate], choice: str | None = None) -> s
     rows = "".join(
         f"<tr{CHOSEN if r.chosen else ''}><td>{r.rank_by_quality}</td><td>{r.index}</td><td>{r.quality:.1f}</td>"
         f"<td>{' / '.join(f'{x:.0%}' for x in r.success_rates)}</td>"
-        f"<td>{' / '.join(f'{x:.0%}' for x in r.flat_success_rates)}</td>"
+        f"<td>{' / '.join('-' if x is None else f'{x:.0%}' for x in r.flat_success_rates)}</td>"
         f"<td>{' / '.join(str(n) for n in r.trials_run)}</td>"
         f"<td>{'yes' if r.passed else 'no'}</td><td>{'&#9733;' if r.chosen else ''}</td></tr>"
         for r in ranking

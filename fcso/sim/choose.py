@@ -322,10 +322,10 @@ def _deliverable(result: DesignResult, preferred: list, outcomes: list, config: 
 
 def trial_figures(verification: VerificationReport) -> dict[str, list]:
     """A :class:`RankedCandidate`'s figures of a verification: per scenario, the designed and the flat pads' success
-    rates and the designed pads' trials run."""
+    rates (None where the flat control ran no trial) and the designed pads' trials run."""
     return {
         "success_rates": [s.fcso.success_rate for s in verification.scenarios],
-        "flat_success_rates": [s.flat.success_rate for s in verification.scenarios],
+        "flat_success_rates": [s.flat.success_rate if s.flat.trials else None for s in verification.scenarios],
         "trials_run": [len(s.fcso.trials) for s in verification.scenarios],
     }
 

@@ -98,8 +98,9 @@ class ScenarioVerification(_Model):
     )
     stopped_after_trials: int | None = Field(
         None,
-        description="The precision trials stopped after this many (designed and flat alike): the designed finger "
-        "could no longer reach pass_success_rate (stop_early); null: every trial ran",
+        description="The designed finger's precision trials stopped after this many: it could no longer reach "
+        "pass_success_rate (stop_early); the flat control ran none (with reuse_simulations, whose designed trials run "
+        "first), else as many; null: every trial ran",
     )
     passed: bool = Field(
         description="The designed finger's success rate reaches pass_success_rate, it holds as well as flat pads, and "
@@ -127,7 +128,11 @@ class RankedCandidate(_Model):
     index: int = Field(description="Candidate index (report.json candidates)")
     quality: float = Field(description="The design's measure of the candidate (Q under the paper's measure), mm²")
     success_rates: list[float] = Field(description="Designed finger's success rate per verified scenario")
-    flat_success_rates: list[float] = Field(description="Flat control's success rate per verified scenario")
+    flat_success_rates: list[float | None] = Field(
+        description="Flat control's success rate per verified scenario; null where it ran no trial: the control's "
+        "trials run once the designed finger has passed every scenario's (stop_early), and the delivered candidate's "
+        "always"
+    )
     trials_run: list[int] = Field(
         default_factory=list,
         description="Precision trials run per verified scenario (fewer than the settings' trials: stopped once the "

@@ -20,6 +20,13 @@ machine's speed. A designed finger that fails its first trial takes
 its nominal grasps and first trials, and at most the parts of the
 grasps and pushes in flight beside them that ran until those were
 judged.
+
+A precision-only run (``precision_only``) simulates the designed finger's
+nominal grasp and trials and the other fingers' nominal grasps alone: no
+control trials and no pushes. A verification that stops early runs it
+first for every scenario and the rest only where every scenario passes
+it (:func:`fcso.sim.verify.verify`), so a candidate the choice rejects
+costs its designed trials alone.
 """
 
 from __future__ import annotations
@@ -108,7 +115,12 @@ class ScenarioSimulations:
 
 
 def scenario_simulations(
-    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+    scenes: dict[str, Scene],
+    case: GraspCase,
+    errors: np.ndarray,
+    config: VerifyConfig,
+    advance: Callable[[], None],
+    precision_only: bool = False,
 ) -> ScenarioSimulations:
     """Every finger's nominal grasp, precision trials and holding test (:func:`fcso.sim.trials.hold_force`, six
     pushes from the nominal grasp's state after the lift) on ``config.jobs`` forked workers, the trials judged in
@@ -125,11 +137,19 @@ def scenario_simulations(
     config : VerifyConfig
     advance : callable
         Called after every kept grasp.
+    precision_only : bool
+        The designed finger's trials and every finger's nominal grasp alone: no other finger's trials, no pushes
+        (``holding`` empty).
     """
     kinds = sorted(scenes, key=lambda kind: kind != "fcso")
-    items = [(kind, number, error) for number, error in enumerate([None, *errors]) for kind in kinds]
+    items = [
+        (kind, number, error)
+        for number, error in enumerate([None, *errors])
+        for kind in kinds
+        if not precision_only or kind == "fcso" or number == 0
+    ]
     # no more workers than tasks: the grasps and every finger's pushes
-    jobs = min(resolve_jobs(config.jobs), len(items) + len(scenes) * len(HOLD_DIRECTIONS))
+    jobs = min(resolve_jobs(config.jobs), len(items) + (0 if precision_only else len(scenes) * len(HOLD_DIRECTIONS)))
     runs = {kind: [] for kind in scenes}
     trials = {kind: [] for kind in scenes}
     forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in scenes}
@@ -153,7 +173,7 @@ def scenario_simulations(
         reused += run.reused
         advance()
         if number == 0:
-            if run.held:
+            if run.held and not precision_only:
                 pushes.extend((kind, name, run.lifted) for name in HOLD_DIRECTIONS)
             return
         nominal = runs[kind][0]
@@ -197,13 +217,13 @@ def scenario_simulations(
 
     def settled() -> bool:
         # stopped early, and every grasp up to the deciding trial judged: what still runs would be dropped
-        return kept < len(errors) and judged >= (kept + 1) * len(kinds)
+        return kept < len(errors) and judged >= sum(number <= kept for _, number, _ in items)
 
     keys = {kind: scene_key(scene, case, config) for kind, scene in scenes.items()}
     with WorkerPool((scenes, case, config, keys), jobs) as pool:
         pool.run(next_tasks(), on_done, settled)
     precision_failed = below_pass_rate(trials.get("fcso"), config)
-    holding = {kind: {} for kind in scenes} if config.stop_early and precision_failed else forces
+    holding = {kind: {} for kind in scenes} if precision_only or (config.stop_early and precision_failed) else forces
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -118,6 +118,10 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
     Before any trial it then judges every scenario's unperturbed grasp (:func:`nominal_seats`, METHOD §5b) and
     stops at the first that does not hold its part at its designed seat (timed as ``seats``); without
     ``stop_early`` such a scenario fails after its full run. Either way it is listed in ``unseated_scenarios``.
+    With ``stop_early`` and ``reuse_simulations`` the designed finger's precision trials run first, scenario by
+    scenario, and the flat control's trials and both fingers' holding tests only once every scenario has passed
+    them (the designed trials then read back from the simulation cache): a design that fails costs its designed
+    trials alone, and a failed scenario's flat control runs no trial (``flat.trials`` empty).
 
     Parameters
     ----------
@@ -137,10 +141,9 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
 
     def advance() -> None:
         counter[0] += 1
-        report_progress("verification", counter[0], total)
+        report_progress("verification", min(counter[0], total), total)
 
     report_progress("verification", 0, total)
-    scenarios, warnings, unverified, unseated = [], [], [], []
     built, rejected = {}, None
     if config.stop_early:
         clock = time.perf_counter()
@@ -148,49 +151,15 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         timings["seats"] = time.perf_counter() - clock
     if rejected is not None:
         name, why = rejected
-        unseated, unverified = [name], [c.name for c in design.cases]
-        warnings.append(f"{name}: {why}: the design cannot pass, no trial is run (METHOD §5b, stop_early)")
-    for stream, case in enumerate([] if rejected else design.cases):
-        if scenarios and config.stop_early and not scenarios[-1].passed:
-            # the design can no longer pass: the verdict is settled
-            unverified = [c.name for c in design.cases[stream:]]
-            warnings.append(
-                f"not verified: {', '.join(unverified)}; {design.cases[stream - 1].name} had already failed, so the "
-                "design cannot pass (stop_early)"
-            )
-            break
-        clock = time.perf_counter()
-        pieces, pad, seated = built.pop(stream, None) or fitted_pieces(case, design, config)
-        timings["decomposition"] += time.perf_counter() - clock
-        clock = time.perf_counter()
-        scenario = verify_case(case, pieces, pad, design.finger_hull_mm, config, stream, advance, seated)
-        timings["simulation"] += time.perf_counter() - clock
-        warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
-        ran = len(scenario.fcso.trials)
-        missed = nominal_miss(scenario.fcso, config)
-        if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
-            unseated.append(case.name)
-            warnings.append(f"{case.name}: {missed} (METHOD §5b)")
-        if scenario.failure_reason is not None:
-            warnings.append(f"{case.name}: not simulated: {scenario.failure_reason}")
-        elif scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
-            stop = (
-                f"; stopped after {ran} of {config.trials}: it can no longer pass"
-                if scenario.stopped_after_trials is not None
-                else ""
-            )
-            warnings.append(
-                f"{case.name}: {successes(scenario.fcso.trials)} of {ran} precision trials succeeded "
-                f"(flat pads: {successes(scenario.flat.trials)} of {len(scenario.flat.trials)}), below "
-                f"pass_success_rate {config.pass_success_rate:.0%}{stop}"
-            )
-        if scenario.holds_as_flat is False:
-            weaker = weaker_than_flat(scenario.fcso.holding_n, scenario.flat.holding_n, config)
-            warnings.append(
-                f"{case.name}: the designed finger holds less than flat pads pushed "
-                + ", ".join(f"{name} ({mine:.1f} N against {theirs:.1f} N)" for name, (mine, theirs) in weaker.items())
-            )
-        scenarios.append(scenario)
+        outcome = _Verified([], [f"{name}: {why}: the design cannot pass, no trial is run (METHOD §5b, stop_early)"])
+        outcome.unseated, outcome.unverified = [name], [c.name for c in design.cases]
+    else:
+        precision_first = config.stop_early and config.reuse_simulations
+        outcome = _verified_scenarios(design, config, built, timings, advance, precision_only=precision_first)
+        if precision_first and not outcome.unverified and all(_precise(s, config) for s in outcome.scenarios):
+            first = outcome
+            outcome = _verified_scenarios(design, config, built, timings, advance, precision_only=False)
+            outcome.scenarios = [_simulated_once(s, earlier) for s, earlier in zip(outcome.scenarios, first.scenarios)]
     report_progress("verification", total, total)
     # once per verification, not per entry: a farm's cache holds many thousands of outcomes
     evict(config.cache_path())
@@ -198,13 +167,111 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         fcso_version=__version__,
         mujoco_version=mujoco.__version__,
         settings=config,
-        scenarios=scenarios,
-        passed=all(s.passed for s in scenarios) and not unverified,
-        unverified_scenarios=unverified,
-        unseated_scenarios=unseated,
-        warnings=warnings,
+        scenarios=outcome.scenarios,
+        passed=all(s.passed for s in outcome.scenarios) and not outcome.unverified,
+        unverified_scenarios=outcome.unverified,
+        unseated_scenarios=outcome.unseated,
+        warnings=outcome.warnings,
         timings_s={k: round(v, 3) for k, v in timings.items()},
     )
+
+
+@dataclass
+class _Verified:
+    """What :func:`_verified_scenarios` found: the scenarios simulated, warnings, the scenarios left unverified and
+    those whose unperturbed grasp left the part off its seat."""
+
+    scenarios: list[ScenarioVerification]
+    warnings: list[str]
+    unverified: list[str] = field(default_factory=list)
+    unseated: list[str] = field(default_factory=list)
+
+
+def _verified_scenarios(
+    design: DesignUnderTest,
+    config: VerifyConfig,
+    built: dict,
+    timings: dict[str, float],
+    advance: Callable[[], None],
+    precision_only: bool,
+) -> _Verified:
+    """:func:`verify_case` of each scenario in turn (``precision_only``: the designed finger's precision trials
+    alone); with ``config.stop_early`` none after one that failed. ``built``: pieces and scenes already made
+    (:func:`nominal_seats`); ``timings`` accumulates decomposition and simulation seconds."""
+    outcome = _Verified([], [])
+    kept_on = _precise if precision_only else lambda scenario, config: scenario.passed
+    for stream, case in enumerate(design.cases):
+        if outcome.scenarios and config.stop_early and not kept_on(outcome.scenarios[-1], config):
+            # the design can no longer pass: the verdict is settled
+            outcome.unverified = [c.name for c in design.cases[stream:]]
+            outcome.warnings.append(
+                f"not verified: {', '.join(outcome.unverified)}; {design.cases[stream - 1].name} had already failed, "
+                "so the design cannot pass (stop_early)"
+            )
+            break
+        clock = time.perf_counter()
+        pieces, pad, seated = built.get(stream) or fitted_pieces(case, design, config)
+        timings["decomposition"] += time.perf_counter() - clock
+        clock = time.perf_counter()
+        scenario = verify_case(
+            case, pieces, pad, design.finger_hull_mm, config, stream, advance, seated, precision_only=precision_only
+        )
+        timings["simulation"] += time.perf_counter() - clock
+        outcome.warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
+        outcome.warnings.extend(_scenario_warnings(case.name, scenario, config))
+        missed = nominal_miss(scenario.fcso, config)
+        if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
+            outcome.unseated.append(case.name)
+        outcome.scenarios.append(scenario)
+    return outcome
+
+
+def _scenario_warnings(name: str, scenario: ScenarioVerification, config: VerifyConfig) -> list[str]:
+    """Why scenario ``name`` does not pass: not simulated, off its seat, too few precision successes, or holding less
+    than flat pads."""
+    missed = nominal_miss(scenario.fcso, config)
+    if scenario.failure_reason is not None:
+        return [f"{name}: not simulated: {scenario.failure_reason}"]
+    warnings = []
+    if missed is not None and nominal_miss(scenario.flat, config) is None:
+        warnings.append(f"{name}: {missed} (METHOD §5b)")
+    ran = len(scenario.fcso.trials)
+    if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
+        stop = (
+            f"; stopped after {ran} of {config.trials}: it can no longer pass"
+            if scenario.stopped_after_trials is not None
+            else ""
+        )
+        flat = f" (flat pads: {successes(scenario.flat.trials)} of {len(scenario.flat.trials)})"
+        warnings.append(
+            f"{name}: {successes(scenario.fcso.trials)} of {ran} precision trials succeeded"
+            f"{flat if scenario.flat.trials else ''}, below pass_success_rate {config.pass_success_rate:.0%}{stop}"
+        )
+    if scenario.holds_as_flat is False:
+        weaker = weaker_than_flat(scenario.fcso.holding_n, scenario.flat.holding_n, config)
+        warnings.append(
+            f"{name}: the designed finger holds less than flat pads pushed "
+            + ", ".join(f"{push} ({mine:.1f} N against {theirs:.1f} N)" for push, (mine, theirs) in weaker.items())
+        )
+    return warnings
+
+
+def _precise(scenario: ScenarioVerification, config: VerifyConfig) -> bool:
+    """Whether a scenario's designed finger passed what a precision-only run tells (:func:`verify_case`): simulated,
+    its unperturbed grasp at its seat and enough precision trials successful."""
+    return (
+        scenario.failure_reason is None
+        and nominal_miss(scenario.fcso, config) is None
+        and scenario.fcso.success_rate >= config.pass_success_rate - 1e-9
+    )
+
+
+def _simulated_once(scenario: ScenarioVerification, precision: ScenarioVerification) -> ScenarioVerification:
+    """``scenario`` of a complete run counting as read from the cache only what its precision-only run
+    (``precision``) had not simulated itself: those grasps were simulated for this verification."""
+    grasps = 2 + len(precision.fcso.trials) + len(precision.flat.trials)
+    simulated_first = grasps - precision.reused_simulations
+    return scenario.model_copy(update={"reused_simulations": max(0, scenario.reused_simulations - simulated_first)})
 
 
 def nominal_seats(
@@ -400,6 +467,7 @@ def verify_case(
     stream: int,
     advance: Callable[[], None] = lambda: None,
     designed_scene: Scene | None = None,
+    precision_only: bool = False,
 ) -> ScenarioVerification:
     """Both fingers' precision and holding tests on one grasp case.
 
@@ -418,6 +486,10 @@ def verify_case(
         Called after every simulated grasp.
     designed_scene : Scene, optional
         The designed finger's scene of these pieces when already compiled (:func:`fitted_pieces`).
+    precision_only : bool
+        The designed finger's precision trials and both fingers' unperturbed grasps alone
+        (:func:`scenario_simulations`): the flat control runs no trial, no holding test runs, and the scenario does
+        not pass (``holds_as_flat`` null).
     """
     errors = perturbations(config.trials, config, stream)
     scenes = {
@@ -440,7 +512,7 @@ def verify_case(
     # a design delivered with flat pads is the control itself: its simulations are the control's
     own_control = is_own_control(scenes["fcso"], scenes["flat"])
     simulated = simulations_within_arena(
-        {"fcso": scenes["fcso"]} if own_control else scenes, case, errors, config, advance
+        {"fcso": scenes["fcso"]} if own_control else scenes, case, errors, config, advance, precision_only
     )
     if own_control and not isinstance(simulated, str):
         simulated = as_own_control(simulated, advance)
@@ -485,7 +557,12 @@ def verify_case(
 
 
 def simulations_within_arena(
-    scenes: dict[str, Scene], case: GraspCase, errors: np.ndarray, config: VerifyConfig, advance: Callable[[], None]
+    scenes: dict[str, Scene],
+    case: GraspCase,
+    errors: np.ndarray,
+    config: VerifyConfig,
+    advance: Callable[[], None],
+    precision_only: bool = False,
 ) -> ScenarioSimulations | str:
     """:func:`scenario_simulations`, run again once with ``config.arena_retry_factor`` times the arena when MuJoCo
     runs out of it (a part of many pieces in many contacts).
@@ -499,7 +576,7 @@ def simulations_within_arena(
     while True:
         arenas.append(max(scene.arena_bytes for scene in scenes.values()))
         try:
-            return scenario_simulations(scenes, case, errors, config, advance)
+            return scenario_simulations(scenes, case, errors, config, advance, precision_only)
         except mujoco.FatalError as error:
             if not out_of_arena(error):
                 raise

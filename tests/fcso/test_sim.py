@@ -374,6 +374,52 @@ def test_a_scenario_whose_unperturbed_grasp_slides_off_its_seat_fails_and_is_rej
     assert chosen.unverified_scenarios == [case.name, "shifted pose 0"]
 
 
+def test_a_design_that_fails_its_precision_trials_runs_no_control_trial_and_no_push(ridged, tmp_path, monkeypatch):
+    # choosing (stop_early): the designed finger's trials run first and decide; the flat control's trials and both
+    # fingers' pushes are for a design that passed them. Start errors of 6 mm along the pads put the ridges beyond
+    # the grooves that centre them at 2 mm
+    case, _, _, hull, fingerpad = ridged
+    design_1 = DesignUnderTest([case], fingerpad, hull)
+    settings = {"trials": 4, "position_error_mm": 6.0, "lift_mm": 10.0, "hold_ramp_n_s": 300.0}
+    full = verify(design_1, _config(tmp_path / "full", stop_early=False, **settings))
+    (whole,) = full.scenarios
+    assert not full.passed and len(whole.flat.trials) == 4 and len(whole.flat.holding_n) == 6
+    simulated = []
+    grasp = schedule_module.run_grasp
+    monkeypatch.setattr(
+        schedule_module, "run_grasp", lambda scene, *args, **kw: simulated.append(scene) or grasp(scene, *args, **kw)
+    )
+    pushes = []
+    push = schedule_module.hold_force
+    monkeypatch.setattr(schedule_module, "hold_force", lambda *args: pushes.append(args) or push(*args))
+
+    chosen = verify(design_1, _config(tmp_path, jobs=1, reuse_simulations=True, **settings))
+
+    (stopped,) = chosen.scenarios
+    assert not chosen.passed and stopped.stopped_after_trials is not None
+    assert stopped.fcso.trials == whole.fcso.trials[: stopped.stopped_after_trials]
+    assert stopped.flat.trials == [] and stopped.flat.nominal_held == whole.flat.nominal_held
+    assert stopped.fcso.holding_n == stopped.flat.holding_n == {} and pushes == []
+    # both fingers' unperturbed grasps (METHOD §5b), then the designed finger's trials to the deciding one
+    designed = sum(scene.pad_geoms.size > 2 for scene in simulated)
+    assert (designed, len(simulated) - designed) == (1 + stopped.stopped_after_trials, 1)
+
+
+def test_a_design_that_passes_its_precision_trials_is_verified_in_full_as_without_stopping(ridged, tmp_path):
+    case, _, _, hull, fingerpad = ridged
+    design_1 = DesignUnderTest([case], fingerpad, hull)
+    settings = {"trials": 2, "lift_mm": 10.0, "hold_ramp_n_s": 300.0}
+    full = verify(design_1, _config(tmp_path / "full", stop_early=False, **settings))
+    chosen = verify(design_1, _config(tmp_path / "chosen", reuse_simulations=True, **settings))
+    assert full.passed and chosen.passed
+    assert chosen.scenarios[0].model_dump(exclude={"reused_simulations"}) == full.scenarios[0].model_dump(
+        exclude={"reused_simulations"}
+    )
+    # its designed trials were simulated for this verification, not read from an earlier one: what it reads back is
+    # the unperturbed grasp the seat check (METHOD §5b) ran before them
+    assert chosen.scenarios[0].reused_simulations == 1 and chosen.warnings == full.warnings
+
+
 def test_a_part_that_flat_pads_cannot_hold_either_rejects_no_candidate_before_its_trials(ridged, tmp_path):
     # METHOD §5b is "never worse than flat" said of the seat: the ridged block 300 times as dense weighs more than the
     # 60 N grip's friction carries (2 x 0.4 x 60 N) and its V-grooves are vertical, so in the unperturbed grasp it
