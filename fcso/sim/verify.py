@@ -144,10 +144,10 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
         report_progress("verification", min(counter[0], total), total)
 
     report_progress("verification", 0, total)
-    built, rejected = {}, None
+    built, rejected, seat_checks = {}, None, {}
     if config.stop_early:
         clock = time.perf_counter()
-        built, rejected = nominal_seats(design, config)
+        built, rejected, seat_checks = nominal_seats(design, config)
         timings["seats"] = time.perf_counter() - clock
     if rejected is not None:
         name, why = rejected
@@ -160,6 +160,11 @@ def verify(design: DesignUnderTest, config: VerifyConfig, progress: Progress | N
             first = outcome
             outcome = _verified_scenarios(design, config, built, timings, advance, precision_only=False)
             outcome.scenarios = [_simulated_once(s, earlier) for s, earlier in zip(outcome.scenarios, first.scenarios)]
+    # the seat check's grasps were simulated for this verification too
+    outcome.scenarios = [
+        s.model_copy(update={"reused_simulations": max(0, s.reused_simulations - seat_checks.get(number, 0))})
+        for number, s in enumerate(outcome.scenarios)
+    ]
     report_progress("verification", total, total)
     # once per verification, not per entry: a farm's cache holds many thousands of outcomes
     evict(config.cache_path())
@@ -276,7 +281,7 @@ def _simulated_once(scenario: ScenarioVerification, precision: ScenarioVerificat
 
 def nominal_seats(
     design: DesignUnderTest, config: VerifyConfig
-) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None]:
+) -> tuple[dict[int, tuple[ConvexPieces, ConvexPieces, Scene]], tuple[str, str] | None, dict[int, int]]:
     """METHOD §5b, cheaply: the designed finger's unperturbed grasp of every scenario, one grasp each (two for a
     drop), side by side; the first scenario whose grasp does not hold its part at its designed seat
     (:func:`seat_miss`) where the flat control's unperturbed grasp does rejects the finger (never worse than flat: a
@@ -294,10 +299,14 @@ def nominal_seats(
     rejected : (str, str) or None
         The first scenario whose grasp misses its seat where flat pads' does not, and why; None when there is none
         (a scenario MuJoCo cannot simulate within its arena is left to the full run, which retries it).
+    simulated : dict
+        Scenario number -> the unperturbed grasps simulated here, not read from the cache: the trials read them back
+        and should not count them as simulated before.
     """
     built = {number: fitted_pieces(case, design, config) for number, case in enumerate(design.cases)}
     # every scenario's grasp side by side (one core each): one after the other they were most of a part's choice
     runs = nominal_grasps([built[n][2] for n in built], design.cases, config)
+    simulated = {n: int(not run.reused) for n, run in enumerate(runs) if not isinstance(run, mujoco.FatalError)}
     for number, (case, run) in enumerate(zip(design.cases, runs)):
         pieces, _, scene = built[number]
         if isinstance(run, mujoco.FatalError):
@@ -309,12 +318,14 @@ def nominal_seats(
             # flat pads that cannot hold the part at its seat either leave nothing a carving would be worse than
             if missed is not None:
                 flat = build_scene(case, pieces.pieces, None, design.finger_hull_mm, config)
-                if _nominal_seat_miss(flat, case, config, "flat") is None:
-                    return built, (case.name, missed)
+                flat_run = nominal_grasp(flat, case, config, "flat")
+                simulated[number] += not flat_run.reused
+                if _nominal_seat_miss(flat, case, config, "flat", flat_run) is None:
+                    return built, (case.name, missed), simulated
         except mujoco.FatalError as error:
             if not out_of_arena(error):
                 raise
-    return built, None
+    return built, None, simulated
 
 
 def _nominal_seat_miss(

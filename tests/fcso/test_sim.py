@@ -415,9 +415,9 @@ def test_a_design_that_passes_its_precision_trials_is_verified_in_full_as_withou
     assert chosen.scenarios[0].model_dump(exclude={"reused_simulations"}) == full.scenarios[0].model_dump(
         exclude={"reused_simulations"}
     )
-    # its designed trials were simulated for this verification, not read from an earlier one: what it reads back is
-    # the unperturbed grasp the seat check (METHOD §5b) ran before them
-    assert chosen.scenarios[0].reused_simulations == 1 and chosen.warnings == full.warnings
+    # everything was simulated for this verification, none read from an earlier one: not the unperturbed grasp the
+    # seat check (METHOD §5b) ran before the trials, nor the designed trials the full run reads back
+    assert chosen.scenarios[0].reused_simulations == 0 and chosen.warnings == full.warnings
 
 
 def test_a_part_that_flat_pads_cannot_hold_either_rejects_no_candidate_before_its_trials(ridged, tmp_path):
