@@ -54,7 +54,8 @@ from fcso.parts import Part
 from fcso.sets import design_sets
 from fcso.sim.choose import candidate_designs, verify_top
 from fcso.sim.config import VerifyConfig
-from fcso.sim.verify import nominal_miss, verify, weaker_than_flat
+from fcso.sim.seats import nominal_miss
+from fcso.sim.verify import verify, weaker_than_flat
 
 #: Jobs of several parts sharing one finger, per split: family names (each split's first seed). The test split's
 #: mix held-out and development families; the development split's, drawn from its own families, keep the two

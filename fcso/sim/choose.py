@@ -75,7 +75,7 @@ def verify_top(
     ``config.stop_early`` a candidate's verification stops as soon as it can
     no longer pass (:func:`fcso.sim.schedule.scenario_simulations`), and one whose unperturbed grasp leaves any
     part off its seat where flat pads hold it there is rejected before its trials
-    (:func:`fcso.sim.verify.nominal_seats`, METHOD §5b). When none
+    (:func:`fcso.sim.seats.nominal_seats`, METHOD §5b). When none
     of those tried passes, the best of them by truth is delivered: one that holds every part at its seat, then the
     highest worst-scenario success count over the planned trials
     (:func:`worst_success_share`), then the measure's order; but flat pads the

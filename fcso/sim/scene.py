@@ -326,3 +326,8 @@ def pad_in_world(snapshot: PoseSnapshot, side: int, pad_gap_mm: float, pad_size_
     opened = np.eye(4)
     opened[0, 3] = snapshot.opening_mm
     return np.asarray(snapshot.gripper_pose) @ in_tcp @ opened
+
+
+def out_of_arena(error: mujoco.FatalError) -> bool:
+    """Whether MuJoCo's fatal ``error`` is its arena running out (too many contacts and constraints)."""
+    return "out of memory" in str(error)

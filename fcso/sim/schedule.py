@@ -124,8 +124,7 @@ def scenario_simulations(
 ) -> ScenarioSimulations:
     """Every finger's nominal grasp, precision trials and holding test (:func:`fcso.sim.trials.hold_force`, six
     pushes from the nominal grasp's state after the lift) on ``config.jobs`` forked workers, the trials judged in
-    order. Grasps and pushes are independent (each starts from a fresh state or from its nominal grasp's), so the
-    results are those of one process. The order of the tasks and where they stop: this module's docstring.
+    order: the results of one process. The order of the tasks and where they stop: this module's docstring.
 
     Parameters
     ----------
@@ -138,30 +137,20 @@ def scenario_simulations(
     advance : callable
         Called after every kept grasp.
     precision_only : bool
-        The designed finger's trials and every finger's nominal grasp alone: no other finger's trials, no pushes
-        (``holding`` empty).
+        The designed finger's trials and every finger's nominal grasp alone (no pushes: ``holding`` empty).
     """
-    kinds = sorted(scenes, key=lambda kind: kind != "fcso")
-    items = [
-        (kind, number, error)
-        for number, error in enumerate([None, *errors])
-        for kind in kinds
-        if not precision_only or kind == "fcso" or number == 0
-    ]
+    items = _grasp_items(scenes, errors, precision_only)
     # no more workers than tasks: the grasps and every finger's pushes
     jobs = min(resolve_jobs(config.jobs), len(items) + (0 if precision_only else len(scenes) * len(HOLD_DIRECTIONS)))
-    runs = {kind: [] for kind in scenes}
-    trials = {kind: [] for kind in scenes}
+    runs, trials = {kind: [] for kind in scenes}, {kind: [] for kind in scenes}
     forces = {kind: {name: 0.0 for name in HOLD_DIRECTIONS} for kind in scenes}
     allowed_failures = len(errors) - needed_successes(len(errors), config)
     # the last trial kept, the next grasp to judge and the next to start; the grasps not judged yet by index;
     # the pushes whose nominal grasp held, not started yet; tasks running
-    kept, judged, started = len(errors), 0, 0
+    kept, judged, started, running, reused = len(errors), 0, 0, 0, 0
     finished: dict[int, TrialRun] = {}
     pushes: list[tuple[str, str, np.ndarray]] = []
-    running, reused = 0, 0
-    # grasps started and not judged yet, at most (stop_early: a grasp that would be dropped is seldom started;
-    # otherwise every grasp is kept)
+    # grasps started and not judged yet, at most (stop_early: one beyond a deciding failure is seldom started)
     ahead = 2 * jobs if config.stop_early else len(items)
 
     def judge(index: int, run: TrialRun) -> None:
@@ -225,6 +214,19 @@ def scenario_simulations(
     precision_failed = below_pass_rate(trials.get("fcso"), config)
     holding = {kind: {} for kind in scenes} if precision_only or (config.stop_early and precision_failed) else forces
     return ScenarioSimulations(runs, trials, kept if kept < len(errors) else None, holding, precision_failed, reused)
+
+
+def _grasp_items(scenes: dict[str, Scene], errors: np.ndarray, precision_only: bool) -> list[tuple]:
+    """The grasps of :func:`scenario_simulations` in the order they start, ``(kind, number, error)`` (number 0: the
+    nominal grasp, error None): trial by trial, the designed finger's first; ``precision_only``: the designed
+    finger's and the other fingers' nominal grasps alone."""
+    kinds = sorted(scenes, key=lambda kind: kind != "fcso")
+    return [
+        (kind, number, error)
+        for number, error in enumerate([None, *errors])
+        for kind in kinds
+        if not precision_only or kind == "fcso" or number == 0
+    ]
 
 
 def is_own_control(designed: Scene, flat: Scene) -> bool:

@@ -37,6 +37,7 @@ from fcso.sim.diskcache import ABANDONED_WRITE_S, evict
 from fcso.sim.report import Fidelity, VerificationReport, verdict_text
 from fcso.sim.scene import GraspCase, build_scene
 from fcso.sim.schedule import nominal_grasp, nominal_grasps, scenario_simulations
+from fcso.sim.seats import nominal_miss
 from fcso.sim.trials import hold_forces, pose_error, run_grasp, seated_overlaps_mm, start_pose
 from fcso.sim.verify import (
     DesignUnderTest,
@@ -46,7 +47,6 @@ from fcso.sim.verify import (
     flat_pad,
     grasp_case,
     is_flat_control,
-    nominal_miss,
     part_pieces,
     seated_overlap_notes,
     verify,
