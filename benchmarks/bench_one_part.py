@@ -33,14 +33,16 @@ REPO = Path(__file__).resolve().parent.parent
 TARGET_S = 60.0
 
 
-def timed_design(part: Path, out: Path, top_k: int) -> tuple[float, int]:
-    """Wall seconds and exit code of ``fcso design part --verify-top top_k`` with an empty simulation cache."""
+def timed_design(part: Path, out: Path, top_k: int) -> tuple[float, int, int]:
+    """Wall seconds, exit code and cache entries written (grasps, pushes and collision pieces: the work, counted
+    whatever the machine's speed) of ``fcso design part --verify-top top_k`` with an empty simulation cache."""
     with tempfile.TemporaryDirectory() as cache:
         command = [sys.executable, "-m", "fcso.cli", "design", str(part), "--verify-top", str(top_k)]
         command += ["--out", str(out), "--quiet"]
         started = time.perf_counter()
         done = subprocess.run(command, cwd=REPO, env={**os.environ, "FCSO_CACHE_DIR": cache}, capture_output=True)
-        return time.perf_counter() - started, done.returncode
+        seconds = time.perf_counter() - started
+        return seconds, done.returncode, sum(1 for _ in Path(cache).rglob("*.npz"))
 
 
 def main() -> None:
@@ -59,13 +61,14 @@ def main() -> None:
             path = Path(scratch) / f"{drawn.name}.stl"
             drawn.mesh.export(path)
             runs = [timed_design(path, Path(scratch) / drawn.name, args.top_k) for _ in range(args.runs)]
-            seconds = [s for s, _ in runs]
+            seconds = [s for s, _, _ in runs]
             medians.append(statistics.median(seconds))
             # exit code 3: the delivered finger did not pass verification (the time counts all the same)
-            codes = sorted({code for _, code in runs})
+            codes = sorted({code for _, code, _ in runs})
+            entries = sorted({count for _, _, count in runs})
             print(
                 f"{drawn.name:<22} median {medians[-1]:6.1f} s (min {min(seconds):.1f}, max {max(seconds):.1f}; "
-                f"exit {codes})",
+                f"exit {codes}; cache entries written {entries})",
                 flush=True,
             )
     print(
