@@ -223,8 +223,7 @@ def _verified_scenarios(
         timings["simulation"] += time.perf_counter() - clock
         outcome.warnings.extend(seated_overlap_notes(case.name, scenario.fidelity, config))
         outcome.warnings.extend(_scenario_warnings(case.name, scenario, config))
-        missed = nominal_miss(scenario.fcso, config)
-        if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
+        if _unseated(scenario, config) is not None:
             outcome.unseated.append(case.name)
         outcome.scenarios.append(scenario)
     return outcome
@@ -233,11 +232,10 @@ def _verified_scenarios(
 def _scenario_warnings(name: str, scenario: ScenarioVerification, config: VerifyConfig) -> list[str]:
     """Why scenario ``name`` does not pass: not simulated, off its seat, too few precision successes, or holding less
     than flat pads."""
-    missed = nominal_miss(scenario.fcso, config)
     if scenario.failure_reason is not None:
         return [f"{name}: not simulated: {scenario.failure_reason}"]
     warnings = []
-    if missed is not None and nominal_miss(scenario.flat, config) is None:
+    if (missed := _unseated(scenario, config)) is not None:
         warnings.append(f"{name}: {missed} (METHOD §5b)")
     ran = len(scenario.fcso.trials)
     if scenario.fcso.success_rate < config.pass_success_rate - 1e-9:
@@ -258,6 +256,15 @@ def _scenario_warnings(name: str, scenario: ScenarioVerification, config: Verify
             + ", ".join(f"{push} ({mine:.1f} N against {theirs:.1f} N)" for push, (mine, theirs) in weaker.items())
         )
     return warnings
+
+
+def _unseated(scenario: ScenarioVerification, config: VerifyConfig) -> str | None:
+    """Why a simulated scenario's designed finger holds its part off its seat where flat pads hold it there (METHOD
+    §5b), or None."""
+    missed = nominal_miss(scenario.fcso, config)
+    if scenario.failure_reason is None and missed is not None and nominal_miss(scenario.flat, config) is None:
+        return missed
+    return None
 
 
 def _precise(scenario: ScenarioVerification, config: VerifyConfig) -> bool:
