@@ -96,14 +96,19 @@ def _holding(values: dict) -> str:
     return " ".join(f"{d}:{'held' if v is None else f'{v:.0f}'}" for d, v in values.items())
 
 
+def _share(value: float | None, spec: str) -> str:
+    """A volume share, "-" where a precision-only run did not measure it."""
+    return "-" if value is None else f"{value:{spec}}"
+
+
 def print_verification(name: str, verification: VerificationReport, errors: bool = False) -> None:
     print(f"\n{name}  ({verification.timings_s})")
     for s in verification.scenarios:
         f = s.fidelity
         print(
             f"  {s.part} pose {s.pose_index}: pieces part {f.part_pieces} pad {f.pad_pieces}, volume error part "
-            f"{f.part_volume_error:+.2%} (under the shell {f.part_missing_fraction:.1%}) "
-            f"pad {f.pad_volume_error:+.2%}, seated overlap part/pad {f.seated_penetration_mm:.3f} mm "
+            f"{_share(f.part_volume_error, '+.2%')} (under the shell {_share(f.part_missing_fraction, '.1%')}) "
+            f"pad {_share(f.pad_volume_error, '+.2%')}, seated overlap part/pad {f.seated_penetration_mm:.3f} mm "
             f"pad/pad {f.seated_pads_overlap_mm:.3f} mm"
         )
         for label, r in (("designed", s.fcso), ("flat", s.flat)):

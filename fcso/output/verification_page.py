@@ -236,7 +236,7 @@ def section_html(verification: VerificationReport, pictures: dict[str, bytes], e
         f = s.fidelity
         cells += [
             f"<td>{f.part_pieces} / {f.pad_pieces}</td>",
-            f"<td>{f.part_volume_error:+.2%} / {f.pad_volume_error:+.2%}</td>",
+            f"<td>{_number(f.part_volume_error, '+.2%')} / {_number(f.pad_volume_error, '+.2%')}</td>",
             f"<td>{f.seated_penetration_mm:.3f} / {f.seated_pads_overlap_mm:.3f}</td>",
         ]
         lines.append("<tr>" + "".join(cells) + "</tr>")
@@ -288,8 +288,9 @@ def _success_text(trials: list, stopped_after: int | None, planned: int) -> str:
     return f"{successes(trials)} of {len(trials)} (stopped; {planned} planned)"
 
 
-def _number(value: float | None) -> str:
-    return "-" if value is None else f"{value:.3f}"
+def _number(value: float | None, spec: str = ".3f") -> str:
+    """``value`` formatted by ``spec``; "-" for None (not measured)."""
+    return "-" if value is None else f"{value:{spec}}"
 
 
 def insert_section(page: str, section: str) -> str:

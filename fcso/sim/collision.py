@@ -23,8 +23,10 @@ MuJoCo collides a mesh by its convex hull, so
   restarts and concurrent workers; written under a name of its own and
   renamed, :mod:`fcso.sim.diskcache`; the verification keeps the folder
   within its size once at its end); the fidelity is the volume of the
-  union of the pieces against the mesh's own, computed once and cached
-  with them;
+  union of the pieces against the mesh's own (:func:`volume_errors`),
+  measured only for a verification told in full and cached beside them:
+  its Boolean union is the costliest step of the pieces, and nobody reads
+  it for a candidate the choice by truth rejects;
 - the finger body behind the pad is the convex hull of the finger's
   material behind the pad's back face.
 
@@ -73,29 +75,24 @@ PATCH_BEND_DEG = 30.0
 
 @dataclass
 class ConvexPieces:
-    """A part as convex pieces.
+    """A mesh as convex pieces.
 
     Attributes
     ----------
     pieces : list of (vertices (n, 3) float, faces (m, 3) int)
-        Convex meshes in the part's frame, mm.
-    excess_fraction : float
-        Volume of the union of the pieces outside the mesh / mesh volume (how far they stand out of it).
-    missing_fraction : float
-        Share of the mesh's volume not covered by any piece.
+        Convex meshes in the mesh's frame, mm.
+    mesh : trimesh.Trimesh
+        The mesh they were cut from (for :func:`volume_errors`).
+    key : str
+        Content hash of the mesh and the decomposition's settings (:func:`mesh_key`); empty: not cached.
     cached : bool
         Whether the pieces came from the cache.
     """
 
     pieces: list[tuple[np.ndarray, np.ndarray]]
-    excess_fraction: float
-    missing_fraction: float
+    mesh: trimesh.Trimesh
+    key: str
     cached: bool
-
-    @property
-    def volume_error(self) -> float:
-        """(volume of the union of the pieces - mesh volume) / mesh volume."""
-        return self.excess_fraction - self.missing_fraction
 
 
 def mesh_key(vertices: np.ndarray, faces: np.ndarray, settings: str) -> str:
@@ -374,27 +371,50 @@ def hull_width_mm(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 def _cached_pieces(mesh: trimesh.Trimesh, settings: str, decompose, cache_dir: Path | None) -> ConvexPieces:
-    """Pieces from the cache (key: the mesh and ``settings``) or from ``decompose()``, with their volume errors.
-
-    The volume errors (:func:`union_volume_errors`, a Boolean union of every
-    piece: a second for the xyz cube's 290 pad prisms) are stored with the
-    pieces and read back with them: they are a function of the same mesh.
-    """
+    """Pieces from the cache (key: the mesh and ``settings``) or from ``decompose()``."""
     key = mesh_key(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), settings)
     path = None if cache_dir is None else Path(cache_dir) / f"{key}.npz"
     stored = None if path is None else _read_cached(path)
     if stored is not None:
-        pieces, (excess, missing) = stored
-        return ConvexPieces(pieces=pieces, excess_fraction=excess, missing_fraction=missing, cached=True)
+        return ConvexPieces(pieces=stored, mesh=mesh, key=key, cached=True)
     pieces = decompose()
-    excess, missing = union_volume_errors(mesh, pieces)
     if path is not None:
-        write_entry(path, _write_pieces(pieces, (excess, missing)))
-    return ConvexPieces(pieces=pieces, excess_fraction=excess, missing_fraction=missing, cached=False)
+        write_entry(path, _write_pieces(pieces))
+    return ConvexPieces(pieces=pieces, mesh=mesh, key=key, cached=False)
 
 
-def _read_cached(path: Path) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[float, float]] | None:
-    """A cache entry's pieces and volume errors, or None when it is absent or unreadable (then it is made again)."""
+def volume_errors(pieces: ConvexPieces, cache_dir: Path | None) -> tuple[float, float]:
+    """Excess and missing volume of ``pieces`` against their mesh (:func:`union_volume_errors`), cached beside them.
+
+    Measured on demand: the Boolean union of every piece takes longer than
+    cutting them (a fifth of a second for a part's 80 pieces, a second for
+    the xyz cube's 290 pad prisms), and only a verification told in full
+    reports it.
+
+    Returns
+    -------
+    excess, missing : float
+        Volume of (union - mesh) and of (mesh - union), each over the mesh's volume.
+    """
+    path = None if cache_dir is None or not pieces.key else Path(cache_dir) / f"{pieces.key}-volume.npz"
+    data = None if path is None else read_entry(path)
+    try:
+        if data is not None:
+            with np.load(io.BytesIO(data)) as stored:
+                excess, missing = (float(x) for x in stored["volume_errors"])
+                return excess, missing
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        pass  # a damaged entry is measured again
+    errors = union_volume_errors(pieces.mesh, pieces.pieces)
+    if path is not None:
+        buffer = io.BytesIO()
+        np.savez(buffer, volume_errors=np.asarray(errors, dtype=np.float64))
+        write_entry(path, buffer.getvalue())
+    return errors
+
+
+def _read_cached(path: Path) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """A cache entry's pieces, or None when it is absent or unreadable (then it is made again)."""
     data = read_entry(path)
     try:
         return None if data is None else _read_pieces(data)
@@ -402,7 +422,7 @@ def _read_cached(path: Path) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple
         return None
 
 
-def _write_pieces(pieces, volume_errors: tuple[float, float]) -> bytes:
+def _write_pieces(pieces) -> bytes:
     """A cache entry: every piece's vertices and faces stacked, with the counts that split them again (a few arrays
     instead of two per piece: the xyz cube's 290 pad prisms write and read in milliseconds, not a third of a second).
     """
@@ -415,20 +435,18 @@ def _write_pieces(pieces, volume_errors: tuple[float, float]) -> bytes:
         faces=np.concatenate(faces) if pieces else np.zeros((0, 3), dtype=np.int64),
         vertex_counts=np.array([len(v) for v in vertices], dtype=np.int64),
         face_counts=np.array([len(f) for f in faces], dtype=np.int64),
-        volume_errors=np.asarray(volume_errors, dtype=np.float64),
     )
     return buffer.getvalue()
 
 
-def _read_pieces(data: bytes) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[float, float]]:
+def _read_pieces(data: bytes) -> list[tuple[np.ndarray, np.ndarray]]:
     with np.load(io.BytesIO(data)) as stored:
-        errors = tuple(float(x) for x in stored["volume_errors"])
         vertex_counts, face_counts = stored["vertex_counts"], stored["face_counts"]
         if len(vertex_counts) == 0:
-            return [], errors
+            return []
         vertices = np.split(stored["vertices"], np.cumsum(vertex_counts)[:-1])
         faces = np.split(stored["faces"], np.cumsum(face_counts)[:-1])
-        return list(zip(vertices, faces)), errors
+        return list(zip(vertices, faces))
 
 
 def union_volume_errors(mesh: trimesh.Trimesh, pieces) -> tuple[float, float]:

@@ -63,16 +63,20 @@ class Fidelity(_Model):
     """How exact the collision geometry is (METHOD §12)."""
 
     part_pieces: int = Field(description="Convex pieces of the part")
-    part_volume_error: float = Field(
+    part_volume_error: float | None = Field(
         description="Volume of the union of the part's pieces outside the part / part volume: where the pads reach, "
-        "none (the pieces are prisms under its surface); elsewhere the hulls by cells bridge the part's concavities"
+        "none (the pieces are prisms under its surface); elsewhere the hulls by cells bridge the part's concavities. "
+        "Null: not measured (a precision-only run of the choice by truth, whose candidate failed its trials)"
     )
-    part_missing_fraction: float = Field(
+    part_missing_fraction: float | None = Field(
         description="Share of the part's volume outside every piece: the material under the shell of prisms where "
-        "the pads reach"
+        "the pads reach; null: not measured, as part_volume_error"
     )
     pad_pieces: int = Field(description="Convex pieces of the fingerpad")
-    pad_volume_error: float = Field(description="(union of the pad's pieces - fingerpad volume) / fingerpad volume")
+    pad_volume_error: float | None = Field(
+        description="(union of the pad's pieces - fingerpad volume) / fingerpad volume; null: not measured, as "
+        "part_volume_error"
+    )
     seated_penetration_mm: float = Field(
         description="Deepest overlap of the part's pieces and the pads, part at its nominal seated grasp, mm"
     )
