@@ -25,7 +25,6 @@ from ..finger import (
     load_finger,
     parametric_finger,
 )
-from ..geometry import to_manifold
 from ..grid import ScreenGrid
 from ..jit import load_kernels
 from ..parallel import WorkerPool, resolve_jobs
@@ -305,10 +304,8 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
     scenarios, config, grid, lattice = context
     number, start, stop = task
     scenario = scenarios[number]
-    part_manifold = to_manifold(scenario.mesh)
+    samples = scenario.sampler_result.samples
     return [
-        sample_geometry(
-            part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice
-        )
+        sample_geometry(scenario.solid(), scenario.mesh, samples[index], config, (number, index), grid, lattice)
         for index in range(start, stop)
     ]
