@@ -126,6 +126,17 @@ class Scenario:
     mesh: trimesh.Trimesh
     sampler_result: SamplerResult
     samples: list[SampleGeometry] = field(default_factory=list)
+    made_solid: manifold3d.Manifold | None = field(default=None, init=False, repr=False, compare=False)
+
+    def solid(self) -> manifold3d.Manifold:
+        """``mesh`` as a manifold3d solid, made once per process: every pad geometry of the scenario intersects it."""
+        if self.made_solid is None:
+            self.made_solid = to_manifold(self.mesh)
+        return self.made_solid
+
+    def __getstate__(self) -> dict:
+        # a solid does not pickle: a process the scenario is sent to (a Dask worker) makes its own
+        return {**self.__dict__, "made_solid": None}
 
 
 @dataclass
@@ -557,7 +568,7 @@ def fitted_sample(scenario: Scenario, sample: SampleGeometry, config: DesignConf
     """
     sampler, fit = config.sampler, config.print.resolved()
     size = (sampler.thickness_mm, sampler.length_mm, sampler.width_mm)
-    part = to_manifold(scenario.mesh)
+    part = scenario.solid()
     made = []
     for geometry, frame in zip(sample.geometries, sample.frames):
         if geometry.good:

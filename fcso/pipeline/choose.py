@@ -84,13 +84,14 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     scenarios, jobs = prepared.scenarios, prepared.jobs
     warnings, timings = list(prepared.warnings), dict(prepared.timings_s)
 
-    clock = time.perf_counter()
-    outcome, indices, ranked, finalists, kept = _screened_ranking(prepared, config, report_progress)
-    timings["screening"] = time.perf_counter() - clock
+    # one pool for the screening and the exact figures: its workers share the scenarios
+    with WorkerPool(_screen_context(prepared, config), jobs, config.compute.scheduler) as pool:
+        clock = time.perf_counter()
+        outcome, indices, ranked, finalists, kept = _screened_ranking(prepared, config, report_progress, pool)
+        timings["screening"] = time.perf_counter() - clock
 
-    clock = time.perf_counter()
-    report_progress("exact", 0, len(finalists))
-    with WorkerPool((scenarios, config), jobs, config.compute.scheduler) as pool:
+        clock = time.perf_counter()
+        report_progress("exact", 0, len(finalists))
         exact = dict(zip(finalists, pool.map(_exact_task, finalists)))
     report_progress(
         "exact",
@@ -120,73 +121,72 @@ def choose_candidate(prepared: Prepared, config: DesignConfig, progress: Progres
     )
 
 
-def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress: Progress) -> tuple:
-    """The screening of :func:`choose_candidate` (METHOD §8): the search's outcome, each screened candidate's index,
-    the candidates ranked, the exact finalists, and the listed candidates' screenings the search kept."""
+def _screened_ranking(prepared: Prepared, config: DesignConfig, report_progress: Progress, pool: WorkerPool) -> tuple:
+    """The screening of :func:`choose_candidate` (METHOD §8) on ``pool`` (its context :func:`_screen_context`): the
+    search's outcome, each screened candidate's index, the candidates ranked, the exact finalists, and the listed
+    candidates' screenings the search kept."""
     scenarios, jobs = prepared.scenarios, prepared.jobs
     counts = [len(s.samples) for s in scenarios]
     total = int(np.prod(counts, dtype=object))
     budget = config.search.max_exhaustive if total <= config.search.max_exhaustive else config.search.max_evaluations
     expected = min(total, budget)
     screened_bounds = [np.array([g.screened_bound for g in s.samples]) for s in scenarios]
-    screen_data = _screen_context(prepared, config)
     screened_count, best_screened = 0, 0.0
     screened_bound = quality_upper_bound(screened_bounds)
     # when every candidate the search screens is listed in the report, keep
     # their per-scenario values as they are screened instead of screening again
     keep_screens = expected <= config.search.report_candidates
     kept_screens: dict[tuple[int, ...], ScreenedCandidate] = {}
-    with WorkerPool(screen_data, jobs, config.compute.scheduler) as pool:
 
-        def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
-            nonlocal screened_count, best_screened
-            # a batch under a chunk per worker is split among them: the coordinate ascent's batches are a few dozen
-            # candidates, and one chunk ran in this process while the workers waited (the 12-part job: 200 such
-            # batches, 1.2 s)
-            size = min(_SCREEN_CHUNK, -(-len(choices) // jobs))
-            chunks = [choices[i : i + size] for i in range(0, len(choices), size)]
-            if keep_screens:
-                screened = [c for chunk in pool.map(_screen_batch, chunks) for c in chunk]
-                kept_screens.update(zip(choices, screened))
-                scored = [(c.quality, c.mean_effective_area) for c in screened]
-            else:
-                scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
-            screened_count += len(choices)
-            best_screened = max([best_screened] + [q for q, _ in scored])
-            report_progress(
-                "screening",
-                min(screened_count, expected),
-                expected,
-                f"best {quality_words(best_screened, config.quality.measure)} of bound {screened_bound:.3g} (screened)",
-            )
-            return scored
+    def evaluate(choices: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+        nonlocal screened_count, best_screened
+        # a batch under a chunk per worker is split among them: the coordinate ascent's batches are a few dozen
+        # candidates, and one chunk ran in this process while the workers waited (the 12-part job: 200 such
+        # batches, 1.2 s)
+        size = min(_SCREEN_CHUNK, -(-len(choices) // jobs))
+        chunks = [choices[i : i + size] for i in range(0, len(choices), size)]
+        if keep_screens:
+            screened = [c for chunk in pool.map(_screen_batch, chunks) for c in chunk]
+            kept_screens.update(zip(choices, screened))
+            scored = [(c.quality, c.mean_effective_area) for c in screened]
+        else:
+            scored = [pair for chunk in pool.map(_screen_task, chunks) for pair in chunk]
+        screened_count += len(choices)
+        best_screened = max([best_screened] + [q for q, _ in scored])
+        report_progress(
+            "screening",
+            min(screened_count, expected),
+            expected,
+            f"best {quality_words(best_screened, config.quality.measure)} of bound {screened_bound:.3g} (screened)",
+        )
+        return scored
 
-        outcome = search(
-            counts,
-            screened_bounds,
-            evaluate,
-            config.search.max_exhaustive,
-            config.search.max_evaluations,
-            keep=config.search.exact_top_k,
-        )
-        indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
-        ranked = sorted(
-            outcome.evaluated,
-            key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]),
-            reverse=True,
-        )
-        if config.quality.measure == "capture":
-            # the search ranked by each sample's own capture: the best are screened again on the candidate's pad
-            top = ranked[: config.search.pad_top_k]
-            chunks = [top[i : i + _PAD_CHUNK] for i in range(0, len(top), _PAD_CHUNK)]
-            on_pad = dict(zip(top, (c for chunk in pool.map(_pad_batch, chunks) for c in chunk)))
-            kept_screens.update(on_pad)
-            ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in on_pad.items()}, counts)
-        finalists = ranked[: config.search.exact_top_k]
-        # the report lists each screened candidate's per-scenario values: those not kept are screened again only
-        # when the finger is made (:func:`listed_screens`): a finger set judged and not delivered never needs them
-        listed = ranked[config.search.exact_top_k : config.search.report_candidates]
-        kept = {c: kept_screens[c] for c in listed if c in kept_screens}
+    outcome = search(
+        counts,
+        screened_bounds,
+        evaluate,
+        config.search.max_exhaustive,
+        config.search.max_evaluations,
+        keep=config.search.exact_top_k,
+    )
+    indices = {choice: candidate_index(choice, counts) for choice in outcome.evaluated}
+    ranked = sorted(
+        outcome.evaluated,
+        key=lambda c: (outcome.evaluated[c][0], outcome.evaluated[c][1], -indices[c]),
+        reverse=True,
+    )
+    if config.quality.measure == "capture":
+        # the search ranked by each sample's own capture: the best are screened again on the candidate's pad
+        top = ranked[: config.search.pad_top_k]
+        chunks = [top[i : i + _PAD_CHUNK] for i in range(0, len(top), _PAD_CHUNK)]
+        on_pad = dict(zip(top, (c for chunk in pool.map(_pad_batch, chunks) for c in chunk)))
+        kept_screens.update(on_pad)
+        ranked = rerank(ranked, {c: (s.quality, s.mean_effective_area) for c, s in on_pad.items()}, counts)
+    finalists = ranked[: config.search.exact_top_k]
+    # the report lists each screened candidate's per-scenario values: those not kept are screened again only
+    # when the finger is made (:func:`listed_screens`): a finger set judged and not delivered never needs them
+    listed = ranked[config.search.exact_top_k : config.search.report_candidates]
+    kept = {c: kept_screens[c] for c in listed if c in kept_screens}
     report_progress("screening", expected, expected)
     return outcome, indices, ranked, finalists, kept
 
@@ -297,8 +297,8 @@ def listed_screens(
 
 
 def _screen_context(prepared: Prepared, config: DesignConfig) -> tuple:
-    """What the screening workers share (:func:`_screen_batch`, :func:`_pad_batch`): every sample's screening
-    geometries, the scenarios, the settings and the normal lattice."""
+    """What the screening workers share (:func:`_screen_batch`, :func:`_pad_batch`, :func:`_exact_task`): every
+    sample's screening geometries, the scenarios, the settings and the normal lattice."""
     scenarios = prepared.scenarios
     return [[g.screen for g in s.samples] for s in scenarios], scenarios, config, prepared.lattice
 
@@ -338,14 +338,15 @@ def _screen_task(context, choices: list[tuple[int, ...]]) -> list[tuple[float, f
 
 
 def _exact_task(context, choice: tuple[int, ...]) -> CandidateEvaluation:
-    """A finalist's exact figures under the draft it would be printed with (:func:`printed_lead_in_deg`).
+    """A finalist's exact figures under the draft it would be printed with (:func:`printed_lead_in_deg`), on the
+    screening's pool (:func:`_screen_context`).
 
     Ranked under the default lead-in only, a finalist that captures fully once its pocket is drafted wider lost to
     one that captures half at any draft (the ribbed block: closed square to its ribs, capture 0.48 at 15° and 1.0 at
     45°, lost to an oblique grasp of 0.53 whose trials missed by 2 mm): the measure scores the pocket as printed
     (METHOD §5b).
     """
-    scenarios, config = context
+    _, scenarios, config, _ = context
     angle, _ = printed_lead_in_deg(scenarios, choice, config)
     if angle != config.print.resolved()["lead_in_deg"]:
         config = config.updated({"print": {"lead_in_deg": angle}})

@@ -25,8 +25,8 @@ from ..finger import (
     load_finger,
     parametric_finger,
 )
-from ..geometry import to_manifold
 from ..grid import ScreenGrid
+from ..jit import load_kernels
 from ..parallel import WorkerPool, resolve_jobs
 from ..parts import Part, load_parts
 from ..poses import select_poses, stable_poses
@@ -144,6 +144,9 @@ def prepare(
     timings["poses"] = time.perf_counter() - clock
 
     jobs = resolve_jobs(config.search.jobs)
+    if config.quality.measure == "capture":
+        # the capture measure's kernels, loaded once here rather than in each worker forked below
+        load_kernels()
     clock = time.perf_counter()
     plate = finger_plate(finger, config.sampler, config.gripper)
     report_progress("sampling", 0, len(scenarios))
@@ -301,10 +304,8 @@ def _geometry_task(context, task: tuple[int, int, int]) -> list[SampleGeometry]:
     scenarios, config, grid, lattice = context
     number, start, stop = task
     scenario = scenarios[number]
-    part_manifold = to_manifold(scenario.mesh)
+    samples = scenario.sampler_result.samples
     return [
-        sample_geometry(
-            part_manifold, scenario.mesh, scenario.sampler_result.samples[index], config, (number, index), grid, lattice
-        )
+        sample_geometry(scenario.solid(), scenario.mesh, samples[index], config, (number, index), grid, lattice)
         for index in range(start, stop)
     ]

@@ -7,6 +7,9 @@ import json
 import subprocess
 import sys
 
+import numpy as np
+
+from fcso.jit import compiled_on_use, load_kernels
 from fcso.startup import collector_paused
 from tests.conftest import REPO
 
@@ -44,3 +47,42 @@ def test_the_pause_leaves_a_collector_turned_off_as_it_was():
         assert gc.isenabled()
     finally:
         (gc.enable if was else gc.disable)()
+
+
+def test_what_a_paused_block_made_joins_the_oldest_generation_without_a_collection():
+    """No young collection walks the imports after the block; the collector's frozen objects, if any, stay frozen."""
+    collections = []
+    gc.callbacks.append(callback := lambda phase, info: collections.append(info) if phase == "start" else None)
+    try:
+        with collector_paused():
+            made = [[k] for k in range(20_000)]
+        young = gc.get_objects(generation=0)
+        assert not any(item is made for item in young) and len(young) < 1_000
+        assert collections == [] and gc.get_freeze_count() == 0
+        gc.freeze()
+        with collector_paused():
+            kept = [[k] for k in range(100)]
+        assert gc.get_freeze_count() > 0 and any(item is kept for item in gc.get_objects(generation=0))
+    finally:
+        gc.callbacks.remove(callback)
+        gc.unfreeze()
+
+
+def test_a_kernel_compiled_on_use_loads_at_its_first_call_or_with_load_kernels():
+    """The capture measure's kernels wait for their first use (the paper's measure never loads them), or for
+    load_kernels before a design's workers fork."""
+
+    @compiled_on_use("(float64[::1],)")
+    def called(values):
+        return values.sum()
+
+    @compiled_on_use("(float64[::1],)")
+    def loaded(values):
+        return values.max()
+
+    assert called.dispatcher is None and loaded.dispatcher is None
+    assert called(np.arange(4.0)) == 6.0
+    assert called.dispatcher is not None and loaded.dispatcher is None
+    load_kernels()
+    assert loaded.dispatcher is not None
+    assert loaded(np.arange(4.0)) == 3.0
