@@ -39,7 +39,7 @@ import numpy as np
 from .config import DesignConfig, VerifyConfig
 from .descent import descent
 from .grid import ScreenGrid
-from .jit import compiled, compiled_on_use
+from .jit import compiled
 from .printed_heights import carved_heights, clearance_heights, drafted_heights
 from .screen import ScreenGeometry, pad_case
 
@@ -294,7 +294,7 @@ def sliding_error_weights(offsets_mm: np.ndarray, error_mm: float, sliding_axis:
     return np.clip(np.minimum(a + b - t, 2.0 * a), 0.0, None) / (4.0 * a * b)
 
 
-@compiled_on_use("(float64[:, ::1], float64[::1], float64, float64, float64[::1])")
+@compiled("(float64[:, ::1], float64[::1], float64, float64, float64[::1])")
 def _turned_heights(part, v_mm, u_c, v_c, yaws):
     """The part's column heights turned by each yaw about its centre of mass ``(u_c, v_c)`` in the pad frame.
 
@@ -396,7 +396,7 @@ def _row_kinds(values):
     return kind
 
 
-@compiled_on_use("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
+@compiled("(float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1], float64[:, ::1])")
 def _add_side_gaps(pad, turned, whole, fraction, gap):
     """Add one pad's gap to ``gap`` ((offsets, yaws) float, mm) for every start of the grid.
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import compiled_on_use
+from .jit import compiled
 
 #: A turn of one yaw step is taken only when it lowers the separation by more than this, mm: less is the facets of a
 #: tessellated round (a 96-gon of radius 15 mm turned half a facet: 8 µm), which no grip resolves (the contacts give
@@ -32,7 +32,7 @@ def descent(separation: np.ndarray, step_mm: float, turn_mm: float, friction: fl
     return successor
 
 
-@compiled_on_use("(float64[:, ::1], float64, float64, float64)")
+@compiled("(float64[:, ::1], float64, float64, float64)")
 def _steepest_moves(separation, step_mm, turn_mm, friction):
     """Each node's steepest move of :func:`descent` (its own flat index where none is taken)."""
     rows, columns = separation.shape

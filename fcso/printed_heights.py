@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .grid import ScreenGrid
-from .jit import compiled_on_use
+from .jit import compiled
 from .screen import ScreenGeometry
 
 
@@ -89,7 +89,7 @@ def drafted_heights(heights_mm: np.ndarray, floor_mm: float, cell_mm: float, lea
     return np.maximum(heights, floor_mm)
 
 
-@compiled_on_use("(float64[:, ::1], float64, float64)")
+@compiled("(float64[:, ::1], float64, float64)")
 def _drafted(heights, drop, diagonal):
     """Every wall of ``heights`` drafted: ``H = max(H, max of the 4 side neighbours - drop, max of the 4 corner
     neighbours - diagonal)`` at every cell until none changes.

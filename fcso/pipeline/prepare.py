@@ -26,7 +26,6 @@ from ..finger import (
     parametric_finger,
 )
 from ..grid import ScreenGrid
-from ..jit import load_kernels
 from ..parallel import WorkerPool, resolve_jobs
 from ..parts import Part, load_parts
 from ..poses import select_poses, stable_poses
@@ -144,9 +143,6 @@ def prepare(
     timings["poses"] = time.perf_counter() - clock
 
     jobs = resolve_jobs(config.search.jobs)
-    if config.quality.measure == "capture":
-        # the capture measure's kernels, loaded once here rather than in each worker forked below
-        load_kernels()
     clock = time.perf_counter()
     plate = finger_plate(finger, config.sampler, config.gripper)
     report_progress("sampling", 0, len(scenarios))

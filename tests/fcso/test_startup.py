@@ -7,9 +7,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
-
-from fcso.jit import compiled_on_use, load_kernels
 from fcso.startup import collector_paused
 from tests.conftest import REPO
 
@@ -66,23 +63,3 @@ def test_what_a_paused_block_made_joins_the_oldest_generation_without_a_collecti
     finally:
         gc.callbacks.remove(callback)
         gc.unfreeze()
-
-
-def test_a_kernel_compiled_on_use_loads_at_its_first_call_or_with_load_kernels():
-    """The capture measure's kernels wait for their first use (the paper's measure never loads them), or for
-    load_kernels before a design's workers fork."""
-
-    @compiled_on_use("(float64[::1],)")
-    def called(values):
-        return values.sum()
-
-    @compiled_on_use("(float64[::1],)")
-    def loaded(values):
-        return values.max()
-
-    assert called.dispatcher is None and loaded.dispatcher is None
-    assert called(np.arange(4.0)) == 6.0
-    assert called.dispatcher is not None and loaded.dispatcher is None
-    load_kernels()
-    assert loaded.dispatcher is not None
-    assert loaded(np.arange(4.0)) == 3.0
